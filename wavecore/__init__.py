@@ -1,0 +1,49 @@
+"""wavecore: local filters of quadratic B-spline wavelets (Samavati & Bartels), and a codec.
+
+The public API is what ``__all__`` lists; everything else is internal.
+"""
+
+from __future__ import annotations
+
+from .errors import (
+    BundleError,
+    InvalidCoefficients,
+    InvalidLength,
+    InvalidParameter,
+    WavecoreError,
+)
+from .filters import matrices, wavelet_names
+from .multilevel import (
+    max_level,
+    valid_length,
+    wavedec,
+    wavedec2,
+    wavedecn,
+    waverec,
+    waverec2,
+    waverecn,
+)
+from .transform import analysis_step, synthesis_step
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "BundleError",
+    "InvalidCoefficients",
+    "InvalidLength",
+    "InvalidParameter",
+    "WavecoreError",
+    "__version__",
+    "analysis_step",
+    "matrices",
+    "max_level",
+    "synthesis_step",
+    "valid_length",
+    "wavedec",
+    "wavedec2",
+    "wavedecn",
+    "wavelet_names",
+    "waverec",
+    "waverec2",
+    "waverecn",
+]

@@ -1,0 +1,394 @@
+"""Filter definitions, as data.
+
+A wavelet here is a :class:`FilterBank`: for each boundary it holds the four banded matrices of
+the paper's section 2 (analysis ``A``, ``B``; synthesis ``P``, ``Q``) in the paper's own block
+form — explicit *start* rows, a *regular* pattern that repeats down the diagonal, explicit *end*
+rows — and the size rule that says which fine lengths it accepts.  Everything else (the fast
+steps, the dense matrices, the size functions) is derived from that data, so a new filter family
+is one new definition at the bottom of this file.
+
+Index conventions are 0-based.  The closed (periodic) alignment is the one verified in
+``NOTES.md``: Chaikin's rule ``f[2i] = 3/4 c[i] + 1/4 c[i+1]``, ``f[2i+1] = 1/4 c[i] + 3/4 c[i+1]``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+
+from .errors import InvalidLength, InvalidParameter
+
+__all__ = [
+    "BOUNDARIES",
+    "Banded",
+    "BoundaryRule",
+    "FilterBank",
+    "Sparse",
+    "get_wavelet",
+    "matrices",
+    "wavelet_names",
+]
+
+BOUNDARIES = ("open", "closed")
+
+
+@dataclass(frozen=True)
+class Banded:
+    """One banded matrix in the paper's block form.
+
+    Parameters
+    ----------
+    pattern : tuple of tuple of float
+        The regular block: ``p`` rows of ``w`` weights, placed again and again down the
+        diagonal.
+    first : tuple of int
+        ``(row, column)`` of the first placement of ``pattern`` (the column may be negative
+        for periodic matrices, where columns wrap).
+    step : tuple of int
+        How far each next placement moves, ``(rows, columns)``; ``rows`` is always ``p``.
+    start : tuple of tuple of float
+        Dense rows placed at the top-left corner (the paper's ``X_s`` block); empty when closed.
+    end : tuple of tuple of float
+        Dense rows placed at the bottom-right corner (the paper's ``X_e`` block).
+    """
+
+    pattern: tuple[tuple[float, ...], ...]
+    first: tuple[int, int]
+    step: tuple[int, int]
+    start: tuple[tuple[float, ...], ...] = ()
+    end: tuple[tuple[float, ...], ...] = ()
+
+    def dense(self, rows: int, cols: int, periodic: bool) -> np.ndarray:
+        """Build the ``rows × cols`` matrix (float64).
+
+        Periodic matrices wrap columns modulo ``cols`` and *add* the taps that land on the same
+        column, which is what tiny closed sizes need (see ``NOTES.md``).
+        """
+        out = np.zeros((rows, cols))
+        if self.start:
+            start = np.array(self.start, dtype=float)
+            out[: start.shape[0], : start.shape[1]] += start
+        if self.end:
+            end = np.array(self.end, dtype=float)
+            out[rows - end.shape[0] :, cols - end.shape[1] :] += end
+        pattern = np.array(self.pattern, dtype=float)
+        p, w = pattern.shape
+        regular_rows = rows - len(self.start) - len(self.end)
+        if regular_rows < 0 or regular_rows % p:
+            msg = f"{rows} rows cannot hold the start, end and regular blocks"
+            raise InvalidLength(msg)
+        row, col = self.first
+        for _ in range(regular_rows // p):
+            columns = np.arange(col, col + w)
+            if periodic:
+                columns %= cols
+            elif columns[0] < 0 or columns[-1] >= cols:
+                msg = f"a regular row does not fit in {cols} columns"
+                raise InvalidLength(msg)
+            for i in range(p):
+                np.add.at(out[row + i], columns, pattern[i])
+            row += self.step[0]
+            col += self.step[1]
+        return out
+
+
+@dataclass(frozen=True)
+class BoundaryRule:
+    """The four matrices of one wavelet at one boundary, and its size rule.
+
+    One analysis step takes ``m`` fine samples to ``(m + extra) // 2`` coarse samples and
+    ``(m - extra) // 2`` details; ``m`` must be even and at least ``min_length``.
+    """
+
+    A: Banded
+    B: Banded
+    P: Banded
+    Q: Banded
+    extra: int
+    min_length: int
+    periodic: bool
+
+    def coarse_length(self, m: int) -> int:
+        """Number of coarse samples one step makes from ``m`` fine samples."""
+        return (m + self.extra) // 2
+
+    def detail_length(self, m: int) -> int:
+        """Number of details one step makes from ``m`` fine samples."""
+        return (m - self.extra) // 2
+
+    def fine_length(self, coarse: int, detail: int) -> int:
+        """The fine length that one synthesis step makes from these coefficient lengths."""
+        return coarse + detail
+
+    def fits(self, m: int, level: int) -> bool:
+        """Whether ``m`` fine samples can be decomposed ``level`` times."""
+        for _ in range(level):
+            if m % 2 or m < self.min_length:
+                return False
+            m = self.coarse_length(m)
+        return True
+
+    def smallest_k(self, level: int) -> int:
+        """Smallest ``k`` such that ``2**level * k + extra`` fits ``level`` levels."""
+        k = 1
+        while level and not self.fits((1 << level) * k + self.extra, level):
+            k += 1
+        return k
+
+
+@dataclass(frozen=True)
+class FilterBank:
+    """A wavelet family: its name, aliases, and one :class:`BoundaryRule` per boundary.
+
+    Parameters
+    ----------
+    name : str
+        The canonical name (``"bspline2"``).
+    rules : mapping of str to BoundaryRule
+        One rule for each of :data:`BOUNDARIES`.
+    aliases : tuple of str
+        Other accepted names.
+    description : str
+        One line for documentation and error messages.
+    """
+
+    name: str
+    rules: Mapping[str, BoundaryRule]
+    aliases: tuple[str, ...] = ()
+    description: str = ""
+    notes: str = field(default="", repr=False)
+
+    def rule(self, boundary: str) -> BoundaryRule:
+        """The :class:`BoundaryRule` for ``boundary``, with a clear error for unknown names."""
+        try:
+            return self.rules[boundary]
+        except (KeyError, TypeError):
+            accepted = ", ".join(repr(b) for b in BOUNDARIES)
+            msg = f"unknown boundary {boundary!r}; accepted boundaries are {accepted}"
+            raise InvalidParameter(msg) from None
+
+
+_Q = 0.25
+_H = 0.5
+_T = 0.75
+
+# The paper's quadratic B-spline filters, eqs. (4)–(19), and their closed form (section 4.4).
+BSPLINE2 = FilterBank(
+    name="bspline2",
+    aliases=("chaikin",),
+    description="local filters of quadratic B-spline wavelets (Samavati & Bartels)",
+    rules={
+        "open": BoundaryRule(
+            A=Banded(
+                start=((1, 0, 0, 0), (-_H, 1, _T, -_Q)),
+                pattern=((-_Q, _T, _T, -_Q),),
+                first=(2, 2),
+                step=(1, 2),
+                end=((-_Q, _T, 1, -_H), (0, 0, 0, 1)),
+            ),
+            B=Banded(
+                start=((-_H, 1, -_T, _Q, 0, 0), (0, 0, -_Q, _T, -_T, _Q)),
+                pattern=((_Q, -_T, _T, -_Q),),
+                first=(2, 4),
+                step=(1, 2),
+                end=((_Q, -_T, 1, -_H),),
+            ),
+            P=Banded(
+                start=((1, 0), (_H, _H)),
+                pattern=((_T, _Q), (_Q, _T)),
+                first=(2, 1),
+                step=(2, 1),
+                end=((_H, _H), (0, 1)),
+            ),
+            Q=Banded(
+                start=(
+                    (0, 0, 0),
+                    (_H, 0, 0),
+                    (-_T, _Q, 0),
+                    (-_Q, _T, 0),
+                    (0, -_T, -_Q),
+                    (0, -_Q, -_T),
+                ),
+                pattern=((_T, -_Q), (_Q, -_T)),
+                first=(6, 2),
+                step=(2, 1),
+                end=((_H,), (0,)),
+            ),
+            extra=2,
+            min_length=8,
+            periodic=False,
+        ),
+        "closed": BoundaryRule(
+            A=Banded(pattern=((-_Q, _T, _T, -_Q),), first=(0, -2), step=(1, 2)),
+            B=Banded(pattern=((_Q, -_T, _T, -_Q),), first=(0, -2), step=(1, 2)),
+            P=Banded(pattern=((_T, _Q), (_Q, _T)), first=(0, 0), step=(2, 1)),
+            Q=Banded(pattern=((_T, -_Q), (_Q, -_T)), first=(0, 0), step=(2, 1)),
+            extra=0,
+            min_length=2,
+            periodic=True,
+        ),
+    },
+)
+
+# Haar in the paper's (averaging) normalisation: c = (a + b) / 2, d = (a - b) / 2.  It has no
+# boundary rows, so "open" and "closed" are the same matrices and the same size rule
+# (any even length; 2**L * k for L levels).
+_HAAR_RULE = BoundaryRule(
+    A=Banded(pattern=((_H, _H),), first=(0, 0), step=(1, 2)),
+    B=Banded(pattern=((_H, -_H),), first=(0, 0), step=(1, 2)),
+    P=Banded(pattern=((1,), (1,)), first=(0, 0), step=(2, 1)),
+    Q=Banded(pattern=((1,), (-1,)), first=(0, 0), step=(2, 1)),
+    extra=0,
+    min_length=2,
+    periodic=False,
+)
+HAAR = FilterBank(
+    name="haar",
+    description="Haar wavelets, the paper's baseline (averaging normalisation)",
+    rules={"open": _HAAR_RULE, "closed": _HAAR_RULE},
+)
+
+_REGISTRY: dict[str, FilterBank] = {}
+
+
+def register(bank: FilterBank) -> FilterBank:
+    """Make ``bank`` available by its name and aliases; returns it, for use as a decorator."""
+    for key in (bank.name, *bank.aliases):
+        _REGISTRY[key] = bank
+    return bank
+
+
+register(BSPLINE2)
+register(HAAR)
+
+
+def wavelet_names() -> list[str]:
+    """The accepted wavelet names, aliases included, sorted."""
+    return sorted(_REGISTRY)
+
+
+def get_wavelet(wavelet: str | FilterBank) -> FilterBank:
+    """Look a wavelet up by name (or pass a :class:`FilterBank` through).
+
+    Raises
+    ------
+    InvalidParameter
+        For an unknown name; the message lists the accepted ones.
+    """
+    if isinstance(wavelet, FilterBank):
+        return wavelet
+    try:
+        return _REGISTRY[wavelet]
+    except (KeyError, TypeError):
+        accepted = ", ".join(repr(n) for n in wavelet_names())
+        msg = f"unknown wavelet {wavelet!r}; accepted wavelets are {accepted}"
+        raise InvalidParameter(msg) from None
+
+
+@dataclass(frozen=True)
+class Sparse:
+    """A matrix in compressed-row form, as the fast kernels read it."""
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    weights: np.ndarray
+    shape: tuple[int, int]
+
+    @classmethod
+    def from_dense(cls, dense: np.ndarray) -> Sparse:
+        rows, cols = np.nonzero(dense)
+        indptr = np.zeros(dense.shape[0] + 1, dtype=np.intp)
+        np.add.at(indptr, rows + 1, 1)
+        return cls(
+            indptr=np.cumsum(indptr),
+            indices=cols.astype(np.intp),
+            weights=dense[rows, cols],
+            shape=(int(dense.shape[0]), int(dense.shape[1])),
+        )
+
+    def as_dtype(self, dtype: np.dtype) -> np.ndarray:
+        return self.weights.astype(dtype)
+
+
+def check_fine_length(rule: BoundaryRule, m: int, wavelet: str, boundary: str) -> None:
+    """Raise :class:`InvalidLength` unless one step can take ``m`` fine samples."""
+    if m % 2 or m < rule.min_length:
+        msg = (
+            f"length {m} does not fit one level of the {boundary} boundary of {wavelet!r}: "
+            f"it needs an even length of at least {rule.min_length}"
+        )
+        raise InvalidLength(msg)
+
+
+@lru_cache(maxsize=256)
+def _step_matrices(bank_name: str, boundary: str, m: int) -> tuple[np.ndarray, ...]:
+    bank = get_wavelet(bank_name)
+    rule = bank.rule(boundary)
+    check_fine_length(rule, m, bank.name, boundary)
+    r, s = rule.coarse_length(m), rule.detail_length(m)
+    mats = (
+        rule.A.dense(r, m, rule.periodic),
+        rule.B.dense(s, m, rule.periodic),
+        rule.P.dense(m, r, rule.periodic),
+        rule.Q.dense(m, s, rule.periodic),
+    )
+    for mat in mats:
+        mat.setflags(write=False)
+    return mats
+
+
+@lru_cache(maxsize=256)
+def step_sparse(bank_name: str, boundary: str, m: int) -> tuple[Sparse, Sparse, Sparse, Sparse]:
+    """The four step matrices for fine length ``m`` in compressed-row form (cached)."""
+    A, B, P, Q = _step_matrices(bank_name, boundary, m)
+    return Sparse.from_dense(A), Sparse.from_dense(B), Sparse.from_dense(P), Sparse.from_dense(Q)
+
+
+def matrices(
+    m: int, wavelet: str = "bspline2", boundary: str = "open"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Dense analysis and synthesis matrices ``(A, B, P, Q)`` for a fine length ``m``.
+
+    ``A`` is ``r × m``, ``B`` is ``s × m``, ``P`` is ``m × r`` and ``Q`` is ``m × s``, with
+    ``C = A @ F``, ``D = B @ F`` and ``F = P @ C + Q @ D``.  Meant for checks and for teaching;
+    the transform itself never forms them.
+
+    Parameters
+    ----------
+    m : int
+        The fine length.  Open ``bspline2`` needs an even ``m >= 8``; closed and Haar any even
+        ``m >= 2``.
+    wavelet : str
+        A name from :func:`wavelet_names`.
+    boundary : {"open", "closed"}
+        Endpoint-interpolating or periodic.
+
+    Returns
+    -------
+    A, B, P, Q : numpy.ndarray
+        Fresh float64 arrays.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> A, B, P, Q = matrices(8)
+    >>> A.shape, B.shape
+    ((5, 8), (3, 8))
+    >>> bool(np.allclose(np.vstack([A, B]) @ np.hstack([P, Q]), np.eye(8)))
+    True
+    """
+    bank = get_wavelet(wavelet)
+    bank.rule(boundary)
+    m = _as_length(m)
+    A, B, P, Q = _step_matrices(bank.name, boundary, m)
+    return A.copy(), B.copy(), P.copy(), Q.copy()
+
+
+def _as_length(m: object) -> int:
+    if isinstance(m, bool) or not isinstance(m, int | np.integer):
+        msg = f"a length must be an integer, not {m!r}"
+        raise InvalidParameter(msg)
+    return int(m)
