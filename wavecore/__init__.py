@@ -23,6 +23,7 @@ from .multilevel import (
     waverec2,
     waverecn,
 )
+from .norms import basis_norms, basis_norms_nd
 from .transform import analysis_step, synthesis_step
 
 __version__ = "0.1.0"
@@ -35,6 +36,8 @@ __all__ = [
     "WavecoreError",
     "__version__",
     "analysis_step",
+    "basis_norms",
+    "basis_norms_nd",
     "matrices",
     "max_level",
     "synthesis_step",
