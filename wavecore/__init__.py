@@ -24,6 +24,8 @@ from .multilevel import (
     waverecn,
 )
 from .norms import basis_norms, basis_norms_nd
+from .resample import coarse_extent, crop_padding, pad_to_fit, resample_curve
+from .threshold import remove_smallest
 from .transform import analysis_step, synthesis_step
 
 __version__ = "0.1.0"
@@ -38,8 +40,13 @@ __all__ = [
     "analysis_step",
     "basis_norms",
     "basis_norms_nd",
+    "coarse_extent",
+    "crop_padding",
     "matrices",
     "max_level",
+    "pad_to_fit",
+    "remove_smallest",
+    "resample_curve",
     "synthesis_step",
     "valid_length",
     "wavedec",

@@ -1,0 +1,325 @@
+"""Fitting data to the lengths the transform accepts: padding grids, re-sampling curves.
+
+The transform takes only lengths of the form ``2**L * k + 2`` (open) or ``2**L * k`` (closed)
+along each axis.  Two ways to get there:
+
+* :func:`pad_to_fit` / :func:`crop_padding` — extend each axis at its *end* up to the next length
+  that fits, and cut the extension off again after reconstruction.  Exact: with every detail kept
+  the original comes back bit for bit (up to float rounding).  The default for images.
+* :func:`resample_curve` — the paper's section 4.5: re-sample a curve uniformly by arc length to a
+  length that fits.  Changes the samples (not exact), but keeps the shape, and is what the curve
+  front end does.
+
+Why the padding goes at the end
+    The first sample keeps index 0 at every level, so the original's extent is always a prefix:
+    cropping is a slice ``[:n]`` on the fine data and ``[:coarse_extent(...)]`` on a coarse
+    approximation.  Splitting the padding between both ends would shift the origin by a
+    fraction of a coarse sample at every level.
+
+How the extension looks
+    Open axes repeat the last sample (edge padding): a flat continuation has no details of its
+    own, so it disturbs the open boundary's end rows the least.  Closed (periodic) axes are
+    extended by a straight blend from the last sample back to the first, so the periodic signal
+    that the closed filters see has no jump at the seam (wrap padding, ``x[0], x[1], …`` appended,
+    would move the jump to where the appended run meets ``x[0]`` again).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .errors import InvalidParameter
+from .filters import FilterBank, get_wavelet
+from .multilevel import _as_int, _axes, _boundaries, valid_length
+from .transform import as_float_array
+
+__all__ = ["coarse_extent", "crop_padding", "pad_to_fit", "resample_curve"]
+
+Pads = tuple[tuple[int, int], ...]
+
+
+def pad_to_fit(
+    data: Any,
+    level: int,
+    *,
+    axes: Sequence[int] | int,
+    boundary: str | Sequence[str] = "open",
+    wavelet: str | FilterBank = "bspline2",
+) -> tuple[np.ndarray, Pads]:
+    """Extend each axis in ``axes`` at its end to the smallest length that fits ``level`` levels.
+
+    Parameters
+    ----------
+    data : array_like
+        Any array; axes not in ``axes`` are left alone (colour channels, point coordinates).
+    level : int
+        The number of levels the padded array must allow (0 pads nothing).
+    axes : int or sequence of int
+        The axes to pad (keyword-only: the axes that will be transformed).
+    boundary : str or sequence of str
+        One boundary for all axes or one per axis in ``axes``.  Open axes repeat their last
+        sample; closed axes blend linearly from the last sample back to the first, so the
+        periodic signal stays without a jump.
+    wavelet : str
+        The wavelet whose size rule applies (see :func:`wavecore.valid_length`).
+
+    Returns
+    -------
+    padded : numpy.ndarray
+        The padded array, of ``data``'s dtype (integers rounded in a closed blend).
+    pads : tuple of (int, int)
+        ``(before, after)`` per axis in ``axes`` — ``before`` is always 0 — for
+        :func:`crop_padding`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> image = np.arange(12.0).reshape(3, 4)
+    >>> padded, pads = pad_to_fit(image, 1, axes=(0, 1))
+    >>> padded.shape, pads
+    ((8, 8), ((0, 5), (0, 4)))
+    >>> bool(np.array_equal(crop_padding(padded, pads, axes=(0, 1)), image))
+    True
+    """
+    arr = np.asarray(data)
+    ax = _axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
+    bank = get_wavelet(wavelet)
+    bounds = _boundaries(boundary, len(ax), bank)
+    level = _as_int(level, "level")
+    pads: list[tuple[int, int]] = []
+    for a, b in zip(ax, bounds, strict=True):
+        n = arr.shape[a]
+        if n == 0:
+            msg = f"axis {a} is empty; there is nothing to pad"
+            raise InvalidParameter(msg)
+        after = valid_length(n, level, b, bank) - n
+        pads.append((0, after))
+        if after:
+            arr = _extend(arr, a, after, closed=b == "closed")
+    return arr, tuple(pads)
+
+
+def _extend(arr: np.ndarray, axis: int, count: int, *, closed: bool) -> np.ndarray:
+    last = np.take(arr, [-1], axis=axis)
+    if not closed:
+        return np.concatenate([arr, np.repeat(last, count, axis=axis)], axis=axis)
+    first = np.take(arr, [0], axis=axis)
+    shape = [1] * arr.ndim
+    shape[axis] = count
+    # count + 1 steps from the last sample to the first, neither of them repeated.
+    t = (np.arange(1, count + 1) / (count + 1)).reshape(shape)
+    blend = last + (first.astype(np.float64) - last) * t
+    if arr.dtype.kind in "biu":
+        info = np.iinfo(arr.dtype) if arr.dtype.kind != "b" else None
+        blend = np.rint(blend)
+        if info is not None:
+            blend = np.clip(blend, info.min, info.max)
+    return np.concatenate([arr, blend.astype(arr.dtype)], axis=axis)
+
+
+def coarse_extent(
+    n: int,
+    pad: tuple[int, int],
+    level: int,
+    *,
+    boundary: str = "open",
+    wavelet: str | FilterBank = "bspline2",
+) -> int:
+    """How many samples of a level-``level`` coarse approximation cover the original's extent.
+
+    Each coarse sample sits at the centre of its basis function (its Greville abscissa).  The
+    coarse approximation keeps the samples that sit inside the original's extent, plus the next
+    one when the extent ends between two of them: about ``n / 2**level`` samples, and one or two
+    more for the open boundary, whose end samples interpolate the ends.
+
+    Parameters
+    ----------
+    n : int
+        The original length of the axis.
+    pad : (int, int)
+        The ``(before, after)`` padding that :func:`pad_to_fit` returned for this axis.
+    level : int
+        The level of the coarse approximation (0 is the fine data: ``n`` itself).
+    boundary, wavelet
+        As given to :func:`pad_to_fit`.
+
+    Examples
+    --------
+    >>> coarse_extent(512, (0, 2), 2), coarse_extent(60, (0, 6), 3), coarse_extent(37, (0, 5), 3)
+    (130, 9, 6)
+    >>> coarse_extent(100, (0, 4), 2, wavelet="haar")
+    25
+    """
+    before, after = (int(p) for p in pad)
+    if before:
+        msg = f"padding before the data ({before}) is not supported; pad_to_fit pads at the end"
+        raise InvalidParameter(msg)
+    n = _as_int(n, "n", minimum=1)
+    level = _as_int(level, "level")
+    bank = get_wavelet(wavelet)
+    rule = bank.rule(boundary)
+    coarse = n + after
+    for _ in range(level):
+        coarse = rule.coarse_length(coarse)
+    step = 1 << level
+    if level == 0:
+        return n
+    if bank.name == "haar":
+        return min(coarse, -(-n // step))
+    if rule.periodic:
+        # Chaikin: fine sample i sits at coarse position (i - 1/2) / 2**level + 1/2.
+        end = (n - 1.5) / step + 0.5
+        positions = np.arange(coarse, dtype=np.float64)
+    else:
+        # Endpoint interpolating: Greville abscissae 0, 1/2, 3/2, …, K - 1/2, K (coarse units).
+        end = max(0.0, (n - 1.5) / step)
+        positions = np.clip(np.arange(coarse) - 0.5, 0.0, coarse - 2.0)
+    inside = int(np.count_nonzero(positions <= end + 1e-12))
+    if positions[inside - 1] < end - 1e-12:
+        inside += 1
+    return min(coarse, inside)
+
+
+def crop_padding(
+    data: Any,
+    pads: Pads,
+    *,
+    axes: Sequence[int] | int,
+    level: int = 0,
+    boundary: str | Sequence[str] = "open",
+    wavelet: str | FilterBank = "bspline2",
+) -> np.ndarray:
+    """Undo :func:`pad_to_fit`: cut the padding off the fine data or off a coarse approximation.
+
+    Parameters
+    ----------
+    data : array_like
+        The padded array (``level=0``) or its coarse approximation after ``level`` levels.
+    pads : tuple of (int, int)
+        As :func:`pad_to_fit` returned them.
+    axes : int or sequence of int
+        The same axes as given to :func:`pad_to_fit`.
+    level : int
+        0 for fine data; ``k`` for a coarse approximation after ``k`` levels, which is cropped to
+        the original's extent with :func:`coarse_extent`.
+    boundary, wavelet
+        As given to :func:`pad_to_fit` (only needed for ``level > 0``).
+
+    Returns
+    -------
+    numpy.ndarray
+        A view of ``data`` without the padding.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import wavecore
+    >>> image = np.random.default_rng(0).random((37, 60))
+    >>> padded, pads = pad_to_fit(image, 3, axes=(0, 1))
+    >>> coarse = wavecore.wavedec2(padded, level=3)[0]
+    >>> padded.shape, coarse.shape, crop_padding(coarse, pads, axes=(0, 1), level=3).shape
+    ((42, 66), (7, 10), (6, 9))
+    """
+    arr = np.asarray(data)
+    ax = _axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
+    if len(pads) != len(ax):
+        msg = f"got {len(pads)} pads for {len(ax)} axes; give one (before, after) per axis"
+        raise InvalidParameter(msg)
+    bounds = _boundaries(boundary, len(ax), get_wavelet(wavelet))
+    index: list[slice] = [slice(None)] * arr.ndim
+    for a, b, pad in zip(ax, bounds, pads, strict=True):
+        before, after = (int(p) for p in pad)
+        if level == 0:
+            n = arr.shape[a] - before - after
+            if n <= 0:
+                msg = f"axis {a} has {arr.shape[a]} samples, fewer than its padding {pad}"
+                raise InvalidParameter(msg)
+            index[a] = slice(before, before + n)
+            continue
+        # The padded fine length is unknown here; recover it from the coarse length.
+        rule = get_wavelet(wavelet).rule(b)
+        padded = arr.shape[a]
+        for _ in range(_as_int(level, "level")):
+            padded = 2 * padded - rule.extra
+        keep = coarse_extent(
+            padded - before - after, (before, after), level, boundary=b, wavelet=wavelet
+        )
+        index[a] = slice(0, keep)
+    return arr[tuple(index)]
+
+
+def resample_curve(points: Any, n: int, *, closed: bool = False) -> np.ndarray:
+    """Re-sample a curve to ``n`` points spaced uniformly by arc length (the paper's section 4.5).
+
+    Parameters
+    ----------
+    points : array_like, shape (m, d) or (m,)
+        The curve's points in order.  With ``d >= 2`` the parameter is arc length (straight
+        segments between the points).  With ``d == 1`` (and for 1-D input) the curve is a time
+        series, and the parameter is the sample index: arc length along the values alone would
+        fold the series onto its range and skip its turning points.
+    n : int
+        The number of points wanted (at least 2).
+    closed : bool, keyword-only
+        Whether the curve is closed: then the segment from the last point back to the first
+        counts, a last point equal to the first (a written-out seam) is dropped, and the
+        result has no duplicated seam point either.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, d) or (n,)
+        The re-sampled points, float (float32 input stays float32).  An open curve keeps both
+        end points exactly; a closed curve starts at the first point.
+
+    Raises
+    ------
+    InvalidParameter
+        For fewer than 2 input points, ``n < 2``, or points that are not finite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    >>> resample_curve(square, 8, closed=True)[:3].tolist()
+    [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]
+    >>> resample_curve([[0.0, 0.0], [3.0, 4.0]], 3).tolist()
+    [[0.0, 0.0], [1.5, 2.0], [3.0, 4.0]]
+    """
+    arr = as_float_array(points)
+    flat = arr.ndim == 1
+    if flat:
+        arr = arr[:, None]
+    if arr.ndim != 2:
+        msg = f"points must have shape (m, d) or (m,), not {arr.shape}"
+        raise InvalidParameter(msg)
+    n = _as_int(n, "n", minimum=2)
+    if not np.all(np.isfinite(arr)):
+        msg = "points must be finite (no NaN or infinity)"
+        raise InvalidParameter(msg)
+    if closed and len(arr) > 2 and np.array_equal(arr[0], arr[-1]):
+        arr = arr[:-1]
+    if len(arr) < 2:
+        msg = f"a curve needs at least 2 points, got {len(arr)}"
+        raise InvalidParameter(msg)
+    nodes = np.concatenate([arr, arr[:1]]) if closed else arr
+    if arr.shape[1] == 1:
+        s = np.arange(len(nodes), dtype=np.float64)
+    else:
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(nodes, axis=0), axis=1))])
+    total = s[-1]
+    if total == 0.0:
+        out = np.repeat(arr[:1], n, axis=0)
+        return out[:, 0] if flat else out
+    targets = total * np.arange(n) / n if closed else np.linspace(0.0, total, n)
+    # Repeated points give zero-length segments; np.interp needs increasing nodes.
+    keep = np.concatenate([[True], np.diff(s) > 0])
+    s, nodes = s[keep], nodes[keep]
+    out = np.stack([np.interp(targets, s, nodes[:, j]) for j in range(nodes.shape[1])], axis=1)
+    out = out.astype(arr.dtype, copy=False)
+    out[0] = arr[0]
+    if not closed:
+        out[-1] = arr[-1]
+    return out[:, 0] if flat else out

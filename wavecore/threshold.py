@@ -1,0 +1,270 @@
+"""Removing details: "zero the smallest p % of the details", ranked by their effect.
+
+The paper's figures remove "the smallest 60 % of D".  These filters are not orthogonal, so a
+detail's size alone says little about what removing it costs: a level-``l`` detail changes the
+reconstruction by its magnitude times the L2 norm of its synthesis basis function
+(:func:`wavecore.basis_norms`), and those norms differ from level to level and near the open
+boundary's ends.  :func:`remove_smallest` ranks by that product by default (``weighted=True``),
+which is what removing them costs in L2 if the basis functions were orthogonal, and a close
+estimate here; ``weighted=False`` ranks by plain magnitude.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .errors import InvalidCoefficients, InvalidParameter
+from .filters import FilterBank, get_wavelet
+from .multilevel import _boundaries
+from .norms import basis_norms_nd
+from .transform import normalize_axis
+
+__all__ = ["remove_smallest"]
+
+_WAVEDEC2_KEYS = ("da", "ad", "dd")  # the order of (cH, cV, cD) in wavedec2's tuples
+
+
+def remove_smallest(
+    coeffs: Sequence[Any],
+    fraction: float,
+    *,
+    wavelet: str | FilterBank = "bspline2",
+    boundary: str | Sequence[str] = "open",
+    weighted: bool = True,
+    axes: Sequence[int] | None = None,
+    vector_axis: int | None = -1,
+) -> list[Any]:
+    """Zero the smallest ``fraction`` of all detail coefficients, over all levels.
+
+    Parameters
+    ----------
+    coeffs : list
+        A decomposition as :func:`wavecore.wavedec`, :func:`wavecore.wavedec2` or
+        :func:`wavecore.wavedecn` returns it (recognised by the type of its detail entries:
+        arrays, ``(cH, cV, cD)`` tuples or dicts).
+    fraction : float
+        The share of the details to remove, in ``[0, 1]``: exactly ``round(fraction × count)``
+        of them (halves round up).  0 changes nothing; 1 leaves only the coarse approximation.
+    wavelet, boundary : keyword-only
+        As given to the decomposition; needed for the basis norms.
+    weighted : bool, keyword-only
+        Rank by magnitude × the norm of the coefficient's synthesis basis function (the
+        default: the ranking that costs the least L2 error), or by plain magnitude.
+    axes : sequence of int, optional, keyword-only
+        The axes that were transformed.  Default: the leading ones — ``(0,)`` for ``wavedec``,
+        ``(0, 1)`` for ``wavedec2``, and as many as a ``wavedecn`` key has letters.  Give them
+        when you transformed other axes (``wavedec(x, axis=1)``).
+    vector_axis : int or None, keyword-only
+        When the coefficient arrays have axes that were not transformed, ``vector_axis``
+        (default the last one) holds the components of one vector-valued detail — curve points
+        ``(n, d)``, surface points ``(U, V, 3)`` — and a detail's size is its vector norm; it is
+        removed or kept whole.  It is ignored when every axis was transformed.  ``None`` ranks
+        every number on its own (colour channels of an image).
+
+    Returns
+    -------
+    list
+        A new decomposition of the same layout; the coarse approximation is copied unchanged.
+
+    Raises
+    ------
+    InvalidParameter
+        For a fraction outside ``[0, 1]`` or a ``vector_axis`` that was transformed.
+    InvalidCoefficients
+        If ``coeffs`` is not a decomposition.
+
+    Notes
+    -----
+    Ties are broken deterministically: among equal sizes, details of coarser levels are
+    removed first, then in the order of the layout (subband, then C order of positions).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import wavecore
+    >>> x = np.random.default_rng(0).standard_normal(66)
+    >>> coeffs = wavecore.wavedec(x, level=3)
+    >>> kept = remove_smallest(coeffs, 0.6)
+    >>> sum(int(np.count_nonzero(d)) for d in kept[1:]), sum(d.size for d in coeffs[1:])
+    (22, 56)
+    >>> bool(np.array_equal(kept[0], coeffs[0]))
+    True
+    """
+    fraction = _check_fraction(fraction)
+    kind, coarse, levels = _as_bands(coeffs)
+    if not levels:
+        return [np.array(coarse, copy=True)]
+    key_length = len(next(iter(levels[0])))
+    ax = _resolve_axes(axes, coarse.ndim, key_length)
+    carried = [a for a in range(coarse.ndim) if a not in ax]
+    vec = _resolve_vector_axis(vector_axis, coarse.ndim, ax) if carried else None
+
+    # Each band in a common layout: transformed axes first (in `axes` order), then the
+    # carried axes, the vector axis last; sizes drop the vector axis.
+    order = ax + [a for a in carried if a != vec] + ([vec] if vec is not None else [])
+    norms = _band_norms(coarse, levels, ax, wavelet, boundary) if weighted else None
+
+    sizes: list[np.ndarray] = []
+    for li, bands in enumerate(levels):
+        for key, band in bands.items():
+            moved = np.transpose(band, order)
+            size = np.linalg.norm(moved, axis=-1) if vec is not None else np.abs(moved)
+            if norms is not None:
+                weight = norms[li][key]
+                size = size * weight.reshape(weight.shape + (1,) * (size.ndim - weight.ndim))
+            sizes.append(size.ravel())
+    flat = np.concatenate(sizes) if sizes else np.zeros(0)
+    remove = int(np.floor(fraction * flat.size + 0.5))
+    drop = np.zeros(flat.size, dtype=bool)
+    drop[np.argsort(flat, kind="stable")[:remove]] = True
+
+    out_levels: list[dict[str, np.ndarray]] = []
+    start = 0
+    inverse = np.argsort(order)
+    for bands in levels:
+        new_bands: dict[str, np.ndarray] = {}
+        for key, band in bands.items():
+            moved = np.transpose(band, order)
+            shape = moved.shape[:-1] if vec is not None else moved.shape
+            count = int(np.prod(shape))
+            mask = drop[start : start + count].reshape(shape)
+            start += count
+            kept = moved.copy()
+            kept[mask] = 0
+            new_bands[key] = np.transpose(kept, inverse)
+        out_levels.append(new_bands)
+    return _from_bands(kind, np.array(coarse, copy=True), out_levels)
+
+
+def _check_fraction(fraction: Any) -> float:
+    if isinstance(fraction, bool) or not isinstance(
+        fraction, int | float | np.integer | np.floating
+    ):
+        msg = f"fraction must be a number in [0, 1], not {fraction!r}"
+        raise InvalidParameter(msg)
+    value = float(fraction)
+    if not 0.0 <= value <= 1.0:  # also rejects NaN
+        msg = f"fraction must be in [0, 1] (the share of details to remove), not {fraction!r}"
+        raise InvalidParameter(msg)
+    return value
+
+
+def _as_bands(coeffs: Any) -> tuple[str, np.ndarray, list[dict[str, np.ndarray]]]:
+    """Any of the three layouts as (kind, cA, [{key: band}] coarse level first)."""
+    if isinstance(coeffs, np.ndarray | dict) or not isinstance(coeffs, Sequence) or not coeffs:
+        msg = "coeffs must be a non-empty list as wavedec, wavedec2 or wavedecn returns it"
+        raise InvalidCoefficients(msg)
+    coarse = np.asarray(coeffs[0])
+    if coarse.ndim == 0:
+        msg = "cA must have at least one dimension"
+        raise InvalidCoefficients(msg)
+    details = list(coeffs[1:])
+    if not details:
+        return "wavedec", coarse, []
+    first = details[0]
+    levels: list[dict[str, np.ndarray]] = []
+    if isinstance(first, dict):
+        kind = "wavedecn"
+        for d in details:
+            if not isinstance(d, dict) or not d:
+                msg = "every level of a wavedecn list must be a non-empty dict of detail bands"
+                raise InvalidCoefficients(msg)
+            levels.append({k: _band(v, k) for k, v in d.items()})
+    elif isinstance(first, tuple | list):
+        kind = "wavedec2"
+        for d in details:
+            if not isinstance(d, tuple | list) or len(d) != 3:
+                msg = "every level of a wavedec2 list must be a tuple (cH, cV, cD)"
+                raise InvalidCoefficients(msg)
+            levels.append({k: _band(v, k) for k, v in zip(_WAVEDEC2_KEYS, d, strict=True)})
+    else:
+        kind = "wavedec"
+        levels = [{"d": _band(d, "cD")} for d in details]
+    lengths = {len(k) for bands in levels for k in bands}
+    if len(lengths) != 1:
+        msg = f"detail keys of different lengths {sorted(lengths)}; expected one per axis"
+        raise InvalidCoefficients(msg)
+    for bands in levels:
+        for key, band in bands.items():
+            if band.ndim != coarse.ndim:
+                msg = (
+                    f"detail band {key!r} has {band.ndim} dimensions but cA has {coarse.ndim}; "
+                    "they must match"
+                )
+                raise InvalidCoefficients(msg)
+    return kind, coarse, levels
+
+
+def _band(value: Any, name: str) -> np.ndarray:
+    if value is None:
+        msg = f"detail band {name!r} is None; remove_smallest needs every band as an array"
+        raise InvalidCoefficients(msg)
+    return np.asarray(value)
+
+
+def _from_bands(kind: str, coarse: np.ndarray, levels: list[dict[str, np.ndarray]]) -> list[Any]:
+    if kind == "wavedec":
+        return [coarse, *(bands["d"] for bands in levels)]
+    if kind == "wavedec2":
+        return [coarse, *(tuple(bands[k] for k in _WAVEDEC2_KEYS) for bands in levels)]
+    return [coarse, *levels]
+
+
+def _resolve_axes(axes: Sequence[int] | None, ndim: int, count: int) -> list[int]:
+    if axes is None:
+        if count > ndim:
+            msg = f"detail keys name {count} axes but the arrays have only {ndim}"
+            raise InvalidCoefficients(msg)
+        return list(range(count))
+    if isinstance(axes, int | np.integer):
+        axes = [int(axes)]
+    result = [normalize_axis(a, ndim) for a in axes]
+    if len(result) != count or len(set(result)) != count:
+        msg = f"axes {tuple(axes)} must name {count} distinct axes, one per letter of the keys"
+        raise InvalidParameter(msg)
+    return result
+
+
+def _resolve_vector_axis(vector_axis: int | None, ndim: int, axes: list[int]) -> int | None:
+    if vector_axis is None:
+        return None
+    vec = normalize_axis(vector_axis, ndim)
+    if vec in axes:
+        msg = (
+            f"vector_axis {vector_axis} was transformed (axes {tuple(axes)}); give an axis that "
+            "holds vector components, or None to rank every number on its own"
+        )
+        raise InvalidParameter(msg)
+    return vec
+
+
+def _band_norms(
+    coarse: np.ndarray,
+    levels: list[dict[str, np.ndarray]],
+    axes: list[int],
+    wavelet: str | FilterBank,
+    boundary: str | Sequence[str],
+) -> list[dict[str, np.ndarray]]:
+    """Basis norms per band (transformed axes only, in ``axes`` order), coarse level first."""
+    bank = get_wavelet(wavelet)
+    bounds = _boundaries(boundary, len(axes), bank)
+    fine = []
+    for i, a in enumerate(axes):
+        n = coarse.shape[a]
+        for bands in levels:
+            detail = next((b for k, b in bands.items() if k[i] == "d"), None)
+            if detail is None:
+                msg = f"level without a band that is detail along axis {a}; cannot size it"
+                raise InvalidCoefficients(msg)
+            n = bank.rule(bounds[i]).fine_length(n, detail.shape[a])
+        fine.append(n)
+    table = basis_norms_nd(tuple(fine), bank, bounds, len(levels))
+    result: list[dict[str, np.ndarray]] = []
+    for li, bands in enumerate(levels):
+        level_norms = table[li + 1]
+        assert isinstance(level_norms, dict)
+        result.append({key: np.asarray(level_norms[key]) for key in bands})
+    return result
