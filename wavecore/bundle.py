@@ -1,0 +1,387 @@
+"""The coefficient bundle: a versioned binary container, coarse to fine.
+
+This docstring is the specification of format version 1.0; ``docs/bundle-format.md`` says the
+same in more words.  Like NumPy's ``.npy`` format, a bundle is a fixed preamble, a bounded
+self-describing header, then the payload.  All integers are little-endian.
+
+Layout
+------
+========  ===========  ==========================================================================
+offset    size         field
+========  ===========  ==========================================================================
+0         8            magic ``b"\\x89WVB\\r\\n\\x1a\\n"`` (PNG-style: catches 7-bit and newline
+                       mangling, stops ``type`` on DOS)
+8         1            major version (``1``); a reader refuses any other major version
+9         1            minor version (``0``); a reader accepts any minor version of its major,
+                       because minor versions only add optional header keys
+10        2            header length ``H`` (``uint16``), ``2 <= H <= MAX_HEADER_SIZE``
+12        H            header: a UTF-8 JSON object (see *Header*)
+12+H      1            chunk count ``N`` (``uint8``), ``1 <= N <= MAX_CHUNKS``
+13+H      8·N          chunk table: for each chunk its byte length (``uint32``) and CRC-32
+                       (``uint32``, ``zlib.crc32``)
+13+H+8N   4            CRC-32 of every byte before it (magic, versions, header, table)
+17+H+8N   ...          the chunks, concatenated in table order; nothing may follow the last one
+========  ===========  ==========================================================================
+
+Chunk ``0`` holds the coarsest approximation ``cA_L``; chunk ``i`` (``1 <= i <= L``) holds all
+detail subbands of level ``L + 1 - i`` (every channel, every orientation), so chunks run
+**coarse to fine**.  A bundle cut after chunk ``i`` still decodes exactly at resolution level
+``L - i`` (``decode(data, level=L - i)``); chunk CRCs are checked only for the chunks a decode
+uses, so a damaged fine chunk does not hide the coarse image, and a damaged chunk that is needed is
+a clear error.  What a chunk's bytes mean is the business of the coder named in the header.
+
+Header
+------
+A JSON object (no whitespace needed) with these keys; readers ignore unknown keys, so a minor
+version may add some.
+
+``kind``        ``"image"``, ``"curve"`` or ``"surface"``
+``shape``       the original array's shape (list of positive ints)
+``dtype``       the original dtype: ``uint8``, ``uint16``, ``float32`` or ``float64``
+``fit``         how the transformed grid was made from the original: ``"pad"`` (``pads`` says
+                how many samples were added before and after on each transformed axis) or
+                ``"none"``
+``pads``        ``[[before, after], ...]``, one pair per transformed axis
+``fitted``      the shape of the transformed array (the original plus pads, colour axis kept)
+``wavelet``     ``"bspline2"``, ``"haar"``, ``"cdf97"`` … or ``"legall53"`` (the reversible integer
+                lifting used by the lossless path)
+``boundary``    one of ``"open"`` (the paper's endpoint-interpolating rows), ``"closed"``
+                (periodic) or ``"symmetric"`` (mirror extension: ``legall53``, ``cdf97``) per
+                transformed axis
+``levels``      ``L``, the number of decomposition levels (``N = L + 1`` chunks)
+``colour``      ``"none"``, ``"ycbcr"`` (irreversible, lossy) or ``"rct"`` (reversible)
+``quantizer``   the quantizer's name (``"none"`` for lossless) and ``qparams`` its parameters
+``coder``       the entropy coder's name and ``cparams`` its parameters
+``peak``        the peak value PSNR is measured against
+``psnr``        the encoder's measured PSNR in dB (``null`` when exact)
+``max_error``   the encoder's measured largest absolute error (per sample, or per point for
+                curves)
+
+Limits and safety
+-----------------
+A reader checks, in this order and before it allocates anything sized by the bundle: the magic,
+the major version, the header length (at most ``MAX_HEADER_SIZE`` bytes), the JSON, every header
+field's type and range (the declared element count is at most ``MAX_ELEMENTS``), the header and
+table CRC, and that the chunk table's lengths fit in the bytes that are actually present.  Every
+failure is a :class:`~wavecore.errors.BundleError` whose message names the field being read.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from .errors import BundleError
+
+__all__ = [
+    "FORMAT_VERSION",
+    "MAGIC",
+    "MAX_CHUNKS",
+    "MAX_ELEMENTS",
+    "MAX_HEADER_SIZE",
+    "Bundle",
+    "read_bundle",
+    "write_bundle",
+]
+
+MAGIC = b"\x89WVB\r\n\x1a\n"
+FORMAT_VERSION = (1, 0)
+MAX_HEADER_SIZE = 65535
+MAX_CHUNKS = 64
+#: Largest element count (samples × channels) a bundle may declare: 2**27, about a 6700 × 6700
+#: RGB image.  Decoding allocates a few float64 arrays of this size, so this bounds memory use.
+MAX_ELEMENTS = 2**27
+MAX_LEVELS = 30
+
+_PREAMBLE = struct.Struct("<8sBBH")
+_TABLE_ENTRY = struct.Struct("<II")
+_CRC = struct.Struct("<I")
+
+KINDS = ("image", "curve", "surface")
+DTYPES = ("uint8", "uint16", "float32", "float64")
+COLOURS = ("none", "ycbcr", "rct")
+FITS = ("pad", "none")
+BOUNDARIES = ("open", "closed", "symmetric")
+_NAME_MAX = 32
+
+
+@dataclass(frozen=True)
+class Bundle:
+    """A parsed bundle: its validated header and the chunk bytes that are present.
+
+    ``chunks[i]`` is ``None`` when the data ends before chunk ``i`` is complete (a truncated
+    bundle); use :meth:`chunk` to get a chunk with its CRC checked.
+    """
+
+    version: tuple[int, int]
+    header: dict[str, Any]
+    chunks: tuple[memoryview | None, ...]
+    crcs: tuple[int, ...]
+
+    @property
+    def available(self) -> int:
+        """How many leading chunks are complete."""
+        count = 0
+        for chunk in self.chunks:
+            if chunk is None:
+                break
+            count += 1
+        return count
+
+    def chunk(self, index: int) -> bytes:
+        """Chunk ``index``, after checking it is present and its CRC matches."""
+        data = self.chunks[index]
+        if data is None:
+            msg = (
+                f"bundle is truncated: chunk {index} of {len(self.chunks)} is missing; "
+                f"only the first {self.available} chunk(s) are complete, so decode a coarser "
+                "level or supply the whole bundle"
+            )
+            raise BundleError(msg)
+        if zlib.crc32(data) != self.crcs[index]:
+            msg = f"chunk {index} is corrupt: its CRC-32 does not match the chunk table"
+            raise BundleError(msg)
+        return bytes(data)
+
+
+class _Reader:
+    """Reads fields in order; every error names the field it was reading."""
+
+    def __init__(self, data: bytes | bytearray | memoryview) -> None:
+        self.view = memoryview(data).cast("B")
+        self.offset = 0
+
+    def take(self, size: int, field: str) -> memoryview:
+        remaining = len(self.view) - self.offset
+        if size > remaining:
+            msg = (
+                f"bundle is truncated while reading {field}: it needs {size} byte(s) at offset "
+                f"{self.offset}, but only {remaining} remain"
+            )
+            raise BundleError(msg)
+        out = self.view[self.offset : self.offset + size]
+        self.offset += size
+        return out
+
+    def unpack(self, fmt: struct.Struct, field: str) -> tuple[Any, ...]:
+        return fmt.unpack(self.take(fmt.size, field))
+
+
+def write_bundle(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
+    """Serialise a header and its chunks (coarse to fine) into bundle bytes.
+
+    The header is validated exactly as a reader would, so a writer can never produce a bundle
+    that its own reader refuses.
+
+    Examples
+    --------
+    >>> header = {"kind": "curve", "shape": [8, 2], "dtype": "float64", "fit": "none",
+    ...           "pads": [[0, 0]], "fitted": [8, 2], "wavelet": "bspline2",
+    ...           "boundary": ["open"], "levels": 0, "colour": "none", "quantizer": "none",
+    ...           "qparams": {}, "coder": "raw", "cparams": {}, "peak": 1.0, "psnr": None,
+    ...           "max_error": 0.0}
+    >>> data = write_bundle(header, [b"abc"])
+    >>> data[:8], read_bundle(data).chunk(0)
+    (b'\\x89WVB\\r\\n\\x1a\\n', b'abc')
+    """
+    check_header(header)
+    text = json.dumps(header, separators=(",", ":"), allow_nan=False).encode("utf-8")
+    if len(text) > MAX_HEADER_SIZE:
+        msg = f"header is {len(text)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
+        raise BundleError(msg)
+    if not 1 <= len(chunks) <= MAX_CHUNKS or len(chunks) != header["levels"] + 1:
+        msg = f"a bundle of {header['levels']} levels needs {header['levels'] + 1} chunks"
+        raise BundleError(msg)
+    parts = [_PREAMBLE.pack(MAGIC, *FORMAT_VERSION, len(text)), text, bytes([len(chunks)])]
+    for chunk in chunks:
+        parts.append(_TABLE_ENTRY.pack(len(chunk), zlib.crc32(chunk)))
+    head = b"".join(parts)
+    return b"".join([head, _CRC.pack(zlib.crc32(head)), *chunks])
+
+
+def read_bundle(data: Any) -> Bundle:
+    """Parse and validate a bundle's preamble, header and chunk table.
+
+    Never raises anything but :class:`BundleError` and never allocates more than the input's
+    own size: chunks are views into ``data``.
+
+    Parameters
+    ----------
+    data : bytes-like
+        The bundle.  It may be truncated inside the chunks (the missing chunks come back as
+        ``None``); a bundle truncated before the end of its chunk table is an error.
+    """
+    try:
+        reader = _Reader(data)
+    except TypeError as exc:
+        msg = f"a bundle must be bytes, not {type(data).__name__}"
+        raise BundleError(msg) from exc
+    magic, major, minor, header_size = reader.unpack(_PREAMBLE, "the preamble")
+    if magic != MAGIC:
+        msg = f"not a wavecore bundle: the magic bytes are {bytes(magic)!r}, expected {MAGIC!r}"
+        raise BundleError(msg)
+    if major != FORMAT_VERSION[0]:
+        msg = (
+            f"unsupported bundle format version {major}.{minor}: this wavecore reads major "
+            f"version {FORMAT_VERSION[0]} (up to {FORMAT_VERSION[0]}.{FORMAT_VERSION[1]} "
+            "fully); use a wavecore release that knows this version"
+        )
+        raise BundleError(msg)
+    if header_size < 2:
+        msg = f"header length {header_size} is too short for a JSON object"
+        raise BundleError(msg)
+    text = reader.take(header_size, "the header")
+    header = _parse_header(bytes(text))
+    (count,) = reader.unpack(struct.Struct("<B"), "the chunk count")
+    if count != header["levels"] + 1:
+        msg = (
+            f"chunk count {count} does not match the header's levels = {header['levels']} "
+            f"(expected {header['levels'] + 1} chunks)"
+        )
+        raise BundleError(msg)
+    table = [reader.unpack(_TABLE_ENTRY, f"chunk table entry {i}") for i in range(count)]
+    head_end = reader.offset
+    (crc,) = reader.unpack(_CRC, "the header CRC-32")
+    if zlib.crc32(reader.view[:head_end]) != crc:
+        msg = "the header or chunk table is corrupt: the header CRC-32 does not match"
+        raise BundleError(msg)
+    chunks: list[memoryview | None] = []
+    remaining = len(reader.view) - reader.offset
+    for length, _ in table:
+        if length <= remaining:
+            chunks.append(reader.take(length, "a chunk"))
+            remaining -= length
+        else:
+            remaining = -1  # every chunk after a missing one is missing too
+            chunks.append(None)
+    if remaining > 0:
+        msg = f"{remaining} unexpected byte(s) after the last chunk"
+        raise BundleError(msg)
+    return Bundle((major, minor), header, tuple(chunks), tuple(c for _, c in table))
+
+
+def _parse_header(text: bytes) -> dict[str, Any]:
+    try:
+        header = json.loads(text.decode("utf-8"), parse_constant=_reject_constant)
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        msg = f"the header is not valid UTF-8 JSON: {exc}"
+        raise BundleError(msg) from exc
+    check_header(header)
+    return header
+
+
+def _reject_constant(name: str) -> None:
+    msg = f"the header contains {name}, which is not a number"
+    raise BundleError(msg)
+
+
+def _field(header: dict[str, Any], key: str, kind: type | tuple[type, ...]) -> Any:
+    """One header field, type-checked; the error names it."""
+    if key not in header:
+        msg = f"header field {key!r} is missing"
+        raise BundleError(msg)
+    value = header[key]
+    if isinstance(value, bool) and bool not in (kind if isinstance(kind, tuple) else (kind,)):
+        msg = f"header field {key!r} must be {_type_name(kind)}, not a boolean"
+        raise BundleError(msg)
+    if not isinstance(value, kind):
+        msg = f"header field {key!r} must be {_type_name(kind)}, not {type(value).__name__}"
+        raise BundleError(msg)
+    return value
+
+
+def _type_name(kind: type | tuple[type, ...]) -> str:
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    names = {int: "an integer", float: "a number", str: "a string", list: "a list", dict: "an "
+             "object", type(None): "null"}  # fmt: skip
+    return " or ".join(names.get(k, k.__name__) for k in kinds)
+
+
+def _choice(header: dict[str, Any], key: str, choices: Sequence[str]) -> str:
+    value = _field(header, key, str)
+    if value not in choices:
+        msg = f"header field {key!r} is {value[:_NAME_MAX]!r}; expected one of {list(choices)}"
+        raise BundleError(msg)
+    return value
+
+
+def _name(header: dict[str, Any], key: str) -> str:
+    value = _field(header, key, str)
+    if not 0 < len(value) <= _NAME_MAX or not value.replace("_", "").isalnum():
+        msg = f"header field {key!r} must be a short alphanumeric name, not {value[:40]!r}"
+        raise BundleError(msg)
+    return value
+
+
+def _int_list(header: dict[str, Any], key: str, minimum: int) -> list[int]:
+    value = _field(header, key, list)
+    if not 1 <= len(value) <= 4:
+        msg = f"header field {key!r} must list 1 to 4 sizes, not {len(value)}"
+        raise BundleError(msg)
+    for item in value:
+        if isinstance(item, bool) or not isinstance(item, int) or not minimum <= item:
+            msg = f"header field {key!r} must hold integers >= {minimum}, not {item!r}"
+            raise BundleError(msg)
+        if item > MAX_ELEMENTS:
+            msg = f"header field {key!r} declares a size {item} above MAX_ELEMENTS"
+            raise BundleError(msg)
+    return value
+
+
+def check_header(header: Any) -> None:
+    """Validate a header's fields and limits; raise :class:`BundleError` naming the bad field."""
+    if not isinstance(header, dict):
+        msg = f"the header must be a JSON object, not {type(header).__name__}"
+        raise BundleError(msg)
+    _choice(header, "kind", KINDS)
+    _choice(header, "dtype", DTYPES)
+    _choice(header, "fit", FITS)
+    _choice(header, "colour", COLOURS)
+    _name(header, "wavelet")
+    _name(header, "quantizer")
+    _name(header, "coder")
+    _field(header, "qparams", dict)
+    _field(header, "cparams", dict)
+    shape = _int_list(header, "shape", 1)
+    fitted = _int_list(header, "fitted", 1)
+    for key, dims in (("shape", shape), ("fitted", fitted)):
+        if math.prod(dims) > MAX_ELEMENTS:
+            msg = (
+                f"header field {key!r} declares {math.prod(dims)} elements, more than "
+                f"MAX_ELEMENTS = {MAX_ELEMENTS}"
+            )
+            raise BundleError(msg)
+    levels = _field(header, "levels", int)
+    if not 0 <= levels <= MAX_LEVELS or levels + 1 > MAX_CHUNKS:
+        msg = f"header field 'levels' must be between 0 and {MAX_LEVELS}, not {levels}"
+        raise BundleError(msg)
+    boundary = _field(header, "boundary", list)
+    if not 1 <= len(boundary) <= 2 or any(b not in BOUNDARIES for b in boundary):
+        msg = f"header field 'boundary' must list one or two of {list(BOUNDARIES)}"
+        raise BundleError(msg)
+    pads = _field(header, "pads", list)
+    if len(pads) != len(boundary):
+        msg = f"header field 'pads' must hold one pair per boundary ({len(boundary)})"
+        raise BundleError(msg)
+    for pair in pads:
+        if (
+            not isinstance(pair, list)
+            or len(pair) != 2
+            or any(isinstance(p, bool) or not isinstance(p, int) or p < 0 for p in pair)
+        ):
+            msg = f"header field 'pads' must hold pairs of integers >= 0, not {pair!r}"
+            raise BundleError(msg)
+    for key in ("peak", "max_error"):
+        value = _field(header, key, (int, float))
+        if not math.isfinite(value) or value < 0:
+            msg = f"header field {key!r} must be a finite number >= 0, not {value!r}"
+            raise BundleError(msg)
+    psnr = _field(header, "psnr", (int, float, type(None)))
+    if psnr is not None and not math.isfinite(psnr):
+        msg = f"header field 'psnr' must be a finite number or null, not {psnr!r}"
+        raise BundleError(msg)
