@@ -1,0 +1,146 @@
+"""Re-sampling curves and padding grids to the lengths the transform accepts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import wavecore
+from wavecore import InvalidParameter
+
+
+def _random_curve(rng: np.random.Generator, m: int, d: int = 2) -> np.ndarray:
+    return np.cumsum(rng.standard_normal((m, d)), axis=0)
+
+
+def _steps(points: np.ndarray, closed: bool) -> np.ndarray:
+    nodes = np.concatenate([points, points[:1]]) if closed else points
+    return np.linalg.norm(np.diff(nodes, axis=0), axis=1)
+
+
+@given(m=st.integers(2, 60), n=st.integers(2, 200), d=st.integers(2, 4), seed=st.integers(0, 99))
+@settings(max_examples=60, deadline=None)
+def test_open_resampling_keeps_end_points_and_count(m: int, n: int, d: int, seed: int) -> None:
+    points = _random_curve(np.random.default_rng(seed), m, d)
+    out = wavecore.resample_curve(points, n)
+    assert out.shape == (n, d)
+    assert np.array_equal(out[0], points[0])
+    assert np.array_equal(out[-1], points[-1])
+
+
+@given(m=st.integers(3, 60), n=st.integers(2, 200), seed=st.integers(0, 99))
+@settings(max_examples=60, deadline=None)
+def test_closed_resampling_stays_closed_without_a_seam_point(m: int, n: int, seed: int) -> None:
+    points = _random_curve(np.random.default_rng(seed), m)
+    out = wavecore.resample_curve(points, n, closed=True)
+    assert out.shape == (n, 2)
+    assert np.array_equal(out[0], points[0])
+    assert not np.allclose(out[-1], out[0])  # the seam is not written out twice
+    # Uniform by arc length on the closed polygon: every chord, the one across the seam
+    # included, is at most one n-th of the perimeter.
+    perimeter = _steps(points, closed=True).sum()
+    assert np.all(_steps(out, closed=True) <= perimeter / n * (1 + 1e-9))
+
+
+def test_closed_curve_with_a_written_out_seam_is_the_same_curve() -> None:
+    rng = np.random.default_rng(3)
+    points = _random_curve(rng, 20)
+    with_seam = np.concatenate([points, points[:1]])
+    assert np.allclose(
+        wavecore.resample_curve(points, 32, closed=True),
+        wavecore.resample_curve(with_seam, 32, closed=True),
+    )
+
+
+@given(
+    m=st.integers(2, 40),
+    n=st.integers(2, 120),
+    direction=st.lists(st.floats(-5, 5), min_size=3, max_size=3),
+    step=st.floats(0.01, 10),
+)
+@settings(max_examples=60, deadline=None)
+def test_uniform_points_on_a_line_are_resampled_exactly(
+    m: int, n: int, direction: list[float], step: float
+) -> None:
+    d = np.asarray(direction)
+    if np.linalg.norm(d) < 1e-3:
+        d = np.array([1.0, 0.0, 0.0])
+    origin = np.array([1.0, -2.0, 0.5])
+    line = origin + step * np.arange(m)[:, None] * d
+    out = wavecore.resample_curve(line, n)
+    expected = origin + step * (m - 1) * np.linspace(0, 1, n)[:, None] * d
+    assert np.allclose(out, expected, rtol=1e-12, atol=1e-9 * step * m * np.linalg.norm(d))
+    # The same count gives the same points back.
+    assert np.allclose(wavecore.resample_curve(line, m), line, rtol=1e-12, atol=1e-9 * step * m)
+
+
+def test_time_series_is_resampled_in_the_index() -> None:
+    series = np.sin(np.linspace(0, 6, 41))
+    out = wavecore.resample_curve(series, 81)
+    assert out.shape == (81,)
+    assert np.allclose(out[::2], series)
+
+
+def test_resampling_rejects_bad_input() -> None:
+    with pytest.raises(InvalidParameter, match="at least 2 points"):
+        wavecore.resample_curve([[0.0, 1.0]], 5)
+    with pytest.raises(InvalidParameter, match="n must be at least 2"):
+        wavecore.resample_curve([[0.0, 1.0], [1.0, 1.0]], 1)
+    with pytest.raises(InvalidParameter, match="finite"):
+        wavecore.resample_curve([[0.0, np.nan], [1.0, 1.0]], 4)
+    with pytest.raises(InvalidParameter, match="shape"):
+        wavecore.resample_curve(np.zeros((3, 2, 2)), 4)
+
+
+@given(
+    shape=st.tuples(st.integers(1, 40), st.integers(1, 40), st.integers(1, 3)),
+    level=st.integers(0, 4),
+    boundaries=st.sampled_from([("open", "open"), ("closed", "open"), ("closed", "closed")]),
+    dtype=st.sampled_from([np.uint8, np.uint16, np.float32, np.float64]),
+)
+@settings(max_examples=80, deadline=None)
+def test_padding_fits_and_crops_back(
+    shape: tuple[int, int, int], level: int, boundaries: tuple[str, str], dtype: type
+) -> None:
+    rng = np.random.default_rng(sum(shape) + level)
+    data = (rng.random(shape) * 200).astype(dtype)
+    padded, pads = wavecore.pad_to_fit(data, level, axes=(0, 1), boundary=boundaries)
+    assert padded.dtype == data.dtype
+    for axis, boundary in enumerate(boundaries):
+        assert padded.shape[axis] == wavecore.valid_length(shape[axis], level, boundary)
+        assert pads[axis][0] == 0
+    assert np.array_equal(wavecore.crop_padding(padded, pads, axes=(0, 1)), data)
+    if level:
+        coeffs = wavecore.wavedec2(padded, boundary=boundaries, level=level)
+        assert np.allclose(wavecore.waverec2(coeffs, boundary=boundaries), padded, atol=1e-3)
+
+
+def test_closed_padding_blends_across_the_seam() -> None:
+    data = np.array([0.0, 10.0, 20.0, 30.0, 40.0])
+    padded, pads = wavecore.pad_to_fit(data, 2, axes=0, boundary="closed")
+    assert pads == ((0, 3),)
+    assert padded.tolist() == [0.0, 10.0, 20.0, 30.0, 40.0, 30.0, 20.0, 10.0]
+
+
+def test_open_padding_repeats_the_edge() -> None:
+    padded, _ = wavecore.pad_to_fit(np.array([1.0, 2.0, 3.0]), 1, axes=0)
+    assert padded.tolist() == [1.0, 2.0, 3.0, 3.0, 3.0, 3.0, 3.0, 3.0]
+
+
+@pytest.mark.parametrize("boundary", ["open", "closed"])
+@pytest.mark.parametrize("n", [5, 37, 100, 255, 300])
+def test_coarse_crop_is_about_n_over_two_to_the_level(boundary: str, n: int) -> None:
+    for level in range(1, 4):
+        padded, pads = wavecore.pad_to_fit(np.zeros(n), level, axes=0, boundary=boundary)
+        coarse = wavecore.wavedec(padded, boundary=boundary, level=level)[0]
+        cropped = wavecore.crop_padding(coarse, pads, axes=0, level=level, boundary=boundary)
+        extra = 2 if boundary == "open" else 1
+        assert -(-n // 2**level) <= len(cropped) <= -(-n // 2**level) + extra
+        assert len(cropped) <= len(coarse)
+
+
+def test_crop_rejects_mismatched_pads() -> None:
+    with pytest.raises(InvalidParameter, match="pads"):
+        wavecore.crop_padding(np.zeros((8, 8)), ((0, 1),), axes=(0, 1))
