@@ -28,6 +28,22 @@ setup() {
     fi
 }
 
+# The browser tests (tests/browser) drive Debian's Chromium through Playwright; Playwright's own
+# browser download is never used. Installed only when missing and only as root (CI, Docker).
+ensure_chromium() {
+    if [ -x /usr/bin/chromium ] && command -v chromedriver >/dev/null 2>&1; then
+        return
+    fi
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "installing chromium from Debian for the browser tests" >&2
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get update -qq >/dev/null
+        apt-get install -y -qq chromium chromium-driver >/dev/null </dev/null
+    else
+        echo "note: /usr/bin/chromium is missing (not root, not installing it)" >&2
+    fi
+}
+
 cmd=${1:-help}
 shift || true
 case "$cmd" in
@@ -40,6 +56,7 @@ case "$cmd" in
         ;;
     test)
         setup service,figures,test
+        ensure_chromium
         "$VENV/bin/ruff" check .
         "$VENV/bin/ruff" format --check .
         "$VENV/bin/mypy"
