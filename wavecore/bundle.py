@@ -43,8 +43,10 @@ version may add some.
                 ``"none"``
 ``pads``        ``[[before, after], ...]``, one pair per transformed axis
 ``fitted``      the shape of the transformed array (the original plus pads, colour axis kept)
-``wavelet``     ``"bspline2"``, ``"haar"``, ``"cdf97"`` … or ``"legall53"`` (the reversible integer
-                lifting used by the lossless path)
+``wavelet``     ``"bspline2"``, ``"haar"``, ``"cdf97"`` … or ``"reversible"`` (the integer
+                lifting of the lossless path, see :mod:`wavecore.lossless`)
+``lifting``     only with ``"reversible"``: the integer filter of each level, finest first,
+                ``"legall53"`` or ``"haar"``
 ``boundary``    one of ``"open"`` (the paper's endpoint-interpolating rows), ``"closed"``
                 (periodic) or ``"symmetric"`` (mirror extension: ``legall53``, ``cdf97``) per
                 transformed axis

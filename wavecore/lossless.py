@@ -19,6 +19,13 @@ samples split into ``ceil(n/2)`` coarse and ``floor(n/2)`` details), so a lossle
 padding, and its low-pass has unit DC gain, so the coarse band is a viewable thumbnail for
 ``decode(..., level=k)``.
 
+A second reversible filter, the integer Haar (S-transform: ``d = x[2i+1] - x[2i]``,
+``s = x[2i] + floor(d / 2)``), is chosen instead of 5/3 for a level when it codes that level's
+details in fewer bits: on images that were enlarged by pixel repetition (scikit-image's ``moon``
+is a 2× nearest-neighbour enlargement) its details are exactly zero, where 5/3's are not.  The
+choice is made per level by :func:`choose_filters` (first-order entropy of the level's details)
+and recorded in the bundle header.
+
 Only integer arithmetic in ``int64`` is used (floor division by shifts), so the result is the same
 everywhere.
 """
@@ -32,7 +39,10 @@ import numpy as np
 
 from .errors import InvalidParameter
 
-__all__ = ["band_shapes", "forward", "inverse", "lift", "unlift"]
+__all__ = ["FILTERS", "band_shapes", "choose_filters", "forward", "inverse", "lift", "unlift"]
+
+#: The reversible filters, by the names the bundle header uses.
+FILTERS = ("legall53", "haar")
 
 
 def _neighbours(s: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -44,8 +54,11 @@ def _neighbours(s: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     return s_right, d_left, d_right
 
 
-def lift(x: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """One 5/3 analysis step along ``axis``: ``(coarse, detail)`` as ``int64``.
+def lift(x: np.ndarray, axis: int = 0, filter: str = "legall53") -> tuple[np.ndarray, np.ndarray]:
+    """One analysis step along ``axis``: ``(coarse, detail)`` as ``int64``.
+
+    ``n`` samples give ``ceil(n / 2)`` coarse samples and ``floor(n / 2)`` details for both
+    filters (Haar passes an unpaired last sample to the coarse band unchanged).
 
     Examples
     --------
@@ -59,6 +72,10 @@ def lift(x: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray]:
         return np.moveaxis(data.copy(), 0, axis), np.moveaxis(data[:0].copy(), 0, axis)
     s = data[0::2].copy()
     d = data[1::2].copy()
+    if filter == "haar":
+        d -= s[: len(d)]
+        s[: len(d)] += d >> 1
+        return np.moveaxis(s, 0, axis), np.moveaxis(d, 0, axis)
     s_right, _, _ = _neighbours(s, d)
     d -= (s[: len(d)] + s_right) >> 1
     _, d_left, d_right = _neighbours(s, d)
@@ -66,16 +83,22 @@ def lift(x: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return np.moveaxis(s, 0, axis), np.moveaxis(d, 0, axis)
 
 
-def unlift(coarse: np.ndarray, detail: np.ndarray, axis: int = 0) -> np.ndarray:
+def unlift(
+    coarse: np.ndarray, detail: np.ndarray, axis: int = 0, filter: str = "legall53"
+) -> np.ndarray:
     """The exact inverse of :func:`lift`."""
     s = np.moveaxis(np.asarray(coarse, dtype=np.int64), axis, 0).copy()
     d = np.moveaxis(np.asarray(detail, dtype=np.int64), axis, 0).copy()
     if d.shape[0] == 0:
         return np.moveaxis(s, 0, axis)
-    _, d_left, d_right = _neighbours(s, d)
-    s -= (d_left + d_right + 2) >> 2
-    s_right, _, _ = _neighbours(s, d)
-    d += (s[: len(d)] + s_right) >> 1
+    if filter == "haar":
+        s[: len(d)] -= d >> 1
+        d += s[: len(d)]
+    else:
+        _, d_left, d_right = _neighbours(s, d)
+        s -= (d_left + d_right + 2) >> 2
+        s_right, _, _ = _neighbours(s, d)
+        d += (s[: len(d)] + s_right) >> 1
     out = np.empty((len(s) + len(d), *s.shape[1:]), dtype=np.int64)
     out[0::2] = s
     out[1::2] = d
@@ -111,8 +134,66 @@ def band_shapes(shape: Sequence[int], level: int, axes: Sequence[int] = (0, 1)) 
     return [tuple(current), *reversed(details)]
 
 
-def forward(data: np.ndarray, level: int, axes: Sequence[int] = (0, 1)) -> list[Any]:
-    """Multi-level 5/3 decomposition of integer data, in ``wavedec2`` layout (``int32``).
+def _filters(filters: Sequence[str] | None, level: int) -> list[str]:
+    names = ["legall53"] * level if filters is None else list(filters)
+    if len(names) != level or any(f not in FILTERS for f in names):
+        msg = f"filters must name one of {list(FILTERS)} per level ({level}), not {filters!r}"
+        raise InvalidParameter(msg)
+    return names
+
+
+def _entropy_bits(bands: Sequence[np.ndarray]) -> float:
+    total = 0.0
+    for band in bands:
+        _, counts = np.unique(band, return_counts=True)
+        total -= float(np.sum(counts * np.log2(counts / band.size)))
+    return total
+
+
+def _level_step(coarse: np.ndarray, axes: tuple[int, ...], name: str) -> tuple[np.ndarray, Any]:
+    if len(axes) == 1:
+        return lift(coarse, axes[0], name)
+    low, high = lift(coarse, axes[0], name)
+    ll, lh = lift(low, axes[1], name)
+    hl, hh = lift(high, axes[1], name)
+    return ll, (hl, lh, hh)
+
+
+def choose_filters(data: np.ndarray, level: int, axes: Sequence[int] = (0, 1)) -> list[str]:
+    """Per level (finest first), the filter whose details have the lower first-order entropy.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> small = np.random.default_rng(0).integers(0, 256, (16, 16))
+    >>> choose_filters(np.kron(small, np.ones((2, 2), int)), 2)  # a 2x pixel-repeated image
+    ['haar', 'legall53']
+    """
+    axes = tuple(axes)
+    coarse = np.asarray(data).astype(np.int64)
+    chosen: list[str] = []
+    for _ in range(level):
+        best: tuple[float, str, np.ndarray] | None = None
+        for name in FILTERS:
+            low, bands = _level_step(coarse, axes, name)
+            bits = _entropy_bits(bands if isinstance(bands, tuple) else (bands,))
+            if best is None or bits < best[0]:
+                best = (bits, name, low)
+        assert best is not None
+        chosen.append(best[1])
+        coarse = best[2]
+    return chosen
+
+
+def forward(
+    data: np.ndarray,
+    level: int,
+    axes: Sequence[int] = (0, 1),
+    filters: Sequence[str] | None = None,
+) -> list[Any]:
+    """Multi-level reversible decomposition of integer data, in ``wavedec2`` layout (``int32``).
+
+    ``filters`` names the filter of each level, finest first (default: 5/3 everywhere).
 
     With two axes the result is ``[cA, (cH, cV, cD), ...]`` (``cH`` detail along the first
     axis), with one axis ``[cA, cD, ...]``.  Other axes (colour) are carried along.
@@ -130,31 +211,41 @@ def forward(data: np.ndarray, level: int, axes: Sequence[int] = (0, 1)) -> list[
         msg = f"the reversible transform needs integer data, not {arr.dtype}"
         raise InvalidParameter(msg)
     axes = tuple(axes)
+    names = _filters(filters, level)
     coarse = arr.astype(np.int64)
     details: list[Any] = []
-    for _ in range(level):
-        if len(axes) == 1:
-            coarse, d = lift(coarse, axes[0])
-            details.append(d.astype(np.int32))
-            continue
-        low, high = lift(coarse, axes[0])
-        ll, lh = lift(low, axes[1])
-        hl, hh = lift(high, axes[1])
-        details.append((hl.astype(np.int32), lh.astype(np.int32), hh.astype(np.int32)))
-        coarse = ll
+    for name in names:
+        coarse, bands = _level_step(coarse, axes, name)
+        if isinstance(bands, tuple):
+            details.append(tuple(b.astype(np.int32) for b in bands))
+        else:
+            details.append(bands.astype(np.int32))
     return [coarse.astype(np.int32), *reversed(details)]
 
 
-def inverse(coeffs: Sequence[Any], axes: Sequence[int] = (0, 1)) -> np.ndarray:
-    """Reconstruct from :func:`forward`'s list, or from a prefix of it (a coarser image)."""
+def inverse(
+    coeffs: Sequence[Any], axes: Sequence[int] = (0, 1), filters: Sequence[str] | None = None
+) -> np.ndarray:
+    """Reconstruct from :func:`forward`'s list, or from a prefix of it (a coarser image).
+
+    ``filters`` is the full list given to :func:`forward` (finest first); a prefix of ``coeffs``
+    uses the coarsest ones.
+    """
     axes = tuple(axes)
+    levels = len(coeffs) - 1
+    names = _filters(filters, len(filters) if filters is not None else levels)
+    if len(names) < levels:
+        msg = f"{levels} detail levels but only {len(names)} filters"
+        raise InvalidParameter(msg)
     coarse = np.asarray(coeffs[0], dtype=np.int64)
-    for bands in coeffs[1:]:
+    # coeffs[1] is the coarsest level present: filter index len(names) - 1, then downwards.
+    for index, bands in enumerate(coeffs[1:]):
+        name = names[len(names) - 1 - index]
         if len(axes) == 1:
-            coarse = unlift(coarse, bands, axes[0])
+            coarse = unlift(coarse, bands, axes[0], name)
             continue
         cH, cV, cD = bands
-        low = unlift(coarse, cV, axes[1])
-        high = unlift(cH, cD, axes[1])
-        coarse = unlift(low, high, axes[0])
+        low = unlift(coarse, cV, axes[1], name)
+        high = unlift(cH, cD, axes[1], name)
+        coarse = unlift(low, high, axes[0], name)
     return coarse

@@ -1,0 +1,232 @@
+"""The container format (wavecore.bundle): layout, limits, and clean failures.
+
+Like NumPy's tests of the .npy format, a list of malformed inputs that must each fail with a
+BundleError naming what was wrong.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import zlib
+from typing import Any
+
+import pytest
+
+from wavecore import BundleError
+from wavecore.bundle import (
+    FORMAT_VERSION,
+    MAGIC,
+    MAX_ELEMENTS,
+    MAX_HEADER_SIZE,
+    check_header,
+    read_bundle,
+    write_bundle,
+)
+
+
+def make_header(**changes: Any) -> dict[str, Any]:
+    header: dict[str, Any] = {
+        "kind": "image",
+        "shape": [30, 20],
+        "dtype": "uint8",
+        "fit": "pad",
+        "pads": [[0, 4], [0, 2]],
+        "fitted": [34, 22],
+        "wavelet": "bspline2",
+        "boundary": ["open", "open"],
+        "levels": 2,
+        "colour": "none",
+        "quantizer": "deadzone",
+        "qparams": {"step": 1.5},
+        "coder": "zlib",
+        "cparams": {},
+        "peak": 255.0,
+        "psnr": 41.5,
+        "max_error": 3.0,
+    }
+    header.update(changes)
+    return header
+
+
+CHUNKS = [b"coarse", b"middle level", b"the finest level, longest"]
+
+
+def raw_bundle(header_bytes: bytes, chunks: list[bytes], major: int = 1, minor: int = 0) -> bytes:
+    """Assemble a bundle by hand, with correct CRCs, to reach the checks after the CRC."""
+    head = struct.pack("<8sBBH", MAGIC, major, minor, len(header_bytes)) + header_bytes
+    head += bytes([len(chunks)])
+    for chunk in chunks:
+        head += struct.pack("<II", len(chunk), zlib.crc32(chunk))
+    return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
+
+
+def test_round_trip_keeps_header_and_chunks() -> None:
+    header = make_header()
+    parsed = read_bundle(write_bundle(header, CHUNKS))
+    assert parsed.header == header
+    assert parsed.version == FORMAT_VERSION
+    assert [parsed.chunk(i) for i in range(3)] == CHUNKS
+    assert parsed.available == 3
+
+
+def test_layout_matches_the_spec() -> None:
+    data = write_bundle(make_header(), CHUNKS)
+    magic, major, minor, size = struct.unpack_from("<8sBBH", data)
+    assert (magic, (major, minor)) == (MAGIC, FORMAT_VERSION)
+    assert json.loads(data[12 : 12 + size]) == make_header()
+    assert data[12 + size] == len(CHUNKS)
+    table = 13 + size
+    lengths = [struct.unpack_from("<II", data, table + 8 * i)[0] for i in range(3)]
+    assert lengths == [len(c) for c in CHUNKS]
+    payload = table + 8 * 3 + 4
+    (crc,) = struct.unpack_from("<I", data, payload - 4)
+    assert crc == zlib.crc32(data[: payload - 4])
+    assert data[payload:] == b"".join(CHUNKS)
+
+
+def test_a_truncated_payload_keeps_its_complete_prefix() -> None:
+    data = write_bundle(make_header(), CHUNKS)
+    cut = data[: len(data) - len(CHUNKS[2]) + 3]
+    parsed = read_bundle(cut)
+    assert parsed.available == 2
+    assert parsed.chunk(1) == CHUNKS[1]
+    with pytest.raises(BundleError, match="truncated: chunk 2 of 3 is missing"):
+        parsed.chunk(2)
+
+
+def test_a_corrupt_chunk_fails_only_when_it_is_used() -> None:
+    data = bytearray(write_bundle(make_header(), CHUNKS))
+    data[-1] ^= 0xFF
+    parsed = read_bundle(bytes(data))
+    assert parsed.chunk(0) == CHUNKS[0]
+    with pytest.raises(BundleError, match="chunk 2 is corrupt"):
+        parsed.chunk(2)
+
+
+def test_unknown_major_version_is_refused_clearly() -> None:
+    data = bytearray(write_bundle(make_header(), CHUNKS))
+    data[8] = 2
+    with pytest.raises(BundleError, match=r"unsupported bundle format version 2\.0"):
+        read_bundle(bytes(data))
+
+
+def test_a_newer_minor_version_with_extra_keys_is_read() -> None:
+    header = make_header(future_key={"anything": [1, 2]})
+    text = json.dumps(header).encode()
+    parsed = read_bundle(raw_bundle(text, CHUNKS, minor=7))
+    assert parsed.version == (1, 7)
+    assert parsed.chunk(2) == CHUNKS[2]
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (b"", "truncated while reading the preamble"),
+        (b"\x89WVB", "truncated while reading the preamble"),
+        (b"\x89PNG\r\n\x1a\n\x01\x00\x02\x00{}", "not a wavecore bundle"),
+        (MAGIC + b"\x01\x00\x00\x00", "header length 0 is too short"),
+        (MAGIC + b"\x01\x00\x10\x00{}", "truncated while reading the header"),
+        (MAGIC + b"\x01\x00\x02\x00[]", "must be a JSON object"),
+        (MAGIC + b"\x01\x00\x02\x00\xff\xfe", "not valid UTF-8 JSON"),
+        (MAGIC + b"\x01\x00\x02\x00{}", "'kind' is missing"),
+        ("a string", "must be bytes"),
+        (12345, "must be bytes"),
+    ],
+)
+def test_malformed_preambles_fail_cleanly(data: Any, message: str) -> None:
+    with pytest.raises(BundleError, match=message):
+        read_bundle(data)
+
+
+BAD_HEADERS = [
+    ({"kind": "movie"}, "'kind' is 'movie'"),
+    ({"kind": 3}, "'kind' must be a string"),
+    ({"dtype": "int64"}, "'dtype' is 'int64'"),
+    ({"shape": []}, "'shape' must list 1 to 4 sizes"),
+    ({"shape": [0, 5]}, "'shape' must hold integers >= 1"),
+    ({"shape": [True, 5]}, "'shape' must hold integers"),
+    ({"shape": [2.5, 5]}, "'shape' must hold integers"),
+    ({"shape": [MAX_ELEMENTS + 1, 1]}, "above MAX_ELEMENTS"),
+    ({"fitted": [2**14, 2**14]}, "more than MAX_ELEMENTS"),
+    ({"levels": -1}, "'levels' must be between 0 and"),
+    ({"levels": 10**6}, "'levels' must be between 0 and"),
+    ({"levels": "2"}, "'levels' must be an integer"),
+    ({"levels": True}, "'levels' must be an integer, not a boolean"),
+    ({"boundary": ["open", "sideways"]}, "'boundary' must list"),
+    ({"pads": [[0, 4]]}, "one pair per boundary"),
+    ({"pads": [[0, -4], [0, 2]]}, "pairs of integers >= 0"),
+    ({"wavelet": "x" * 100}, "'wavelet' must be a short alphanumeric name"),
+    ({"coder": "../etc"}, "'coder' must be a short alphanumeric name"),
+    ({"qparams": []}, "'qparams' must be an object"),
+    ({"peak": -1}, "'peak' must be a finite number >= 0"),
+    ({"psnr": "high"}, "'psnr' must be"),
+]
+
+
+@pytest.mark.parametrize(("changes", "message"), BAD_HEADERS)
+def test_bad_header_fields_are_named(changes: dict[str, Any], message: str) -> None:
+    header = make_header(**changes)
+    with pytest.raises(BundleError, match=message):
+        check_header(header)
+    # The reader refuses it too, even with valid CRCs (a crafted bundle).
+    with pytest.raises(BundleError, match=message):
+        read_bundle(raw_bundle(json.dumps(header).encode(), CHUNKS))
+
+
+def test_missing_fields_are_named() -> None:
+    for key in make_header():
+        header = make_header()
+        del header[key]
+        with pytest.raises(BundleError, match=f"'{key}' is missing"):
+            check_header(header)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        b'{"kind": NaN}',
+        b"[" * 5000 + b"]" * 5000,
+        b'{"levels": 1' + b"0" * 5000 + b"}",
+        b'{"a": 1e999}',
+    ],
+)
+def test_hostile_json_fails_cleanly(text: bytes) -> None:
+    with pytest.raises(BundleError):
+        read_bundle(raw_bundle(text, CHUNKS))
+
+
+def test_chunk_count_must_match_levels() -> None:
+    text = json.dumps(make_header()).encode()
+    with pytest.raises(BundleError, match="chunk count 2 does not match"):
+        read_bundle(raw_bundle(text, CHUNKS[:2]))
+    with pytest.raises(BundleError, match="needs 3 chunks"):
+        write_bundle(make_header(), CHUNKS[:2])
+
+
+def test_trailing_bytes_are_refused() -> None:
+    with pytest.raises(BundleError, match="3 unexpected byte"):
+        read_bundle(write_bundle(make_header(), CHUNKS) + b"abc")
+
+
+def test_header_crc_catches_a_changed_table() -> None:
+    data = bytearray(write_bundle(make_header(), CHUNKS))
+    size = struct.unpack_from("<H", data, 10)[0]
+    data[13 + size] ^= 1  # the first chunk's length
+    with pytest.raises(BundleError, match="header CRC-32 does not match"):
+        read_bundle(bytes(data))
+
+
+def test_header_size_is_bounded() -> None:
+    header = make_header(qparams={"steps": list(range(20000))})
+    with pytest.raises(BundleError, match="MAX_HEADER_SIZE"):
+        write_bundle(header, CHUNKS)
+    assert MAX_HEADER_SIZE == 65535  # the uint16 length field cannot say more
+
+
+def test_chunk_views_do_not_copy_the_input() -> None:
+    data = write_bundle(make_header(), CHUNKS)
+    parsed = read_bundle(data)
+    view = parsed.chunks[2]
+    assert isinstance(view, memoryview)
+    assert view.obj is memoryview(data).obj
