@@ -5,6 +5,7 @@ The public API is what ``__all__`` lists; everything else is internal.
 
 from __future__ import annotations
 
+from .curves import CurveDecomposition, decompose_curve, fitting_length, transfer_details
 from .errors import (
     BundleError,
     InvalidCoefficients,
@@ -32,6 +33,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "BundleError",
+    "CurveDecomposition",
     "InvalidCoefficients",
     "InvalidLength",
     "InvalidParameter",
@@ -42,12 +44,15 @@ __all__ = [
     "basis_norms_nd",
     "coarse_extent",
     "crop_padding",
+    "decompose_curve",
+    "fitting_length",
     "matrices",
     "max_level",
     "pad_to_fit",
     "remove_smallest",
     "resample_curve",
     "synthesis_step",
+    "transfer_details",
     "valid_length",
     "wavedec",
     "wavedec2",
