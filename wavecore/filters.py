@@ -26,6 +26,7 @@ __all__ = [
     "Banded",
     "BoundaryRule",
     "FilterBank",
+    "Regular",
     "Sparse",
     "get_wavelet",
     "matrices",
@@ -93,6 +94,83 @@ class Banded:
             row += self.step[0]
             col += self.step[1]
         return out
+
+    def _check_rows(self, rows: int) -> int:
+        p = len(self.pattern)
+        regular_rows = rows - len(self.start) - len(self.end)
+        if regular_rows < 0 or regular_rows % p:
+            msg = f"{rows} rows cannot hold the start, end and regular blocks"
+            raise InvalidLength(msg)
+        return regular_rows // p
+
+    def sparse(self, rows: int, cols: int, periodic: bool) -> Sparse:
+        """The same matrix as :meth:`dense`, in compressed-row form, built without it."""
+        blocks = self._check_rows(rows)
+        pattern = np.array(self.pattern, dtype=float)
+        p, w = pattern.shape
+        parts_r, parts_c, parts_v = [], [], []
+        for block, row0, col0 in (
+            (self.start, 0, 0),
+            (self.end, rows - len(self.end), cols - (len(self.end[0]) if self.end else 0)),
+        ):
+            if block:
+                dense = np.array(block, dtype=float)
+                r, c = np.nonzero(dense)
+                parts_r.append(r + row0)
+                parts_c.append(c + col0)
+                parts_v.append(dense[r, c])
+        b = np.arange(blocks)[:, None, None]
+        i = np.arange(p)[None, :, None]
+        t = np.arange(w)[None, None, :]
+        r = np.broadcast_to(self.first[0] + b * self.step[0] + i, (blocks, p, w)).ravel()
+        c = np.broadcast_to(self.first[1] + b * self.step[1] + t, (blocks, p, w)).ravel()
+        if periodic:
+            c = c % cols
+        elif blocks and (c.min() < 0 or c.max() >= cols):
+            msg = f"a regular row does not fit in {cols} columns"
+            raise InvalidLength(msg)
+        parts_r.append(r)
+        parts_c.append(c)
+        parts_v.append(np.broadcast_to(pattern[None], (blocks, p, w)).ravel())
+        all_r, all_c, all_v = (np.concatenate(x) for x in (parts_r, parts_c, parts_v))
+        # Taps that land on the same entry add up (start/end overlap, tiny periodic sizes).
+        flat = all_r.astype(np.int64) * cols + all_c
+        keys, inverse = np.unique(flat, return_inverse=True)
+        values = np.zeros(len(keys))
+        np.add.at(values, inverse, all_v)
+        keep = values != 0
+        keys, values = keys[keep], values[keep]
+        out_r, out_c = np.divmod(keys, cols)
+        indptr = np.zeros(rows + 1, dtype=np.intp)
+        np.add.at(indptr, out_r + 1, 1)
+        return Sparse(
+            indptr=np.cumsum(indptr),
+            indices=out_c.astype(np.intp),
+            weights=values,
+            shape=(rows, cols),
+        )
+
+    def regular(self, rows: int, cols: int) -> Regular:
+        """The placements of ``pattern`` that neither wrap nor meet the start or end rows."""
+        blocks = self._check_rows(rows)
+        pattern = np.array(self.pattern, dtype=float)
+        p, w = pattern.shape
+        row0, col0 = self.first
+        step = self.step[1]
+        b_lo, b_hi = 0, blocks
+        if step > 0:
+            b_lo = max(0, -(col0 // step)) if col0 < 0 else 0
+            b_hi = min(blocks, (cols - w - col0) // step + 1)
+        if row0 < len(self.start) or row0 + blocks * p > rows - len(self.end) or b_hi <= b_lo:
+            return Regular(lo=0, blocks=0, p=p, col=0, step=step, pattern=pattern)
+        return Regular(
+            lo=row0 + b_lo * p,
+            blocks=b_hi - b_lo,
+            p=p,
+            col=col0 + b_lo * step,
+            step=step,
+            pattern=pattern,
+        )
 
 
 @dataclass(frozen=True)
@@ -323,7 +401,7 @@ def check_fine_length(rule: BoundaryRule, m: int, wavelet: str, boundary: str) -
         raise InvalidLength(msg)
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=16)
 def _step_matrices(bank_name: str, boundary: str, m: int) -> tuple[np.ndarray, ...]:
     bank = get_wavelet(bank_name)
     rule = bank.rule(boundary)
@@ -340,11 +418,60 @@ def _step_matrices(bank_name: str, boundary: str, m: int) -> tuple[np.ndarray, .
     return mats
 
 
+def _rows_and_columns(rule: BoundaryRule, m: int) -> dict[str, tuple[int, int]]:
+    r, s = rule.coarse_length(m), rule.detail_length(m)
+    return {"A": (r, m), "B": (s, m), "P": (m, r), "Q": (m, s)}
+
+
 @lru_cache(maxsize=256)
 def step_sparse(bank_name: str, boundary: str, m: int) -> tuple[Sparse, Sparse, Sparse, Sparse]:
-    """The four step matrices for fine length ``m`` in compressed-row form (cached)."""
-    A, B, P, Q = _step_matrices(bank_name, boundary, m)
-    return Sparse.from_dense(A), Sparse.from_dense(B), Sparse.from_dense(P), Sparse.from_dense(Q)
+    """The four step matrices for fine length ``m`` in compressed-row form (cached).
+
+    Built straight from the block form, without a dense matrix, so that large lengths cost
+    memory and time in proportion to ``m``.
+    """
+    bank = get_wavelet(bank_name)
+    rule = bank.rule(boundary)
+    check_fine_length(rule, m, bank.name, boundary)
+    sizes = _rows_and_columns(rule, m)
+    A, B, P, Q = (
+        getattr(rule, name).sparse(*sizes[name], rule.periodic) for name in ("A", "B", "P", "Q")
+    )
+    return A, B, P, Q
+
+
+@dataclass(frozen=True)
+class Regular:
+    """The rows of a banded matrix that are one repeated pattern, for the vectorised kernels.
+
+    Rows ``lo + b * p + i`` (``0 <= b < blocks``, ``0 <= i < p``) hold ``pattern[i]`` in
+    columns ``col + b * step`` onwards, with no wrap-around; every other row is taken from the
+    compressed-row form.
+    """
+
+    lo: int
+    blocks: int
+    p: int
+    col: int
+    step: int
+    pattern: np.ndarray
+
+    @property
+    def hi(self) -> int:
+        return self.lo + self.blocks * self.p
+
+
+@lru_cache(maxsize=256)
+def step_regular(
+    bank_name: str, boundary: str, m: int
+) -> tuple[Regular, Regular, Regular, Regular]:
+    """The regular interior of each of ``A, B, P, Q`` for fine length ``m`` (cached)."""
+    bank = get_wavelet(bank_name)
+    rule = bank.rule(boundary)
+    check_fine_length(rule, m, bank.name, boundary)
+    sizes = _rows_and_columns(rule, m)
+    A, B, P, Q = (getattr(rule, name).regular(*sizes[name]) for name in ("A", "B", "P", "Q"))
+    return A, B, P, Q
 
 
 def matrices(

@@ -26,7 +26,15 @@ import numpy as np
 
 from .errors import InvalidCoefficients, InvalidLength, InvalidParameter
 from .filters import BoundaryRule, FilterBank, get_wavelet
-from .transform import analysis_step, as_float_array, normalize_axis, synthesis_step
+from .transform import (
+    analysis_2d,
+    analysis_step,
+    as_float_array,
+    fused_level_fits,
+    normalize_axis,
+    synthesis_2d,
+    synthesis_step,
+)
 
 __all__ = [
     "max_level",
@@ -338,6 +346,12 @@ def wavedecn(
     coarse = arr
     details: list[dict[str, np.ndarray]] = []
     for _ in range(level):
+        if len(ax) == 2 and fused_level_fits(coarse.shape, ax, coarse.dtype):
+            fused = analysis_2d(coarse, bank, (bounds[0], bounds[1]))
+            if fused is not None:
+                coarse, ad, da, dd = fused
+                details.append({"ad": ad, "da": da, "dd": dd})
+                continue
         bands: dict[str, np.ndarray] = {"": coarse}
         for a, b in zip(ax, bounds, strict=True):
             split: dict[str, np.ndarray] = {}
@@ -391,6 +405,15 @@ def waverecn(
         if unknown:
             msg = f"unknown detail keys {sorted(unknown)}; expected {sorted(keys)}"
             raise InvalidCoefficients(msg)
+        if len(ax) == 2 and fused_level_fits(coarse.shape, ax, coarse.dtype):
+            fine = synthesis_2d(
+                (coarse, level_details.get("ad"), level_details.get("da"), level_details.get("dd")),
+                bank,
+                (bounds[0], bounds[1]),
+            )
+            if fine is not None:
+                coarse = fine
+                continue
         bands: dict[str, Any] = {"a" * len(ax): coarse, **level_details}
         # Undo the axes in reverse order: merge the last letter of every key first.
         for depth in range(len(ax), 0, -1):

@@ -25,7 +25,14 @@ import numpy as np
 
 from . import _kernels
 from .errors import InvalidCoefficients, InvalidParameter
-from .filters import FilterBank, Sparse, check_fine_length, get_wavelet, step_sparse
+from .filters import (
+    FilterBank,
+    Sparse,
+    check_fine_length,
+    get_wavelet,
+    step_regular,
+    step_sparse,
+)
 
 __all__ = ["analysis_step", "as_float_array", "normalize_axis", "synthesis_step", "work_dtype"]
 
@@ -82,21 +89,35 @@ def normalize_axis(axis: Any, ndim: int) -> int:
 
 
 def _run_blocks(
-    kernel: Callable[..., None], args: tuple[Any, ...], outer: int, rows: int, work: int
+    kernel: Callable[..., None],
+    args: tuple[Any, ...],
+    outer: int,
+    rows: int,
+    work: int,
+    rows_even: bool = False,
+    outer_only: bool = False,
 ) -> None:
-    """Call ``kernel(*args, outer_lo, outer_hi, row_lo, row_hi)`` over blocks, in threads if big."""
+    """Call ``kernel(*args, outer_lo, outer_hi, row_lo, row_hi)`` over blocks, in threads if big.
+
+    ``outer_only`` kernels take only ``(outer_lo, outer_hi)``; ``rows_even`` keeps row blocks
+    on even boundaries (a synthesis block then starts on a whole pair of fine rows).
+    """
     threads = _thread_count()
-    if threads == 1 or work < _THREADED_MIN_ELEMENTS:
-        kernel(*args, 0, outer, 0, rows)
+    if threads == 1 or work < _THREADED_MIN_ELEMENTS or (outer_only and outer == 1):
+        kernel(*args, 0, outer) if outer_only else kernel(*args, 0, outer, 0, rows)
         return
     blocks = threads * 4
-    if outer >= blocks:
-        edges = np.linspace(0, outer, blocks + 1).astype(int)
+    if outer >= blocks or outer_only:
+        edges = np.linspace(0, outer, min(blocks, outer) + 1).astype(int)
         spans = [(lo, hi, 0, rows) for lo, hi in itertools.pairwise(edges) if hi > lo]
     else:
         edges = np.linspace(0, rows, blocks + 1).astype(int)
+        if rows_even:
+            edges = edges - edges % 2
+            edges[-1] = rows
         spans = [(0, outer, lo, hi) for lo, hi in itertools.pairwise(edges) if hi > lo]
-    futures = [_pool().submit(kernel, *args, *span) for span in spans]
+    calls: list[tuple[int, ...]] = [span[:2] if outer_only else span for span in spans]
+    futures = [_pool().submit(kernel, *args, *span) for span in calls]
     for future in futures:
         future.result()
 
@@ -111,6 +132,45 @@ def _view3(arr: np.ndarray, axis: int) -> np.ndarray:
 
 def _csr(matrix: Sparse, dtype: np.dtype[Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return matrix.indptr, matrix.indices, matrix.weights.astype(dtype, copy=False)
+
+
+@lru_cache(maxsize=256)
+def _kernel_args(
+    bank_name: str, boundary: str, m: int, dtype: np.dtype[Any]
+) -> dict[str, tuple[np.ndarray, ...]]:
+    """Kernel arguments for the four matrices of fine length ``m``, in ``dtype`` (cached).
+
+    ``"A"`` … ``"Q"`` are the compressed rows; ``"A+"`` … ``"Q+"`` add the regular interior in
+    the form the last-axis kernels read (none when the pattern's strides are not the dyadic
+    ones those kernels are written for).
+    """
+    sparse = dict(zip("ABPQ", step_sparse(bank_name, boundary, m), strict=True))
+    regular = dict(zip("ABPQ", step_regular(bank_name, boundary, m), strict=True))
+    out: dict[str, tuple[np.ndarray, ...]] = {}
+    for name in "ABPQ":
+        csr = _csr(sparse[name], dtype)
+        reg = regular[name]
+        p, step = (1, 2) if name in "AB" else (2, 1)
+        if reg.p == p and reg.step == step and reg.blocks:
+            interior = np.array([reg.lo, reg.blocks, reg.col], dtype=np.intp)
+            pattern = reg.pattern.astype(dtype)
+        else:
+            interior = np.zeros(3, dtype=np.intp)
+            pattern = np.zeros((p, 1), dtype=dtype)
+        out[name] = csr
+        out[name + "+"] = (*csr, interior, pattern)
+    return out
+
+
+def _max_span(matrix: Sparse) -> tuple[int, int]:
+    """The most taps in a row, and the widest column span of a row."""
+    counts = np.diff(matrix.indptr)
+    spans = [
+        int(matrix.indices[hi - 1] - matrix.indices[lo]) + 1
+        for lo, hi in itertools.pairwise(matrix.indptr)
+        if hi > lo
+    ]
+    return int(counts.max(initial=0)), max(spans, default=0)
 
 
 def analysis_step(
@@ -165,20 +225,18 @@ def analysis_step(
         cr, dr = analysis_step(arr.real, bank, boundary, axis)
         ci, di = analysis_step(arr.imag, bank, boundary, axis)
         return cr + 1j * ci, dr + 1j * di
-    A, B, _, _ = step_sparse(bank.name, boundary, m)
+    mats = _kernel_args(bank.name, boundary, m, arr.dtype)
     arr = np.ascontiguousarray(arr)
     x = _view3(arr, axis)
-    r, s = A.shape[0], B.shape[0]
+    r, s = rule.coarse_length(m), rule.detail_length(m)
     c = np.empty((x.shape[0], r, x.shape[2]), dtype=arr.dtype)
     d = np.empty((x.shape[0], s, x.shape[2]), dtype=arr.dtype)
     if x.shape[2] == 1:
-        kernel, args = (
-            _kernels.analysis2,
-            (x[:, :, 0], *_csr(A, arr.dtype), *_csr(B, arr.dtype), c[:, :, 0], d[:, :, 0]),
-        )
+        args = (x[:, :, 0], *mats["A+"], *mats["B+"], c[:, :, 0], d[:, :, 0])
+        _run_blocks(_kernels.analysis_last, args, x.shape[0], m, x.size, outer_only=True)
     else:
-        kernel, args = _kernels.analysis3, (x, *_csr(A, arr.dtype), *_csr(B, arr.dtype), c, d)
-    _run_blocks(kernel, args, x.shape[0], max(r, s), x.size)
+        args = (x, *mats["A"], *mats["B"], c, d)
+        _run_blocks(_kernels.analysis3, args, x.shape[0], max(r, s), x.size)
     shape_c = arr.shape[:axis] + (r,) + arr.shape[axis + 1 :]
     shape_d = arr.shape[:axis] + (s,) + arr.shape[axis + 1 :]
     return c.reshape(shape_c), d.reshape(shape_d)
@@ -249,16 +307,112 @@ def synthesis_step(
         fr = synthesis_step(c_arr.real, d_arr.real, bank, boundary, axis)
         fi = synthesis_step(c_arr.imag, d_arr.imag, bank, boundary, axis)
         return fr + 1j * fi
-    _, _, P, Q = step_sparse(bank.name, boundary, m)
+    mats = _kernel_args(bank.name, boundary, m, dtype)
     cx = _view3(np.ascontiguousarray(c_arr, dtype=dtype), axis)
     dx = _view3(np.ascontiguousarray(d_arr, dtype=dtype), axis)
     f = np.empty((cx.shape[0], m, cx.shape[2]), dtype=dtype)
     if f.shape[2] == 1:
-        kernel, args = (
-            _kernels.synthesis2,
-            (cx[:, :, 0], dx[:, :, 0], *_csr(P, dtype), *_csr(Q, dtype), f[:, :, 0]),
-        )
+        args = (cx[:, :, 0], dx[:, :, 0], *mats["P+"], *mats["Q+"], f[:, :, 0])
+        _run_blocks(_kernels.synthesis_last, args, f.shape[0], m, f.size, outer_only=True)
     else:
-        kernel, args = _kernels.synthesis3, (cx, dx, *_csr(P, dtype), *_csr(Q, dtype), f)
-    _run_blocks(kernel, args, f.shape[0], m, f.size)
+        args = (cx, dx, *mats["P"], *mats["Q"], f)
+        _run_blocks(_kernels.synthesis3, args, f.shape[0], m, f.size)
     return f.reshape(c_arr.shape[:axis] + (m,) + c_arr.shape[axis + 1 :])
+
+
+def fused_level_fits(shape: tuple[int, ...], axes: list[int], dtype: np.dtype[Any]) -> bool:
+    """Whether one 2-D level over ``axes`` can run as one fused pass (the image case).
+
+    It can when the two axes are the last two, in order, and the data is real floating point;
+    any other layout takes one step per axis.
+    """
+    ndim = len(shape)
+    return (
+        ndim >= 2
+        and list(axes) == [ndim - 2, ndim - 1]
+        and np.dtype(dtype) in (np.float32, np.float64)
+    )
+
+
+@lru_cache(maxsize=256)
+def _fused_ok(bank_name: str, boundary: str, m: int, synthesis: bool) -> bool:
+    """Whether the axis-0 rows of a fused level fit the kernels' tap and ring-buffer sizes."""
+    sparse = step_sparse(bank_name, boundary, m)
+    taps, span = _max_span(sparse[2] if synthesis else sparse[0])
+    taps_q, span_q = _max_span(sparse[3] if synthesis else sparse[1])
+    return max(taps, taps_q) <= 32 and max(span, span_q) < _kernels._RING
+
+
+def analysis_2d(
+    arr: np.ndarray, bank: FilterBank, boundaries: tuple[str, str]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """One 2-D level over the last two axes of ``arr`` in one pass, or ``None`` if it cannot.
+
+    Returns the bands ``(aa, ad, da, dd)``: the first letter is axis ``-2``, the second axis
+    ``-1``; ``"a"`` coarse, ``"d"`` detail.  The lengths must already be checked.
+    """
+    if not fused_level_fits(arr.shape, [arr.ndim - 2, arr.ndim - 1], arr.dtype):
+        return None
+    m0, m1 = arr.shape[-2:]
+    if not _fused_ok(bank.name, boundaries[0], m0, synthesis=False):
+        return None
+    rule0, rule1 = bank.rule(boundaries[0]), bank.rule(boundaries[1])
+    mats0 = _kernel_args(bank.name, boundaries[0], m0, arr.dtype)
+    mats1 = _kernel_args(bank.name, boundaries[1], m1, arr.dtype)
+    arr = np.ascontiguousarray(arr)
+    x = arr.reshape(-1, m0, m1)
+    r0, s0 = rule0.coarse_length(m0), rule0.detail_length(m0)
+    r1, s1 = rule1.coarse_length(m1), rule1.detail_length(m1)
+    outer = x.shape[0]
+    bands = [
+        np.empty((outer, rows, cols), dtype=arr.dtype)
+        for rows, cols in ((r0, r1), (r0, s1), (s0, r1), (s0, s1))
+    ]
+    args = (x, *mats0["A"], *mats0["B"], *mats1["A+"], *mats1["B+"], *bands)
+    _run_blocks(_kernels.analysis_2d, args, outer, max(r0, s0), x.size)
+    lead = arr.shape[:-2]
+    aa, ad, da, dd = (band.reshape(lead + band.shape[1:]) for band in bands)
+    return aa, ad, da, dd
+
+
+def synthesis_2d(
+    bands: tuple[Any, Any, Any, Any], bank: FilterBank, boundaries: tuple[str, str]
+) -> np.ndarray | None:
+    """The inverse of :func:`analysis_2d` in one pass, or ``None`` if it cannot run fused.
+
+    ``None`` also when the bands' shapes do not fit together: the per-axis path then raises
+    the precise error.
+    """
+    if any(band is None for band in bands):
+        return None
+    aa, ad, da, dd = (as_float_array(band) for band in bands)
+    dtype = np.result_type(aa, ad, da, dd)
+    if aa.ndim < 2 or not fused_level_fits(aa.shape, [aa.ndim - 2, aa.ndim - 1], dtype):
+        return None
+    rule0, rule1 = bank.rule(boundaries[0]), bank.rule(boundaries[1])
+    (r0, r1), (s0, s1) = aa.shape[-2:], dd.shape[-2:]
+    m0, m1 = rule0.fine_length(r0, s0), rule1.fine_length(r1, s1)
+    lead = aa.shape[:-2]
+    fits = all(
+        band.shape == lead + shape
+        for band, shape in ((ad, (r0, s1)), (da, (s0, r1)), (dd, (s0, s1)))
+    ) and all(
+        m % 2 == 0
+        and m >= rule.min_length
+        and rule.coarse_length(m) == r
+        and rule.detail_length(m) == s
+        for rule, m, r, s in ((rule0, m0, r0, s0), (rule1, m1, r1, s1))
+    )
+    if not fits or not _fused_ok(bank.name, boundaries[0], m0, synthesis=True):
+        return None
+    mats0 = _kernel_args(bank.name, boundaries[0], m0, dtype)
+    mats1 = _kernel_args(bank.name, boundaries[1], m1, dtype)
+    views = [
+        np.ascontiguousarray(band, dtype=dtype).reshape(-1, *band.shape[-2:])
+        for band in (aa, ad, da, dd)
+    ]
+    outer = views[0].shape[0]
+    f = np.empty((outer, m0, m1), dtype=dtype)
+    args = (*views, *mats0["P"], *mats0["Q"], *mats1["P+"], *mats1["Q+"], f)
+    _run_blocks(_kernels.synthesis_2d, args, outer, m0, f.size, rows_even=True)
+    return f.reshape(lead + (m0, m1))

@@ -1,0 +1,148 @@
+"""Transform speed: wavecore's wavedec2 + waverec2 against PyWavelets, and the memory floor.
+
+Run with ``.venv/bin/python benchmarks/transform_speed.py`` (``--size 1026`` for a quick look).
+Everything is measured in one process and reported as medians of several runs, because the
+machine this project is built on is shared and noisy; the ratios matter more than the seconds.
+
+What is timed, for float64 and float32:
+
+* ours: ``wavedec2`` + ``waverec2``, 5 levels, open boundary, on a ``(2**12 + 2)²`` image;
+* PyWavelets: ``wavedec2`` + ``waverec2`` with ``"bior3.1"`` (the same four-tap filters up to
+  a factor of √2), ``mode="symmetric"``, 5 levels, on a ``2**12``-square image;
+* the memory-bandwidth floor: one ``np.copyto`` of the input (a read and a write of every
+  sample) times the number of such full passes our algorithm makes (see ``PASSES``);
+* peak extra memory of ours, from ``tracemalloc`` (NumPy reports its buffers to it), as a
+  multiple of the input's size.  The coefficients (about 1× the input) and the reconstruction
+  (1×) are part of it, so 2× is the least possible.
+
+It also measures, in fresh subprocesses, the first call's cost: importing wavecore and running
+a tiny ``wavedec2`` + ``waverec2``, with numba's on-disk cache cold and warm.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import tracemalloc
+from collections.abc import Callable
+
+import numpy as np
+import pywt
+
+import wavecore
+
+LEVELS = 5
+
+
+def passes(levels: int) -> float:
+    """Full read-and-write passes over the data that wavedec2 + waverec2 make.
+
+    Each 2-D level is one fused pass in each direction: decomposition reads the level's input
+    once and writes its four bands once; reconstruction reads the four bands and writes the
+    finer coarse band once.  Level ``l`` works on 4**-(l-1) of the data, so the total is
+    2 · (1 + 1/4 + … + 1/4**(levels-1)).
+    """
+    return 2 * sum(0.25**level for level in range(levels))
+
+
+def median_time(func: Callable[[], object], repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        func()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def ours(image: np.ndarray) -> np.ndarray:
+    return wavecore.waverec2(wavecore.wavedec2(image, "bspline2", "open", LEVELS))
+
+
+def theirs(image: np.ndarray) -> np.ndarray:
+    coeffs = pywt.wavedec2(image, "bior3.1", mode="symmetric", level=LEVELS)
+    return pywt.waverec2(coeffs, "bior3.1", mode="symmetric")
+
+
+def peak_extra(image: np.ndarray) -> float:
+    tracemalloc.start()
+    tracemalloc.reset_peak()
+    ours(image)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return peak / image.nbytes
+
+
+FIRST_CALL = """
+import time
+start = time.perf_counter()
+import numpy as np
+import wavecore
+wavecore.waverec2(wavecore.wavedec2(np.ones((66, 66), dtype=np.{dtype}), level=2))
+print(time.perf_counter() - start)
+"""
+
+
+def first_call(cache_dir: str, dtype: str) -> float:
+    env = {**os.environ, "NUMBA_CACHE_DIR": cache_dir}
+    out = subprocess.run(
+        [sys.executable, "-c", FIRST_CALL.format(dtype=dtype)],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return float(out.stdout.strip())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--size", type=int, default=4098, help="our image side (2**L*k + 2)")
+    parser.add_argument("--repeat", type=int, default=7, help="runs per median")
+    parser.add_argument("--no-first-call", action="store_true", help="skip the compile timing")
+    args = parser.parse_args()
+    n = args.size
+    rng = np.random.default_rng(0)
+    base = rng.random((n, n))
+    print(f"wavecore.wavedec2 + waverec2, {LEVELS} levels, open, {n}x{n}; ", end="")
+    print(f"pywt bior3.1 symmetric on {n - 2}x{n - 2}; median of {args.repeat} runs")
+    print(f"threads: {os.environ.get('WAVECORE_THREADS') or os.cpu_count()}")
+    results: dict[str, dict[str, float]] = {}
+    for dtype in (np.float64, np.float32):
+        image = base.astype(dtype)
+        peer = np.ascontiguousarray(image[: n - 2, : n - 2])
+        ours(image)  # compile and warm the caches
+        theirs(peer)
+        err = np.max(np.abs(ours(image) - image)) / np.max(np.abs(image))
+        dst = np.empty_like(image)
+        copy = median_time(lambda image=image, dst=dst: np.copyto(dst, image), args.repeat)
+        t_ours = median_time(lambda image=image: ours(image), args.repeat)
+        t_theirs = median_time(lambda peer=peer: theirs(peer), args.repeat)
+        floor = copy * passes(LEVELS)
+        name = np.dtype(dtype).name
+        results[name] = {"ours": t_ours, "pywt": t_theirs}
+        print(f"\n{name}: max relative reconstruction error {err:.1e}")
+        print(f"  ours    {t_ours:8.3f} s")
+        print(f"  pywt    {t_theirs:8.3f} s   -> ours is {t_theirs / t_ours:5.2f}x faster")
+        print(
+            f"  floor   {floor:8.3f} s   (copyto {copy:.4f} s x {passes(LEVELS):.2f} passes)"
+            f" -> ours is {t_ours / floor:5.2f}x the floor"
+        )
+        print(f"  peak extra memory {peak_extra(image):.2f}x the input")
+    speedup = results["float64"]["ours"] / results["float32"]["ours"]
+    print(f"\nfloat32 is {speedup:.2f}x faster than float64 (ours)")
+    print(f"pywt: float32 is {results['float64']['pywt'] / results['float32']['pywt']:.2f}x")
+    if not args.no_first_call:
+        with tempfile.TemporaryDirectory() as cache:
+            cold = first_call(cache, "float64")
+            warm = first_call(cache, "float64")
+        print("\nfirst call (import + tiny wavedec2/waverec2, fresh process): ", end="")
+        print(f"numba cache cold {cold:.1f} s, warm {warm:.2f} s")
+
+
+if __name__ == "__main__":
+    main()
