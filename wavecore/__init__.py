@@ -14,6 +14,7 @@ from .errors import (
     WavecoreError,
 )
 from .filters import matrices, wavelet_names
+from .images import ImageDecomposition, decompose_image, subband_mosaic
 from .multilevel import (
     max_level,
     valid_length,
@@ -25,7 +26,16 @@ from .multilevel import (
     waverecn,
 )
 from .norms import basis_norms, basis_norms_nd
-from .resample import coarse_extent, crop_padding, pad_to_fit, resample_curve
+from .resample import (
+    GridFit,
+    coarse_extent,
+    crop_padding,
+    fit_grid,
+    minimum_length,
+    pad_to_fit,
+    resample_curve,
+    resample_grid,
+)
 from .threshold import remove_smallest
 from .transform import analysis_step, synthesis_step
 
@@ -34,6 +44,8 @@ __version__ = "0.1.0"
 __all__ = [
     "BundleError",
     "CurveDecomposition",
+    "GridFit",
+    "ImageDecomposition",
     "InvalidCoefficients",
     "InvalidLength",
     "InvalidParameter",
@@ -45,12 +57,17 @@ __all__ = [
     "coarse_extent",
     "crop_padding",
     "decompose_curve",
+    "decompose_image",
+    "fit_grid",
     "fitting_length",
     "matrices",
     "max_level",
+    "minimum_length",
     "pad_to_fit",
     "remove_smallest",
     "resample_curve",
+    "resample_grid",
+    "subband_mosaic",
     "synthesis_step",
     "transfer_details",
     "valid_length",

@@ -27,16 +27,26 @@ How the extension looks
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .errors import InvalidParameter
+from .errors import InvalidLength, InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import _as_int, _axes, _boundaries, valid_length
 from .transform import as_float_array
 
-__all__ = ["coarse_extent", "crop_padding", "pad_to_fit", "resample_curve"]
+__all__ = [
+    "GridFit",
+    "coarse_extent",
+    "crop_padding",
+    "fit_grid",
+    "minimum_length",
+    "pad_to_fit",
+    "resample_curve",
+    "resample_grid",
+]
 
 Pads = tuple[tuple[int, int], ...]
 
@@ -323,3 +333,205 @@ def resample_curve(points: Any, n: int, *, closed: bool = False) -> np.ndarray:
     if not closed:
         out[-1] = arr[-1]
     return out[:, 0] if flat else out
+
+
+def resample_grid(
+    data: Any,
+    shape: Sequence[int],
+    *,
+    axes: Sequence[int] | int,
+    boundary: str | Sequence[str] = "open",
+) -> np.ndarray:
+    """Re-sample a grid (an image, a surface's points) along ``axes`` to new lengths, linearly.
+
+    The samples stay uniformly spaced over the same extent: along an open axis the first and
+    last samples stay where they were; along a closed (periodic) axis sample ``i`` of ``n``
+    sits at ``i / n`` of the period.  This is the grid counterpart of :func:`resample_curve`
+    (the paper's section 4.5 for images and tensor-product surfaces).
+
+    Parameters
+    ----------
+    data : array_like
+        The grid.
+    shape : sequence of int
+        The new length of each axis in ``axes``.
+    axes : int or sequence of int, keyword-only
+        The axes to re-sample.
+    boundary : str or sequence of str, keyword-only
+        ``"open"`` or ``"closed"``, one for all axes or one per axis.
+
+    Returns
+    -------
+    numpy.ndarray
+        Float (float64, or float32 for float32 input).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> resample_grid(np.array([0.0, 1.0, 2.0]), (5,), axes=0).tolist()
+    [0.0, 0.5, 1.0, 1.5, 2.0]
+    >>> resample_grid(np.array([0.0, 1.0, 2.0, 1.0]), (2,), axes=0, boundary="closed").tolist()
+    [0.0, 2.0]
+    """
+    arr = as_float_array(data)
+    ax = _axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
+    lengths = [_as_int(s, "length", minimum=1) for s in shape]
+    if len(lengths) != len(ax):
+        msg = f"got {len(lengths)} lengths for {len(ax)} axes; give one per axis"
+        raise InvalidParameter(msg)
+    bounds = _boundaries(boundary, len(ax), get_wavelet("bspline2"))
+    for a, b, n_out in zip(ax, bounds, lengths, strict=True):
+        n_in = arr.shape[a]
+        if n_in == n_out:
+            continue
+        if b == "closed":
+            position = np.arange(n_out) * (n_in / n_out)
+        elif n_out == 1:
+            position = np.zeros(1)
+        else:
+            position = np.linspace(0.0, n_in - 1.0, n_out)
+        low = np.floor(position).astype(np.intp)
+        weight = position - low
+        high = low + 1
+        if b == "closed":
+            low, high = low % n_in, high % n_in
+        else:
+            low = np.minimum(low, n_in - 1)
+            high = np.minimum(high, n_in - 1)
+        shape_w = [1] * arr.ndim
+        shape_w[a] = n_out
+        w = weight.reshape(shape_w).astype(arr.dtype)
+        arr = np.take(arr, low, axis=a) * (1 - w) + np.take(arr, high, axis=a) * w
+    return arr
+
+
+@dataclass(frozen=True)
+class GridFit:
+    """How a grid was fitted to the transform's lengths, and how to undo it.
+
+    Made by :func:`fit_grid`; used by the image and surface front ends.
+
+    Attributes
+    ----------
+    method : {"pad", "resample"}
+        Edge padding at the end of each axis (exact) or linear re-sampling.
+    axes : tuple of int
+        The fitted axes.
+    boundaries : tuple of str
+        One boundary per axis.
+    wavelet : str
+        The wavelet whose size rule was fitted.
+    original : tuple of int
+        The original length of each axis.
+    fitted : tuple of int
+        The fitted length of each axis.
+    """
+
+    method: str
+    axes: tuple[int, ...]
+    boundaries: tuple[str, ...]
+    wavelet: str
+    original: tuple[int, ...]
+    fitted: tuple[int, ...]
+
+    @property
+    def pads(self) -> Pads:
+        """The ``(before, after)`` padding per axis (only meaningful for ``method="pad"``)."""
+        return tuple((0, f - o) for o, f in zip(self.original, self.fitted, strict=True))
+
+    def undo(self, data: np.ndarray) -> np.ndarray:
+        """Fine data of the fitted size back at the original size."""
+        if self.method == "pad":
+            return crop_padding(data, self.pads, axes=self.axes)
+        return resample_grid(data, self.original, axes=self.axes, boundary=self.boundaries)
+
+    def coarse_view(self, coarse: np.ndarray, level: int) -> np.ndarray:
+        """A level-``level`` coarse approximation restricted to the original's extent.
+
+        Padding is cropped away (see :func:`coarse_extent`); a re-sampled grid's coarse
+        approximation already spans exactly the original's extent and is returned as it is.
+        """
+        if self.method == "pad" and level > 0:
+            return crop_padding(
+                coarse,
+                self.pads,
+                axes=self.axes,
+                level=level,
+                boundary=self.boundaries,
+                wavelet=self.wavelet,
+            )
+        if self.method == "pad":
+            return crop_padding(coarse, self.pads, axes=self.axes)
+        return coarse
+
+
+def minimum_length(boundary: str = "open", wavelet: str | FilterBank = "bspline2") -> int:
+    """The shortest length that allows one level (8 for open ``bspline2``, else 2).
+
+    Examples
+    --------
+    >>> minimum_length(), minimum_length("closed"), minimum_length(wavelet="haar")
+    (8, 2, 2)
+    """
+    return valid_length(1, 1, boundary, wavelet)
+
+
+def fit_grid(
+    data: Any,
+    level: int,
+    *,
+    axes: Sequence[int],
+    boundary: str | Sequence[str] = "open",
+    wavelet: str | FilterBank = "bspline2",
+    method: str = "pad",
+) -> tuple[np.ndarray, GridFit]:
+    """Fit the lengths of ``axes`` to ``level`` levels by padding or by re-sampling.
+
+    ``method="pad"`` pads at the end with :func:`pad_to_fit` (exact, undone by cropping);
+    ``method="resample"`` re-samples linearly with :func:`resample_grid` to the nearest length
+    that fits (the paper's section 4.5; not exact).  Every axis must have at least
+    :func:`minimum_length` samples: a grid too small for one level is an error.
+
+    Returns
+    -------
+    fitted : numpy.ndarray
+        The fitted grid (float for ``"resample"``, ``data``'s dtype for ``"pad"``).
+    fit : GridFit
+        What was done, with :meth:`GridFit.undo` and :meth:`GridFit.coarse_view`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> fitted, fit = fit_grid(np.zeros((100, 60)), 2, axes=(0, 1), method="resample")
+    >>> fitted.shape, fit.undo(fitted).shape
+    ((102, 62), (100, 60))
+    """
+    from .curves import fitting_length  # curves imports this module
+
+    if method not in ("pad", "resample"):
+        msg = f"method must be 'pad' (exact) or 'resample' (section 4.5), not {method!r}"
+        raise InvalidParameter(msg)
+    arr = np.asarray(data)
+    bank = get_wavelet(wavelet)
+    ax = tuple(_axes(axes, arr.ndim))
+    bounds = tuple(_boundaries(boundary, len(ax), bank))
+    level = _as_int(level, "level")
+    original = tuple(arr.shape[a] for a in ax)
+    for a, b, n in zip(ax, bounds, original, strict=True):
+        least = minimum_length(b, bank)
+        if n < least:
+            sizes = "×".join(str(s) for s in original)
+            msg = (
+                f"a grid of {sizes} samples is too small: axis {a} has {n}, and one level of "
+                f"the {b} boundary of {bank.name!r} needs at least {least} samples per axis"
+            )
+            raise InvalidLength(msg)
+    if method == "pad":
+        fitted_arr, pads = pad_to_fit(arr, level, axes=ax, boundary=bounds, wavelet=bank)
+        fitted = tuple(o + p[1] for o, p in zip(original, pads, strict=True))
+    else:
+        fitted = tuple(
+            fitting_length(n, level, b, bank) for n, b in zip(original, bounds, strict=True)
+        )
+        fitted_arr = resample_grid(arr, fitted, axes=ax, boundary=bounds)
+    return fitted_arr, GridFit(method, ax, bounds, bank.name, original, fitted)
