@@ -36,6 +36,7 @@ from .resample import (
     resample_curve,
     resample_grid,
 )
+from .surfaces import SurfaceDecomposition, decompose_surface
 from .threshold import remove_smallest
 from .transform import analysis_step, synthesis_step
 
@@ -49,6 +50,7 @@ __all__ = [
     "InvalidCoefficients",
     "InvalidLength",
     "InvalidParameter",
+    "SurfaceDecomposition",
     "WavecoreError",
     "__version__",
     "analysis_step",
@@ -58,6 +60,7 @@ __all__ = [
     "crop_padding",
     "decompose_curve",
     "decompose_image",
+    "decompose_surface",
     "fit_grid",
     "fitting_length",
     "matrices",
