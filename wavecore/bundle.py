@@ -30,6 +30,14 @@ detail subbands of level ``L + 1 - i`` (every channel, every orientation), so ch
 uses, so a damaged fine chunk does not hide the coarse image, and a damaged chunk that is needed is
 a clear error.  What a chunk's bytes mean is the business of the coder named in the header.
 
+Versions
+--------
+A reader refuses any other major version and accepts any minor version of its own: minor
+versions only add optional header keys.  Anything else — a new meaning for a field, a new layout,
+an entropy coder whose old bitstreams no longer decode — is a new major version, or a new coder
+*name* (which older readers refuse clearly).  The golden bundles in ``tests/golden`` are decoded
+in every test run to hold this promise.
+
 Header
 ------
 A JSON object (no whitespace needed) with these keys; readers ignore unknown keys, so a minor
@@ -66,6 +74,9 @@ the major version, the header length (at most ``MAX_HEADER_SIZE`` bytes), the JS
 field's type and range (the declared element count is at most ``MAX_ELEMENTS``), the header and
 table CRC, and that the chunk table's lengths fit in the bytes that are actually present.  Every
 failure is a :class:`~wavecore.errors.BundleError` whose message names the field being read.
+The codec then checks the kind-specific consistency (``fitted`` = ``shape`` + ``pads``, the
+lengths fit ``levels`` of the wavelet and boundary, the colour transform fits the channels) and
+the entropy decoder never produces more values than the subband shapes that follow from it.
 """
 
 from __future__ import annotations
