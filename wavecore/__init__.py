@@ -5,6 +5,7 @@ The public API is what ``__all__`` lists; everything else is internal.
 
 from __future__ import annotations
 
+from .codec import decode, encode_curve, encode_image, encode_surface, inspect
 from .curves import CurveDecomposition, decompose_curve, fitting_length, transfer_details
 from .errors import (
     BundleError,
@@ -58,11 +59,16 @@ __all__ = [
     "basis_norms_nd",
     "coarse_extent",
     "crop_padding",
+    "decode",
     "decompose_curve",
     "decompose_image",
     "decompose_surface",
+    "encode_curve",
+    "encode_image",
+    "encode_surface",
     "fit_grid",
     "fitting_length",
+    "inspect",
     "matrices",
     "max_level",
     "minimum_length",

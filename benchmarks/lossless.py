@@ -1,0 +1,136 @@
+"""Lossless sizes: ``encode_image(..., lossless=True)`` against Pillow's PNG (``optimize=True``).
+
+    .venv/bin/python benchmarks/lossless.py [--write]
+
+For scikit-image's camera, moon, coins, brick (grey) and astronaut (RGB): our bundle's bytes
+(header included) and PNG's, their ratio, bits per pixel, whether the round trip is bit-exact,
+and the median encode/decode times of both over a few runs in this process.  With ``--write``
+the table replaces the "Lossless" section of ``docs/benchmarks.md`` (between its markers).
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PIL import Image
+from skimage import data
+
+import wavecore
+
+IMAGES = ["camera", "moon", "coins", "brick", "astronaut"]
+RUNS = 3
+DOCS = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
+START, END = "<!-- lossless:start -->", "<!-- lossless:end -->"
+
+
+def median_time(function: Callable[[], Any]) -> tuple[float, Any]:
+    times, result = [], None
+    for _ in range(RUNS):
+        start = time.perf_counter()
+        result = function()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), result
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    Image.fromarray(image).save(buffer, format="PNG", optimize=True)
+    return buffer.getvalue()
+
+
+def measure(name: str) -> dict[str, Any]:
+    image = getattr(data, name)()
+    pixels = image.shape[0] * image.shape[1]
+    encode_time, bundle = median_time(lambda: wavecore.encode_image(image, lossless=True))
+    decode_time, decoded = median_time(lambda: wavecore.decode(bundle))
+    png_encode, png = median_time(lambda: png_bytes(image))
+    png_decode, _ = median_time(lambda: np.asarray(Image.open(io.BytesIO(png))))
+    info = wavecore.inspect(bundle)
+    return {
+        "name": name,
+        "shape": "×".join(str(s) for s in image.shape),
+        "ours": len(bundle),
+        "png": len(png),
+        "ratio": len(bundle) / len(png),
+        "bpp": 8 * len(bundle) / pixels,
+        "png_bpp": 8 * len(png) / pixels,
+        "exact": bool(np.array_equal(decoded, image)),
+        "lifting": ",".join(info["header"]["lifting"]),
+        "encode": encode_time,
+        "decode": decode_time,
+        "png_encode": png_encode,
+        "png_decode": png_decode,
+    }
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    lines = [
+        "| image | shape | ours (bytes) | PNG (bytes) | ours / PNG | ours bpp | PNG bpp "
+        "| bit-exact | lifting per level (finest first) | encode ours / PNG (s) "
+        "| decode ours / PNG (s) |",
+        "|---|---|---:|---:|---:|---:|---:|---|---|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['name']} | {r['shape']} | {r['ours']:,} | {r['png']:,} | {r['ratio']:.3f} "
+            f"| {r['bpp']:.3f} | {r['png_bpp']:.3f} | {'yes' if r['exact'] else 'NO'} "
+            f"| {r['lifting']} | {r['encode']:.3f} / {r['png_encode']:.3f} "
+            f"| {r['decode']:.3f} / {r['png_decode']:.3f} |"
+        )
+    total_ours = sum(r["ours"] for r in rows)
+    total_png = sum(r["png"] for r in rows)
+    lines.append(
+        f"| **all** | | {total_ours:,} | {total_png:,} | {total_ours / total_png:.3f} | | | | | | |"
+    )
+    return "\n".join(lines)
+
+
+def section(rows: list[dict[str, Any]]) -> str:
+    return "\n".join(
+        [
+            START,
+            "### Lossless",
+            "",
+            "`encode_image(image, lossless=True)` against Pillow's PNG with `optimize=True`, on "
+            "scikit-image's images; bytes are whole files (our header included); times are "
+            f"medians of {RUNS} runs in one process on a shared 2-core machine "
+            "(`benchmarks/lossless.py --write` regenerates this table).",
+            "",
+            table(rows),
+            "",
+            "The transform is the reversible integer lifting of `wavecore.lossless` (LeGall 5/3 "
+            "or integer Haar per level, see `docs/bundle-format.md` for why not an integer "
+            "`bspline2`), with JPEG 2000's reversible colour transform for RGB, and the entropy "
+            "coder of `wavecore.entropy`.",
+            END,
+        ]
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--write", action="store_true", help="update docs/benchmarks.md")
+    args = parser.parse_args()
+    rows = [measure(name) for name in IMAGES]
+    text = section(rows)
+    print(text)
+    if args.write:
+        current = DOCS.read_text() if DOCS.exists() else "# Benchmarks\n"
+        if START in current and END in current:
+            before, rest = current.split(START, 1)
+            after = rest.split(END, 1)[1]
+            current = before + text + after
+        else:
+            current = current.rstrip("\n") + "\n\n" + text + "\n"
+        DOCS.write_text(current)
+
+
+if __name__ == "__main__":
+    main()

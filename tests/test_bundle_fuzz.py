@@ -1,0 +1,249 @@
+"""Decoding any bytes returns an array or raises BundleError: never another error, never a hang.
+
+Real bundles are cut at every length and have every byte flipped; then Hypothesis mutates them,
+both as they are (the CRCs catch it) and with the CRCs recomputed after the mutation, the way an
+attacker would, so that the header checks and the entropy decoder see the damage themselves.
+The default run is fast; ``-m slow`` runs more than 10 000 cases.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import struct
+import tracemalloc
+import zlib
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import wavecore
+from wavecore import BundleError, decode, inspect
+from wavecore.bundle import MAGIC, read_bundle
+
+FAST = settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
+SLOW = settings(max_examples=2600, deadline=None, suppress_health_check=list(HealthCheck))
+
+
+def _make_bundles() -> dict[str, bytes]:
+    rng = np.random.default_rng(7)
+    y, x = np.mgrid[0:22, 0:19]
+    grey = (120 + 60 * np.sin(x / 3) * np.cos(y / 4) + rng.normal(0, 4, x.shape)).clip(0, 255)
+    rgb = rng.integers(0, 256, (11, 9, 3)).astype(np.uint8)
+    t = np.linspace(0, 2 * np.pi, 37, endpoint=False)
+    curve = np.stack([np.cos(t), np.sin(2 * t)], axis=1)
+    grid = np.stack([np.add.outer(np.arange(12.0), np.zeros(10)), rng.random((12, 10))], -1)
+    return {
+        "lossy image": wavecore.encode_image(grey.astype(np.uint8), level=2, quality=30),
+        "lossless rgb": wavecore.encode_image(rgb, lossless=True, level=2),
+        "closed curve": wavecore.encode_curve(curve, closed=True, level=2, tolerance=0.01),
+        "surface": wavecore.encode_surface(grid, closed=(True, False), level=1, quality=30),
+    }
+
+
+BUNDLES = _make_bundles()
+NAMES = sorted(BUNDLES)
+
+
+def decodes_or_fails_cleanly(data: bytes, **kwargs: Any) -> np.ndarray | None:
+    """Decode; only an array or a BundleError is acceptable."""
+    try:
+        out = decode(data, **kwargs)
+    except BundleError:
+        return None
+    assert isinstance(out, np.ndarray)
+    return out
+
+
+def split(data: bytes) -> tuple[dict[str, Any], list[bytes]]:
+    parsed = read_bundle(data)
+    return json.loads(json.dumps(parsed.header)), [bytes(c or b"") for c in parsed.chunks]
+
+
+def assemble(header: bytes, chunks: list[bytes], major: int = 1, minor: int = 0) -> bytes:
+    """A bundle with correct CRCs around whatever header bytes and chunks it is given."""
+    head = struct.pack("<8sBBH", MAGIC, major, minor, len(header)) + header
+    head += bytes([len(chunks) % 256])
+    for chunk in chunks:
+        head += struct.pack("<II", len(chunk), zlib.crc32(chunk))
+    return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_cut_fails_cleanly_or_decodes_its_complete_levels(name: str) -> None:
+    data = BUNDLES[name]
+    info = inspect(data)
+    levels = info["levels"]
+    ends = np.cumsum([info["header_bytes"]] + [c["bytes"] for c in info["chunks"]])
+    full = [decode(data, level=k) for k in range(levels + 1)]
+    for length in range(len(data)):
+        cut = data[:length]
+        assert decodes_or_fails_cleanly(cut) is None  # the finest level always needs more
+        complete = int(np.searchsorted(ends, length, side="right")) - 1  # chunks fully present
+        for k in range(levels + 1):
+            out = decodes_or_fails_cleanly(cut, level=k)
+            if length >= info["header_bytes"] and levels - k + 1 <= complete:
+                assert out is not None and np.array_equal(out, full[k])
+            else:
+                assert out is None
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_flipped_byte_is_caught(name: str) -> None:
+    data = BUNDLES[name]
+    for position in range(len(data)):
+        damaged = bytearray(data)
+        damaged[position] ^= 0xFF
+        # Every byte is covered by a magic check, the header CRC or a chunk CRC.
+        assert decodes_or_fails_cleanly(bytes(damaged)) is None, position
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_flipped_payload_byte_with_fixed_crcs(name: str) -> None:
+    """The decoding stages themselves must reject (or survive) any damaged chunk."""
+    header, chunks = split(BUNDLES[name])
+    text = json.dumps(header).encode()
+    for index, chunk in enumerate(chunks):
+        for position in range(len(chunk)):
+            for flip in (0x01, 0x80, 0xFF):
+                damaged = bytearray(chunk)
+                damaged[position] ^= flip
+                mutated = chunks[:index] + [bytes(damaged)] + chunks[index + 1 :]
+                decodes_or_fails_cleanly(assemble(text, mutated))
+
+
+def json_values() -> st.SearchStrategy[Any]:
+    leaves = (
+        st.none()
+        | st.booleans()
+        | st.integers(-(2**40), 2**40)
+        | st.floats(allow_nan=False, allow_infinity=False)
+        | st.text(max_size=12)
+    )
+    return st.recursive(
+        leaves,
+        lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=8), inner),
+        max_leaves=12,
+    )
+
+
+def mutate_header(header: dict[str, Any], data: st.DataObject) -> dict[str, Any]:
+    header = dict(header)
+    key = data.draw(st.sampled_from(sorted(header)))
+    choice = data.draw(st.integers(0, 3))
+    value = header[key]
+    if choice == 0:
+        header[key] = data.draw(json_values())
+    elif choice == 1 and isinstance(value, list) and value:
+        i = data.draw(st.integers(0, len(value) - 1))
+        value = list(value)
+        value[i] = data.draw(st.integers(-3, 70000) | json_values())
+        header[key] = value
+    elif choice == 2 and isinstance(value, dict) and value:
+        sub = dict(value)
+        subkey = data.draw(st.sampled_from(sorted(sub)))
+        sub[subkey] = data.draw(json_values())
+        header[key] = sub
+    elif isinstance(value, int) and not isinstance(value, bool):
+        header[key] = value + data.draw(st.integers(-3, 3))
+    else:
+        del header[key]
+    return header
+
+
+def mutate_bytes(raw: bytes, data: st.DataObject) -> bytes:
+    buffer = bytearray(raw)
+    for _ in range(data.draw(st.integers(1, 4))):
+        action = data.draw(st.integers(0, 2))
+        position = data.draw(st.integers(0, max(len(buffer), 1)))
+        if action == 0 and buffer:
+            buffer[min(position, len(buffer) - 1)] = data.draw(st.integers(0, 255))
+        elif action == 1:
+            buffer[position:position] = data.draw(st.binary(min_size=1, max_size=8))
+        else:
+            del buffer[position : position + data.draw(st.integers(1, 8))]
+    return bytes(buffer)
+
+
+def fuzz_case(data: st.DataObject) -> None:
+    name = data.draw(st.sampled_from(NAMES))
+    header, chunks = split(BUNDLES[name])
+    mode = data.draw(st.integers(0, 3))
+    if mode == 0:  # raw damage, CRCs left as they are
+        bundle = mutate_bytes(BUNDLES[name], data)
+    elif mode == 1:  # damaged chunks with valid CRCs
+        index = data.draw(st.integers(0, len(chunks) - 1))
+        chunks[index] = mutate_bytes(chunks[index], data)
+        bundle = assemble(json.dumps(header).encode(), chunks)
+    elif mode == 2:  # a crafted header with valid CRCs
+        bundle = assemble(json.dumps(mutate_header(header, data)).encode(), chunks)
+    else:  # arbitrary bytes behind a valid preamble
+        bundle = MAGIC + bytes([1, 0]) + data.draw(st.binary(max_size=300))
+    level = data.draw(st.integers(0, 2))
+    try:
+        decodes_or_fails_cleanly(bundle, level=level)
+    except wavecore.InvalidParameter as exc:  # a level deeper than a (crafted) bundle has
+        assert "deeper than the bundle" in str(exc)
+    with contextlib.suppress(BundleError):
+        inspect(bundle)
+
+
+@FAST
+@given(st.data())
+def test_fuzz_fast(data: st.DataObject) -> None:
+    fuzz_case(data)
+
+
+@pytest.mark.slow
+@SLOW
+@given(st.data())
+@pytest.mark.parametrize("round_", range(4))
+def test_fuzz_slow_10000_cases(round_: int, data: st.DataObject) -> None:
+    fuzz_case(data)
+
+
+@FAST
+@given(st.binary(max_size=200))
+def test_random_bytes_fail_cleanly(data: bytes) -> None:
+    assert decodes_or_fails_cleanly(data) is None
+
+
+def test_declared_size_is_bounded_before_allocation() -> None:
+    header, chunks = split(BUNDLES["lossy image"])
+    header["shape"] = [40000, 40000]
+    header["fitted"] = [40000 + 2, 40000 + 2]
+    bundle = assemble(json.dumps(header).encode(), chunks)
+    tracemalloc.start()
+    try:
+        with pytest.raises(BundleError, match="MAX_ELEMENTS"):
+            decode(bundle)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 1_000_000
+
+
+def test_a_large_declared_shape_with_a_small_payload_fails_without_large_allocations() -> None:
+    header, chunks = split(BUNDLES["lossy image"])
+    header["shape"] = [4000, 3000]
+    header["pads"] = [[0, 98], [0, 2]]
+    header["fitted"] = [4098, 3002]
+    bundle = assemble(json.dumps(header).encode(), chunks)
+    tracemalloc.start()
+    try:
+        assert decodes_or_fails_cleanly(bundle) is None
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    # Never more than a few float64 arrays of the declared size (4098 × 3002 elements).
+    assert peak < 6 * 8 * 4098 * 3002
+
+
+def test_unknown_major_version_through_decode() -> None:
+    data = bytearray(BUNDLES["surface"])
+    data[8] = 9
+    with pytest.raises(BundleError, match="unsupported bundle format version 9"):
+        decode(bytes(data))

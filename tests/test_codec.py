@@ -1,0 +1,312 @@
+"""The public codec API: encode_image / encode_curve / encode_surface / decode / inspect."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import wavecore
+from wavecore import BundleError, InvalidParameter, decode, encode_curve, encode_image, inspect
+
+
+def psnr(a: np.ndarray, b: np.ndarray, peak: float) -> float:
+    mse = float(np.mean((a.astype(float) - b.astype(float)) ** 2))
+    return math.inf if mse == 0 else 10 * math.log10(peak * peak / mse)
+
+
+def smooth_image(shape: tuple[int, ...], seed: int = 0) -> np.ndarray:
+    """A photograph-like test image: smooth shapes plus a little noise (uint8)."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0 : shape[0], 0 : shape[1]] / max(shape[:2])
+    base = 128 + 80 * np.sin(6 * x + 2 * y) * np.cos(4 * y) + rng.normal(0, 3, shape[:2])
+    if len(shape) == 3:
+        base = base[..., None] + np.arange(shape[2]) * 20
+    return np.clip(base, 0, 255).astype(np.uint8)
+
+
+@pytest.fixture(scope="module")
+def coins() -> np.ndarray:
+    data = pytest.importorskip("skimage.data", reason="scikit-image ships the test images")
+    return data.coins()
+
+
+# --- images --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "shape", [(1, 1), (3, 5), (8, 8), (37, 61), (40, 30, 1), (33, 20, 2), (30, 41, 3), (25, 26, 4)]
+)
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32, np.float64])
+def test_any_image_comes_back_in_its_shape_and_dtype(shape: tuple[int, ...], dtype: type) -> None:
+    image = smooth_image(shape).astype(dtype)
+    if np.dtype(dtype).kind == "f":
+        image /= 255
+    elif dtype is np.uint16:
+        image *= 257
+    bundle = encode_image(image, quality=30)
+    out = decode(bundle)
+    assert out.shape == image.shape and out.dtype == image.dtype
+    peak = 1.0 if np.dtype(dtype).kind == "f" else float(np.iinfo(dtype).max)
+    measured = psnr(out, image, peak)
+    assert measured >= 30
+    recorded = inspect(bundle)["psnr"]
+    assert recorded is None or recorded == pytest.approx(measured)
+
+
+@pytest.mark.parametrize("target", [25.0, 32.0, 38.0, 45.0])
+def test_quality_is_met(coins: np.ndarray, target: float) -> None:
+    bundle = encode_image(coins, quality=target)
+    assert psnr(decode(bundle), coins, 255) >= target
+    assert inspect(bundle)["psnr"] >= target
+
+
+def test_higher_quality_costs_more_bytes(coins: np.ndarray) -> None:
+    sizes = [len(encode_image(coins, quality=q)) for q in (28, 34, 40)]
+    assert sizes[0] < sizes[1] < sizes[2]
+
+
+def test_default_is_quality_40(coins: np.ndarray) -> None:
+    bundle = encode_image(coins)
+    assert inspect(bundle)["psnr"] >= wavecore.codec.DEFAULT_QUALITY == 40.0
+
+
+@pytest.mark.parametrize("bpp", [0.25, 0.5, 1.0, 2.0])
+def test_bpp_is_not_exceeded_and_within_3_percent(coins: np.ndarray, bpp: float) -> None:
+    bundle = encode_image(coins, bpp=bpp)
+    actual = 8 * len(bundle) / coins.size
+    assert 0.97 * bpp <= actual <= bpp
+    assert inspect(bundle)["bpp"] == pytest.approx(actual)
+
+
+def test_bpp_too_low_is_a_clear_error() -> None:
+    with pytest.raises(InvalidParameter, match="smallest bundle is"):
+        encode_image(smooth_image((16, 16)), bpp=0.01)
+
+
+def test_colour_bpp_counts_pixels_not_samples() -> None:
+    image = smooth_image((64, 80, 3))
+    bundle = encode_image(image, bpp=2.0)
+    assert 0.97 * 2.0 <= 8 * len(bundle) / (64 * 80) <= 2.0
+
+
+def test_keep_drops_details_and_bytes(coins: np.ndarray) -> None:
+    full, tenth = encode_image(coins, keep=1.0), encode_image(coins, keep=0.1)
+    assert len(tenth) < len(full)
+    assert psnr(decode(tenth), coins, 255) < psnr(decode(full), coins, 255)
+
+
+def test_colour_images_use_ycbcr() -> None:
+    image = smooth_image((48, 40, 3))
+    assert inspect(encode_image(image))["colour"] == "ycbcr"
+    assert inspect(encode_image(image[..., :2]))["colour"] == "none"
+
+
+@pytest.mark.parametrize("wavelet", ["bspline2", "haar"])
+def test_other_wavelets(wavelet: str) -> None:
+    image = smooth_image((40, 52))
+    bundle = encode_image(image, wavelet=wavelet, quality=35)
+    assert inspect(bundle)["wavelet"] == wavelet
+    assert psnr(decode(bundle), image, 255) >= 35
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"keep": 0.5, "quality": 30}, "at most one of keep, quality, bpp"),
+        ({"keep": 1.5}, r"keep must be in \[0, 1\]"),
+        ({"keep": "all"}, "keep must be a number"),
+        ({"quality": -3}, "quality must be a positive"),
+        ({"bpp": 0}, "bpp must be a positive"),
+        ({"bpp": math.nan}, "bpp must be a positive"),
+        ({"wavelet": "db4"}, "db4"),
+        ({"level": -1}, "level must be None or an integer"),
+        ({"quality": 400}, "cannot be reached"),
+    ],
+)
+def test_bad_arguments_are_named(kwargs: dict[str, object], message: str) -> None:
+    with pytest.raises(InvalidParameter, match=message):
+        encode_image(smooth_image((20, 20)).astype(np.float64) / 255, **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("image", "message"),
+    [
+        (np.zeros((4, 4, 4, 4)), "image must be"),
+        (np.zeros((8, 8, 5)), "1 to 4 channels"),
+        (np.zeros((0, 8)), "empty"),
+        (np.zeros((8, 8), bool), "must hold numbers"),
+        (np.full((8, 8), np.nan), "NaN"),
+        (np.zeros((8, 8), np.int32), "dtype int32"),
+    ],
+)
+def test_bad_images_are_named(image: np.ndarray, message: str) -> None:
+    with pytest.raises(InvalidParameter, match=message):
+        encode_image(image)
+
+
+# --- decode(level=k) and keep at decode time ---------------------------------------------------
+
+
+def test_coarse_levels_have_the_extent_of_the_original() -> None:
+    image = smooth_image((90, 130, 3))
+    bundle = encode_image(image, level=4, quality=35)
+    info = inspect(bundle)
+    assert info["levels"] == 4
+    for k in range(5):
+        coarse = decode(bundle, level=k)
+        assert coarse.dtype == np.uint8 and coarse.shape[2] == 3
+        for axis, n in enumerate(image.shape[:2]):
+            assert -(-n // 2**k) <= coarse.shape[axis] <= -(-n // 2**k) + 2
+    with pytest.raises(InvalidParameter, match="deeper than the bundle's 4 levels"):
+        decode(bundle, level=5)
+
+
+def test_coarse_level_is_the_transforms_coarse_approximation() -> None:
+    image = smooth_image((128, 128))
+    coarse = decode(encode_image(image, level=3, quality=45), level=2)
+    padded, pads = wavecore.pad_to_fit(image.astype(float), 3, axes=(0, 1))
+    exact = wavecore.wavedec2(padded, level=2)[0]
+    exact = wavecore.crop_padding(exact, pads, axes=(0, 1), level=2)
+    assert coarse.shape == exact.shape
+    assert np.mean(np.abs(coarse - exact)) < 2
+    blocks = image.reshape(32, 4, 32, 4).mean(axis=(1, 3))
+    assert np.corrcoef(coarse[:32, :32].ravel(), blocks.ravel())[0, 1] > 0.95
+
+
+def test_a_coarse_level_needs_only_its_prefix() -> None:
+    image = smooth_image((70, 50))
+    bundle = encode_image(image, level=3, quality=40)
+    chunks = inspect(bundle)["chunks"]
+    header = inspect(bundle)["header_bytes"]
+    for k in range(4):
+        used = header + sum(c["bytes"] for c in chunks[: 3 - k + 1])
+        prefix = bundle[:used]
+        assert np.array_equal(decode(prefix, level=k), decode(bundle, level=k))
+        if k > 0:
+            with pytest.raises(BundleError, match="truncated"):
+                decode(prefix, level=k - 1)
+
+
+def test_keep_at_decode_time_smooths_progressively() -> None:
+    image = smooth_image((64, 64))
+    bundle = encode_image(image, quality=45)
+    errors = [psnr(decode(bundle, keep=keep), image, 255) for keep in (1.0, 0.3, 0.05, 0.0)]
+    assert errors == sorted(errors, reverse=True)
+    assert np.array_equal(decode(bundle, keep=1.0), decode(bundle))
+    with pytest.raises(InvalidParameter, match="keep"):
+        decode(bundle, keep=2)
+
+
+def test_decode_rejects_non_bytes() -> None:
+    with pytest.raises(BundleError, match="must be bytes"):
+        decode("not a bundle")  # type: ignore[arg-type]
+    with pytest.raises(BundleError, match="not a wavecore bundle"):
+        decode(b"GIF89a" + bytes(40))
+
+
+# --- inspect -----------------------------------------------------------------------------------
+
+
+def test_inspect_describes_every_chunk() -> None:
+    image = smooth_image((45, 60, 3))
+    bundle = encode_image(image, level=2, quality=33)
+    info = inspect(bundle)
+    assert info["kind"] == "image" and info["shape"] == [45, 60, 3] and info["dtype"] == "uint8"
+    assert [c["level"] for c in info["chunks"]] == [2, 1, 0]
+    assert info["chunks"][0]["bands"] == ["cA"]
+    assert info["chunks"][1]["bands"] == ["cH", "cV", "cD"]
+    assert info["header_bytes"] + sum(c["bytes"] for c in info["chunks"]) == len(bundle)
+    assert info["psnr"] >= 33 and info["max_error"] > 0
+    assert info["version"] == "1.0"
+    coarse_shape = info["chunks"][0]["shapes"][0]
+    assert coarse_shape[2] == 3
+
+
+# --- curves ------------------------------------------------------------------------------------
+
+
+def wobbly_curve(n: int, closed: bool, d: int = 2) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, n, endpoint=not closed)
+    columns = [np.cos(t) + 0.1 * np.cos(7 * t), np.sin(t) + 0.1 * np.sin(5 * t), 0.3 * t]
+    return np.stack(columns[:d], axis=1)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    n=st.integers(1, 300),
+    closed=st.booleans(),
+    d=st.integers(1, 3),
+    tolerance=st.floats(1e-5, 0.3),
+)
+def test_curve_tolerance_is_guaranteed(n: int, closed: bool, d: int, tolerance: float) -> None:
+    points = wobbly_curve(n, closed, d)
+    bundle = encode_curve(points, closed=closed, tolerance=tolerance)
+    out = decode(bundle)
+    assert out.shape == points.shape and out.dtype == points.dtype
+    assert np.max(np.linalg.norm(out - points, axis=1)) <= tolerance
+    assert inspect(bundle)["max_error"] <= tolerance
+
+
+def test_looser_tolerance_is_smaller() -> None:
+    points = wobbly_curve(500, True)
+    sizes = [len(encode_curve(points, closed=True, tolerance=t)) for t in (1e-4, 1e-3, 1e-2)]
+    assert sizes[0] > sizes[1] > sizes[2]
+
+
+def test_curve_keep_and_levels() -> None:
+    points = wobbly_curve(200, False, 3).astype(np.float32)
+    bundle = encode_curve(points, keep=0.2, level=4)
+    out = decode(bundle)
+    assert out.dtype == np.float32 and out.shape == (200, 3)
+    assert np.max(np.abs(out[[0, -1]] - points[[0, -1]])) < 0.05  # open ends are kept
+    outline = decode(bundle, level=3)
+    assert outline.shape[1] == 3 and 25 <= outline.shape[0] <= 27
+
+
+def test_a_time_series_keeps_its_1d_shape() -> None:
+    series = np.sin(np.linspace(0, 20, 333))
+    out = decode(encode_curve(series, tolerance=1e-3))
+    assert out.shape == (333,) and np.max(np.abs(out - series)) <= 1e-3
+
+
+def test_curve_arguments_are_checked() -> None:
+    with pytest.raises(InvalidParameter, match="at most one of keep, tolerance"):
+        encode_curve(wobbly_curve(20, False), keep=0.5, tolerance=0.1)
+    with pytest.raises(InvalidParameter, match="tolerance must be a positive"):
+        encode_curve(wobbly_curve(20, False), tolerance=0)
+    with pytest.raises(InvalidParameter, match="points must be"):
+        encode_curve(np.zeros((4, 4, 2)))
+    with pytest.raises(InvalidParameter, match="closed must be"):
+        encode_curve(wobbly_curve(20, False), closed="yes")  # type: ignore[arg-type]
+
+
+# --- surfaces ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("closed", [(False, False), (True, False), (False, True), (True, True)])
+def test_surfaces_meet_quality(closed: tuple[bool, bool]) -> None:
+    u = np.linspace(0, 2 * np.pi, 40, endpoint=not closed[0])
+    v = np.linspace(0, 2 * np.pi, 33, endpoint=not closed[1])
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    grid = np.stack([(2 + np.cos(vv)) * np.cos(uu), (2 + np.cos(vv)) * np.sin(uu), vv], -1)
+    bundle = wavecore.encode_surface(grid, closed=closed, quality=50)
+    out = decode(bundle)
+    assert out.shape == grid.shape
+    span = grid.max() - grid.min()
+    assert psnr(out, grid, span) >= 50
+    info = inspect(bundle)
+    assert info["boundary"] == ["closed" if c else "open" for c in closed]
+
+
+def test_height_field_and_keep() -> None:
+    z = np.add.outer(np.sin(np.linspace(0, 3, 50)), np.cos(np.linspace(0, 4, 45)))
+    all_details = decode(wavecore.encode_surface(z, keep=1.0))
+    few = decode(wavecore.encode_surface(z, keep=0.05))
+    assert all_details.shape == few.shape == z.shape
+    assert np.abs(all_details - z).max() < np.abs(few - z).max()
+    with pytest.raises(InvalidParameter, match="closed must be a pair"):
+        wavecore.encode_surface(z, closed=True)  # type: ignore[arg-type]
