@@ -1,0 +1,145 @@
+"""Tests for the level-by-level entropy coders."""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wavecore import wavedec2
+from wavecore.entropy import CODERS, decode_levels, encode_levels
+from wavecore.errors import BundleError, InvalidParameter
+from wavecore.quantize import quantize_bands
+
+
+def _laplace_bands(seed: int, shape: tuple[int, ...] = (34, 34)) -> list[object]:
+    """Quantized coefficients of a textured test picture (peaked, like real details)."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[: shape[0], : shape[1]]
+    image = 128 + 50 * np.sin(x / 5.0 + y / 9.0) + rng.laplace(0, 6, shape[:2])
+    if len(shape) == 3:
+        image = np.stack([image * (1 - 0.1 * c) for c in range(shape[2])], axis=-1)
+    coeffs = wavedec2(image, "bspline2", "open", 2)
+    q, _ = quantize_bands(coeffs, 2.0, wavelet="bspline2", boundary="open")
+    return q
+
+
+def _shapes(q: list[object]) -> list[object]:
+    out: list[object] = [q[0].shape]  # type: ignore[attr-defined]
+    for entry in q[1:]:
+        if isinstance(entry, tuple):
+            out.append(tuple(b.shape for b in entry))
+        else:
+            out.append(entry.shape)  # type: ignore[attr-defined]
+    return out
+
+
+def _assert_equal(a: list[object], b: list[object]) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        if isinstance(x, tuple):
+            assert isinstance(y, tuple)
+            for u, v in zip(x, y, strict=True):
+                np.testing.assert_array_equal(u, v)
+                assert v.dtype == np.int32
+        else:
+            np.testing.assert_array_equal(x, y)
+
+
+@pytest.mark.parametrize("coder", CODERS)
+@pytest.mark.parametrize("shape", [(34, 34), (34, 18, 3)])
+def test_round_trip_and_prefix(coder: str, shape: tuple[int, ...]) -> None:
+    q = _laplace_bands(1, shape)
+    chunks, params = encode_levels(q, coder=coder)
+    assert len(chunks) == len(q)
+    shapes = _shapes(q)
+    _assert_equal(decode_levels(chunks, shapes, params), q)
+    _assert_equal(decode_levels(chunks[:2], shapes, params), q[:2])
+
+
+@pytest.mark.parametrize("coder", CODERS)
+def test_one_dimensional_layout(coder: str) -> None:
+    rng = np.random.default_rng(2)
+    q = [rng.integers(-50, 50, (6, 2), dtype=np.int32), rng.integers(-3, 4, (4, 2), dtype=np.int32)]
+    chunks, params = encode_levels(q, coder=coder)
+    back = decode_levels(chunks, [(6, 2), (4, 2)], params)
+    assert isinstance(back[1], np.ndarray)
+    _assert_equal(back, q)
+
+
+@pytest.mark.parametrize("coder", CODERS)
+def test_large_and_empty_values(coder: str) -> None:
+    """Lossless coefficients reach about 2**20; all-zero bands are common."""
+    rng = np.random.default_rng(4)
+    big = rng.integers(-(2**21), 2**21, (6, 6), dtype=np.int32)
+    q = [big, (np.zeros((4, 6), np.int32), np.zeros((6, 4), np.int32), np.zeros((4, 4), np.int32))]
+    chunks, params = encode_levels(q, coder=coder)
+    _assert_equal(decode_levels(chunks, _shapes(q), params), q)
+
+
+def test_context_coder_beats_zlib() -> None:
+    q = _laplace_bands(5, (130, 130))
+    zlib_size = sum(map(len, encode_levels(q, coder="zlib")[0]))
+    context_size = sum(map(len, encode_levels(q, coder="context")[0]))
+    assert context_size <= zlib_size
+
+
+def test_bad_arguments() -> None:
+    with pytest.raises(InvalidParameter, match="coder"):
+        encode_levels([np.zeros((2, 2), np.int32)], coder="gzip")
+    with pytest.raises(InvalidParameter, match="integers"):
+        encode_levels([np.zeros((2, 2))])
+
+
+@pytest.mark.parametrize("coder", CODERS)
+def test_corrupt_chunks_raise_bundle_error(coder: str) -> None:
+    q = _laplace_bands(6)
+    chunks, params = encode_levels(q, coder=coder)
+    shapes = _shapes(q)
+    rng = np.random.default_rng(7)
+    for trial in range(60):
+        broken = list(chunks)
+        index = trial % len(broken)
+        data = bytearray(broken[index])
+        if trial % 3 == 0:
+            data = data[: rng.integers(0, len(data))]
+        elif len(data):
+            data[rng.integers(0, len(data))] ^= int(rng.integers(1, 256))
+        broken[index] = bytes(data)
+        try:
+            back = decode_levels(broken, shapes, params)
+        except BundleError:
+            continue
+        # A flip the coder cannot see still has to give arrays of the declared shapes.
+        assert back[0].shape == q[0].shape  # type: ignore[attr-defined]
+
+
+def test_bad_shapes_and_params() -> None:
+    q = _laplace_bands(8)
+    chunks, params = encode_levels(q, coder="zlib")
+    with pytest.raises(BundleError):
+        decode_levels(chunks, _shapes(q)[:1], params)
+    with pytest.raises(BundleError):
+        decode_levels(chunks, [(2**40, 2**40)], params)
+    with pytest.raises(BundleError):
+        decode_levels(chunks, _shapes(q), {"coder": "nope"})
+    with pytest.raises(BundleError):
+        decode_levels(chunks[:1], [(-1, 3)], params)
+    bomb = zlib.compress(bytes(10**6))
+    with pytest.raises(BundleError):
+        decode_levels([bomb], [(4, 4)], params)
+
+
+@settings(max_examples=40, deadline=None)
+@given(data=st.binary(max_size=200), coder=st.sampled_from(CODERS))
+def test_arbitrary_bytes_never_escape(data: bytes, coder: str) -> None:
+    q = _laplace_bands(9)
+    _, params = encode_levels(q, coder=coder)
+    try:
+        back = decode_levels([data], _shapes(q), params)
+    except BundleError:
+        return
+    assert back[0].shape == q[0].shape  # type: ignore[attr-defined]

@@ -1,0 +1,130 @@
+"""Tests for the weighted dead-zone quantizer."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wavecore import basis_norms, wavedec, wavedec2, waverec, waverec2
+from wavecore.errors import InvalidCoefficients, InvalidParameter
+from wavecore.quantize import dequantize_bands, quantize_bands
+
+
+def _image(seed: int = 0, shape: tuple[int, ...] = (66, 34)) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[: shape[0], : shape[1]]
+    smooth = 100 + 60 * np.sin(x / 7.0) * np.cos(y / 5.0)
+    noise = rng.normal(0, 4, shape[:2])
+    out = smooth + noise
+    if len(shape) == 3:
+        out = np.stack([out * (0.5 + 0.2 * c) for c in range(shape[2])], axis=-1)
+    return out
+
+
+@pytest.mark.parametrize("wavelet", ["bspline2", "haar"])
+def test_error_shrinks_with_step(wavelet: str) -> None:
+    image = _image(shape=(66, 34) if wavelet == "bspline2" else (64, 32))
+    coeffs = wavedec2(image, wavelet, "open", 2)
+    errors = []
+    for step in (8.0, 2.0, 0.5):
+        q, params = quantize_bands(coeffs, step, wavelet=wavelet, boundary="open")
+        back = waverec2(dequantize_bands(q, params, wavelet=wavelet, boundary="open"), wavelet)
+        errors.append(float(np.sqrt(np.mean((back - image) ** 2))))
+    assert errors[0] > errors[1] > errors[2]
+    # At a fine step the error is about step / sqrt(12) (dead zone aside), not much more.
+    assert errors[2] < 0.5
+
+
+def test_layout_dtype_and_json_params() -> None:
+    image = _image(shape=(34, 34, 3))
+    coeffs = wavedec2(image, "bspline2", "open", 2)
+    q, params = quantize_bands(coeffs, 1.0, wavelet="bspline2", boundary="open")
+    assert q[0].dtype == np.int32 and q[0].shape == coeffs[0].shape
+    for bands, qbands in zip(coeffs[1:], q[1:], strict=True):
+        assert isinstance(qbands, tuple)
+        assert [b.shape for b in qbands] == [b.shape for b in bands]
+    assert json.loads(json.dumps(params)) == params
+
+
+def test_steps_follow_basis_norms() -> None:
+    """A band whose basis functions are larger gets a proportionally finer step."""
+    x = np.random.default_rng(3).normal(size=66)
+    coeffs = wavedec(x, "bspline2", "open", 3)
+    _, params = quantize_bands(coeffs, 1.0, wavelet="bspline2", boundary="open", axes=(0,))
+    norms = basis_norms(66, "bspline2", "open", 3)
+    rms = [float(np.sqrt(np.mean(n**2))) for n in norms]
+    steps = [s[0] for s in params["steps"]]
+    # cA of level 3 and cD of level 3 come from the same decomposition depth.
+    assert steps[0] * rms[0] == pytest.approx(1.0)
+    assert steps[1] * rms[1] == pytest.approx(1.0)
+
+
+def test_dead_zone_zeros_small_details() -> None:
+    coeffs = [np.zeros((6, 6)), (np.full((4, 6), 0.55), np.full((6, 4), -0.55), np.zeros((4, 4)))]
+    q, params = quantize_bands(coeffs, 1.0, wavelet="bspline2", boundary="open")
+    step = params["steps"][1][0]
+    # 0.55 / step is below 1 - rounding for these norms, so the dead zone takes it.
+    assert 0.55 / step < 1 - 0.38
+    assert not np.any(q[1][0]) and not np.any(q[1][1])
+
+
+def test_prefix_dequantizes_alone() -> None:
+    image = _image()
+    coeffs = wavedec2(image, "bspline2", "open", 3)
+    q, params = quantize_bands(coeffs, 1.0, wavelet="bspline2", boundary="open")
+    full = dequantize_bands(q, params, wavelet="bspline2", boundary="open")
+    prefix = dequantize_bands(q[:2], params, wavelet="bspline2", boundary="open")
+    assert len(prefix) == 2
+    np.testing.assert_array_equal(prefix[0], full[0])
+    np.testing.assert_array_equal(prefix[1][2], full[1][2])
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        {"name": "other", "steps": [[1.0]], "offsets": [[[0, 0]]]},
+        {"name": "deadzone", "steps": [], "offsets": []},
+        {"name": "deadzone", "steps": [["x"]], "offsets": [[[0, 0]]]},
+        {"name": "deadzone", "steps": [[float("nan")]], "offsets": [[[0, 0]]]},
+        {"name": "deadzone", "steps": [[1.0]], "offsets": [[[0]]]},
+        {"name": "deadzone", "steps": [[1.0, 2.0]], "offsets": [[[0, 0]]]},
+        "not a dict",
+    ],
+)
+def test_bad_params_are_rejected(params: object) -> None:
+    q = [np.zeros((3, 3), dtype=np.int32)]
+    with pytest.raises(InvalidParameter):
+        dequantize_bands(q, params, wavelet="haar", boundary="open")  # type: ignore[arg-type]
+
+
+def test_bad_arguments() -> None:
+    coeffs = wavedec2(_image(shape=(64, 32)), "haar", "open", 1)
+    for step in (0, -1.0, float("inf"), "1", True):
+        with pytest.raises(InvalidParameter, match="step"):
+            quantize_bands(coeffs, step, wavelet="haar", boundary="open")  # type: ignore[arg-type]
+    with pytest.raises(InvalidParameter, match="rounding"):
+        quantize_bands(coeffs, 1.0, wavelet="haar", boundary="open", rounding=0.8)
+    with pytest.raises(InvalidCoefficients):
+        quantize_bands([], 1.0, wavelet="haar", boundary="open")
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    step=st.floats(0.05, 20.0),
+    n=st.sampled_from([16, 32, 64]),
+)
+def test_curve_round_trip_error_is_bounded(seed: int, step: float, n: int) -> None:
+    """Every coefficient comes back within one band step (dead zone plus offset)."""
+    points = np.random.default_rng(seed).normal(0, 10, (n, 2))
+    coeffs = wavedec(points, "bspline2", "closed", 2)
+    q, params = quantize_bands(coeffs, step, wavelet="bspline2", boundary="closed", axes=(0,))
+    back = dequantize_bands(q, params, wavelet="bspline2", boundary="closed", axes=(0,))
+    for index, (c, b) in enumerate(zip(coeffs, back, strict=True)):
+        band_step = params["steps"][index][0]
+        assert np.all(np.abs(c - b) <= band_step * (1 + 1e-9))
+    assert waverec(back, "bspline2", "closed").shape == points.shape
