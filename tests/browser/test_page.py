@@ -1,0 +1,238 @@
+"""The upload page (``GET /``) in real headless Chromium against the real server process."""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import io
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.browser
+
+PHONE = {"width": 390, "height": 844}
+
+
+@pytest.fixture(scope="module")
+def astronaut_png(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 256 × 256 RGB photograph (scikit-image's astronaut), as a PNG file."""
+    from PIL import Image
+    from skimage import data
+
+    image = Image.fromarray(data.astronaut()).resize((256, 256), Image.Resampling.LANCZOS)
+    path = tmp_path_factory.mktemp("images") / "astronaut.png"
+    image.save(path)
+    return path
+
+
+def image_bytes(page: Any, selector: str) -> bytes:
+    """The bytes behind an ``<img>``'s blob URL, read inside the page."""
+    encoded = page.evaluate(
+        """async (selector) => {
+            const img = document.querySelector(selector);
+            const blob = await (await fetch(img.src)).blob();
+            const bytes = new Uint8Array(await blob.arrayBuffer());
+            let text = "";
+            for (const b of bytes) text += String.fromCharCode(b);
+            return btoa(text);
+        }""",
+        selector,
+    )
+    return base64.b64decode(encoded)
+
+
+def png_pixels(data: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"), dtype=np.float64)
+
+
+def figure(page: Any, name: str) -> str:
+    return str(page.inner_text(f"#fig-{name}")).strip()
+
+
+def number(text: str) -> float:
+    match = re.search(r"-?\d+(\.\d+)?", text)
+    assert match, f"no number in {text!r}"
+    return float(match.group())
+
+
+def upload_image(page: Any, path: Path) -> None:
+    page.set_input_files("#image-file", str(path))
+    page.wait_for_selector("#img-recon[data-keep]")
+    page.wait_for_selector("#img-coarse[data-level]")
+
+
+def move_keep_slider(page: Any, value: int) -> float:
+    """Moves the keep slider as a user would (focus, arrow keys), returns the keep it shows."""
+    keep = float(page.evaluate("(v) => window.wavecore.sliderToKeep(v)", value))
+    page.focus("#keep-slider")
+    current = int(page.input_value("#keep-slider"))
+    key = "ArrowLeft" if value < current else "ArrowRight"
+    for _ in range(abs(current - value)):
+        page.keyboard.press(key)
+    page.wait_for_selector(f"#img-recon[data-keep='{keep}']")
+    return keep
+
+
+def test_page_has_labelled_controls_and_loads_nothing_from_elsewhere(page: Any, artifacts: Path):
+    assert "wavecore" in page.title()
+    unlabelled = page.evaluate(
+        """() => [...document.querySelectorAll('input, select')].filter((el) =>
+            !(el.labels && el.labels.length) && !el.getAttribute('aria-label')
+        ).map((el) => el.id || el.name)"""
+    )
+    assert unlabelled == []
+    # The keyboard reaches the mode switch and the file chooser.
+    reached = []
+    for _ in range(8):
+        page.keyboard.press("Tab")
+        reached.append(page.evaluate("document.activeElement.id || document.activeElement.name"))
+    assert "mode" in reached
+    assert "image-file" in reached
+    assert "sample-image" in reached
+    page.screenshot(path=artifacts / "empty-desktop.png", full_page=True)
+
+
+def test_upload_image_shows_figures_and_slider_redecodes_the_same_bundle(
+    page: Any, astronaut_png: Path, artifacts: Path
+):
+    encode_requests: list[str] = []
+    page.on(
+        "request",
+        lambda r: encode_requests.append(r.url) if "/encode" in r.url else None,
+    )
+    upload_image(page, astronaut_png)
+
+    bundle_bytes = number(figure(page, "bytes"))
+    ratio = number(figure(page, "ratio"))
+    bpp = number(figure(page, "bpp"))
+    psnr_full = number(figure(page, "psnr"))
+    assert bundle_bytes > 0
+    assert ratio > 1, "a lossy bundle is smaller than the raw pixels"
+    assert 0 < bpp < 24
+    assert psnr_full > 25
+    assert page.get_attribute("#img-original", "alt")
+    assert page.get_attribute("#img-recon", "alt")
+    full = image_bytes(page, "#img-recon")
+    coarse = png_pixels(image_bytes(page, "#img-coarse"))
+    level = int(page.input_value("#level-slider"))
+    assert coarse.shape[0] == pytest.approx(256 / 2**level, abs=1)
+    page.screenshot(path=artifacts / "image-desktop.png", full_page=True)
+
+    keep = move_keep_slider(page, 30)
+    assert keep < 0.02
+    low = image_bytes(page, "#img-recon")
+    assert hashlib.sha256(low).digest() != hashlib.sha256(full).digest()
+    psnr_low = number(figure(page, "psnr"))
+    assert psnr_low < psnr_full, "fewer details, lower PSNR"
+    # Measured independently of the page: the PSNR it shows is the PSNR of what it shows.
+    original = png_pixels(astronaut_png.read_bytes())
+    mse = float(np.mean((png_pixels(low) - original) ** 2))
+    assert 10 * np.log10(255**2 / mse) == pytest.approx(psnr_low, abs=0.02)
+    assert len(encode_requests) == 1, "the slider never re-uploads"
+    page.screenshot(path=artifacts / "image-keep-low.png", full_page=True)
+
+
+def test_haar_against_bspline_at_the_same_keep(page: Any, astronaut_png: Path, artifacts: Path):
+    upload_image(page, astronaut_png)
+    keep = move_keep_slider(page, 30)
+    page.click("#compare-run")
+    page.wait_for_selector(f"#cmp-haar[data-keep='{keep}']")
+    page.wait_for_selector(f"#cmp-bspline2[data-keep='{keep}']")
+    smooth = png_pixels(image_bytes(page, "#cmp-bspline2"))
+    blocky = png_pixels(image_bytes(page, "#cmp-haar"))
+
+    # Haar's reconstruction is piecewise constant: far more neighbours share exactly one value.
+    def flat_share(img: np.ndarray) -> float:
+        return float(np.mean(np.all(img[:, 1:] == img[:, :-1], axis=-1)))
+
+    assert flat_share(blocky) > 2 * flat_share(smooth)
+    page.screenshot(path=artifacts / "compare-haar.png", full_page=True)
+
+    # Switching the wavelet itself re-encodes with Haar.
+    page.select_option("#wavelet", "haar")
+    page.wait_for_function("document.getElementById('fig-wavelet').textContent === 'haar'")
+    page.wait_for_selector("#img-recon[data-keep]")
+
+
+def test_draw_a_curve_and_see_its_coarse_curve(page: Any, artifacts: Path):
+    page.click("label:has(input[name=mode][value=curve])")
+    pad = page.locator("#curve-pad").bounding_box()
+    cx, cy = pad["x"] + pad["width"] / 2, pad["y"] + pad["height"] / 2
+    page.mouse.move(cx - 0.4 * pad["width"], cy)
+    page.mouse.down()
+    for i in range(1, 121):
+        t = i / 120
+        x = cx + (t - 0.5) * 0.8 * pad["width"]
+        y = cy + 0.3 * pad["height"] * np.sin(6 * np.pi * t) * (1 - t)
+        page.mouse.move(x, y)
+    page.mouse.up()
+    page.wait_for_selector("#curve-plot[data-level]")
+    page.wait_for_selector("#curve-plot[data-keep]")
+    coarse = int(page.get_attribute("#curve-plot", "data-coarse-points"))
+    recon = int(page.get_attribute("#curve-plot", "data-recon-points"))
+    assert 2 <= coarse < recon
+    assert page.locator("#curve-plot path.coarse").count() == 1
+    assert page.locator("#curve-plot path.recon").count() == 1
+    assert number(figure(page, "maxerr")) >= 0
+    page.screenshot(path=artifacts / "curve-desktop.png", full_page=True)
+
+
+def test_corrupt_bundle_shows_a_readable_error_next_to_the_bundle_input(page: Any, artifacts: Path):
+    page.click("label:has(input[name=mode][value=bundle])")
+    junk = np.random.default_rng(6).integers(0, 256, 300, dtype=np.uint8).tobytes()
+    page.set_input_files(
+        "#bundle-file",
+        files=[{"name": "broken.wcb", "mimeType": "application/octet-stream", "buffer": junk}],
+    )
+    error = page.locator("#bundle-file-error")
+    error.wait_for(state="visible")
+    assert "bundle" in error.inner_text().lower()
+    assert page.get_attribute("#bundle-file", "aria-invalid") == "true"
+    page.screenshot(path=artifacts / "bundle-error.png", full_page=True)
+    page.problems.clear()
+
+
+def test_bad_parameter_error_sits_next_to_the_target(page: Any, astronaut_png: Path):
+    page.fill("#keep", "2")
+    page.set_input_files("#image-file", str(astronaut_png))
+    error = page.locator("#target-error")
+    error.wait_for(state="visible")
+    assert "keep" in error.inner_text().lower()
+    page.problems.clear()
+
+
+def test_download_bundle_decodes_and_reopens(page: Any, astronaut_png: Path, tmp_path: Path):
+    import wavecore
+
+    upload_image(page, astronaut_png)
+    with page.expect_download() as info:
+        page.click("#download")
+    saved = tmp_path / "download.wcb"
+    info.value.save_as(saved)
+    decoded = wavecore.decode(saved.read_bytes())
+    assert decoded.shape == (256, 256, 3)
+    assert decoded.dtype == np.uint8
+    shown = number(figure(page, "bytes"))
+    assert saved.stat().st_size == pytest.approx(shown * 1024, rel=0.06)
+
+    # Upload the downloaded bundle: it reconstructs to what the page showed before.
+    page.click("label:has(input[name=mode][value=bundle])")
+    page.set_input_files("#bundle-file", str(saved))
+    page.wait_for_function("document.getElementById('img-original').complete")
+    page.wait_for_selector("#img-recon[data-keep]")
+    shown_pixels = png_pixels(image_bytes(page, "#img-recon"))
+    assert np.array_equal(shown_pixels, decoded.astype(np.float64))
+
+
+def test_phone_width_has_no_sideways_scrolling(page: Any, astronaut_png: Path, artifacts: Path):
+    page.set_viewport_size(PHONE)
+    upload_image(page, astronaut_png)
+    width = page.evaluate("document.documentElement.scrollWidth")
+    assert width <= PHONE["width"]
+    page.screenshot(path=artifacts / "image-phone.png", full_page=True)
