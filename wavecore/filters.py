@@ -13,7 +13,7 @@ Index conventions are 0-based.  The closed (periodic) alignment is the one verif
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -331,10 +331,21 @@ HAAR = FilterBank(
 
 _REGISTRY: dict[str, FilterBank] = {}
 
+# Functions that forget what they cached under a wavelet's name (here and in transform.py).
+CACHE_CLEARERS: list[Callable[[], None]] = []
+
 
 def register(bank: FilterBank) -> FilterBank:
-    """Make ``bank`` available by its name and aliases; returns it, for use as a decorator."""
-    for key in (bank.name, *bank.aliases):
+    """Make ``bank`` available by its name and aliases; returns it, for use as a decorator.
+
+    Registering a different bank under a name already in use replaces it, and drops every
+    cached matrix so that nothing computed for the old one is used again.
+    """
+    keys = (bank.name, *bank.aliases)
+    if any(key in _REGISTRY and _REGISTRY[key] is not bank for key in keys):
+        for clear in CACHE_CLEARERS:
+            clear()
+    for key in keys:
         _REGISTRY[key] = bank
     return bank
 
@@ -519,3 +530,8 @@ def _as_length(m: object) -> int:
         msg = f"a length must be an integer, not {m!r}"
         raise InvalidParameter(msg)
     return int(m)
+
+
+CACHE_CLEARERS.extend(
+    [_step_matrices.cache_clear, step_sparse.cache_clear, step_regular.cache_clear]
+)

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _kernels
+from . import _kernels, filters
 from .errors import InvalidCoefficients, InvalidParameter
 from .filters import (
     FilterBank,
@@ -160,6 +160,14 @@ def _kernel_args(
         out[name] = csr
         out[name + "+"] = (*csr, interior, pattern)
     return out
+
+
+def _forget_cached_matrices() -> None:
+    _kernel_args.cache_clear()
+    _fused_ok.cache_clear()
+
+
+filters.CACHE_CLEARERS.append(_forget_cached_matrices)
 
 
 def _max_span(matrix: Sparse) -> tuple[int, int]:
