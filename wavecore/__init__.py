@@ -5,6 +5,7 @@ The public API is what ``__all__`` lists; everything else is internal.
 
 from __future__ import annotations
 
+from . import cdf97 as _cdf97  # noqa: F401  (importing it registers "cdf97")
 from .codec import decode, encode_curve, encode_image, encode_surface, inspect
 from .curves import CurveDecomposition, decompose_curve, fitting_length, transfer_details
 from .errors import (
