@@ -57,6 +57,8 @@ LOSSLESS_WAVELET = "reversible"
 _MAX_IMAGE_LEVELS = 5
 _MAX_CURVE_LEVELS = 8
 _SEARCH_STEPS = 18
+_BPP_EVALUATIONS = 40
+_LONGEST_FLOAT = 1.2345678901234567e-300  # 23 characters, the longest repr of a positive float
 
 
 # --------------------------------------------------------------------------------------------
@@ -327,20 +329,35 @@ class _LossyEncoder:
         psnr, max_error = _errors(self.plan, self.original, self.reconstruct(q, params))
         return (math.inf if psnr is None else psnr), max_error
 
-    def bundle(self, step: float) -> bytes:
+    def _assemble(
+        self, step: float, errors: tuple[float | None, float] | None
+    ) -> tuple[bytes, list[Any], dict[str, Any]]:
         q, qparams = self.quantize(step)
         chunks, cparams = encode_levels(q, coder=DEFAULT_CODER)
-        psnr, max_error = _errors(self.plan, self.original, self.reconstruct(q, qparams))
+        if errors is None:
+            errors = _errors(self.plan, self.original, self.reconstruct(q, qparams))
         header = self.plan.header()
         header.update(
             quantizer=str(qparams.get("name", "deadzone")),
             qparams=qparams,
             coder=str(cparams.get("coder", DEFAULT_CODER)),
             cparams=cparams,
-            psnr=psnr,
-            max_error=max_error,
+            psnr=errors[0],
+            max_error=errors[1],
         )
-        return write_bundle(header, chunks)
+        return write_bundle(header, chunks), q, qparams
+
+    def bundle(self, step: float) -> bytes:
+        """The bundle at ``step``, with its measured PSNR and largest error in the header."""
+        return self._assemble(step, None)[0]
+
+    def size_bound(self, step: float) -> int:
+        """An upper bound on ``len(self.bundle(step))`` that skips measuring the errors.
+
+        The placeholders are floats with the longest JSON form, so the real header can only
+        be shorter (by at most a few dozen bytes).
+        """
+        return len(self._assemble(step, (_LONGEST_FLOAT, _LONGEST_FLOAT))[0])
 
 
 def _largest_step(ok: Callable[[float], bool], low: float, high: float) -> float:
@@ -405,32 +422,49 @@ def _encode_to_tolerance(
 
 
 def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) -> bytes:
+    """The bundle closest below ``bpp`` (whole bundle, header included), within 3 % of it.
+
+    A safeguarded secant search on log(size) against log(step): sizes follow a power law in the
+    step closely, so a handful of encodes usually lands in the window; bisection takes over
+    when the interpolation stalls.
+    """
     plan = encoder.plan
     pixels = plan.shape[0] * plan.shape[1]
     budget = math.floor(bpp * pixels / 8.0)
-    floor_bytes = math.ceil(0.97 * bpp * pixels / 8.0)
-    smallest = encoder.bundle(high)
-    if len(smallest) > budget:
+    # Stop once 99 % of the budget is used (the promise is 97 %); the real header is at most
+    # 2 × 23 bytes shorter than the bound, hence the margin.
+    enough = max(math.ceil(0.97 * bpp * pixels / 8.0) + 48, math.ceil(0.99 * budget))
+    aim = budget - max(1.0, 0.004 * budget)
+    fits = (high, encoder.size_bound(high))
+    if fits[1] > budget:
+        smallest = len(encoder.bundle(high))
         msg = (
             f"bpp {bpp} is below what this image can be coded in: the smallest bundle is "
-            f"{len(smallest)} bytes = {8 * len(smallest) / pixels:.4f} bpp (header included)"
+            f"{smallest} bytes = {8 * smallest / pixels:.4f} bpp (header included)"
         )
         raise InvalidParameter(msg)
-    best = smallest
-    for _ in range(2 * _SEARCH_STEPS):
-        if len(best) >= floor_bytes:
+    too_big: tuple[float, int] | None = None
+    for _ in range(_BPP_EVALUATIONS):
+        if fits[1] >= enough:
             break
-        mid = math.sqrt(low * high)
-        data = encoder.bundle(mid)
-        if len(data) <= budget:
-            high = mid
-            if len(data) > len(best):
-                best = data
+        if too_big is None:
+            # Below the budget with no upper bracket yet: extrapolate (size ~ 1 / step).
+            step = max(low, fits[0] * fits[1] / aim)
         else:
-            low = mid
-        if high / low < 1.0 + 1e-9:
-            break
-    return best
+            lo_s, hi_s = math.log(too_big[0]), math.log(fits[0])
+            lo_n, hi_n = math.log(too_big[1]), math.log(max(fits[1], 1))
+            t = (lo_n - math.log(aim)) / (lo_n - hi_n) if lo_n != hi_n else 0.5
+            t = min(max(t, 0.1), 0.9)  # keep both brackets moving
+            step = math.exp(lo_s + t * (hi_s - lo_s))
+            if hi_s - lo_s < 1e-12:
+                break
+        size = encoder.size_bound(step)
+        if size <= budget:
+            if size > fits[1]:
+                fits = (step, size)
+        elif too_big is None or step > too_big[0]:
+            too_big = (step, size)
+    return encoder.bundle(fits[0])
 
 
 def encode_image(
