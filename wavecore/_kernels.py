@@ -92,23 +92,26 @@ def _row_analysis(src, ptr, idx, w, reg, pat, out):
     _csr_rows(src, ptr, idx, w, out, 0, lo, False)
     _csr_rows(src, ptr, idx, w, out, lo + blocks, out.shape[0], False)
     taps = pat.shape[1]
+    # Slicing first makes every index below provably non-negative, so no wrap-around test is
+    # compiled into the loops and they vectorise (several times faster, float32 most).
+    s = src[col : col + 2 * (blocks - 1) + taps]
+    o = out[lo : lo + blocks]
     if taps == 4:
         w0, w1, w2, w3 = pat[0, 0], pat[0, 1], pat[0, 2], pat[0, 3]
         for b in range(blocks):
-            k = col + 2 * b
-            out[lo + b] = w0 * src[k] + w1 * src[k + 1] + w2 * src[k + 2] + w3 * src[k + 3]
+            o[b] = w0 * s[2 * b] + w1 * s[2 * b + 1] + w2 * s[2 * b + 2] + w3 * s[2 * b + 3]
     elif taps == 2:
         w0, w1 = pat[0, 0], pat[0, 1]
         for b in range(blocks):
-            k = col + 2 * b
-            out[lo + b] = w0 * src[k] + w1 * src[k + 1]
+            o[b] = w0 * s[2 * b] + w1 * s[2 * b + 1]
     else:
         for b in range(blocks):
-            out[lo + b] = 0
+            o[b] = 0
         for t in range(taps):
             wt = pat[0, t]
+            st = s[t:]
             for b in range(blocks):
-                out[lo + b] += wt * src[col + 2 * b + t]
+                o[b] += wt * st[2 * b]
 
 
 @njit(nogil=True, cache=True)
@@ -119,29 +122,33 @@ def _row_synthesis_part(src, ptr, idx, w, reg, pat, out, add):
     _csr_rows(src, ptr, idx, w, out, 0, lo, add)
     _csr_rows(src, ptr, idx, w, out, lo + 2 * blocks, out.shape[0], add)
     taps = pat.shape[1]
+    s = src[col : col + blocks - 1 + taps]  # sliced for non-negative indices, as above
+    o = out[lo : lo + 2 * blocks]
     if taps == 2:
         w00, w01, w10, w11 = pat[0, 0], pat[0, 1], pat[1, 0], pat[1, 1]
         if add:
             for b in range(blocks):
-                s0 = src[col + b]
-                s1 = src[col + b + 1]
-                out[lo + 2 * b] += w00 * s0 + w01 * s1
-                out[lo + 2 * b + 1] += w10 * s0 + w11 * s1
+                s0 = s[b]
+                s1 = s[b + 1]
+                o[2 * b] += w00 * s0 + w01 * s1
+                o[2 * b + 1] += w10 * s0 + w11 * s1
         else:
             for b in range(blocks):
-                s0 = src[col + b]
-                s1 = src[col + b + 1]
-                out[lo + 2 * b] = w00 * s0 + w01 * s1
-                out[lo + 2 * b + 1] = w10 * s0 + w11 * s1
+                s0 = s[b]
+                s1 = s[b + 1]
+                o[2 * b] = w00 * s0 + w01 * s1
+                o[2 * b + 1] = w10 * s0 + w11 * s1
     else:
         if not add:
-            for j in range(lo, lo + 2 * blocks):
-                out[j] = 0
+            for j in range(2 * blocks):
+                o[j] = 0
         for i in range(pat.shape[0]):
+            oi = o[i:]
             for t in range(taps):
                 wt = pat[i, t]
+                st = s[t:]
                 for b in range(blocks):
-                    out[lo + 2 * b + i] += wt * src[col + b + t]
+                    oi[2 * b] += wt * st[b]
 
 
 @njit(nogil=True, cache=True)
