@@ -433,7 +433,7 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
     budget = math.floor(bpp * pixels / 8.0)
     # Stop once 99 % of the budget is used (the promise is 97 %); the real header is at most
     # 2 × 23 bytes shorter than the bound, hence the margin.
-    enough = max(math.ceil(0.97 * bpp * pixels / 8.0) + 48, math.ceil(0.99 * budget))
+    enough = min(budget, max(math.ceil(0.97 * bpp * pixels / 8.0) + 48, math.ceil(0.99 * budget)))
     aim = budget - max(1.0, 0.004 * budget)
     fits = (high, encoder.size_bound(high))
     if fits[1] > budget:
@@ -444,12 +444,16 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         )
         raise InvalidParameter(msg)
     too_big: tuple[float, int] | None = None
+    last = fits
     for _ in range(_BPP_EVALUATIONS):
         if fits[1] >= enough:
             break
         if too_big is None:
-            # Below the budget with no upper bracket yet: extrapolate (size ~ 1 / step).
-            step = max(low, fits[0] * fits[1] / aim)
+            # Below the budget with no upper bracket yet: extrapolate (size ~ 1 / step), and at
+            # least halve the step, since small bundles are mostly header and barely move.
+            if last[0] <= low:
+                break
+            step = max(low, last[0] * min(last[1] / aim, 0.5))
         else:
             lo_s, hi_s = math.log(too_big[0]), math.log(fits[0])
             lo_n, hi_n = math.log(too_big[1]), math.log(max(fits[1], 1))
@@ -458,7 +462,10 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
             step = math.exp(lo_s + t * (hi_s - lo_s))
             if hi_s - lo_s < 1e-12:
                 break
+        if step == last[0]:
+            break  # the brackets met: no step between them gives another size
         size = encoder.size_bound(step)
+        last = (step, size)
         if size <= budget:
             if size > fits[1]:
                 fits = (step, size)
