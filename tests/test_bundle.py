@@ -20,6 +20,8 @@ from wavecore.bundle import (
     MAX_ELEMENTS,
     MAX_HEADER_SIZE,
     check_header,
+    deflate_header,
+    inflate_header,
     read_bundle,
     write_bundle,
 )
@@ -54,6 +56,7 @@ CHUNKS = [b"coarse", b"middle level", b"the finest level, longest"]
 
 def raw_bundle(header_bytes: bytes, chunks: list[bytes], major: int = 1, minor: int = 0) -> bytes:
     """Assemble a bundle by hand, with correct CRCs, to reach the checks after the CRC."""
+    header_bytes = deflate_header(header_bytes)
     head = struct.pack("<8sBBH", MAGIC, major, minor, len(header_bytes)) + header_bytes
     head += bytes([len(chunks)])
     for chunk in chunks:
@@ -74,7 +77,7 @@ def test_layout_matches_the_spec() -> None:
     data = write_bundle(make_header(), CHUNKS)
     magic, major, minor, size = struct.unpack_from("<8sBBH", data)
     assert (magic, (major, minor)) == (MAGIC, FORMAT_VERSION)
-    assert json.loads(data[12 : 12 + size]) == make_header()
+    assert json.loads(inflate_header(data[12 : 12 + size])) == make_header()
     assert data[12 + size] == len(CHUNKS)
     table = 13 + size
     lengths = [struct.unpack_from("<II", data, table + 8 * i)[0] for i in range(3)]
@@ -127,9 +130,10 @@ def test_a_newer_minor_version_with_extra_keys_is_read() -> None:
         (b"\x89PNG\r\n\x1a\n\x01\x00\x02\x00{}", "not a wavecore bundle"),
         (MAGIC + b"\x01\x00\x00\x00", "header length 0 is too short"),
         (MAGIC + b"\x01\x00\x10\x00{}", "truncated while reading the header"),
-        (MAGIC + b"\x01\x00\x02\x00[]", "must be a JSON object"),
-        (MAGIC + b"\x01\x00\x02\x00\xff\xfe", "not valid UTF-8 JSON"),
-        (MAGIC + b"\x01\x00\x02\x00{}", "'kind' is missing"),
+        (MAGIC + b"\x01\x00\x02\x00\xff\xff", "not valid DEFLATE data"),
+        (MAGIC + b"\x01\x00\x04\x00" + deflate_header(b"[]"), "must be a JSON object"),
+        (MAGIC + b"\x01\x00\x04\x00" + deflate_header(b"\xff\xfe"), "not valid UTF-8 JSON"),
+        (MAGIC + b"\x01\x00\x04\x00" + deflate_header(b"{}"), "'kind' is missing"),
         ("a string", "must be bytes"),
         (12345, "must be bytes"),
     ],
@@ -194,6 +198,17 @@ def test_missing_fields_are_named() -> None:
 def test_hostile_json_fails_cleanly(text: bytes) -> None:
     with pytest.raises(BundleError):
         read_bundle(raw_bundle(text, CHUNKS))
+
+
+def test_a_deflate_bomb_header_is_refused() -> None:
+    bomb = deflate_header(b"{" + b" " * 200_000 + b"}")
+    assert len(bomb) < 1000
+    data = MAGIC + bytes([1, 0]) + struct.pack("<H", len(bomb)) + bomb
+    with pytest.raises(BundleError, match="inflates to more than MAX_HEADER_SIZE"):
+        read_bundle(data)
+    cut = deflate_header(json.dumps(make_header()).encode())[:-5]
+    with pytest.raises(BundleError, match=r"incomplete|not valid DEFLATE"):
+        read_bundle(MAGIC + bytes([1, 0]) + struct.pack("<H", len(cut)) + cut)
 
 
 def test_chunk_count_must_match_levels() -> None:

@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 import wavecore
 from wavecore import BundleError, decode, inspect
-from wavecore.bundle import MAGIC, read_bundle
+from wavecore.bundle import MAGIC, deflate_header, read_bundle
 
 FAST = settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
 SLOW = settings(max_examples=2600, deadline=None, suppress_health_check=list(HealthCheck))
@@ -65,6 +65,7 @@ def split(data: bytes) -> tuple[dict[str, Any], list[bytes]]:
 
 def assemble(header: bytes, chunks: list[bytes], major: int = 1, minor: int = 0) -> bytes:
     """A bundle with correct CRCs around whatever header bytes and chunks it is given."""
+    header = deflate_header(header)
     head = struct.pack("<8sBBH", MAGIC, major, minor, len(header)) + header
     head += bytes([len(chunks) % 256])
     for chunk in chunks:

@@ -54,7 +54,7 @@ def test_any_image_comes_back_in_its_shape_and_dtype(shape: tuple[int, ...], dty
     measured = psnr(out, image, peak)
     assert measured >= 30
     recorded = inspect(bundle)["psnr"]
-    assert recorded is None or recorded == pytest.approx(measured)
+    assert recorded is None or recorded == pytest.approx(measured, abs=1e-4)
 
 
 @pytest.mark.parametrize("target", [25.0, 32.0, 38.0, 45.0])

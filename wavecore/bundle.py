@@ -15,7 +15,9 @@ offset    size         field
 9         1            minor version (``0``); a reader accepts any minor version of its major,
                        because minor versions only add optional header keys
 10        2            header length ``H`` (``uint16``), ``2 <= H <= MAX_HEADER_SIZE``
-12        H            header: a UTF-8 JSON object (see *Header*)
+12        H            header: a UTF-8 JSON object (see *Header*), compressed with raw
+                       DEFLATE (RFC 1951, ``zlib`` with ``wbits=-15``); it inflates to at most
+                       ``MAX_HEADER_SIZE`` bytes
 12+H      1            chunk count ``N`` (``uint8``), ``1 <= N <= MAX_CHUNKS``
 13+H      8·N          chunk table: for each chunk its byte length (``uint32``) and CRC-32
                        (``uint32``, ``zlib.crc32``)
@@ -40,7 +42,9 @@ in every test run to hold this promise.
 
 Header
 ------
-A JSON object (no whitespace needed) with these keys; readers ignore unknown keys, so a minor
+A JSON object (stored deflated, see *Layout*: the parameters of the quantizer hold many similar
+numbers, and at 0.25 bpp a 512 × 512 bundle has only 8 KiB) with these keys; readers ignore
+unknown keys, so a minor
 version may add some.
 
 ``kind``        ``"image"``, ``"curve"`` or ``"surface"``
@@ -63,14 +67,16 @@ version may add some.
 ``quantizer``   the quantizer's name (``"none"`` for lossless) and ``qparams`` its parameters
 ``coder``       the entropy coder's name and ``cparams`` its parameters
 ``peak``        the peak value PSNR is measured against
-``psnr``        the encoder's measured PSNR in dB (``null`` when exact)
+``psnr``        the encoder's measured PSNR in dB, rounded down to 4 decimals (``null`` when
+                exact)
 ``max_error``   the encoder's measured largest absolute error (per sample, or per point for
                 curves)
 
 Limits and safety
 -----------------
 A reader checks, in this order and before it allocates anything sized by the bundle: the magic,
-the major version, the header length (at most ``MAX_HEADER_SIZE`` bytes), the JSON, every header
+the major version, the header length (at most ``MAX_HEADER_SIZE`` bytes, compressed and
+inflated: inflation stops at that size, so no "deflate bomb" gets through), the JSON, every header
 field's type and range (the declared element count is at most ``MAX_ELEMENTS``), the header and
 table CRC, and that the chunk table's lengths fit in the bytes that are actually present.  Every
 failure is a :class:`~wavecore.errors.BundleError` whose message names the field being read.
@@ -98,6 +104,8 @@ __all__ = [
     "MAX_ELEMENTS",
     "MAX_HEADER_SIZE",
     "Bundle",
+    "deflate_header",
+    "inflate_header",
     "read_bundle",
     "write_bundle",
 ]
@@ -207,6 +215,10 @@ def write_bundle(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
     if len(text) > MAX_HEADER_SIZE:
         msg = f"header is {len(text)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
         raise BundleError(msg)
+    text = deflate_header(text)
+    if len(text) > MAX_HEADER_SIZE:  # incompressible and at the limit
+        msg = f"header is {len(text)} bytes compressed, more than {MAX_HEADER_SIZE}"
+        raise BundleError(msg)
     if not 1 <= len(chunks) <= MAX_CHUNKS or len(chunks) != header["levels"] + 1:
         msg = f"a bundle of {header['levels']} levels needs {header['levels'] + 1} chunks"
         raise BundleError(msg)
@@ -249,7 +261,7 @@ def read_bundle(data: Any) -> Bundle:
         msg = f"header length {header_size} is too short for a JSON object"
         raise BundleError(msg)
     text = reader.take(header_size, "the header")
-    header = _parse_header(bytes(text))
+    header = _parse_header(inflate_header(bytes(text)))
     (count,) = reader.unpack(struct.Struct("<B"), "the chunk count")
     if count != header["levels"] + 1:
         msg = (
@@ -276,6 +288,29 @@ def read_bundle(data: Any) -> Bundle:
         msg = f"{remaining} unexpected byte(s) after the last chunk"
         raise BundleError(msg)
     return Bundle((major, minor), header, tuple(chunks), tuple(c for _, c in table))
+
+
+def deflate_header(text: bytes) -> bytes:
+    """Compress header JSON as the format stores it (raw DEFLATE, best compression)."""
+    packer = zlib.compressobj(9, zlib.DEFLATED, -15)
+    return packer.compress(text) + packer.flush()
+
+
+def inflate_header(data: bytes) -> bytes:
+    """Inflate a stored header, never to more than ``MAX_HEADER_SIZE`` bytes."""
+    inflater = zlib.decompressobj(-15)
+    try:
+        text = inflater.decompress(data, MAX_HEADER_SIZE + 1)
+    except zlib.error as exc:
+        msg = f"the header is not valid DEFLATE data: {exc}"
+        raise BundleError(msg) from exc
+    if len(text) > MAX_HEADER_SIZE:
+        msg = f"the header inflates to more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE} bytes"
+        raise BundleError(msg)
+    if not inflater.eof or inflater.unused_data:
+        msg = "the header's DEFLATE stream is incomplete or followed by extra bytes"
+        raise BundleError(msg)
+    return text
 
 
 def _parse_header(text: bytes) -> dict[str, Any]:

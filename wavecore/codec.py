@@ -269,7 +269,8 @@ def _errors(plan: _Plan, original: np.ndarray, decoded: np.ndarray) -> tuple[flo
     mse = float(np.mean(diff * diff))
     if mse == 0.0:
         return None, max_error
-    return 10.0 * math.log10(plan.peak * plan.peak / mse), max_error
+    # Rounded down, so that the recorded value never claims more than was measured.
+    return math.floor(10.0 * math.log10(plan.peak * plan.peak / mse) * 1e4) / 1e4, max_error
 
 
 def _peak(arr: np.ndarray, dtype: str, kind: str) -> float:
