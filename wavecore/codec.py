@@ -18,8 +18,14 @@ Contract notes for the owners of ``quantize.py`` and ``entropy.py`` (read by the
   and the decoder side must treat it as untrusted: a crafted header can hold any JSON there.
   As a last line of defence :func:`decode` turns any exception other than ``BundleError`` that
   escapes the decoding stages into a ``BundleError``, but please raise ``BundleError`` yourself.
-* The lossless path hands ``encode_levels`` the integer LeGall 5/3 coefficients (``int32``,
-  magnitudes up to about 2**20 for 16-bit RGB) with no quantizer.
+* The lossless path hands ``encode_levels`` the integer LeGall 5/3 / integer Haar coefficients
+  (``int32``, magnitudes up to about 2**20 for 16-bit RGB) with no quantizer.
+* ``bpp`` counts the whole bundle, header included, and ``params`` live in the header (stored
+  deflated): a float with 17 significant digits costs about 10 bytes even deflated, so rounding
+  steps to ~6 significant digits (and quantizing with the rounded value) buys bits at low rates.
+* Golden bundles (``tests/golden``) are decoded in every test run: once they are committed, a
+  coder or quantizer whose old bitstreams/params no longer decode the same needs a new name (or
+  a version key in ``params``), never a silent change behind the old one.
 """
 
 from __future__ import annotations
