@@ -30,6 +30,7 @@
     urls: {}, // object URLs per <img>, revoked when replaced
     seq: { recon: 0, coarse: 0, compare: 0, encode: 0, transfer: 0 },
     xhr: {}, // in-flight requests per purpose, aborted when superseded
+    loaded: 0, // bundles shown so far; views carry the number of the bundle they show
   };
 
   // ---------------------------------------------------------------- HTTP
@@ -196,6 +197,12 @@
   }
 
   function setMode(mode) {
+    // Curves have no quality, bpp or lossless target; images no tolerance: pick one they have.
+    if (mode === "curve" && target() !== "tolerance") {
+      document.querySelector('input[name="target"][value="keep"]').checked = true;
+    } else if (mode === "image" && target() === "tolerance") {
+      document.querySelector('input[name="target"][value="quality"]').checked = true;
+    }
     state.mode = mode;
     document.body.dataset.mode = mode;
     for (const pane of document.querySelectorAll(".mode-pane")) pane.hidden = pane.dataset.mode !== mode;
@@ -303,6 +310,7 @@
     img.removeAttribute("src");
     delete img.dataset.keep;
     delete img.dataset.level;
+    delete img.dataset.bundle;
   }
 
   function setLoading(id, on) {
@@ -597,6 +605,8 @@
     state.bundle = blob;
     state.bundleName = name;
     state.info = info;
+    state.loaded += 1;
+    document.body.dataset.bundles = String(state.loaded);
     state.kind = info.kind === "curve" ? "curve" : "image";
     document.body.dataset.kind = state.kind;
     if (info.kind !== "image" && info.kind !== "curve") {
@@ -610,6 +620,10 @@
     download.download = name;
     download.hidden = false;
 
+    if (!$("empty").hidden && window.matchMedia("(max-width: 900px)").matches) {
+      // On a phone the result is below the controls: bring the first one into view.
+      $("results").scrollIntoView({ behavior: "smooth", block: "start" });
+    }
     $("empty").hidden = true;
     $("figures").hidden = false;
     $("sliders").hidden = false;
@@ -619,7 +633,8 @@
     const levels = Math.max(1, Number(info.levels) || 1);
     const levelSlider = $("level-slider");
     levelSlider.max = String(levels);
-    levelSlider.value = String(Math.min(levels, Math.max(1, Math.min(3, levels))));
+    // Curves start at the coarsest level: the control polygon, and every detail for figure 1.
+    levelSlider.value = String(info.kind === "curve" ? levels : Math.min(3, levels));
     $("level-out").textContent = levelSlider.value;
     $("keep-slider").value = "100";
     $("keep-out").textContent = "100 %";
@@ -770,6 +785,7 @@
         renderFigures(measured);
         if (measured) $("recon-tag").textContent = `keep ${formatKeep(keep)} · ${formatPsnr(measured.psnr)}`;
         img.dataset.keep = String(keep);
+        img.dataset.bundle = String(state.loaded);
       } catch (err) {
         if (!isAbort(err)) showError("keep-error", err);
       } finally {
@@ -785,6 +801,7 @@
         renderFigures(measured);
         redrawCurves();
         $("curve-plot").dataset.keep = String(keep);
+        $("curve-plot").dataset.bundle = String(state.loaded);
       } catch (err) {
         if (!isAbort(err)) showError("keep-error", err);
       }
@@ -806,6 +823,7 @@
         img.alt = `Coarse approximation after ${level} level${level === 1 ? "" : "s"}, ${img.naturalWidth}×${img.naturalHeight} pixels`;
         $("coarse-tag").textContent = `level ${level} · ${img.naturalWidth}×${img.naturalHeight}`;
         img.dataset.level = String(level);
+        img.dataset.bundle = String(state.loaded);
       } catch (err) {
         if (!isAbort(err)) showError("coarse-error", err);
       } finally {
