@@ -175,3 +175,13 @@ def test_bad_curves() -> None:
         wavecore.transfer_details(_stroke(34), _stroke(5), frame="tangent")
     with pytest.raises(InvalidParameter, match="keep"):
         wavecore.decompose_curve(_stroke(34)).reconstruct(keep=2.0)
+
+
+def test_closed_3d_transfer_has_no_seam() -> None:
+    t = np.linspace(0, 2 * np.pi, 128, endpoint=False)
+    knotty = np.stack([np.cos(t), np.sin(t), 0.8 * np.sin(2 * t)], axis=1)  # frames twist
+    bumps = knotty * (1 + 0.05 * np.cos(24 * t))[:, None]
+    base = np.stack([1.5 * np.cos(t[::4]), np.sin(t[::4]), 0.2 * np.cos(t[::4])], axis=1)
+    new = wavecore.transfer_details(bumps, base, closed=True, level=3)
+    steps = np.linalg.norm(np.diff(np.concatenate([new, new[:1]]), axis=0), axis=1)
+    assert steps[:-1].min() <= steps[-1] <= steps[:-1].max()

@@ -162,7 +162,7 @@ def test_vector_details_are_kept_or_removed_whole() -> None:
 
 
 def test_ties_are_broken_deterministically() -> None:
-    coeffs = [np.zeros(10), np.ones(4), np.ones(8)]
+    coeffs = [np.zeros(6), np.ones(4), np.ones(8)]
     a = wavecore.remove_smallest(coeffs, 0.5, weighted=False)
     b = wavecore.remove_smallest(coeffs, 0.5, weighted=False)
     assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
@@ -194,3 +194,12 @@ def test_coarse_only_list_is_returned_unchanged() -> None:
     out = wavecore.remove_smallest([np.arange(5.0)], 0.5)
     assert len(out) == 1
     assert np.array_equal(out[0], np.arange(5.0))
+
+
+def test_mismatched_band_shapes_are_refused() -> None:
+    coeffs = wavecore.wavedec2(np.zeros((34, 34)), level=2)
+    ch, cv, cd = coeffs[1]
+    broken = [coeffs[0], (ch[:-1], cv, cd), coeffs[2]]
+    for weighted in (True, False):
+        with pytest.raises(InvalidCoefficients, match="same decomposition"):
+            wavecore.remove_smallest(broken, 0.5, weighted=weighted)

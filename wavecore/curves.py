@@ -326,6 +326,20 @@ def _frames(points: np.ndarray, closed: bool) -> np.ndarray:
         r_next = r_left - (2 / c2) * (v2 @ r_left) * v2 if c2 > 0 else r_left
         r_next = r_next - (r_next @ t[i + 1]) * t[i + 1]
         r[i + 1] = r_next / max(np.linalg.norm(r_next), 1e-300)
+    if closed:
+        # The frame need not close up (holonomy): carry it once more across the seam, and
+        # spread the angle it is off by evenly along the curve, so that there is no jump.
+        v1 = points[0] - points[-1]
+        c1 = v1 @ v1
+        r_left = r[-1] - (2 / c1) * (v1 @ r[-1]) * v1 if c1 > 0 else r[-1]
+        t_left = t[-1] - (2 / c1) * (v1 @ t[-1]) * v1 if c1 > 0 else t[-1]
+        v2 = t[0] - t_left
+        c2 = v2 @ v2
+        r_end = r_left - (2 / c2) * (v2 @ r_left) * v2 if c2 > 0 else r_left
+        angle = np.arctan2(np.cross(r[0], r_end) @ t[0], r[0] @ r_end)
+        turn = -angle * np.arange(m) / m
+        side = np.cross(t, r)
+        r = np.cos(turn)[:, None] * r + np.sin(turn)[:, None] * side
     return np.stack([t, r, np.cross(t, r)], axis=1)
 
 
@@ -362,7 +376,8 @@ def transfer_details(
         with the sweep and keep the character across the curve.  When the base runs like the
         source's own outline both give the same curve.
         The frame is the tangent and its left normal for ``d = 2``, and a rotation-minimizing
-        frame for ``d = 3``.  For ``d = 1`` (a time series) and ``d > 3`` there is no
+        frame for ``d = 3`` (on a closed curve its leftover twist is spread evenly along the
+        curve, so that it closes up).  For ``d = 1`` (a time series) and ``d > 3`` there is no
         natural frame, and ``"local"`` falls back to plain displacements.
     wavelet : str, keyword-only
         The wavelet.

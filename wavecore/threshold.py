@@ -105,7 +105,10 @@ def remove_smallest(
     # Each band in a common layout: transformed axes first (in `axes` order), then the
     # carried axes, the vector axis last; sizes drop the vector axis.
     order = ax + [a for a in carried if a != vec] + ([vec] if vec is not None else [])
-    norms = _band_norms(coarse, levels, ax, wavelet, boundary) if weighted else None
+    bank = get_wavelet(wavelet)
+    bounds = _boundaries(boundary, len(ax), bank)
+    fine = _fine_lengths(coarse, levels, ax, bank, bounds)
+    norms = _band_norms(fine, levels, bank, bounds) if weighted else None
 
     sizes: list[np.ndarray] = []
     for li, bands in enumerate(levels):
@@ -241,27 +244,46 @@ def _resolve_vector_axis(vector_axis: int | None, ndim: int, axes: list[int]) ->
     return vec
 
 
-def _band_norms(
+def _fine_lengths(
     coarse: np.ndarray,
     levels: list[dict[str, np.ndarray]],
     axes: list[int],
-    wavelet: str | FilterBank,
-    boundary: str | Sequence[str],
-) -> list[dict[str, np.ndarray]]:
-    """Basis norms per band (transformed axes only, in ``axes`` order), coarse level first."""
-    bank = get_wavelet(wavelet)
-    bounds = _boundaries(boundary, len(axes), bank)
+    bank: FilterBank,
+    bounds: list[str],
+) -> tuple[int, ...]:
+    """The decomposed data's length along each axis, checking that the bands fit together."""
     fine = []
     for i, a in enumerate(axes):
+        rule = bank.rule(bounds[i])
         n = coarse.shape[a]
-        for bands in levels:
+        for depth, bands in enumerate(levels):
             detail = next((b for k, b in bands.items() if k[i] == "d"), None)
             if detail is None:
                 msg = f"level without a band that is detail along axis {a}; cannot size it"
                 raise InvalidCoefficients(msg)
-            n = bank.rule(bounds[i]).fine_length(n, detail.shape[a])
+            fine_n = rule.fine_length(n, detail.shape[a])
+            for key, band in bands.items():
+                expected = detail.shape[a] if key[i] == "d" else n
+                if band.shape[a] != expected or rule.coarse_length(fine_n) != n:
+                    msg = (
+                        f"detail band {key!r} of level {len(levels) - depth} has shape "
+                        f"{band.shape}, which does not belong to the same decomposition as the "
+                        "other bands"
+                    )
+                    raise InvalidCoefficients(msg)
+            n = fine_n
         fine.append(n)
-    table = basis_norms_nd(tuple(fine), bank, bounds, len(levels))
+    return tuple(fine)
+
+
+def _band_norms(
+    fine: tuple[int, ...],
+    levels: list[dict[str, np.ndarray]],
+    bank: FilterBank,
+    bounds: list[str],
+) -> list[dict[str, np.ndarray]]:
+    """Basis norms per band (transformed axes only, in ``axes`` order), coarse level first."""
+    table = basis_norms_nd(fine, bank, bounds, len(levels))
     result: list[dict[str, np.ndarray]] = []
     for li, bands in enumerate(levels):
         level_norms = table[li + 1]
