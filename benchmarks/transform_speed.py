@@ -50,13 +50,25 @@ def passes(levels: int) -> float:
     return 2 * sum(0.25**level for level in range(levels))
 
 
-def median_time(func: Callable[[], object], repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+def time_once(func: Callable[[], object]) -> float:
+    start = time.perf_counter()
+    func()
+    return time.perf_counter() - start
+
+
+def interleaved_medians(
+    contenders: dict[str, Callable[[], object]], rounds: int
+) -> dict[str, float]:
+    """Median time of each contender, timing every one of them once per round.
+
+    Interleaving spreads the load of a shared machine evenly over the contenders, so their
+    ratios stay meaningful even when the absolute times drift.
+    """
+    times: dict[str, list[float]] = {name: [] for name in contenders}
+    for _ in range(rounds):
+        for name, func in contenders.items():
+            times[name].append(time_once(func))
+    return {name: statistics.median(values) for name, values in times.items()}
 
 
 def ours(image: np.ndarray) -> np.ndarray:
@@ -102,7 +114,7 @@ def first_call(cache_dir: str, dtype: str) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", type=int, default=4098, help="our image side (2**L*k + 2)")
-    parser.add_argument("--repeat", type=int, default=7, help="runs per median")
+    parser.add_argument("--repeat", type=int, default=9, help="rounds (runs per median)")
     parser.add_argument("--no-first-call", action="store_true", help="skip the compile timing")
     args = parser.parse_args()
     n = args.size
@@ -110,32 +122,36 @@ def main() -> None:
     base = rng.random((n, n))
     print(f"wavecore.wavedec2 + waverec2, {LEVELS} levels, open, {n}x{n}; ", end="")
     print(f"pywt bior3.1 symmetric on {n - 2}x{n - 2}; median of {args.repeat} runs")
-    print(f"threads: {os.environ.get('WAVECORE_THREADS') or os.cpu_count()}")
-    results: dict[str, dict[str, float]] = {}
+    print(f"threads: {os.environ.get('WAVECORE_THREADS') or os.cpu_count()}; ", end="")
+    print("load average before: {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
+    contenders: dict[str, Callable[[], object]] = {}
     for dtype in (np.float64, np.float32):
+        name = np.dtype(dtype).name
         image = base.astype(dtype)
         peer = np.ascontiguousarray(image[: n - 2, : n - 2])
+        dst = np.empty_like(image)
         ours(image)  # compile and warm the caches
         theirs(peer)
         err = np.max(np.abs(ours(image) - image)) / np.max(np.abs(image))
-        dst = np.empty_like(image)
-        copy = median_time(lambda image=image, dst=dst: np.copyto(dst, image), args.repeat)
-        t_ours = median_time(lambda image=image: ours(image), args.repeat)
-        t_theirs = median_time(lambda peer=peer: theirs(peer), args.repeat)
-        floor = copy * passes(LEVELS)
-        name = np.dtype(dtype).name
-        results[name] = {"ours": t_ours, "pywt": t_theirs}
-        print(f"\n{name}: max relative reconstruction error {err:.1e}")
-        print(f"  ours    {t_ours:8.3f} s")
-        print(f"  pywt    {t_theirs:8.3f} s   -> ours is {t_theirs / t_ours:5.2f}x faster")
+        print(f"{name}: max relative reconstruction error {err:.1e}; ", end="")
+        print(f"peak extra memory {peak_extra(image):.2f}x the input")
+        contenders[f"ours {name}"] = lambda image=image: ours(image)
+        contenders[f"pywt {name}"] = lambda peer=peer: theirs(peer)
+        contenders[f"copyto {name}"] = lambda image=image, dst=dst: np.copyto(dst, image)
+    t = interleaved_medians(contenders, args.repeat)
+    for name in ("float64", "float32"):
+        floor = t[f"copyto {name}"] * passes(LEVELS)
+        print(f"\n{name}")
+        print(f"  ours    {t[f'ours {name}']:8.3f} s")
+        print(f"  pywt    {t[f'pywt {name}']:8.3f} s   -> ours is ", end="")
+        print(f"{t[f'pywt {name}'] / t[f'ours {name}']:5.2f}x faster")
+        print(f"  floor   {floor:8.3f} s   (copyto {t[f'copyto {name}']:.4f} s x ", end="")
         print(
-            f"  floor   {floor:8.3f} s   (copyto {copy:.4f} s x {passes(LEVELS):.2f} passes)"
-            f" -> ours is {t_ours / floor:5.2f}x the floor"
+            f"{passes(LEVELS):.2f} passes) -> ours is {t[f'ours {name}'] / floor:5.2f}x the floor"
         )
-        print(f"  peak extra memory {peak_extra(image):.2f}x the input")
-    speedup = results["float64"]["ours"] / results["float32"]["ours"]
-    print(f"\nfloat32 is {speedup:.2f}x faster than float64 (ours)")
-    print(f"pywt: float32 is {results['float64']['pywt'] / results['float32']['pywt']:.2f}x")
+    print("load average after: {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
+    print(f"\nfloat32 is {t['ours float64'] / t['ours float32']:.2f}x faster than float64 (ours)")
+    print(f"pywt: float32 is {t['pywt float64'] / t['pywt float32']:.2f}x faster than float64")
     if not args.no_first_call:
         with tempfile.TemporaryDirectory() as cache:
             cold = first_call(cache, "float64")
