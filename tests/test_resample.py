@@ -144,3 +144,42 @@ def test_coarse_crop_is_about_n_over_two_to_the_level(boundary: str, n: int) -> 
 def test_crop_rejects_mismatched_pads() -> None:
     with pytest.raises(InvalidParameter, match="pads"):
         wavecore.crop_padding(np.zeros((8, 8)), ((0, 1),), axes=(0, 1))
+
+
+@given(n_in=st.integers(2, 40), n_out=st.integers(2, 80))
+@settings(max_examples=40, deadline=None)
+def test_grid_resampling_is_exact_for_linear_data(n_in: int, n_out: int) -> None:
+    ramp = 3.0 * np.arange(n_in) - 1.0
+    grid = np.add.outer(ramp, np.arange(5.0))  # linear along axis 0
+    out = wavecore.resample_grid(grid, (n_out,), axes=0)
+    expected = np.add.outer(np.linspace(ramp[0], ramp[-1], n_out), np.arange(5.0))
+    assert np.allclose(out, expected)
+
+
+def test_closed_grid_resampling_is_periodic() -> None:
+    u = np.arange(12) / 12
+    circle = np.stack([np.cos(2 * np.pi * u), np.sin(2 * np.pi * u)], axis=1)
+    out = wavecore.resample_grid(circle, (24,), axes=0, boundary="closed")
+    assert np.allclose(out[::2], circle)  # the old samples stay, new ones between
+    assert np.allclose(out[-1], (circle[-1] + circle[0]) / 2)  # across the seam
+
+
+def test_fit_grid_and_its_undo() -> None:
+    image = np.random.default_rng(0).random((37, 50, 3))
+    for method in ("pad", "resample"):
+        fitted, fit = wavecore.fit_grid(image, 3, axes=(0, 1), method=method)
+        for axis in (0, 1):
+            assert wavecore.max_level(fitted.shape[axis]) >= 3
+        assert fit.undo(fitted).shape == image.shape
+    padded, fit = wavecore.fit_grid(image, 3, axes=(0, 1))
+    assert np.array_equal(fit.undo(padded), image)
+    assert fit.pads == wavecore.pad_to_fit(image, 3, axes=(0, 1))[1]
+
+
+def test_minimum_length_and_small_grids() -> None:
+    assert wavecore.minimum_length() == 8
+    assert wavecore.minimum_length("closed") == wavecore.minimum_length(wavelet="haar") == 2
+    with pytest.raises(wavecore.InvalidLength, match="at least 8 samples per axis"):
+        wavecore.fit_grid(np.zeros((7, 30)), 1, axes=(0, 1))
+    with pytest.raises(InvalidParameter, match="method"):
+        wavecore.fit_grid(np.zeros((8, 30)), 1, axes=(0, 1), method="stretch")

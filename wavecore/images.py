@@ -132,7 +132,9 @@ class ImageDecomposition:
         weighted : bool, keyword-only
             Rank details by their effect on the reconstruction (see
             :func:`wavecore.remove_smallest`); every colour channel's numbers are ranked on
-            their own.
+            their own.  The share counts the details of the fitted image: with
+            ``fit="pad"`` that includes the few padded rows and columns, whose flat details
+            are among the first removed.
 
         Returns
         -------
