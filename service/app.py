@@ -1,0 +1,71 @@
+"""The app factory: ``uvicorn --factory service.app:create_app``.
+
+Nothing happens at import time: the settings are read, the thread pool is sized and Pillow's
+pixel limit is set when :func:`create_app` runs, so that tests build apps with their own limits.
+
+>>> app = create_app(Settings(max_upload_bytes=1000))
+>>> app.state.settings.max_upload_bytes
+1000
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+from fastapi import FastAPI
+from fastapi.staticfiles import StaticFiles
+
+import wavecore
+
+from . import errors
+from .imaging import set_pixel_limit
+from .middleware import BodyLimitMiddleware, Metrics, MetricsMiddleware
+from .routes import bundles, curves, health, images, pages, surfaces
+from .settings import Settings
+from .work import AdmissionMiddleware, WorkPool
+
+STATIC = Path(__file__).resolve().parent / "static"
+
+DESCRIPTION = """\
+Wavelet compression with the local filters of quadratic B-spline wavelets (Samavati & Bartels).
+
+Encode an image, a curve or a surface into a *bundle*; send a bundle back with `keep` and
+`level` to get a reconstruction with fewer details or at a coarser resolution.
+
+Errors are `application/problem+json` (RFC 9457); their `type` is
+`urn:wavecore:problem:<kind>`.
+"""
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the service with ``settings`` (default: read from ``WAVECORE_*`` variables)."""
+    settings = settings or Settings()
+    set_pixel_limit(settings.max_pixels)
+    pool = WorkPool(settings)
+
+    @asynccontextmanager
+    async def lifespan(_: FastAPI) -> AsyncIterator[None]:
+        yield
+        pool.shutdown()
+
+    app = FastAPI(
+        title="wavecore",
+        version=wavecore.__version__,
+        description=DESCRIPTION,
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.pool = pool
+    app.state.metrics = Metrics()
+    errors.install(app)
+    for module in (images, curves, surfaces, bundles, health, pages):
+        app.include_router(module.router)
+    if STATIC.is_dir():
+        app.mount("/static", StaticFiles(directory=STATIC), name="static")
+    # Added innermost first: metrics see everything, admission runs before the body is read.
+    app.add_middleware(BodyLimitMiddleware, limit=settings.max_upload_bytes)
+    app.add_middleware(AdmissionMiddleware, pool=pool)
+    app.add_middleware(MetricsMiddleware, metrics=app.state.metrics)
+    return app

@@ -1,0 +1,145 @@
+"""Small helpers shared by the routes: settings, body reading, array checks, responses."""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from fastapi import Request
+from pydantic import BaseModel, ValidationError
+
+from .errors import PROBLEM_JSON, Problem, validation_problem
+from .schemas import ProblemDetails
+from .settings import Settings
+
+BUNDLE_MEDIA_TYPE = "application/vnd.wavecore.bundle"
+NPY_MEDIA_TYPE = "application/x-npy"
+
+
+def settings_of(request: Request) -> Settings:
+    settings: Settings = request.app.state.settings
+    return settings
+
+
+def problem_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """OpenAPI ``responses`` entries for the problems a route can answer with."""
+    return {
+        status: {
+            "model": ProblemDetails,
+            "content": {PROBLEM_JSON: {"schema": ProblemDetails.model_json_schema()}},
+        }
+        for status in statuses
+    }
+
+
+def parse_model(model: type[BaseModel], data: bytes | dict[str, Any]) -> Any:
+    """Validate JSON bytes (or form fields) against ``model``; a 422 problem on failure."""
+    try:
+        if isinstance(data, bytes):
+            return model.model_validate_json(data)
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise validation_problem(exc.errors(include_url=False), prefix=("body",)) from None
+
+
+def as_points(
+    nested: Sequence[Any], name: str, *, ndim: Sequence[int], max_count: int, max_dim: int
+) -> np.ndarray:
+    """A rectangular float64 array from nested lists, or a 422 naming what is wrong."""
+    try:
+        arr = np.array(nested, dtype=np.float64)
+    except (ValueError, TypeError):
+        msg = f"{name} is ragged: every row must have the same number of values"
+        raise Problem("invalid-parameter", msg, errors=_err(name, msg)) from None
+    return check_array(arr, name, ndim=ndim, max_count=max_count, max_dim=max_dim)
+
+
+def check_array(
+    arr: np.ndarray, name: str, *, ndim: Sequence[int], max_count: int, max_dim: int
+) -> np.ndarray:
+    if arr.ndim not in ndim:
+        msg = f"{name} has shape {list(arr.shape)}; expected {' or '.join(map(str, ndim))} axes"
+        raise Problem("invalid-parameter", msg, errors=_err(name, msg))
+    axes = 1 if min(ndim) == 1 else 2  # curves count along one axis, grids along two
+    count = math.prod(arr.shape[:axes])
+    if count > max_count or count == 0:
+        msg = f"{name} has {count} points; between 1 and {max_count} are accepted"
+        raise Problem("invalid-parameter", msg, errors=_err(name, msg))
+    if arr.ndim > axes and not 1 <= arr.shape[-1] <= max_dim:
+        msg = f"{name} has {arr.shape[-1]} coordinates per point; 1 to {max_dim} are accepted"
+        raise Problem("invalid-parameter", msg, errors=_err(name, msg))
+    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        msg = f"{name} holds NaN or infinite values"
+        raise Problem("invalid-parameter", msg, errors=_err(name, msg))
+    return arr
+
+
+def _err(name: str, msg: str) -> list[dict[str, Any]]:
+    return [{"loc": ["body", name], "msg": msg, "type": "value_error"}]
+
+
+def read_npy(data: bytes, name: str, *, max_elements: int) -> np.ndarray:
+    """Load a ``.npy`` file safely: header checked before anything is allocated, no pickles."""
+    f = io.BytesIO(data)
+    try:
+        version = np.lib.format.read_magic(f)
+        if version == (1, 0):
+            shape, _fortran, dtype = np.lib.format.read_array_header_1_0(f)
+        elif version == (2, 0):
+            shape, _fortran, dtype = np.lib.format.read_array_header_2_0(f)
+        else:
+            msg = f".npy version {version} is not supported (1.0 and 2.0 are)"
+            raise ValueError(msg)
+    except ValueError as exc:
+        msg = f"{name} is not a readable .npy file: {exc}"
+        raise Problem("unsupported-media-type", msg[:500]) from None
+    if dtype.kind not in "biuf" or dtype.fields is not None:
+        msg = f"{name} has dtype {dtype}; a numeric (bool, integer or float) array is needed"
+        raise Problem("invalid-parameter", msg, errors=_err(name, msg))
+    size = math.prod(shape)
+    if size > max_elements:
+        msg = f"{name} has {size} values; the limit is {max_elements}"
+        raise Problem("invalid-parameter", msg, errors=_err(name, msg))
+    if len(data) - f.tell() != size * dtype.itemsize:
+        msg = (
+            f"{name} is truncated or padded: its header declares {size * dtype.itemsize} "
+            f"bytes of data and {len(data) - f.tell()} follow"
+        )
+        raise Problem("unsupported-media-type", msg)
+    arr = np.load(io.BytesIO(data), allow_pickle=False)
+    return np.asarray(arr, dtype=np.float64) if dtype.kind != "f" else arr
+
+
+def npy_bytes(arr: np.ndarray) -> bytes:
+    out = io.BytesIO()
+    np.save(out, arr, allow_pickle=False)
+    return out.getvalue()
+
+
+def finite_list(arr: np.ndarray) -> list[Any]:
+    """``arr.tolist()``, refusing NaN/inf (a crafted bundle could decode to them)."""
+    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        msg = "the bundle decodes to NaN or infinite values; ask for format=npy to get them"
+        raise Problem("invalid-bundle", msg)
+    out: list[Any] = arr.tolist()
+    return out
+
+
+def jsonable(value: Any) -> Any:
+    """Plain JSON types, with non-finite floats as strings ("inf", "nan")."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, bytes):
+        return value.hex()
+    return value

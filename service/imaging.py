@@ -1,0 +1,130 @@
+"""Image files ↔ numpy arrays with Pillow (which ``wavecore`` itself never imports).
+
+Decoding is defended against decompression bombs twice: Pillow's own ``MAX_IMAGE_PIXELS`` is set
+from the settings, and the size in the file's header is checked against the limit before a
+single pixel is decoded.  Anything Pillow cannot read completely is an "unsupported image".
+
+>>> import numpy as np
+>>> png = encode_array(np.zeros((4, 5, 3), np.uint8), "png")
+>>> read_image(png, max_pixels=100).shape
+(4, 5, 3)
+"""
+
+from __future__ import annotations
+
+import io
+import warnings
+
+import numpy as np
+from PIL import Image
+
+from .errors import Problem
+
+#: Output formats for images and the media type of each.
+IMAGE_FORMATS = {"png": "image/png", "webp": "image/webp", "tiff": "image/tiff"}
+NPY_MEDIA_TYPE = "application/x-npy"
+
+
+def set_pixel_limit(max_pixels: int) -> None:
+    """Pillow's bomb check (process-wide) from the settings: warn above it, refuse at twice."""
+    Image.MAX_IMAGE_PIXELS = max_pixels
+
+
+def read_image(data: bytes, *, max_pixels: int) -> np.ndarray:
+    """Decode an image file into ``(H, W)`` or ``(H, W, C)`` ``uint8``/``uint16``/``float32``.
+
+    Palette and 1-bit images become 8-bit (RGB(A) or grey), CMYK and other colour spaces RGB;
+    16-bit greys stay ``uint16``; only the first frame of an animation is used.
+
+    Raises
+    ------
+    Problem
+        ``image-too-large`` (413) past ``max_pixels``; ``unsupported-media-type`` (415) for
+        anything that is not a complete image Pillow reads.
+    """
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            image = Image.open(io.BytesIO(data))
+            width, height = image.size
+            if width * height > max_pixels:
+                msg = (
+                    f"the image is {width} × {height} = {width * height} pixels; the limit is "
+                    f"{max_pixels} pixels (WAVECORE_MAX_PIXELS)"
+                )
+                raise Problem("image-too-large", msg)
+            image.load()
+            return _to_array(image)
+    except Problem:
+        raise
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning) as exc:
+        raise Problem("image-too-large", f"{exc} (WAVECORE_MAX_PIXELS)") from None
+    except MemoryError:
+        raise Problem("image-too-large", "the image does not fit in memory") from None
+    except Exception as exc:
+        # Pillow raises many kinds (UnidentifiedImageError, OSError for truncated data,
+        # SyntaxError and ValueError from plugins): any of them means "not a readable image".
+        msg = f"not a complete image that Pillow can read ({type(exc).__name__}: {exc})"
+        raise Problem("unsupported-media-type", msg[:500]) from None
+
+
+def _to_array(image: Image.Image) -> np.ndarray:
+    mode = image.mode
+    if mode in ("L", "LA", "RGB", "RGBA"):
+        return np.asarray(image)
+    if mode.startswith("I;16"):
+        return np.asarray(image).astype(np.uint16)
+    if mode in ("I", "F"):
+        arr = np.asarray(image)
+        if mode == "I" and arr.size and arr.min() >= 0 and arr.max() <= 65535:
+            return arr.astype(np.uint16)
+        return arr.astype(np.float32)
+    if mode in ("1",):
+        return np.asarray(image.convert("L"))
+    if mode in ("P", "PA"):
+        has_alpha = "transparency" in image.info or mode == "PA"
+        converted = image.convert("RGBA" if has_alpha else "RGB")
+        return np.asarray(converted)
+    if mode == "La":
+        return np.asarray(image.convert("LA"))
+    if mode in ("RGBa", "RGBX"):
+        return np.asarray(image.convert("RGBA" if mode == "RGBa" else "RGB"))
+    return np.asarray(image.convert("RGB"))
+
+
+def encode_array(array: np.ndarray, fmt: str) -> bytes:
+    """Write a decoded image as ``png``, ``webp`` or ``tiff``.
+
+    ``uint8`` images of any channel count, and ``uint16`` grey, are written exactly; other
+    combinations have no exact file in that format and raise a 406 problem that names
+    ``format=npy``, which always works.
+    """
+    image = _to_image(array, fmt)
+    out = io.BytesIO()
+    if fmt == "png":
+        # Level 1: the response is a preview, and zlib's default level costs 3× the time.
+        image.save(out, format="PNG", compress_level=1)
+    elif fmt == "webp":
+        image.save(out, format="WEBP", lossless=True, quality=50, method=2)
+    else:
+        image.save(out, format="TIFF", compression="tiff_adobe_deflate")
+    return out.getvalue()
+
+
+def _to_image(array: np.ndarray, fmt: str) -> Image.Image:
+    grey = array.ndim == 2 or (array.ndim == 3 and array.shape[2] == 1)
+    if array.dtype == np.uint8:
+        if array.ndim == 3 and array.shape[2] == 1:
+            array = array[:, :, 0]
+        # Pillow's WebP writer converts grey and grey + alpha to RGB(A) itself.
+        return Image.fromarray(np.ascontiguousarray(array))
+    if array.dtype == np.uint16 and grey and fmt in ("png", "tiff"):
+        return Image.fromarray(np.ascontiguousarray(array.reshape(array.shape[:2])))
+    if array.dtype == np.float32 and grey and fmt == "tiff":
+        return Image.fromarray(np.ascontiguousarray(array.reshape(array.shape[:2])))
+    shape = "x".join(str(s) for s in array.shape)
+    msg = (
+        f"a {shape} {array.dtype} image has no exact {fmt} file; ask for format=npy "
+        "(or png/tiff for 16-bit grey, tiff for float grey)"
+    )
+    raise Problem("not-acceptable", msg)

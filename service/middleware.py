@@ -1,0 +1,140 @@
+"""Plain ASGI middleware: the body-size limit, enforced while streaming, and the metrics."""
+
+from __future__ import annotations
+
+import time
+
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from .errors import BodyTooLarge, Problem, send_problem
+
+
+class BodyLimitMiddleware:
+    """Refuse bodies over ``limit`` bytes: at once by ``Content-Length``, else while reading.
+
+    The body is never read into memory first: the count is kept on each chunk as the route
+    pulls it, and the first chunk past the limit raises :class:`BodyTooLarge` (a 413).
+    """
+
+    def __init__(self, app: ASGIApp, limit: int) -> None:
+        self.app = app
+        self.limit = limit
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        for name, value in scope["headers"]:
+            if name == b"content-length":
+                try:
+                    declared = int(value)
+                except ValueError:
+                    declared = -1
+                if declared > self.limit:
+                    detail = (
+                        f"the request body is {declared} bytes; the limit is {self.limit} "
+                        "bytes (WAVECORE_MAX_UPLOAD_BYTES)"
+                    )
+                    await send_problem(scope, send, Problem("body-too-large", detail))
+                    return
+        received = 0
+
+        async def limited() -> Message:
+            nonlocal received
+            message = await receive()
+            if message["type"] == "http.request":
+                received += len(message.get("body", b""))
+                if received > self.limit:
+                    raise BodyTooLarge(self.limit)
+            return message
+
+        await self.app(scope, limited, send)
+
+
+class Metrics:
+    """The Prometheus metrics of one app (its own registry, so tests can build many apps)."""
+
+    def __init__(self) -> None:
+        self.registry = CollectorRegistry()
+        self.requests = Counter(
+            "wavecore_http_requests",
+            "HTTP requests by route, method and status.",
+            ["route", "method", "status"],
+            registry=self.registry,
+        )
+        self.duration = Histogram(
+            "wavecore_http_request_duration_seconds",
+            "Time from the request's arrival to its last response byte.",
+            ["route"],
+            buckets=(0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60),
+            registry=self.registry,
+        )
+        self.bytes_in = Counter(
+            "wavecore_http_request_body_bytes",
+            "Request body bytes received.",
+            ["route"],
+            registry=self.registry,
+        )
+        self.bytes_out = Counter(
+            "wavecore_http_response_body_bytes",
+            "Response body bytes sent.",
+            ["route"],
+            registry=self.registry,
+        )
+        self.errors = Counter(
+            "wavecore_http_errors",
+            "Problem responses by kind (the end of the problem's type URN).",
+            ["kind"],
+            registry=self.registry,
+        )
+        self.in_flight = Gauge(
+            "wavecore_requests_in_flight",
+            "Admitted /v1/ requests (working or waiting for a thread).",
+            registry=self.registry,
+        )
+
+
+class MetricsMiddleware:
+    """Count every request: route, status, duration, bytes in and out, problems by kind."""
+
+    def __init__(self, app: ASGIApp, metrics: Metrics) -> None:
+        self.app = app
+        self.metrics = metrics
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        start = time.perf_counter()
+        status = 500
+        bytes_in = 0
+        bytes_out = 0
+
+        async def counting_receive() -> Message:
+            nonlocal bytes_in
+            message = await receive()
+            if message["type"] == "http.request":
+                bytes_in += len(message.get("body", b""))
+            return message
+
+        async def counting_send(message: Message) -> None:
+            nonlocal status, bytes_out
+            if message["type"] == "http.response.start":
+                status = message["status"]
+            elif message["type"] == "http.response.body":
+                bytes_out += len(message.get("body", b""))
+            await send(message)
+
+        try:
+            await self.app(scope, counting_receive, counting_send)
+        finally:
+            route = getattr(scope.get("route"), "path", None) or "unmatched"
+            m = self.metrics
+            m.requests.labels(route, scope["method"], str(status)).inc()
+            m.duration.labels(route).observe(time.perf_counter() - start)
+            m.bytes_in.labels(route).inc(bytes_in)
+            m.bytes_out.labels(route).inc(bytes_out)
+            kind = scope.get("state", {}).get("problem_kind")
+            if kind is not None:
+                m.errors.labels(kind).inc()

@@ -1,0 +1,179 @@
+"""``POST /v1/bundles/reconstruct`` and ``POST /v1/bundles/inspect``.
+
+The bundle comes as the raw body (``application/vnd.wavecore.bundle``, or any type) or as the
+field ``bundle`` of a multipart form.  ``keep``, ``level`` and ``format`` come from the query
+string (or, in a form, from fields of those names).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, Query, Request
+from fastapi.responses import JSONResponse, Response
+from starlette.datastructures import UploadFile
+
+import wavecore
+
+from ..deps import (
+    BUNDLE_MEDIA_TYPE,
+    NPY_MEDIA_TYPE,
+    finite_list,
+    jsonable,
+    npy_bytes,
+    parse_model,
+    problem_responses,
+)
+from ..errors import Problem
+from ..imaging import IMAGE_FORMATS, encode_array
+from ..schemas import GridResult, PointsResult, ReconstructParams
+from ..work import run_work
+
+router = APIRouter(prefix="/v1/bundles", tags=["bundles"])
+
+_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            BUNDLE_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}},
+            "multipart/form-data": {
+                "schema": {
+                    "type": "object",
+                    "required": ["bundle"],
+                    "properties": {"bundle": {"type": "string", "format": "binary"}},
+                }
+            },
+        },
+    }
+}
+
+#: Accept media type → format, in the order they are tried.
+_ACCEPT = {
+    NPY_MEDIA_TYPE: "npy",
+    "application/octet-stream": "npy",
+    "image/png": "png",
+    "image/webp": "webp",
+    "image/tiff": "tiff",
+    "application/json": "json",
+}
+
+
+async def _read_bundle(request: Request) -> tuple[bytes, dict[str, str]]:
+    """The bundle bytes and, for a form, its other string fields."""
+    content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if content_type == "multipart/form-data":
+        async with request.form(max_files=1, max_fields=8) as form:
+            upload = form.get("bundle")
+            if not isinstance(upload, UploadFile):
+                msg = "the form needs the bundle file in the field 'bundle'"
+                errors = [{"loc": ["body", "bundle"], "msg": "missing", "type": "missing"}]
+                raise Problem("invalid-parameter", msg, errors=errors)
+            fields = {k: v for k, v in form.items() if isinstance(v, str) and v}
+            return await upload.read(), fields
+    return await request.body(), {}
+
+
+def _choose_format(requested: str | None, kind: str, accept: str) -> str:
+    allowed = ("png", "webp", "tiff", "npy") if kind == "image" else ("json", "npy")
+    if requested is not None:
+        if requested not in allowed:
+            msg = f"a {kind} can be reconstructed as {', '.join(allowed)}, not {requested}"
+            raise Problem("not-acceptable", msg)
+        return requested
+    for media_type, fmt in _ACCEPT.items():
+        if media_type in accept and fmt in allowed:
+            return fmt
+    return allowed[0]
+
+
+def _reconstruct(
+    bundle: bytes, keep: float | None, level: int, requested: str | None, accept: str
+) -> tuple[bytes, str, dict[str, str]]:
+    info = wavecore.inspect(bundle)
+    kind = info["kind"]
+    fmt = _choose_format(requested, kind, accept)
+    arr = wavecore.decode(bundle, keep=keep, level=level)
+    headers = {
+        "X-Wavecore-Kind": kind,
+        "X-Wavecore-Shape": "x".join(str(s) for s in arr.shape),
+        "X-Wavecore-Dtype": str(arr.dtype),
+    }
+    if fmt == "npy":
+        return npy_bytes(arr), NPY_MEDIA_TYPE, headers
+    if kind == "image":
+        return encode_array(arr, fmt), IMAGE_FORMATS[fmt], headers
+    result: PointsResult | GridResult
+    if kind == "curve":
+        result = PointsResult(shape=list(arr.shape), dtype=str(arr.dtype), points=finite_list(arr))
+    else:
+        result = GridResult(shape=list(arr.shape), dtype=str(arr.dtype), grid=finite_list(arr))
+    return result.model_dump_json().encode(), "application/json", headers
+
+
+@router.post(
+    "/reconstruct",
+    response_class=Response,
+    summary="Decode a bundle, optionally keeping fewer details or at a coarser level",
+    openapi_extra=_BODY,
+    responses={
+        200: {
+            "content": {
+                "image/png": {},
+                "image/webp": {},
+                "image/tiff": {},
+                NPY_MEDIA_TYPE: {},
+                "application/json": {"schema": PointsResult.model_json_schema()},
+            },
+            "description": "Images as PNG (default), WebP, TIFF or .npy; curves and surfaces "
+            "as JSON (default) or .npy.",
+        },
+        **problem_responses(400, 406, 413, 422, 503),
+    },
+)
+async def reconstruct(
+    request: Request,
+    keep: Annotated[
+        float | None,
+        Query(ge=0, le=1, allow_inf_nan=False, description="Fraction of stored details kept"),
+    ] = None,
+    level: Annotated[int, Query(ge=0, description="0: full size; k: k levels coarser")] = 0,
+    format: Annotated[
+        Literal["png", "webp", "tiff", "npy", "json"] | None,
+        Query(description="Output format; default by kind, or by the Accept header"),
+    ] = None,
+) -> Response:
+    """`keep` drops the smallest stored details at decode time (0.4 removes the smallest
+    60 %); `level=k` returns the coarse approximation after k levels (about n / 2^k per side),
+    from the bundle's first chunks only."""
+    bundle, fields = await _read_bundle(request)
+    if fields:
+        params = parse_model(
+            ReconstructParams,
+            {"keep": keep, "level": level, "format": format}
+            | {k: v for k, v in fields.items() if k in ReconstructParams.model_fields},
+        )
+        keep, level, format = params.keep, params.level, params.format
+    accept = request.headers.get("accept", "")
+    body, media_type, headers = await run_work(
+        request, _reconstruct, bundle, keep, level, format, accept
+    )
+    return Response(body, media_type=media_type, headers=headers)
+
+
+def _inspect(bundle: bytes) -> Any:
+    return jsonable(wavecore.inspect(bundle))
+
+
+@router.post(
+    "/inspect",
+    summary="Describe a bundle without decoding it",
+    openapi_extra=_BODY,
+    responses=problem_responses(400, 413, 503),
+)
+async def inspect(request: Request) -> JSONResponse:
+    """`wavecore.inspect`: kind, shape, dtype, wavelet, levels, the encoder's measured PSNR and
+    largest error, total and header bytes, and per chunk (coarse to fine) its level, subband
+    shapes and bytes.  Non-finite numbers are given as strings (`"inf"`)."""
+    bundle, _ = await _read_bundle(request)
+    info = await run_work(request, _inspect, bundle)
+    return JSONResponse(info)

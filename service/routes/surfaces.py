@@ -1,0 +1,121 @@
+"""``POST /v1/surfaces/encode``: a JSON grid or an uploaded ``.npy``, a bundle out."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+from fastapi import APIRouter, Request
+from fastapi.responses import Response
+from starlette.datastructures import UploadFile
+
+import wavecore
+
+from ..deps import (
+    BUNDLE_MEDIA_TYPE,
+    as_points,
+    check_array,
+    parse_model,
+    problem_responses,
+    read_npy,
+    settings_of,
+)
+from ..errors import Problem
+from ..schemas import SurfaceEncodeRequest, SurfaceUploadParams
+from ..work import run_work
+
+router = APIRouter(prefix="/v1/surfaces", tags=["surfaces"])
+
+_UPLOAD_SCHEMA = {
+    "type": "object",
+    "required": ["file"],
+    "properties": {
+        "file": {"type": "string", "format": "binary", "description": "A .npy (U, V[, d])"},
+        "closed": {"type": "string", "description": 'e.g. "true,false" or "[true, false]"'},
+        "level": {"type": "integer", "minimum": 0},
+        "keep": {"type": "number", "minimum": 0, "maximum": 1},
+        "quality": {"type": "number", "exclusiveMinimum": 0},
+    },
+}
+
+
+def _encode(grid: np.ndarray, options: dict[str, Any]) -> tuple[bytes, dict[str, str]]:
+    bundle = wavecore.encode_surface(grid, **options)
+    info = wavecore.inspect(bundle)
+    psnr = info.get("psnr")
+    headers = {
+        "X-Wavecore-Bytes": str(len(bundle)),
+        "X-Wavecore-Ratio": f"{grid.nbytes / len(bundle):.3f}",
+        "X-Wavecore-PSNR": "inf" if psnr is None else f"{psnr:.4g}",
+    }
+    return bundle, headers
+
+
+def _closed_field(text: str) -> Any:
+    text = text.strip()
+    if text.startswith("["):
+        try:
+            return json.loads(text)
+        except ValueError:
+            return text
+    return [part.strip() for part in text.split(",")]
+
+
+@router.post(
+    "/encode",
+    response_class=Response,
+    summary="Encode a surface (JSON grid or .npy upload) into a bundle",
+    openapi_extra={
+        "requestBody": {
+            "required": True,
+            "content": {
+                "application/json": {"schema": SurfaceEncodeRequest.model_json_schema()},
+                "multipart/form-data": {"schema": _UPLOAD_SCHEMA},
+            },
+        }
+    },
+    responses={
+        200: {"content": {BUNDLE_MEDIA_TYPE: {}}, "description": "The bundle."},
+        **problem_responses(413, 415, 422, 503),
+    },
+)
+async def encode_surface(request: Request) -> Response:
+    """Send JSON (`grid` as U rows of V points, or a U × V height field; `closed` per
+    axis) or a multipart form with a `.npy` file in `file` and the same fields.  Coded to
+    40 dB against the data range unless `keep` or `quality` says otherwise."""
+    settings = settings_of(request)
+    content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    limits = {
+        "ndim": (2, 3),
+        "max_count": settings.max_grid_points,
+        "max_dim": settings.max_dimension,
+    }
+    if content_type == "multipart/form-data":
+        async with request.form(max_files=1, max_fields=8) as form:
+            upload = form.get("file")
+            if not isinstance(upload, UploadFile):
+                raise Problem(
+                    "invalid-parameter",
+                    "the form needs a .npy file in the field 'file'",
+                    errors=[{"loc": ["body", "file"], "msg": "missing", "type": "missing"}],
+                )
+            fields = {k: v for k, v in form.items() if k != "file" and isinstance(v, str)}
+            if "closed" in fields:
+                fields["closed"] = _closed_field(fields["closed"])
+            params = parse_model(SurfaceUploadParams, {k: v for k, v in fields.items() if v})
+            data = await upload.read()
+        max_values = settings.max_grid_points * settings.max_dimension
+        grid = read_npy(data, "file", max_elements=max_values)
+        grid = check_array(grid, "file", **limits)  # type: ignore[arg-type]
+        options = params.model_dump(exclude_none=True)
+    elif content_type in ("application/json", ""):
+        body: SurfaceEncodeRequest = parse_model(SurfaceEncodeRequest, await request.body())
+        grid = as_points(body.grid, "grid", **limits)  # type: ignore[arg-type]
+        options = body.model_dump(exclude={"grid"}, exclude_none=True)
+    else:
+        msg = f"send application/json or multipart/form-data (a .npy), not {content_type}"
+        raise Problem("unsupported-media-type", msg)
+    options["closed"] = tuple(options.get("closed", (False, False)))
+    bundle, headers = await run_work(request, _encode, grid, options)
+    return Response(bundle, media_type=BUNDLE_MEDIA_TYPE, headers=headers)

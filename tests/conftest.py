@@ -1,0 +1,85 @@
+"""Fixtures shared by the whole test suite.
+
+``live_server`` is a real uvicorn process serving ``service.app:create_app`` on a free port of
+127.0.0.1, started once per session (the service tests and the browser tests both use it).
+Its settings come from ``WAVECORE_*`` variables given to the process; it logs to a file that
+is printed if it fails to start.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def start_server(
+    log: Path, env: dict[str, str] | None = None, timeout: float = 60.0
+) -> tuple[subprocess.Popen[bytes], str]:
+    """Start ``uvicorn --factory service.app:create_app`` and wait for ``/healthz``."""
+    import httpx
+
+    port = free_port()
+    with log.open("wb") as out:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "uvicorn", "service.app:create_app", "--factory"]
+            + ["--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"],
+            cwd=ROOT,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env={**os.environ, **(env or {})},
+        )
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + timeout
+    while True:
+        if proc.poll() is not None:
+            msg = f"the server exited with {proc.returncode}:\n{log.read_text()}"
+            raise RuntimeError(msg)
+        try:
+            if httpx.get(url + "/healthz", timeout=2).status_code == 200:
+                return proc, url
+        except httpx.TransportError:
+            pass
+        if time.monotonic() > deadline:
+            stop_server(proc)
+            msg = f"the server did not answer on {url} within {timeout} s:\n{log.read_text()}"
+            raise RuntimeError(msg)
+        time.sleep(0.1)
+
+
+def stop_server(proc: subprocess.Popen[bytes]) -> None:
+    proc.terminate()
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+@pytest.fixture(scope="session")
+def live_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """Base URL (``http://127.0.0.1:<port>``) of a real uvicorn process with default settings."""
+    pytest.importorskip("service.app", reason="the service extra is not installed")
+    log = tmp_path_factory.mktemp("live-server") / "uvicorn.log"
+    try:
+        proc, url = start_server(log)
+    except RuntimeError as exc:
+        pytest.fail(str(exc))
+    try:
+        yield url
+    finally:
+        stop_server(proc)
