@@ -105,10 +105,13 @@ def remove_smallest(
     # Each band in a common layout: transformed axes first (in `axes` order), then the
     # carried axes, the vector axis last; sizes drop the vector axis.
     order = ax + [a for a in carried if a != vec] + ([vec] if vec is not None else [])
-    bank = get_wavelet(wavelet)
-    bounds = _boundaries(boundary, len(ax), bank)
-    fine = _fine_lengths(coarse, levels, ax, bank, bounds)
-    norms = _band_norms(fine, levels, bank, bounds) if weighted else None
+    norms = None
+    if weighted:
+        # Only the weights need the wavelet's size rule: plain ranking works on any bands
+        # (the codec ranks integer 5/3 lifting bands, whose lengths follow no rule here).
+        bank = get_wavelet(wavelet)
+        bounds = _boundaries(boundary, len(ax), bank)
+        norms = _band_norms(_fine_lengths(coarse, levels, ax, bank, bounds), levels, bank, bounds)
 
     sizes: list[np.ndarray] = []
     for li, bands in enumerate(levels):
