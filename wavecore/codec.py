@@ -580,7 +580,10 @@ def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
     colour = "rct" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
     data = rct_forward(arr) if colour == "rct" else arr.astype(np.int64)
     if level is None:
-        level = _default_level(arr.shape[:2], _MAX_IMAGE_LEVELS)
+        # As many levels as leave every subband non-empty (no padding here: 5/3 fits any size).
+        level = min(
+            _default_level(arr.shape[:2], _MAX_IMAGE_LEVELS), min(arr.shape[:2]).bit_length() - 1
+        )
     lifting = _lossless.choose_filters(data, level, (0, 1))
     plan = _Plan(
         "image",
