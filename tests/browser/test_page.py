@@ -268,7 +268,7 @@ def test_details_of_a_drawn_curve_go_onto_a_second_base_curve(page: Any, artifac
     page.locator("#transfer").scroll_into_view_if_needed()
     # A smooth arc: the paper's figure 1, a new coarse shape under the same details.
     draw(page, "#transfer-pad", lambda t: (0.1 + 0.8 * t, 0.8 - 0.6 * np.sin(np.pi * t)), 60)
-    page.wait_for_function("Number(document.getElementById('transfer-pad').dataset.points) > 0")
+    page.wait_for_selector("#transfer-pad[data-points]:not([data-points='0'])")
     assert int(page.get_attribute("#transfer-pad", "data-points")) == source_points
     assert page.locator("#transfer-error").is_hidden()
     page.screenshot(path=artifacts / "curve-transfer.png", full_page=True)
