@@ -46,7 +46,13 @@ def parse_model(model: type[BaseModel], data: bytes | dict[str, Any]) -> Any:
 
 
 def as_points(
-    nested: Sequence[Any], name: str, *, ndim: Sequence[int], max_count: int, max_dim: int
+    nested: Sequence[Any],
+    name: str,
+    *,
+    ndim: Sequence[int],
+    max_count: int,
+    max_dim: int,
+    point_axes: int = 1,
 ) -> np.ndarray:
     """A rectangular float64 array from nested lists, or a 422 naming what is wrong."""
     try:
@@ -54,16 +60,25 @@ def as_points(
     except (ValueError, TypeError):
         msg = f"{name} is ragged: every row must have the same number of values"
         raise Problem("invalid-parameter", msg, errors=_err(name, msg)) from None
-    return check_array(arr, name, ndim=ndim, max_count=max_count, max_dim=max_dim)
+    return check_array(
+        arr, name, ndim=ndim, max_count=max_count, max_dim=max_dim, point_axes=point_axes
+    )
 
 
 def check_array(
-    arr: np.ndarray, name: str, *, ndim: Sequence[int], max_count: int, max_dim: int
+    arr: np.ndarray,
+    name: str,
+    *,
+    ndim: Sequence[int],
+    max_count: int,
+    max_dim: int,
+    point_axes: int = 1,
 ) -> np.ndarray:
+    """Check rank, point count (over the first ``point_axes`` axes), coordinates, finiteness."""
     if arr.ndim not in ndim:
         msg = f"{name} has shape {list(arr.shape)}; expected {' or '.join(map(str, ndim))} axes"
         raise Problem("invalid-parameter", msg, errors=_err(name, msg))
-    axes = 1 if min(ndim) == 1 else 2  # curves count along one axis, grids along two
+    axes = point_axes
     count = math.prod(arr.shape[:axes])
     if count > max_count or count == 0:
         msg = f"{name} has {count} points; between 1 and {max_count} are accepted"

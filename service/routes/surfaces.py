@@ -90,6 +90,7 @@ async def encode_surface(request: Request) -> Response:
         "ndim": (2, 3),
         "max_count": settings.max_grid_points,
         "max_dim": settings.max_dimension,
+        "point_axes": 2,
     }
     if content_type == "multipart/form-data":
         async with request.form(max_files=1, max_fields=8) as form:

@@ -32,3 +32,32 @@ def circle(n: int = 64, closed: bool = True) -> list[list[float]]:
     t = np.linspace(0, 2 * np.pi, n, endpoint=not closed)
     r = 1 + 0.1 * np.sin(5 * t)
     return np.stack([r * np.cos(t), r * np.sin(t)], axis=1).tolist()
+
+
+def bomb_png(width: int = 10_000, height: int = 10_000) -> bytes:
+    """A real decompression bomb: a valid all-zero grey PNG of ``width × height`` pixels.
+
+    Its rows are compressed as they are generated, so the 100 MB of pixels never exist here;
+    the file is about 100 KB.
+    """
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        crc = zlib.crc32(kind + data) & 0xFFFFFFFF
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
+
+    compressor = zlib.compressobj(9)
+    row = b"\x00" * (width + 1)  # filter byte 0, then the zero pixels
+    rows_per_step = 256
+    parts = []
+    for start in range(0, height, rows_per_step):
+        parts.append(compressor.compress(row * min(rows_per_step, height - start)))
+    parts.append(compressor.flush())
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", ihdr)
+        + chunk(b"IDAT", b"".join(parts))
+        + chunk(b"IEND", b"")
+    )

@@ -1,0 +1,53 @@
+"""64 concurrent clients, in process and against the live server: every one succeeds."""
+
+from __future__ import annotations
+
+import asyncio
+
+import httpx
+import numpy as np
+import pytest
+from service_helpers import image_file, test_image
+
+import wavecore
+
+pytestmark = pytest.mark.anyio
+
+CLIENTS = 64
+
+
+async def test_64_concurrent_encodes_all_succeed(client: httpx.AsyncClient) -> None:
+    images = [test_image((64, 80), seed=i) for i in range(CLIENTS)]
+
+    async def one(i: int) -> httpx.Response:
+        files = {"file": (f"{i}.png", image_file(images[i]), "image/png")}
+        return await client.post("/v1/images/encode", files=files, data={"quality": "35"})
+
+    responses = await asyncio.gather(*(one(i) for i in range(CLIENTS)))
+    statuses = [r.status_code for r in responses]
+    assert statuses == [200] * CLIENTS, statuses
+    # each client got its own image's bundle back
+    for image, r in zip(images, responses, strict=True):
+        decoded = wavecore.decode(r.content)
+        assert decoded.shape == image.shape
+        assert np.sqrt(np.mean((decoded.astype(float) - image) ** 2)) < 255 * 10 ** (-35 / 20)
+    metrics = (await client.get("/metrics")).text
+    assert "wavecore_requests_in_flight 0.0" in metrics
+
+
+async def test_health_answers_while_the_pool_is_busy(client: httpx.AsyncClient) -> None:
+    big = image_file(test_image((512, 512), seed=7))
+    work = [
+        asyncio.create_task(client.post("/v1/images/encode", files={"file": ("b.png", big)}))
+        for _ in range(6)
+    ]
+    await asyncio.sleep(0.05)
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+    r = await client.get("/healthz")
+    waited = loop.time() - start
+    assert r.status_code == 200
+    results = await asyncio.gather(*work)
+    assert all(res.status_code == 200 for res in results)
+    # The event loop is never blocked by encoding, so health is far quicker than the encodes.
+    assert waited < 1.0

@@ -1,0 +1,222 @@
+"""Bad input gets an RFC 9457 problem with the right status and type, never a 500."""
+
+from __future__ import annotations
+
+import asyncio
+import io
+from collections.abc import Callable
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from service_helpers import bomb_png, image_file, test_image
+
+import wavecore
+
+pytestmark = pytest.mark.anyio
+
+PNG = image_file(test_image((40, 52)))
+JPEG = image_file(test_image((40, 52, 3)), "JPEG", quality=90)
+IMAGE_BUNDLE = wavecore.encode_image(test_image((40, 52)), quality=35)
+CURVE_BUNDLE = wavecore.encode_curve(np.random.default_rng(1).random((30, 2)))
+
+
+def _flipped(data: bytes, at: int) -> bytes:
+    out = bytearray(data)
+    out[at] ^= 0x5A
+    return bytes(out)
+
+
+def _npy(array: np.ndarray) -> bytes:
+    out = io.BytesIO()
+    np.save(out, array, allow_pickle=True)
+    return out.getvalue()
+
+
+def image(data: bytes, name: str = "in.png", **fields: str) -> dict[str, Any]:
+    return {"files": {"file": (name, data, "image/png")}, "data": fields}
+
+
+def raw_json(text: str) -> dict[str, Any]:
+    return {"content": text.encode(), "headers": {"content-type": "application/json"}}
+
+
+def surface_npy(data: bytes, **fields: str) -> dict[str, Any]:
+    return {"files": {"file": ("s.npy", data, "application/x-npy")}, "data": fields}
+
+
+# (id, path, request keyword arguments (or a factory), expected status, expected problem kind)
+CASES: list[tuple[str, str, Any, int, str]] = [
+    # images
+    ("bomb-png", "/v1/images/encode", lambda: image(bomb_png()), 413, "image-too-large"),
+    ("text-named-png", "/v1/images/encode", image(b"hello, I am text\n" * 20), 415, "unsupported-media-type"),
+    ("empty-file", "/v1/images/encode", image(b""), 415, "unsupported-media-type"),
+    ("truncated-png", "/v1/images/encode", image(PNG[: len(PNG) // 2]), 415, "unsupported-media-type"),
+    ("png-header-only", "/v1/images/encode", image(PNG[:40]), 415, "unsupported-media-type"),
+    ("truncated-jpeg", "/v1/images/encode", image(JPEG[: len(JPEG) // 2], "in.jpg"), 415, "unsupported-media-type"),
+    ("no-file", "/v1/images/encode", {"data": {"quality": "30"}}, 422, "validation-error"),
+    ("keep-above-1", "/v1/images/encode", image(PNG, keep="1.5"), 422, "validation-error"),
+    ("keep-negative", "/v1/images/encode", image(PNG, keep="-0.1"), 422, "validation-error"),
+    ("keep-nan", "/v1/images/encode", image(PNG, keep="nan"), 422, "validation-error"),
+    ("quality-inf", "/v1/images/encode", image(PNG, quality="inf"), 422, "validation-error"),
+    ("bpp-zero", "/v1/images/encode", image(PNG, bpp="0"), 422, "validation-error"),
+    ("level-text", "/v1/images/encode", image(PNG, level="deep"), 422, "validation-error"),
+    ("two-targets", "/v1/images/encode", image(PNG, keep="0.5", quality="30"), 422, "invalid-parameter"),
+    ("unknown-wavelet", "/v1/images/encode", image(PNG, wavelet="db4000"), 422, "invalid-parameter"),
+    ("lossless-and-bpp", "/v1/images/encode", image(PNG, lossless="true", bpp="1"), 422, "invalid-parameter"),
+    # curves
+    ("curve-nan", "/v1/curves/encode", raw_json('{"points": [[0, 0], [NaN, 1], [2, 2]]}'), 422, "validation-error"),
+    ("curve-infinity", "/v1/curves/encode", raw_json('{"points": [[0, 0], [Infinity, 1], [2, 2]]}'), 422, "validation-error"),
+    ("curve-overflow", "/v1/curves/encode", raw_json('{"points": [[0, 0], [1e999, 1], [2, 2]]}'), 422, "validation-error"),
+    ("curve-ragged", "/v1/curves/encode", {"json": {"points": [[0, 0], [1], [2, 2]]}}, 422, "invalid-parameter"),
+    ("curve-flat-list", "/v1/curves/encode", {"json": {"points": [0, 1, 2, 3]}}, 422, "validation-error"),
+    ("curve-4d", "/v1/curves/encode", {"json": {"points": [[0, 0, 0, 0]] * 12}}, 422, "invalid-parameter"),
+    ("curve-empty", "/v1/curves/encode", {"json": {"points": []}}, 422, "validation-error"),
+    ("curve-strings", "/v1/curves/encode", {"json": {"points": [["a", "b"]]}}, 422, "validation-error"),
+    ("curve-keep-2", "/v1/curves/encode", {"json": {"points": [[0, 0]] * 9, "keep": 2}}, 422, "validation-error"),
+    ("curve-extra-field", "/v1/curves/encode", {"json": {"points": [[0, 0]] * 9, "colour": 1}}, 422, "validation-error"),
+    ("curve-not-json", "/v1/curves/encode", raw_json("{points: oops"), 422, "validation-error"),
+    ("curve-closed-maybe", "/v1/curves/encode", {"json": {"points": [[0, 0]] * 9, "closed": "maybe"}}, 422, "validation-error"),
+    ("transfer-ragged", "/v1/curves/transfer", {"json": {"source": [[0, 0], [1]], "base": [[0, 0], [1, 1]]}}, 422, "invalid-parameter"),
+    # surfaces
+    ("surface-ragged", "/v1/surfaces/encode", {"json": {"grid": [[0, 1, 2], [0, 1]]}}, 422, "invalid-parameter"),
+    ("surface-1d", "/v1/surfaces/encode", {"json": {"grid": [0, 1, 2]}}, 422, "validation-error"),
+    ("surface-nan", "/v1/surfaces/encode", raw_json('{"grid": [[0, NaN], [1, 2]]}'), 422, "validation-error"),
+    ("surface-closed-3", "/v1/surfaces/encode", {"json": {"grid": [[0.0] * 8] * 8, "closed": [True, False, True]}}, 422, "validation-error"),
+    ("surface-pickle-npy", "/v1/surfaces/encode", surface_npy(_npy(np.array([{"a": 1}] * 4, dtype=object))), 422, "invalid-parameter"),
+    ("surface-truncated-npy", "/v1/surfaces/encode", surface_npy(_npy(np.zeros((16, 16)))[:-40]), 415, "unsupported-media-type"),
+    ("surface-garbage-npy", "/v1/surfaces/encode", surface_npy(b"\x93NUMPY garbage"), 415, "unsupported-media-type"),
+    ("surface-npy-nan", "/v1/surfaces/encode", surface_npy(_npy(np.full((8, 8), np.nan))), 422, "invalid-parameter"),
+    ("surface-npy-1d", "/v1/surfaces/encode", surface_npy(_npy(np.zeros(30))), 422, "invalid-parameter"),
+    ("surface-closed-bad", "/v1/surfaces/encode", surface_npy(_npy(np.zeros((8, 8))), closed="yes,no,maybe"), 422, "validation-error"),
+    ("surface-text-plain", "/v1/surfaces/encode", {"content": b"1 2 3", "headers": {"content-type": "text/plain"}}, 415, "unsupported-media-type"),
+    # bundles
+    ("corrupt-bundle", "/v1/bundles/reconstruct", {"content": _flipped(IMAGE_BUNDLE, len(IMAGE_BUNDLE) // 2)}, 400, "invalid-bundle"),
+    ("corrupt-bundle-inspect", "/v1/bundles/inspect", {"content": _flipped(IMAGE_BUNDLE, 20)}, 400, "invalid-bundle"),
+    ("garbage-bundle", "/v1/bundles/reconstruct", {"content": b"PK\x03\x04 not ours"}, 400, "invalid-bundle"),
+    ("empty-bundle", "/v1/bundles/inspect", {"content": b""}, 400, "invalid-bundle"),
+    ("truncated-bundle", "/v1/bundles/reconstruct", {"content": IMAGE_BUNDLE[:30]}, 400, "invalid-bundle"),
+    ("level-too-deep", "/v1/bundles/reconstruct", {"content": IMAGE_BUNDLE, "params": {"level": 40}}, 422, "invalid-parameter"),
+    ("keep-negative-decode", "/v1/bundles/reconstruct", {"content": IMAGE_BUNDLE, "params": {"keep": -1}}, 422, "validation-error"),
+    ("format-unknown", "/v1/bundles/reconstruct", {"content": IMAGE_BUNDLE, "params": {"format": "gif"}}, 422, "validation-error"),
+    ("image-as-json", "/v1/bundles/reconstruct", {"content": IMAGE_BUNDLE, "params": {"format": "json"}}, 406, "not-acceptable"),
+    ("curve-as-png", "/v1/bundles/reconstruct", {"content": CURVE_BUNDLE, "params": {"format": "png"}}, 406, "not-acceptable"),
+    ("form-without-bundle", "/v1/bundles/reconstruct", {"files": {"other": ("b", b"x")}}, 422, "invalid-parameter"),
+    ("form-keep-bad", "/v1/bundles/reconstruct", {"files": {"bundle": ("b", IMAGE_BUNDLE)}, "data": {"keep": "lots"}}, 422, "validation-error"),
+]  # fmt: skip
+
+
+def _check_problem(r: httpx.Response, status: int, kind: str) -> dict[str, Any]:
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"] == "application/problem+json", r.headers
+    body = r.json()
+    assert body["type"] == f"urn:wavecore:problem:{kind}", body
+    assert body["status"] == status
+    assert body["title"] and body["detail"]
+    return body
+
+
+@pytest.mark.parametrize(
+    ("path", "request_kwargs", "status", "kind"),
+    [pytest.param(*case[1:], id=case[0]) for case in CASES],
+)
+async def test_bad_input_gets_a_problem(
+    client: httpx.AsyncClient, path: str, request_kwargs: Any, status: int, kind: str
+) -> None:
+    kwargs = request_kwargs() if callable(request_kwargs) else request_kwargs
+    r = await client.post(path, **kwargs)
+    body = _check_problem(r, status, kind)
+    if kind == "validation-error" and "not valid JSON" not in body["detail"]:
+        assert body["errors"], body
+
+
+async def test_unknown_path_and_method(client: httpx.AsyncClient) -> None:
+    _check_problem(await client.get("/v1/nothing"), 404, "not-found")
+    _check_problem(await client.get("/v1/images/encode"), 405, "method-not-allowed")
+
+
+async def test_validation_errors_name_the_field(client: httpx.AsyncClient) -> None:
+    r = await client.post("/v1/images/encode", **image(PNG, keep="1.5"))
+    body = _check_problem(r, 422, "validation-error")
+    assert body["errors"][0]["loc"][-1] == "keep"
+    assert "keep" in body["detail"]
+
+
+async def test_bomb_refused_by_the_header_before_decoding(
+    make_client: Callable[..., httpx.AsyncClient],
+) -> None:
+    # A limit below the bomb's size but above half of it, where Pillow only warns: our check
+    # of the header's size stops it before any pixel is decoded.
+    async with make_client(max_pixels=5_000_000) as c:
+        body = _check_problem(
+            await c.post("/v1/images/encode", **image(bomb_png(3000, 3000))), 413, "image-too-large"
+        )
+        assert "3000 × 3000" in body["detail"] and "5000000" in body["detail"]
+        small = await c.post("/v1/images/encode", **image(PNG))
+        assert small.status_code == 200
+
+
+async def test_body_limit_by_length_and_while_streaming(
+    make_client: Callable[..., httpx.AsyncClient],
+) -> None:
+    async with make_client(max_upload_bytes=4096) as c:
+        big = image(bytes(10_000))
+        _check_problem(await c.post("/v1/images/encode", **big), 413, "body-too-large")
+
+        async def chunks() -> Any:  # no Content-Length: counted while the body streams in
+            for _ in range(10):
+                yield bytes(1000)
+
+        r = await c.post("/v1/bundles/inspect", content=chunks())
+        _check_problem(r, 413, "body-too-large")
+        r = await c.post(
+            "/v1/curves/encode", content=chunks(), headers={"content-type": "application/json"}
+        )
+        _check_problem(r, 413, "body-too-large")
+        # under the limit: read and answered (a truncated bundle still inspects: prefixes work)
+        r = await c.post("/v1/bundles/inspect", content=IMAGE_BUNDLE[:3000])
+        assert r.status_code == 200 and r.json()["kind"] == "image"
+
+
+async def test_point_and_grid_limits(make_client: Callable[..., httpx.AsyncClient]) -> None:
+    async with make_client(max_points=50, max_grid_points=100) as c:
+        r = await c.post("/v1/curves/encode", json={"points": [[0.0, 1.0]] * 51})
+        assert "51 points" in _check_problem(r, 422, "invalid-parameter")["detail"]
+        assert (
+            await c.post("/v1/curves/encode", json={"points": [[0.0, 1.0]] * 50})
+        ).status_code == 200
+        r = await c.post("/v1/surfaces/encode", json={"grid": [[0.0] * 11] * 10})
+        _check_problem(r, 422, "invalid-parameter")
+        r = await c.post("/v1/surfaces/encode", **surface_npy(_npy(np.zeros((11, 10)))))
+        _check_problem(r, 422, "invalid-parameter")
+
+
+async def test_overload_gets_a_quick_503_with_retry_after(
+    make_client: Callable[..., httpx.AsyncClient],
+) -> None:
+    async with make_client(threads=1, queue_size=0) as c:
+        pool = c._transport.app.state.pool  # type: ignore[attr-defined]
+        held = pool.admit()  # every slot taken
+        r = await c.post("/v1/images/encode", **image(PNG))
+        body = _check_problem(r, 503, "overloaded")
+        assert r.headers["retry-after"].isdigit() and "slots" in body["detail"]
+        assert (await c.get("/healthz")).status_code == 200  # health needs no slot
+        held.release()
+        assert (await c.post("/v1/images/encode", **image(PNG))).status_code == 200
+        metrics = (await c.get("/metrics")).text
+        assert 'wavecore_http_errors_total{kind="overloaded"} 1.0' in metrics
+
+
+async def test_timeout_gets_a_503(make_client: Callable[..., httpx.AsyncClient]) -> None:
+    async with make_client(request_timeout=1e-4) as c:
+        r = await c.post("/v1/images/encode", **image(image_file(test_image((256, 256)))))
+        _check_problem(r, 503, "timeout")
+        assert "retry-after" in r.headers
+        # the abandoned job still holds its slot until its thread is free, then gives it back
+        pool = c._transport.app.state.pool  # type: ignore[attr-defined]
+        for _ in range(200):
+            if pool.in_use == 0:
+                break
+            await asyncio.sleep(0.05)
+        assert pool.in_use == 0
