@@ -1,4 +1,5 @@
 """Bad input gets an RFC 9457 problem with the right status and type, never a 500."""
+# ruff: noqa: E501  (the table of bad inputs reads best one case per line)
 
 from __future__ import annotations
 
