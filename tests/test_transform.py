@@ -135,15 +135,21 @@ def test_non_contiguous_input_and_mixed_dtypes() -> None:
 
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
-def test_threaded_fused_level_matches_per_axis_steps(dtype: type) -> None:
-    # Large enough to be split over threads and row blocks, in both fused directions.
-    image = np.random.default_rng(2).standard_normal((2, 770, 514)).astype(dtype)
-    coeffs = wavecore.wavedec2(image, level=1, axes=(1, 2))
-    low, high = wavecore.analysis_step(image, axis=1)
+@pytest.mark.parametrize(("shape", "axes"), [((2, 770, 514), (1, 2)), ((514, 258, 3), (0, 1))])
+def test_threaded_fused_level_matches_per_axis_steps(
+    dtype: type, shape: tuple[int, ...], axes: tuple[int, int]
+) -> None:
+    # Large enough to be split over threads and row blocks, in both fused directions, with and
+    # without trailing channels (an RGB image).
+    image = np.random.default_rng(2).standard_normal(shape).astype(dtype)
+    coeffs = wavecore.wavedec2(image, level=1, axes=axes)
+    low, high = wavecore.analysis_step(image, axis=axes[0])
     tol = 1e-12 if dtype is np.float64 else 1e-5
-    np.testing.assert_allclose(coeffs[0], wavecore.analysis_step(low, axis=2)[0], atol=tol)
-    np.testing.assert_allclose(coeffs[1][0], wavecore.analysis_step(high, axis=2)[0], atol=tol)
-    np.testing.assert_allclose(coeffs[1][2], wavecore.analysis_step(high, axis=2)[1], atol=tol)
-    rebuilt = wavecore.waverec2(coeffs, axes=(1, 2))
+    aa, ad = wavecore.analysis_step(low, axis=axes[1])
+    da, dd = wavecore.analysis_step(high, axis=axes[1])
+    for band, expected in zip((coeffs[0], *coeffs[1]), (aa, da, ad, dd), strict=True):
+        assert band.shape == expected.shape
+        np.testing.assert_allclose(band, expected, atol=tol)
+    rebuilt = wavecore.waverec2(coeffs, axes=axes)
     assert rebuilt.dtype == dtype
     np.testing.assert_allclose(rebuilt, image, atol=10 * tol)

@@ -178,10 +178,12 @@ def synthesis_last(
 
 # --- One 2-D level in one pass ---------------------------------------------------------------
 #
-# The data is a view ``(outer, n0, n1)``.  Analysis makes one row of the axis-0 step at a time
-# (a short combination of input rows, still in cache) and splits it at once along axis 1 into
-# the final bands, so the half-transformed image is never stored.  Synthesis does the reverse,
-# keeping the axis-1 syntheses of recent coefficient rows in small ring buffers.
+# The data is a view ``(outer, n0, n1 * inner)``: rows are flat, with any trailing channels
+# interleaved, so the axis-0 combinations run over whole rows.  Analysis makes one row of the
+# axis-0 step at a time (a short combination of input rows, still in cache) and splits it at
+# once along axis 1 into the final bands, so the half-transformed image is never stored.
+# Synthesis does the reverse, keeping the axis-1 syntheses of recent coefficient rows in small
+# ring buffers.  Trailing channels are split out one at a time for the axis-1 row kernels.
 
 
 @njit(nogil=True, cache=True)
@@ -203,6 +205,97 @@ def _combine(rows, ptr, idx, w, r, out):
         src = rows[idx[k]]
         for i in range(n):
             out[i] += wk * src[i]
+
+
+@njit(nogil=True, cache=True)
+def _split_row(
+    tmp,
+    inner,
+    a_ptr,
+    a_idx,
+    a_w,
+    a_reg,
+    a_pat,
+    b_ptr,
+    b_idx,
+    b_w,
+    b_reg,
+    b_pat,
+    chan,
+    c_buf,
+    d_buf,
+    out_c,
+    out_d,
+):
+    """The axis-1 analysis of one flat row ``(n1, inner)``, into flat rows of the two bands."""
+    if inner == 1:
+        _row_analysis(tmp, a_ptr, a_idx, a_w, a_reg, a_pat, out_c)
+        _row_analysis(tmp, b_ptr, b_idx, b_w, b_reg, b_pat, out_d)
+        return
+    # Trailing channels: one contiguous channel at a time, so the row kernels still vectorise.
+    n1 = tmp.shape[0] // inner
+    r1 = out_c.shape[0] // inner
+    s1 = out_d.shape[0] // inner
+    for ch in range(inner):
+        for i in range(n1):
+            chan[i] = tmp[i * inner + ch]
+        _row_analysis(chan[:n1], a_ptr, a_idx, a_w, a_reg, a_pat, c_buf[:r1])
+        _row_analysis(chan[:n1], b_ptr, b_idx, b_w, b_reg, b_pat, d_buf[:s1])
+        for j in range(r1):
+            out_c[j * inner + ch] = c_buf[j]
+        for j in range(s1):
+            out_d[j * inner + ch] = d_buf[j]
+
+
+@njit(nogil=True, cache=True)
+def _merge_row(
+    c,
+    d,
+    inner,
+    p_ptr,
+    p_idx,
+    p_w,
+    p_reg,
+    p_pat,
+    q_ptr,
+    q_idx,
+    q_w,
+    q_reg,
+    q_pat,
+    chan_c,
+    chan_d,
+    f_buf,
+    out,
+):
+    """The axis-1 synthesis of one flat coarse row and one flat detail row, into ``out``."""
+    if inner == 1:
+        _row_synthesis(c, d, p_ptr, p_idx, p_w, p_reg, p_pat, q_ptr, q_idx, q_w, q_reg, q_pat, out)
+        return
+    r1 = c.shape[0] // inner
+    s1 = d.shape[0] // inner
+    n1 = out.shape[0] // inner
+    for ch in range(inner):
+        for j in range(r1):
+            chan_c[j] = c[j * inner + ch]
+        for j in range(s1):
+            chan_d[j] = d[j * inner + ch]
+        _row_synthesis(
+            chan_c[:r1],
+            chan_d[:s1],
+            p_ptr,
+            p_idx,
+            p_w,
+            p_reg,
+            p_pat,
+            q_ptr,
+            q_idx,
+            q_w,
+            q_reg,
+            q_pat,
+            f_buf[:n1],
+        )
+        for i in range(n1):
+            out[i * inner + ch] = f_buf[i]
 
 
 @njit(nogil=True, cache=True)
@@ -228,12 +321,17 @@ def analysis_2d(
     ad,
     da,
     dd,
+    inner,
     outer_lo,
     outer_hi,
     row_lo,
     row_hi,
 ):
-    tmp = np.empty(x.shape[2], dtype=x.dtype)
+    width = x.shape[2]  # n1 * inner: rows are flat, channels (if any) interleaved
+    tmp = np.empty(width, dtype=x.dtype)
+    chan = np.empty(width // inner, dtype=x.dtype)
+    c_buf = np.empty(width // inner + 2, dtype=x.dtype)
+    d_buf = np.empty(width // inner + 2, dtype=x.dtype)
     r0 = aa.shape[1]
     s0 = da.shape[1]
     for o in range(outer_lo, outer_hi):
@@ -241,12 +339,46 @@ def analysis_2d(
         for r in range(row_lo, row_hi):
             if r < r0:
                 _combine(rows, a0_ptr, a0_idx, a0_w, r, tmp)
-                _row_analysis(tmp, a1_ptr, a1_idx, a1_w, a1_reg, a1_pat, aa[o, r])
-                _row_analysis(tmp, b1_ptr, b1_idx, b1_w, b1_reg, b1_pat, ad[o, r])
+                _split_row(
+                    tmp,
+                    inner,
+                    a1_ptr,
+                    a1_idx,
+                    a1_w,
+                    a1_reg,
+                    a1_pat,
+                    b1_ptr,
+                    b1_idx,
+                    b1_w,
+                    b1_reg,
+                    b1_pat,
+                    chan,
+                    c_buf,
+                    d_buf,
+                    aa[o, r],
+                    ad[o, r],
+                )
             if r < s0:
                 _combine(rows, b0_ptr, b0_idx, b0_w, r, tmp)
-                _row_analysis(tmp, a1_ptr, a1_idx, a1_w, a1_reg, a1_pat, da[o, r])
-                _row_analysis(tmp, b1_ptr, b1_idx, b1_w, b1_reg, b1_pat, dd[o, r])
+                _split_row(
+                    tmp,
+                    inner,
+                    a1_ptr,
+                    a1_idx,
+                    a1_w,
+                    a1_reg,
+                    a1_pat,
+                    b1_ptr,
+                    b1_idx,
+                    b1_w,
+                    b1_reg,
+                    b1_pat,
+                    chan,
+                    c_buf,
+                    d_buf,
+                    da[o, r],
+                    dd[o, r],
+                )
 
 
 _RING = 16  # rows of axis-1 syntheses kept per band; a miss only costs a recomputation
@@ -275,14 +407,18 @@ def synthesis_2d(
     q1_reg,
     q1_pat,
     f,
+    inner,
     outer_lo,
     outer_hi,
     row_lo,
     row_hi,
 ):
-    n1 = f.shape[2]
+    n1 = f.shape[2]  # flat rows: n1 * inner
     low = np.empty((_RING, n1), dtype=f.dtype)
     high = np.empty((_RING, n1), dtype=f.dtype)
+    chan_c = np.empty(n1 // inner + 2, dtype=f.dtype)
+    chan_d = np.empty(n1 // inner + 2, dtype=f.dtype)
+    f_buf = np.empty(n1 // inner, dtype=f.dtype)
     low_tag = np.empty(_RING, dtype=np.intp)
     high_tag = np.empty(_RING, dtype=np.intp)
     slots = np.empty(64, dtype=np.intp)  # up to 32 taps per row and band (checked by callers)
@@ -296,9 +432,10 @@ def synthesis_2d(
                 i = p0_idx[k]
                 slot = i % _RING
                 if low_tag[slot] != i:
-                    _row_synthesis(
+                    _merge_row(
                         aa[o, i],
                         ad[o, i],
+                        inner,
                         p1_ptr,
                         p1_idx,
                         p1_w,
@@ -309,6 +446,9 @@ def synthesis_2d(
                         q1_w,
                         q1_reg,
                         q1_pat,
+                        chan_c,
+                        chan_d,
+                        f_buf,
                         low[slot],
                     )
                     low_tag[slot] = i
@@ -320,9 +460,10 @@ def synthesis_2d(
                 i = q0_idx[k]
                 slot = i % _RING
                 if high_tag[slot] != i:
-                    _row_synthesis(
+                    _merge_row(
                         da[o, i],
                         dd[o, i],
+                        inner,
                         p1_ptr,
                         p1_idx,
                         p1_w,
@@ -333,6 +474,9 @@ def synthesis_2d(
                         q1_w,
                         q1_reg,
                         q1_pat,
+                        chan_c,
+                        chan_d,
+                        f_buf,
                         high[slot],
                     )
                     high_tag[slot] = i

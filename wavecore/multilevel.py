@@ -347,7 +347,7 @@ def wavedecn(
     details: list[dict[str, np.ndarray]] = []
     for _ in range(level):
         if len(ax) == 2 and fused_level_fits(coarse.shape, ax, coarse.dtype):
-            fused = analysis_2d(coarse, bank, (bounds[0], bounds[1]))
+            fused = analysis_2d(coarse, bank, (bounds[0], bounds[1]), ax[0])
             if fused is not None:
                 coarse, ad, da, dd = fused
                 details.append({"ad": ad, "da": da, "dd": dd})
@@ -410,6 +410,7 @@ def waverecn(
                 (coarse, level_details.get("ad"), level_details.get("da"), level_details.get("dd")),
                 bank,
                 (bounds[0], bounds[1]),
+                ax[0],
             )
             if fine is not None:
                 coarse = fine

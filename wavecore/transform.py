@@ -331,13 +331,14 @@ def synthesis_step(
 def fused_level_fits(shape: tuple[int, ...], axes: list[int], dtype: np.dtype[Any]) -> bool:
     """Whether one 2-D level over ``axes`` can run as one fused pass (the image case).
 
-    It can when the two axes are the last two, in order, and the data is real floating point;
-    any other layout takes one step per axis.
+    It can when the two axes are neighbours, in increasing order (images, with or without
+    trailing channels), and the data is real floating point; any other layout takes one step
+    per axis.
     """
-    ndim = len(shape)
     return (
-        ndim >= 2
-        and list(axes) == [ndim - 2, ndim - 1]
+        len(axes) == 2
+        and axes[0] >= 0
+        and axes[1] == axes[0] + 1 < len(shape)
         and np.dtype(dtype) in (np.float32, np.float64)
     )
 
@@ -351,40 +352,45 @@ def _fused_ok(bank_name: str, boundary: str, m: int, synthesis: bool) -> bool:
     return max(taps, taps_q) <= 32 and max(span, span_q) < _kernels._RING
 
 
-def analysis_2d(
-    arr: np.ndarray, bank: FilterBank, boundaries: tuple[str, str]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """One 2-D level over the last two axes of ``arr`` in one pass, or ``None`` if it cannot.
+def _split_shape(shape: tuple[int, ...], axis: int) -> tuple[int, int, int, int]:
+    """``(outer, n0, n1, inner)`` for the axes ``axis`` and ``axis + 1`` of ``shape``."""
+    outer = int(np.prod(shape[:axis], dtype=np.int64))
+    inner = int(np.prod(shape[axis + 2 :], dtype=np.int64))
+    return outer, shape[axis], shape[axis + 1], inner
 
-    Returns the bands ``(aa, ad, da, dd)``: the first letter is axis ``-2``, the second axis
-    ``-1``; ``"a"`` coarse, ``"d"`` detail.  The lengths must already be checked.
+
+def analysis_2d(
+    arr: np.ndarray, bank: FilterBank, boundaries: tuple[str, str], axis: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """One 2-D level over axes ``axis`` and ``axis + 1`` in one pass, or ``None`` if it cannot.
+
+    Returns the bands ``(aa, ad, da, dd)``: the first letter is ``axis``, the second
+    ``axis + 1``; ``"a"`` coarse, ``"d"`` detail.  The lengths must already be checked.
     """
-    if not fused_level_fits(arr.shape, [arr.ndim - 2, arr.ndim - 1], arr.dtype):
+    if not fused_level_fits(arr.shape, [axis, axis + 1], arr.dtype):
         return None
-    m0, m1 = arr.shape[-2:]
+    outer, m0, m1, inner = _split_shape(arr.shape, axis)
     if not _fused_ok(bank.name, boundaries[0], m0, synthesis=False):
         return None
     rule0, rule1 = bank.rule(boundaries[0]), bank.rule(boundaries[1])
     mats0 = _kernel_args(bank.name, boundaries[0], m0, arr.dtype)
     mats1 = _kernel_args(bank.name, boundaries[1], m1, arr.dtype)
-    arr = np.ascontiguousarray(arr)
-    x = arr.reshape(-1, m0, m1)
+    x = np.ascontiguousarray(arr).reshape(outer, m0, m1 * inner)
     r0, s0 = rule0.coarse_length(m0), rule0.detail_length(m0)
     r1, s1 = rule1.coarse_length(m1), rule1.detail_length(m1)
-    outer = x.shape[0]
-    bands = [
-        np.empty((outer, rows, cols), dtype=arr.dtype)
-        for rows, cols in ((r0, r1), (r0, s1), (s0, r1), (s0, s1))
-    ]
-    args = (x, *mats0["A"], *mats0["B"], *mats1["A+"], *mats1["B+"], *bands)
+    sizes = ((r0, r1), (r0, s1), (s0, r1), (s0, s1))
+    bands = [np.empty((outer, rows, cols * inner), dtype=arr.dtype) for rows, cols in sizes]
+    args = (x, *mats0["A"], *mats0["B"], *mats1["A+"], *mats1["B+"], *bands, inner)
     _run_blocks(_kernels.analysis_2d, args, outer, max(r0, s0), x.size)
-    lead = arr.shape[:-2]
-    aa, ad, da, dd = (band.reshape(lead + band.shape[1:]) for band in bands)
+    lead, trail = arr.shape[:axis], arr.shape[axis + 2 :]
+    aa, ad, da, dd = (
+        band.reshape(lead + size + trail) for band, size in zip(bands, sizes, strict=True)
+    )
     return aa, ad, da, dd
 
 
 def synthesis_2d(
-    bands: tuple[Any, Any, Any, Any], bank: FilterBank, boundaries: tuple[str, str]
+    bands: tuple[Any, Any, Any, Any], bank: FilterBank, boundaries: tuple[str, str], axis: int
 ) -> np.ndarray | None:
     """The inverse of :func:`analysis_2d` in one pass, or ``None`` if it cannot run fused.
 
@@ -395,15 +401,16 @@ def synthesis_2d(
         return None
     aa, ad, da, dd = (as_float_array(band) for band in bands)
     dtype = np.result_type(aa, ad, da, dd)
-    if aa.ndim < 2 or not fused_level_fits(aa.shape, [aa.ndim - 2, aa.ndim - 1], dtype):
+    if not fused_level_fits(aa.shape, [axis, axis + 1], dtype):
         return None
     rule0, rule1 = bank.rule(boundaries[0]), bank.rule(boundaries[1])
-    (r0, r1), (s0, s1) = aa.shape[-2:], dd.shape[-2:]
+    outer, r0, r1, inner = _split_shape(aa.shape, axis)
+    s0, s1 = dd.shape[axis : axis + 2] if dd.ndim == aa.ndim else (-1, -1)
     m0, m1 = rule0.fine_length(r0, s0), rule1.fine_length(r1, s1)
-    lead = aa.shape[:-2]
+    lead, trail = aa.shape[:axis], aa.shape[axis + 2 :]
     fits = all(
-        band.shape == lead + shape
-        for band, shape in ((ad, (r0, s1)), (da, (s0, r1)), (dd, (s0, s1)))
+        band.shape == lead + size + trail
+        for band, size in ((ad, (r0, s1)), (da, (s0, r1)), (dd, (s0, s1)))
     ) and all(
         m % 2 == 0
         and m >= rule.min_length
@@ -416,11 +423,10 @@ def synthesis_2d(
     mats0 = _kernel_args(bank.name, boundaries[0], m0, dtype)
     mats1 = _kernel_args(bank.name, boundaries[1], m1, dtype)
     views = [
-        np.ascontiguousarray(band, dtype=dtype).reshape(-1, *band.shape[-2:])
+        np.ascontiguousarray(band, dtype=dtype).reshape(outer, band.shape[axis], -1)
         for band in (aa, ad, da, dd)
     ]
-    outer = views[0].shape[0]
-    f = np.empty((outer, m0, m1), dtype=dtype)
-    args = (*views, *mats0["P"], *mats0["Q"], *mats1["P+"], *mats1["Q+"], f)
+    f = np.empty((outer, m0, m1 * inner), dtype=dtype)
+    args = (*views, *mats0["P"], *mats0["Q"], *mats1["P+"], *mats1["Q+"], f, inner)
     _run_blocks(_kernels.synthesis_2d, args, outer, m0, f.size, rows_even=True)
-    return f.reshape(lead + (m0, m1))
+    return f.reshape((*lead, m0, m1, *trail))
