@@ -478,7 +478,33 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
                 fits = (step, size)
         elif too_big is None or step > too_big[0]:
             too_big = (step, size)
+    if fits[1] < enough and too_big is not None:
+        # The size jumps between two neighbouring steps (many coefficients cross a bin edge
+        # together, e.g. on pixel-repeated images): take the finer step and drop its least
+        # important details, which lowers the size smoothly, until the bundle fits.
+        fits = _fill_by_removal(encoder, too_big[0], fits, budget, enough)
     return encoder.bundle(fits[0])
+
+
+def _fill_by_removal(
+    encoder: _LossyEncoder, step: float, fits: tuple[float, int], budget: int, enough: int
+) -> tuple[float, int]:
+    best_removed: float | None = None
+    few, many = 0.0, 1.0  # fractions of details removed: too big, small enough
+    for _ in range(_SEARCH_STEPS):
+        removed = (few + many) / 2
+        encoder.keep(1.0 - removed)
+        size = encoder.size_bound(step)
+        if size <= budget:
+            many = removed
+            if size > fits[1]:
+                fits, best_removed = (step, size), removed
+            if size >= enough:
+                break
+        else:
+            few = removed
+    encoder.keep(1.0 - (best_removed if best_removed is not None else 0.0))
+    return fits
 
 
 def encode_image(
