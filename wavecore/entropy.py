@@ -23,6 +23,7 @@ import zlib
 from collections.abc import Sequence
 from typing import Any
 
+import constriction
 import numpy as np
 
 from .errors import BundleError, InvalidParameter
@@ -75,7 +76,7 @@ def encode_levels(
         :func:`wavecore.quantize.quantize_bands`, or integer lifting for lossless coding).
     coder : {"context", "zlib"}
         ``"context"`` (default) is the context-modelling range coder; ``"zlib"`` the generic
-        baseline.  (For now ``"context"`` falls back to ``"zlib"``.)
+        baseline.
 
     Returns
     -------
@@ -97,6 +98,8 @@ def encode_levels(
     """
     coder = _check_coder(coder)
     entries = _entries(qcoeffs)
+    if coder == "context":
+        return _encode_context(entries)
     chunks = []
     for bands in entries:
         raw = b"".join(band.astype("<i4", copy=False).tobytes() for band in bands)
@@ -187,7 +190,10 @@ def decode_levels(
         msg = f"{len(chunks)} chunks given for {len(layout)} band entries"
         raise BundleError(msg)
     layout = layout[: len(chunks)]
-    levels = _decode_zlib(chunks, layout)
+    if params["coder"] == "context":
+        levels = _decode_context(chunks, layout, params)
+    else:
+        levels = _decode_zlib(chunks, layout)
     out: list[Any] = []
     for index, (arrays, bands) in enumerate(zip(levels, layout, strict=True)):
         is_single = len(bands) == 1 and not (
@@ -217,4 +223,447 @@ def _decode_zlib(
             arrays.append(flat[start : start + size].reshape(band))
             start += size
         levels.append(arrays)
+    return levels
+
+
+# --------------------------------------------------------------------------------------------
+# The context coder
+# --------------------------------------------------------------------------------------------
+
+#: Magnitudes ``0 .. ESCAPE - 1`` are symbols of their own; larger ones send ``ESCAPE`` and then
+#: the excess as an exponent (adaptive) and raw mantissa bits.
+ESCAPE = 17
+_ALPHABET = ESCAPE + 1
+_EXPONENTS = 33
+#: Upper edges of the activity bins (the activity is a weighted mean of known neighbour
+#: magnitudes, in quantizer steps); bin 0 is "every known neighbour is zero".
+_ACTIVITY_EDGES = np.array(
+    [1e-9, 0.1, 0.2, 0.35, 0.55, 0.8, 1.15, 1.6, 2.2, 3.0, 4.2, 6.0, 9.0, 14.0]
+)
+_BINS = len(_ACTIVITY_EDGES) + 1
+#: Three interlaced passes over a band: (even, even); (odd, odd), which sees its four diagonal
+#: neighbours; then (even, odd) and (odd, even), which see the four direct ones.
+_PASSES = (((0, 0),), ((1, 1),), ((0, 1), (1, 0)))
+_CLASSES = len(_PASSES) * _BINS
+_APPROX_CLASSES = _BINS
+#: Counts are halved once a class has seen this many symbols, so the model follows the data.
+_COUNT_LIMIT = 1 << 21
+#: Counts are integers (so that every machine computes the same probabilities) in units of
+#: 1/_UNIT observation: a symbol never seen keeps a small but nonzero probability.
+_UNIT = 32
+_PRIOR_WEIGHT = 8
+_DIRECT = ((-1, 0), (1, 0), (0, -1), (0, 1))
+_DIAGONAL = ((-1, -1), (-1, 1), (1, -1), (1, 1))
+_W_DIRECT, _W_DIAGONAL, _W_PARENT, _W_SIBLING, _W_LUMA = 2.0, 1.0, 2.0, 1.0, 1.0
+CONTEXT_VERSION = 1
+_FIRST_SEGMENT = 16
+#: At each new level the detail counts keep their shape but shrink to about this many
+#: observations, so the model re-learns the level's own statistics quickly.
+_LEVEL_MEMORY = 48
+
+
+def _prior(bins: int) -> np.ndarray:
+    """Initial pseudo-counts: geometric magnitudes whose mean grows with the activity bin."""
+    centres = np.concatenate([[0.02], _ACTIVITY_EDGES])[:bins]
+    counts = np.empty((bins, _ALPHABET))
+    k = np.arange(_ALPHABET)
+    for b, mean in enumerate(centres):
+        ratio = mean / (1.0 + mean)
+        p = (1 - ratio) * ratio**k
+        p[-1] = ratio**ESCAPE
+        counts[b] = np.maximum(np.round(_PRIOR_WEIGHT * _UNIT * p), 1)
+    return counts.astype(np.int64)
+
+
+class _Models:
+    """Adaptive symbol counts per context class, identical in encoder and decoder."""
+
+    def __init__(self) -> None:
+        self.detail = np.tile(_prior(_BINS), (len(_PASSES), 1))
+        self.approx = _prior(_BINS)
+        self.exponent = np.full(_EXPONENTS, _UNIT // 4, dtype=np.int64)
+
+    def new_level(self) -> None:
+        totals = self.detail.sum(axis=1, keepdims=True)
+        scaled = (self.detail * (_LEVEL_MEMORY * _UNIT)) // totals
+        self.detail = np.maximum(scaled, 1).astype(np.int64)
+
+    @staticmethod
+    def model(counts: np.ndarray) -> Any:
+        return _model.Categorical(counts.astype(np.float64), perfect=False)
+
+    @staticmethod
+    def update(counts: np.ndarray, symbols: np.ndarray) -> None:
+        counts += _UNIT * np.bincount(symbols, minlength=len(counts))
+        if counts.sum() > _COUNT_LIMIT:
+            counts[:] = (counts + 1) // 2
+
+
+def _segments(count: int) -> list[slice]:
+    """Split ``count`` symbols into runs of doubling length; the model adapts between runs."""
+    out, start, size = [], 0, _FIRST_SEGMENT
+    while start < count:
+        out.append(slice(start, min(count, start + size)))
+        start += size
+        size *= 2
+    return out
+
+
+def _fit(arr: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """Crop or edge-extend a 2-D array to ``rows × cols`` (bands of one level differ a little)."""
+    arr = arr[:rows, :cols]
+    if arr.shape != (rows, cols):
+        arr = np.pad(arr, ((0, rows - arr.shape[0]), (0, cols - arr.shape[1])), mode="edge")
+    return arr
+
+
+def _external(
+    shape: tuple[int, int], parent: np.ndarray | None, siblings: list[tuple[np.ndarray, float]]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted sum and weight of the context from other, already coded, bands."""
+    rows, cols = shape
+    total = np.zeros(shape)
+    weight = 0.0
+    if parent is not None and parent.size:
+        padded = np.pad(parent, 1, mode="edge")
+        box = (
+            sum(
+                padded[1 + di : 1 + di + parent.shape[0], 1 + dj : 1 + dj + parent.shape[1]]
+                for di in (-1, 0, 1)
+                for dj in (-1, 0, 1)
+            )
+            / 9.0
+        )
+        mix = 0.5 * (parent + box)
+        total += _W_PARENT * _fit(np.repeat(np.repeat(mix, 2, 0), 2, 1), rows, cols)
+        weight += _W_PARENT
+    for sibling, w in siblings:
+        if sibling.size:
+            total += w * _fit(sibling, rows, cols)
+            weight += w
+    return total, np.full(shape, weight)
+
+
+def _pass_positions(shape: tuple[int, int], phase: tuple[int, int]) -> tuple[slice, slice]:
+    return slice(phase[0], None, 2), slice(phase[1], None, 2)
+
+
+def _own_context(
+    known_abs: np.ndarray, known: np.ndarray, phase: tuple[int, int], offsets: Any
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted sums of the known neighbours' magnitudes at the positions of ``phase``."""
+    rows, cols = known_abs.shape
+    n_i, n_j = len(range(phase[0], rows, 2)), len(range(phase[1], cols, 2))
+    padded_abs = np.pad(known_abs, 1)
+    padded_known = np.pad(known, 1)
+    total = np.zeros((n_i, n_j))
+    weight = np.zeros((n_i, n_j))
+    for (di, dj), w in offsets:
+        r0, c0 = 1 + phase[0] + di, 1 + phase[1] + dj
+        view = (slice(r0, r0 + 2 * n_i - 1, 2), slice(c0, c0 + 2 * n_j - 1, 2))
+        total += w * padded_abs[view]
+        weight += w * padded_known[view]
+    return total, weight
+
+
+_OFFSETS = [(d, _W_DIRECT) for d in _DIRECT] + [(d, _W_DIAGONAL) for d in _DIAGONAL]
+
+
+def _classes(activity_sum: np.ndarray, weight: np.ndarray, pass_index: int) -> np.ndarray:
+    activity = np.divide(activity_sum, weight, out=np.zeros_like(activity_sum), where=weight > 0)
+    return pass_index * _BINS + np.searchsorted(_ACTIVITY_EDGES, activity, side="left")
+
+
+class _Writer:
+    """Codes symbols into one range-coder stream per level (``chunks``)."""
+
+    def __init__(self) -> None:
+        self.encoder = _queue.RangeEncoder()
+        self.chunks: list[bytes] = []
+
+    def __call__(self, index: int) -> _Writer:
+        self.encoder = _queue.RangeEncoder()
+        return self
+
+    def magnitudes(
+        self, models: _Models, counts: np.ndarray, classes: np.ndarray, values: np.ndarray
+    ) -> np.ndarray:
+        """Code ``values >= 0`` (1-D) with the class of each; escapes follow in the same stream."""
+        symbols = np.minimum(values, ESCAPE).astype(np.int32)
+        for cls in np.unique(classes):
+            picked = symbols[classes == cls]
+            for part in _segments(len(picked)):
+                self.encoder.encode(picked[part], models.model(counts[cls]))
+                models.update(counts[cls], picked[part])
+        excess = values[values >= ESCAPE].astype(np.int64) - ESCAPE
+        if excess.size:
+            exponents = _bit_length(excess)
+            self.encoder.encode(exponents.astype(np.int32), models.model(models.exponent))
+            models.update(models.exponent, exponents)
+            bits = _mantissa_bits(excess, exponents)
+            if bits.size:
+                self.encoder.encode(bits, _BIT)
+        return values
+
+    def signs(self, negative: np.ndarray, nonzero: np.ndarray) -> np.ndarray:
+        del nonzero
+        if negative.size:
+            self.encoder.encode(negative.astype(np.int32), _BIT)
+        return negative.astype(np.int64)
+
+    def done(self) -> None:
+        self.chunks.append(self.encoder.get_compressed().astype("<u4").tobytes())
+
+
+class _Reader:
+    """Decodes the symbols of one level's chunk."""
+
+    def __init__(self, chunk: bytes) -> None:
+        if len(chunk) % 4:
+            msg = f"context-coded chunk of {len(chunk)} bytes is not a whole number of words"
+            raise BundleError(msg)
+        words = np.frombuffer(chunk, dtype="<u4").astype(np.uint32)
+        try:
+            self.decoder = _queue.RangeDecoder(words)
+        except Exception as exc:  # constriction reports bad input in its own exception types
+            msg = f"corrupt context-coded chunk: {exc}"
+            raise BundleError(msg) from exc
+
+    def _decode(self, model: Any, count: int) -> np.ndarray:
+        try:
+            return np.asarray(self.decoder.decode(model, count), dtype=np.int64)
+        except Exception as exc:  # constriction reports bad input in its own exception types
+            msg = f"corrupt context-coded chunk: {exc}"
+            raise BundleError(msg) from exc
+
+    def magnitudes(
+        self, models: _Models, counts: np.ndarray, classes: np.ndarray, truth: None
+    ) -> np.ndarray:
+        del truth
+        values = np.empty(classes.shape, dtype=np.int64)
+        for cls in np.unique(classes):
+            mask = classes == cls
+            picked = np.empty(int(np.count_nonzero(mask)), dtype=np.int64)
+            for part in _segments(len(picked)):
+                picked[part] = self._decode(models.model(counts[cls]), part.stop - part.start)
+                models.update(counts[cls], picked[part])
+            values[mask] = picked
+        escaped = values == ESCAPE
+        count = int(np.count_nonzero(escaped))
+        if count:
+            exponents = self._decode(models.model(models.exponent), count)
+            models.update(models.exponent, exponents)
+            lengths = np.maximum(exponents - 1, 0)
+            bits = self._decode(_BIT, int(lengths.sum()))
+            excess = _from_mantissa(exponents, bits)
+            values[escaped] = ESCAPE + excess
+            if values.max() > _MAX_MAGNITUDE:
+                msg = "context-coded chunk decodes to a value beyond int32"
+                raise BundleError(msg)
+        return values
+
+    def signs(self, negative: None, nonzero: np.ndarray) -> np.ndarray:
+        del negative
+        count = int(np.count_nonzero(nonzero))
+        return self._decode(_BIT, count) if count else np.zeros(0, dtype=np.int64)
+
+    def done(self) -> None:
+        pass
+
+
+_MAX_MAGNITUDE = 2**31 - 1
+
+
+def _bit_length(values: np.ndarray) -> np.ndarray:
+    """Number of bits of each non-negative value (0 for 0)."""
+    out = np.zeros(values.shape, dtype=np.int64)
+    nonzero = values > 0
+    out[nonzero] = np.floor(np.log2(values[nonzero])).astype(np.int64) + 1
+    # log2 can round up just below a power of two; fix with exact integer checks.
+    too_big = nonzero & ((np.int64(1) << np.maximum(out - 1, 0)) > values)
+    out[too_big] -= 1
+    return out
+
+
+def _mantissa_bits(excess: np.ndarray, exponents: np.ndarray) -> np.ndarray:
+    """The bits below the leading one, most significant first, of every value, concatenated."""
+    lengths = np.maximum(exponents - 1, 0)
+    width = int(lengths.max()) if lengths.size else 0
+    if width == 0:
+        return np.zeros(0, dtype=np.int32)
+    shifts = np.arange(width - 1, -1, -1)
+    bits = (excess[:, None] >> shifts[None, :]) & 1
+    keep = np.arange(width)[None, :] >= (width - lengths)[:, None]
+    return bits[keep].astype(np.int32)
+
+
+def _from_mantissa(exponents: np.ndarray, bits: np.ndarray) -> np.ndarray:
+    lengths = np.maximum(exponents - 1, 0)
+    out = np.where(exponents > 0, np.int64(1) << np.maximum(exponents - 1, 0), 0)
+    if bits.size:
+        owner = np.repeat(np.arange(len(exponents)), lengths)
+        ends = np.cumsum(lengths)
+        position = np.arange(bits.size) - np.repeat(ends - lengths, lengths)
+        weight = np.int64(1) << (np.repeat(lengths, lengths) - 1 - position)
+        np.add.at(out, owner, bits * weight)
+    return out
+
+
+def _as_planes(band: np.ndarray, two_d: bool) -> np.ndarray:
+    """View a band as ``(rows, cols, channels)``: 1-D layouts get one column."""
+    if not two_d or band.ndim < 2:
+        return band.reshape(band.shape[0], 1, -1) if band.ndim else band.reshape(1, 1, 1)
+    return band.reshape(band.shape[0], band.shape[1], -1)
+
+
+def _code_approx(io: Any, models: _Models, plane: np.ndarray | None, shape: Any) -> np.ndarray:
+    """The coarsest band: differences along rows (first column: down it), magnitude and sign."""
+    rows, cols = shape
+    residual = None
+    if plane is not None:
+        residual = plane.astype(np.int64)
+        residual[:, 1:] = np.diff(residual, axis=1)
+        residual[1:, 0] = np.diff(plane[:, 0].astype(np.int64))
+    classes = np.zeros(rows * cols, dtype=np.int64)
+    magnitude = io.magnitudes(
+        models, models.approx, classes, None if residual is None else np.abs(residual).ravel()
+    )
+    nonzero = magnitude != 0
+    negative = io.signs(None if residual is None else residual.ravel()[nonzero] < 0, nonzero)
+    signed = magnitude.copy()
+    signed[nonzero] *= 1 - 2 * negative
+    signed = signed.reshape(rows, cols)
+    signed[:, 0] = np.cumsum(signed[:, 0])
+    out = np.cumsum(signed, axis=1)
+    if np.abs(out).max(initial=0) > _MAX_MAGNITUDE:
+        msg = "context-coded chunk decodes to a value beyond int32"
+        raise BundleError(msg)
+    return out
+
+
+def _code_detail(
+    io: Any,
+    models: _Models,
+    plane: np.ndarray | None,
+    shape: tuple[int, int],
+    parent: np.ndarray | None,
+    siblings: list[tuple[np.ndarray, float]],
+) -> np.ndarray:
+    """One detail plane in three interlaced passes, each symbol under its context class."""
+    ext_sum, ext_weight = _external(shape, parent, siblings)
+    magnitude_plane = None if plane is None else np.abs(plane.astype(np.int64))
+    known_abs = np.zeros(shape)
+    known = np.zeros(shape)
+    out = np.zeros(shape, dtype=np.int64)
+    for pass_index, phases in enumerate(_PASSES):
+        for phase in phases:
+            where = _pass_positions(shape, phase)
+            own_sum, own_weight = _own_context(known_abs, known, phase, _OFFSETS)
+            classes = _classes(
+                own_sum + ext_sum[where], own_weight + ext_weight[where], pass_index
+            ).ravel()
+            if not classes.size:
+                continue
+            truth = None if magnitude_plane is None else magnitude_plane[where].ravel()
+            magnitude = io.magnitudes(models, models.detail, classes, truth)
+            nonzero = magnitude != 0
+            negative = io.signs(
+                None if plane is None else plane[where].ravel()[nonzero] < 0, nonzero
+            )
+            signed = magnitude.copy()
+            signed[nonzero] *= 1 - 2 * negative
+            out[where] = signed.reshape(out[where].shape)
+            known_abs[where] = magnitude.reshape(out[where].shape)
+            known[where] = 1.0
+    return out
+
+
+def _code_levels(
+    io_for_level: Any,
+    entries: list[list[np.ndarray]] | None,
+    layout: list[list[tuple[int, ...]]],
+    two_d: bool,
+) -> list[list[np.ndarray]]:
+    """Walk the layout coarse to fine, coding (``entries`` given) or decoding every plane.
+
+    Encoder and decoder run this same function, so their contexts cannot drift apart.
+    """
+    models = _Models()
+    decoded: list[list[np.ndarray]] = []  # per entry, per band: (rows, cols, channels) int64
+    for index, band_shapes in enumerate(layout):
+        io = io_for_level(index)
+        if index > 1:
+            models.new_level()
+        level_planes: list[np.ndarray] = []
+        for k, band_shape in enumerate(band_shapes):
+            dims = _plane_dims(band_shape, two_d)
+            truth = None if entries is None else _as_planes(entries[index][k], two_d)
+            result = np.zeros(dims, dtype=np.int64)
+            for channel in range(dims[2]):
+                plane = None if truth is None else truth[:, :, channel]
+                if index == 0:
+                    result[:, :, channel] = _code_approx(io, models, plane, dims[:2])
+                    continue
+                parent = None
+                if index >= 2 and k < len(decoded[index - 1]):
+                    parent_planes = decoded[index - 1][k]
+                    if channel < parent_planes.shape[2]:
+                        parent = np.abs(parent_planes[:, :, channel]).astype(np.float64)
+                siblings = [
+                    (np.abs(level_planes[s][:, :, channel]).astype(np.float64), _W_SIBLING)
+                    for s in range(k)
+                ]
+                if channel > 0:
+                    siblings.append((np.abs(result[:, :, 0]).astype(np.float64), _W_LUMA))
+                result[:, :, channel] = _code_detail(io, models, plane, dims[:2], parent, siblings)
+            level_planes.append(result)
+        decoded.append(level_planes)
+        io.done()
+    return decoded
+
+
+def _plane_dims(band_shape: tuple[int, ...], two_d: bool) -> tuple[int, int, int]:
+    if not band_shape:
+        return 1, 1, 1
+    if two_d and len(band_shape) >= 2:
+        rows, cols, rest = band_shape[0], band_shape[1], band_shape[2:]
+    else:
+        rows, cols, rest = band_shape[0], 1, band_shape[1:]
+    return int(rows), int(cols), int(np.prod(rest, dtype=np.int64))
+
+
+_queue = constriction.stream.queue
+_model = constriction.stream.model
+_BIT = _model.Uniform(2)
+
+
+def _encode_context(entries: list[list[np.ndarray]]) -> tuple[list[bytes], dict[str, Any]]:
+    two_d = len(entries) > 1 and len(entries[1]) == 3
+    layout = [[band.shape for band in bands] for bands in entries]
+    writer = _Writer()
+    _code_levels(writer, entries, layout, two_d)
+    return writer.chunks, {"coder": "context", "version": CONTEXT_VERSION, "two_d": two_d}
+
+
+def _decode_context(
+    chunks: Sequence[bytes], layout: list[list[tuple[int, ...]]], params: dict[str, Any]
+) -> list[list[np.ndarray]]:
+    if params.get("version") != CONTEXT_VERSION or not isinstance(params.get("two_d"), bool):
+        msg = f"context coder parameters {params!r} are not version {CONTEXT_VERSION}'s"
+        raise BundleError(msg)
+    readers = []
+    for chunk in chunks:
+        if not isinstance(chunk, bytes | bytearray | memoryview):
+            msg = "each chunk must be bytes"
+            raise BundleError(msg)
+        readers.append(_Reader(bytes(chunk)))
+    planes = _code_levels(lambda index: readers[index], None, layout, params["two_d"])
+    levels = []
+    for bands, band_shapes in zip(planes, layout, strict=True):
+        levels.append(
+            [
+                plane.reshape(shape).astype(np.int32)
+                for plane, shape in zip(bands, band_shapes, strict=True)
+            ]
+        )
     return levels

@@ -13,9 +13,9 @@ equal-slope allocation for mean squared error at high rate.
 The quantizer is a dead-zone uniform one: ``q = sign(x) · floor(|x| / step_b + rounding)``
 with ``rounding < 1/2``, so the zero bin is wider than the others (small coefficients, mostly
 noise, cost nothing).  The decoder puts a nonzero ``q`` back at ``sign(q) · (|q| + offset) ·
-step_b``; the encoder measures the best ``offset`` per band (the centroid of the coefficients that
-fell into the bins, separately for ``|q| = 1`` and ``|q| > 1``) and stores it, since wavelet
-details are peaked (Laplacian-like) and their centroids sit below the bin middles.
+step_b``, with ``offset`` the centroid of a Laplacian fitted to the band's own histogram of
+indices (:func:`reconstruction_offset`): wavelet details are peaked, so their centroids sit below
+the bin middles, and since both sides compute the offset from the integers it costs no bits.
 
 Everything the decoder needs is in ``params``, a JSON-serialisable dict, listed from the coarse
 end so that a prefix of the layout (a coarse decode) can be dequantized on its own.
@@ -32,7 +32,7 @@ import numpy as np
 from .errors import InvalidCoefficients, InvalidParameter
 from .norms import basis_norms
 
-__all__ = ["dequantize_bands", "quantize_bands"]
+__all__ = ["dequantize_bands", "quantize_bands", "reconstruction_offset"]
 
 #: ``rounding`` of the dead-zone quantizer: 0.5 would be plain rounding; smaller widens the zero
 #: bin.  Tuned on the scikit-image test pictures (see ``benchmarks/rate_distortion.py``).
@@ -115,19 +115,6 @@ def _check_step(step: Any) -> float:
     return float(step)
 
 
-def _centroid_offsets(magnitude: np.ndarray, q: np.ndarray, default: float) -> list[float]:
-    """Best reconstruction offsets for ``|q| == 1`` and ``|q| > 1``: mean of ``|x|/step - |q|``."""
-    offsets = []
-    for mask in (q == 1, q > 1):
-        count = int(np.count_nonzero(mask))
-        if count:
-            value = float(np.mean(magnitude[mask] - q[mask]))
-            offsets.append(round(min(max(value, -0.5), 1.0), 4))
-        else:
-            offsets.append(default)
-    return offsets
-
-
 def quantize_bands(
     coeffs: Sequence[Any],
     step: float,
@@ -160,8 +147,8 @@ def quantize_bands(
     qcoeffs : list
         ``int32`` arrays in the same layout.
     params : dict
-        JSON-serialisable: ``name``, per-band ``steps`` and reconstruction ``offsets``, listed
-        from the coarse end (``[[cA], [level L bands], ...]``).
+        JSON-serialisable: ``name``, ``step``, ``rounding`` and per-band ``weights`` (band step
+        = ``step · weight``), listed from the coarse end (``[[cA], [level L bands], ...]``).
 
     Examples
     --------
@@ -170,7 +157,7 @@ def quantize_bands(
     >>> image = np.random.default_rng(0).random((34, 34)) * 255
     >>> coeffs = wavedec2(image, level=2)
     >>> q, params = quantize_bands(coeffs, 2.0, wavelet="bspline2", boundary="open")
-    >>> q[0].dtype, len(params["steps"])
+    >>> q[0].dtype, len(params["weights"])
     (dtype('int32'), 3)
     >>> back = dequantize_bands(q, params, wavelet="bspline2", boundary="open")
     >>> bool(np.sqrt(np.mean((waverec2(back) - image) ** 2)) < 2.0)
@@ -183,25 +170,24 @@ def quantize_bands(
     axes = tuple(int(a) for a in axes)
     levels = _layout(coeffs)
     norms = _band_norms(levels, wavelet, boundary, axes)
-    steps: list[list[float]] = []
-    offsets: list[list[list[float]]] = []
+    # Four significant digits keep the header short; the encoder uses the rounded weights too.
+    weights = [[float(f"{1.0 / max(norm, 1e-12):.4g}") for norm in level] for level in norms]
     out_levels: list[list[np.ndarray]] = []
-    for index, (bands, band_norms) in enumerate(zip(levels, norms, strict=True)):
-        level_steps, level_offsets, level_q = [], [], []
+    for index, (bands, band_weights) in enumerate(zip(levels, weights, strict=True)):
         band_rounding = APPROX_ROUNDING if index == 0 else float(rounding)
-        for band, norm in zip(bands, band_norms, strict=True):
-            band_step = step / max(norm, 1e-12)
-            magnitude = np.abs(np.asarray(band, dtype=np.float64)) / band_step
-            q = np.floor(magnitude + band_rounding)
+        level_q = []
+        for band, weight in zip(bands, band_weights, strict=True):
+            values = np.asarray(band, dtype=np.float64)
+            q = np.floor(np.abs(values) * (1.0 / (step * weight)) + band_rounding)
             np.minimum(q, MAX_INDEX, out=q)
-            level_offsets.append(_centroid_offsets(magnitude, q, 0.5 - band_rounding))
-            signed = np.where(np.asarray(band) < 0, -q, q).astype(np.int32)
-            level_q.append(signed)
-            level_steps.append(float(band_step))
-        steps.append(level_steps)
-        offsets.append(level_offsets)
+            level_q.append(np.copysign(q, values).astype(np.int32))
         out_levels.append(level_q)
-    params = {"name": QUANTIZER_NAME, "steps": steps, "offsets": offsets}
+    params = {
+        "name": QUANTIZER_NAME,
+        "step": step,
+        "weights": weights,
+        "rounding": float(rounding),
+    }
     return _unlayout(coeffs, out_levels), params
 
 
@@ -246,7 +232,7 @@ def dequantize_bands(
     --------
     >>> import numpy as np
     >>> q = [np.array([[3, -1], [0, 2]], dtype=np.int32)]
-    >>> params = {"name": "deadzone", "steps": [[0.5]], "offsets": [[[0.0, 0.0]]]}
+    >>> params = {"name": "deadzone", "step": 0.5, "weights": [[1.0]], "rounding": 0.4}
     >>> dequantize_bands(q, params, wavelet="haar", boundary="open")[0]
     array([[ 1.5, -0.5],
            [ 0. ,  1. ]])
@@ -255,37 +241,58 @@ def dequantize_bands(
     if not isinstance(params, dict) or params.get("name") != QUANTIZER_NAME:
         msg = f"quantizer parameters must be a dict with name {QUANTIZER_NAME!r}"
         raise InvalidParameter(msg)
-    steps, offsets = params.get("steps"), params.get("offsets")
+    step = _number(params.get("step"), "step")
+    rounding = _number(params.get("rounding"), "rounding")
+    if not (step > 0 and 0 < rounding <= 0.5):
+        msg = f"quantizer step {step!r} or rounding {rounding!r} out of range"
+        raise InvalidParameter(msg)
+    weights = params.get("weights")
     levels = _layout(qcoeffs)
-    if (
-        not isinstance(steps, list)
-        or not isinstance(offsets, list)
-        or len(steps) < len(levels)
-        or len(offsets) < len(levels)
-    ):
+    if not isinstance(weights, list) or len(weights) < len(levels):
         msg = f"quantizer parameters describe fewer levels than the {len(levels)} given"
         raise InvalidParameter(msg)
     out_levels = []
     for index, bands in enumerate(levels):
-        level_steps, level_offsets = steps[index], offsets[index]
-        if (
-            not isinstance(level_steps, list)
-            or not isinstance(level_offsets, list)
-            or len(level_steps) != len(bands)
-            or len(level_offsets) != len(bands)
-        ):
-            msg = f"quantizer parameters of level entry {index} do not match its {len(bands)} bands"
+        level_weights = weights[index]
+        if not isinstance(level_weights, list) or len(level_weights) != len(bands):
+            msg = f"quantizer weights of level entry {index} do not match its {len(bands)} bands"
             raise InvalidParameter(msg)
         restored = []
-        for band, band_step, band_offsets in zip(bands, level_steps, level_offsets, strict=True):
-            s = _number(band_step, "step")
-            if not isinstance(band_offsets, list) or len(band_offsets) != 2:
-                msg = "quantizer offsets must be pairs [offset for |q| = 1, offset for |q| > 1]"
-                raise InvalidParameter(msg)
-            first, rest = (_number(v, "offset") for v in band_offsets)
+        for band, weight in zip(bands, level_weights, strict=True):
+            band_step = step * _number(weight, "weight")
             q = np.asarray(band)
+            if q.dtype.kind not in "iu":
+                msg = f"quantized coefficients must be integers, not {q.dtype}"
+                raise InvalidParameter(msg)
+            offset = 0.0 if index == 0 else reconstruction_offset(q, rounding)
             magnitude = np.abs(q).astype(np.float64)
-            magnitude += np.where(q == 0, 0.0, np.where(magnitude == 1, first, rest))
-            restored.append(np.copysign(magnitude, q) * s)
+            magnitude[magnitude > 0] += offset
+            restored.append(np.copysign(magnitude, q) * band_step)
         out_levels.append(restored)
     return _unlayout(qcoeffs, out_levels)
+
+
+def reconstruction_offset(q: np.ndarray, rounding: float) -> float:
+    """Where in its bin a nonzero index goes back, relative to ``|q|``, from the band's histogram.
+
+    Details are close to Laplacian, and an exponential density looks the same in every bin, so
+    one number describes them all: ``theta = P(|q| >= 2 | |q| >= 1)`` is the density's decay over
+    one bin width.  The centroid of ``exp(-a t)`` on ``[0, 1)`` with ``exp(-a) = theta`` is
+    ``1/a - theta / (1 - theta)``; the bin of ``|q|`` starts at ``|q| - rounding``.  Encoder and
+    decoder compute it from the same integers, so it costs no bits.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> q = np.array([0, 1, 1, 1, 1, 2, -1, 3])  # theta = 2 / 7: steeply decaying
+    >>> bool(-0.4 < reconstruction_offset(q, 0.4) < 0.5 - 0.4)  # below the bin's middle
+    True
+    """
+    magnitude = np.abs(q)
+    ones = int(np.count_nonzero(magnitude == 1))
+    more = int(np.count_nonzero(magnitude >= 2))
+    if ones + more == 0:
+        return 0.5 - rounding
+    theta = min(max(more / (ones + more), 0.02), 0.98)
+    a = -math.log(theta)
+    return 1.0 / a - theta / (1.0 - theta) - rounding
