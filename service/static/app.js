@@ -198,8 +198,9 @@
 
   function setMode(mode) {
     // Curves have no quality, bpp or lossless target; images no tolerance: pick one they have.
-    if (mode === "curve" && target() !== "tolerance") {
-      document.querySelector('input[name="target"][value="keep"]').checked = true;
+    if (mode === "curve" && !["keep", "tolerance"].includes(target())) {
+      // A tolerance keeps the drawn curve faithful; the keep slider then simplifies it.
+      document.querySelector('input[name="target"][value="tolerance"]').checked = true;
     } else if (mode === "image" && target() === "tolerance") {
       document.querySelector('input[name="target"][value="quality"]').checked = true;
     }
@@ -508,7 +509,11 @@
         showError("curve-file-error", "Draw a curve first (a few strokes' worth of points), or open a curve JSON file.");
         return;
       }
-      await encodeCurve(padToCurve(state.drawn), $("curve-closed").checked, settings);
+      // A curve from a file is encoded in its own coordinates; the pad only shows it.
+      const points = state.filePoints || padToCurve(state.drawn);
+      // Figure 1 works in the pad's coordinates, where the second curve is drawn.
+      state.encodedPad = padToCurve(state.drawn);
+      await encodeCurve(points, $("curve-closed").checked, settings);
     }
   }
 
@@ -820,6 +825,9 @@
         const response = await reconstruct("coarse", state.bundle, { level, format: "png" });
         if (seq !== state.seq.coarse) return;
         const img = await setImage("img-coarse", response.blob);
+        // Haar's coarse image is block averages: show its blocks. The B-spline's is the control
+        // grid of a smooth surface: let the browser interpolate it.
+        img.classList.toggle("pixelated", state.info.wavelet === "haar");
         img.alt = `Coarse approximation after ${level} level${level === 1 ? "" : "s"}, ${img.naturalWidth}×${img.naturalHeight} pixels`;
         $("coarse-tag").textContent = `level ${level} · ${img.naturalWidth}×${img.naturalHeight}`;
         img.dataset.level = String(level);
@@ -939,7 +947,7 @@
     }
     const seq = ++state.seq.transfer;
     const body = {
-      source: state.curve.points,
+      source: state.encodedPad || state.curve.points,
       base: padToCurve(basePad),
       closed: state.curve.closed,
       level: Number($("level-slider").value),
@@ -993,6 +1001,9 @@
     const ox = (PAD_W - (maxX - minX) * scale) / 2;
     const oy = (PAD_H - (maxY - minY) * scale) / 2;
     state.drawn = points.map(([x, y]) => [ox + (x - minX) * scale, PAD_H - (oy + (y - minY) * scale)]);
+    state.filePoints = points.map((p) => [Number(p[0]), Number(p[1])]);
+    // The tolerance is in the file's units: a thousandth of its size, as the codec's default.
+    $("tolerance").value = String(Number((1e-3 * Math.hypot(maxX - minX, maxY - minY)).toPrecision(2)));
     curvePad.set(state.drawn);
     encode();
   }
@@ -1072,6 +1083,7 @@
     }
     $("curve-closed").checked = true;
     state.drawn = points;
+    state.filePoints = null;
     curvePad.set(points);
     clearErrors(...ENCODE_ERRORS);
     encode();
@@ -1096,6 +1108,7 @@
 
   const curvePad = makePad($("curve-pad"), $("pad-empty"), (points) => {
     state.drawn = points;
+    state.filePoints = null;
     clearErrors(...ENCODE_ERRORS);
     if (points.length >= 2) encode();
   }, () => $("curve-closed").checked);
@@ -1138,6 +1151,7 @@
   $("sample-curve").addEventListener("click", sampleCurve);
   $("curve-clear").addEventListener("click", () => {
     state.drawn = [];
+    state.filePoints = null;
     curvePad.clear();
   });
   $("curve-closed").addEventListener("change", () => {

@@ -295,3 +295,24 @@ def test_large_image_shows_progress_and_the_page_stays_responsive(
     assert lag < 250
     wait_for_bundle(page, before + 1)
     assert page.locator("#progress").is_hidden()
+
+
+def test_curve_json_file_is_encoded_in_its_own_coordinates(page: Any, tmp_path: Path):
+    import json
+
+    import wavecore
+
+    t = np.linspace(0, 2 * np.pi, 150, endpoint=False)
+    circle = np.stack([3 + np.cos(t) + 0.05 * np.cos(9 * t), -2 + np.sin(t)], axis=1)
+    path = tmp_path / "circle.json"
+    path.write_text(json.dumps({"points": circle.tolist(), "closed": True}))
+    page.click("label:has(input[name=mode][value=curve])")
+    page.set_input_files("#curve-file", str(path))
+    page.wait_for_selector("#curve-plot[data-bundle='1']")
+    assert page.is_checked("#curve-closed")
+    tolerance = float(page.input_value("#tolerance"))
+    with page.expect_download() as info:
+        page.click("#download")
+    decoded = wavecore.decode(Path(info.value.path()).read_bytes())
+    assert decoded.shape == circle.shape
+    assert np.max(np.linalg.norm(decoded - circle, axis=1)) <= tolerance
