@@ -52,7 +52,8 @@ case "$cmd" in
         ;;
     serve)
         setup service
-        exec "$VENV/bin/python" -m wavecore.demo "$@"
+        # The `wavecore` console script (service/cli.py); WAVECORE_* variables set the limits.
+        exec "$VENV/bin/wavecore" serve --host 127.0.0.1 --port 8000 "$@"
         ;;
     test)
         setup service,figures,test

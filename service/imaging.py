@@ -64,6 +64,9 @@ def read_image(data: bytes, *, max_pixels: int) -> np.ndarray:
         raise Problem("image-too-large", msg) from None
     except MemoryError:
         raise Problem("image-too-large", "the image does not fit in memory") from None
+    except Image.UnidentifiedImageError:
+        msg = "not an image: Pillow recognises no image format in the file"
+        raise Problem("unsupported-media-type", msg) from None
     except Exception as exc:
         # Pillow raises many kinds (UnidentifiedImageError, OSError for truncated data,
         # SyntaxError and ValueError from plugins): any of them means "not a readable image".
