@@ -65,10 +65,12 @@ def synthesis3(c, d, p_ptr, p_idx, p_w, q_ptr, q_idx, q_w, f, outer_lo, outer_hi
 
 # --- Rows along the last axis (contiguous), with the regular interior vectorised ---------------
 #
-# A matrix is passed as its compressed rows ``(ptr, idx, w)`` plus its regular interior ``reg =
-# (lo, blocks, col)`` and ``pat``: analysis rows ``lo + b`` hold ``pat[0]`` from column
-# ``col + 2 b``; synthesis rows ``lo + 2 b + i`` hold ``pat[i]`` from column ``col + b``.  The
-# fixed strides let LLVM vectorise the interior; the few boundary rows go through the CSR form.
+# A matrix is passed as a tuple ``(ptr, idx, w, reg, pat)``: its compressed rows plus its regular
+# interior ``reg = (lo, blocks, col)`` and ``pat``.  Analysis rows ``lo + b`` hold ``pat[0]`` from
+# column ``col + 2 b``; synthesis rows ``lo + 2 b + i`` hold ``pat[i]`` from column ``col + b``.
+# The fixed strides let LLVM vectorise the interior; the few boundary rows use the CSR form.
+# Each helper has one call site per kernel where possible: LLVM inlines every call site, and
+# the compile time (paid once per machine, then cached) grows with the copies.
 
 
 @njit(nogil=True, cache=True)
@@ -85,7 +87,8 @@ def _csr_rows(src, ptr, idx, w, out, lo, hi, add):
 
 
 @njit(nogil=True, cache=True)
-def _row_analysis(src, ptr, idx, w, reg, pat, out):
+def _row_analysis(src, mat, out):
+    ptr, idx, w, reg, pat = mat
     lo = reg[0]
     blocks = reg[1]
     col = reg[2]
@@ -115,65 +118,51 @@ def _row_analysis(src, ptr, idx, w, reg, pat, out):
 
 
 @njit(nogil=True, cache=True)
-def _row_synthesis_part(src, ptr, idx, w, reg, pat, out, add):
-    lo = reg[0]
-    blocks = reg[1]
-    col = reg[2]
-    _csr_rows(src, ptr, idx, w, out, 0, lo, add)
-    _csr_rows(src, ptr, idx, w, out, lo + 2 * blocks, out.shape[0], add)
-    taps = pat.shape[1]
-    s = src[col : col + blocks - 1 + taps]  # sliced for non-negative indices, as above
-    o = out[lo : lo + 2 * blocks]
-    if taps == 2:
-        w00, w01, w10, w11 = pat[0, 0], pat[0, 1], pat[1, 0], pat[1, 1]
-        if add:
+def _row_synthesis(c, d, p_mat, q_mat, out):
+    """``out = P c + Q d`` along one contiguous row."""
+    for part in range(2):
+        src = c if part == 0 else d
+        ptr, idx, w, reg, pat = p_mat if part == 0 else q_mat
+        add = part == 1
+        lo = reg[0]
+        blocks = reg[1]
+        col = reg[2]
+        _csr_rows(src, ptr, idx, w, out, 0, lo, add)
+        _csr_rows(src, ptr, idx, w, out, lo + 2 * blocks, out.shape[0], add)
+        taps = pat.shape[1]
+        s = src[col : col + blocks - 1 + taps]  # sliced for non-negative indices, as above
+        o = out[lo : lo + 2 * blocks]
+        if not add:
+            for j in range(2 * blocks):
+                o[j] = 0
+        if taps == 2:
+            w00, w01, w10, w11 = pat[0, 0], pat[0, 1], pat[1, 0], pat[1, 1]
             for b in range(blocks):
                 s0 = s[b]
                 s1 = s[b + 1]
                 o[2 * b] += w00 * s0 + w01 * s1
                 o[2 * b + 1] += w10 * s0 + w11 * s1
         else:
-            for b in range(blocks):
-                s0 = s[b]
-                s1 = s[b + 1]
-                o[2 * b] = w00 * s0 + w01 * s1
-                o[2 * b + 1] = w10 * s0 + w11 * s1
-    else:
-        if not add:
-            for j in range(2 * blocks):
-                o[j] = 0
-        for i in range(pat.shape[0]):
-            oi = o[i:]
-            for t in range(taps):
-                wt = pat[i, t]
-                st = s[t:]
-                for b in range(blocks):
-                    oi[2 * b] += wt * st[b]
+            for i in range(pat.shape[0]):
+                oi = o[i:]
+                for t in range(taps):
+                    wt = pat[i, t]
+                    st = s[t:]
+                    for b in range(blocks):
+                        oi[2 * b] += wt * st[b]
 
 
 @njit(nogil=True, cache=True)
-def _row_synthesis(c, d, p_ptr, p_idx, p_w, p_reg, p_pat, q_ptr, q_idx, q_w, q_reg, q_pat, out):
-    _row_synthesis_part(c, p_ptr, p_idx, p_w, p_reg, p_pat, out, False)
-    _row_synthesis_part(d, q_ptr, q_idx, q_w, q_reg, q_pat, out, True)
-
-
-@njit(nogil=True, cache=True)
-def analysis_last(
-    x, a_ptr, a_idx, a_w, a_reg, a_pat, b_ptr, b_idx, b_w, b_reg, b_pat, c, d, outer_lo, outer_hi
-):
+def analysis_last(x, a_mat, b_mat, c, d, outer_lo, outer_hi):
     for o in range(outer_lo, outer_hi):
-        _row_analysis(x[o], a_ptr, a_idx, a_w, a_reg, a_pat, c[o])
-        _row_analysis(x[o], b_ptr, b_idx, b_w, b_reg, b_pat, d[o])
+        for half in range(2):
+            _row_analysis(x[o], a_mat if half == 0 else b_mat, c[o] if half == 0 else d[o])
 
 
 @njit(nogil=True, cache=True)
-def synthesis_last(
-    c, d, p_ptr, p_idx, p_w, p_reg, p_pat, q_ptr, q_idx, q_w, q_reg, q_pat, f, outer_lo, outer_hi
-):
+def synthesis_last(c, d, p_mat, q_mat, f, outer_lo, outer_hi):
     for o in range(outer_lo, outer_hi):
-        _row_synthesis(
-            c[o], d[o], p_ptr, p_idx, p_w, p_reg, p_pat, q_ptr, q_idx, q_w, q_reg, q_pat, f[o]
-        )
+        _row_synthesis(c[o], d[o], p_mat, q_mat, f[o])
 
 
 # --- One 2-D level in one pass ---------------------------------------------------------------
@@ -187,8 +176,9 @@ def synthesis_last(
 
 
 @njit(nogil=True, cache=True)
-def _combine(rows, ptr, idx, w, r, out):
+def _combine(rows, mat, r, out):
     """``out = sum_k w[k] * rows[idx[k]]`` over the taps of row ``r``."""
+    ptr, idx, w = mat
     k0 = ptr[r]
     k1 = ptr[r + 1]
     n = out.shape[0]
@@ -208,298 +198,101 @@ def _combine(rows, ptr, idx, w, r, out):
 
 
 @njit(nogil=True, cache=True)
-def _split_row(
-    tmp,
-    inner,
-    a_ptr,
-    a_idx,
-    a_w,
-    a_reg,
-    a_pat,
-    b_ptr,
-    b_idx,
-    b_w,
-    b_reg,
-    b_pat,
-    chan,
-    c_buf,
-    d_buf,
-    out_c,
-    out_d,
-):
-    """The axis-1 analysis of one flat row ``(n1, inner)``, into flat rows of the two bands."""
-    if inner == 1:
-        _row_analysis(tmp, a_ptr, a_idx, a_w, a_reg, a_pat, out_c)
-        _row_analysis(tmp, b_ptr, b_idx, b_w, b_reg, b_pat, out_d)
-        return
-    # Trailing channels: one contiguous channel at a time, so the row kernels still vectorise.
-    n1 = tmp.shape[0] // inner
-    r1 = out_c.shape[0] // inner
-    s1 = out_d.shape[0] // inner
-    for ch in range(inner):
-        for i in range(n1):
-            chan[i] = tmp[i * inner + ch]
-        _row_analysis(chan[:n1], a_ptr, a_idx, a_w, a_reg, a_pat, c_buf[:r1])
-        _row_analysis(chan[:n1], b_ptr, b_idx, b_w, b_reg, b_pat, d_buf[:s1])
-        for j in range(r1):
-            out_c[j * inner + ch] = c_buf[j]
-        for j in range(s1):
-            out_d[j * inner + ch] = d_buf[j]
-
-
-@njit(nogil=True, cache=True)
-def _merge_row(
-    c,
-    d,
-    inner,
-    p_ptr,
-    p_idx,
-    p_w,
-    p_reg,
-    p_pat,
-    q_ptr,
-    q_idx,
-    q_w,
-    q_reg,
-    q_pat,
-    chan_c,
-    chan_d,
-    f_buf,
-    out,
-):
-    """The axis-1 synthesis of one flat coarse row and one flat detail row, into ``out``."""
-    if inner == 1:
-        _row_synthesis(c, d, p_ptr, p_idx, p_w, p_reg, p_pat, q_ptr, q_idx, q_w, q_reg, q_pat, out)
-        return
-    r1 = c.shape[0] // inner
-    s1 = d.shape[0] // inner
-    n1 = out.shape[0] // inner
-    for ch in range(inner):
-        for j in range(r1):
-            chan_c[j] = c[j * inner + ch]
-        for j in range(s1):
-            chan_d[j] = d[j * inner + ch]
-        _row_synthesis(
-            chan_c[:r1],
-            chan_d[:s1],
-            p_ptr,
-            p_idx,
-            p_w,
-            p_reg,
-            p_pat,
-            q_ptr,
-            q_idx,
-            q_w,
-            q_reg,
-            q_pat,
-            f_buf[:n1],
-        )
-        for i in range(n1):
-            out[i * inner + ch] = f_buf[i]
-
-
-@njit(nogil=True, cache=True)
-def analysis_2d(
-    x,
-    a0_ptr,
-    a0_idx,
-    a0_w,
-    b0_ptr,
-    b0_idx,
-    b0_w,
-    a1_ptr,
-    a1_idx,
-    a1_w,
-    a1_reg,
-    a1_pat,
-    b1_ptr,
-    b1_idx,
-    b1_w,
-    b1_reg,
-    b1_pat,
-    aa,
-    ad,
-    da,
-    dd,
-    inner,
-    outer_lo,
-    outer_hi,
-    row_lo,
-    row_hi,
-):
-    width = x.shape[2]  # n1 * inner: rows are flat, channels (if any) interleaved
+def analysis_2d(x, a0, b0, a1, b1, aa, ad, da, dd, inner, outer_lo, outer_hi, row_lo, row_hi):
+    width = x.shape[2]
+    n1 = width // inner
+    r1 = aa.shape[2] // inner
+    s1 = ad.shape[2] // inner
     tmp = np.empty(width, dtype=x.dtype)
-    chan = np.empty(width // inner, dtype=x.dtype)
-    c_buf = np.empty(width // inner + 2, dtype=x.dtype)
-    d_buf = np.empty(width // inner + 2, dtype=x.dtype)
+    chan = np.empty(n1, dtype=x.dtype)
+    bufs = (np.empty(r1, dtype=x.dtype), np.empty(s1, dtype=x.dtype))
     r0 = aa.shape[1]
     s0 = da.shape[1]
     for o in range(outer_lo, outer_hi):
         rows = x[o]
         for r in range(row_lo, row_hi):
-            if r < r0:
-                _combine(rows, a0_ptr, a0_idx, a0_w, r, tmp)
-                _split_row(
-                    tmp,
-                    inner,
-                    a1_ptr,
-                    a1_idx,
-                    a1_w,
-                    a1_reg,
-                    a1_pat,
-                    b1_ptr,
-                    b1_idx,
-                    b1_w,
-                    b1_reg,
-                    b1_pat,
-                    chan,
-                    c_buf,
-                    d_buf,
-                    aa[o, r],
-                    ad[o, r],
-                )
-            if r < s0:
-                _combine(rows, b0_ptr, b0_idx, b0_w, r, tmp)
-                _split_row(
-                    tmp,
-                    inner,
-                    a1_ptr,
-                    a1_idx,
-                    a1_w,
-                    a1_reg,
-                    a1_pat,
-                    b1_ptr,
-                    b1_idx,
-                    b1_w,
-                    b1_reg,
-                    b1_pat,
-                    chan,
-                    c_buf,
-                    d_buf,
-                    da[o, r],
-                    dd[o, r],
-                )
+            for half in range(2):
+                if r >= (r0 if half == 0 else s0):
+                    continue
+                _combine(rows, a0 if half == 0 else b0, r, tmp)
+                outs = (aa[o, r], ad[o, r]) if half == 0 else (da[o, r], dd[o, r])
+                for ch in range(inner):
+                    if inner > 1:
+                        # One contiguous channel at a time, so the row kernel still vectorises.
+                        for i in range(n1):
+                            chan[i] = tmp[i * inner + ch]
+                    src = tmp if inner == 1 else chan
+                    for which in range(2):
+                        out = outs[which]
+                        dest = out if inner == 1 else bufs[which]
+                        _row_analysis(src, a1 if which == 0 else b1, dest)
+                        if inner > 1:
+                            for j in range(dest.shape[0]):
+                                out[j * inner + ch] = dest[j]
 
 
 _RING = 16  # rows of axis-1 syntheses kept per band; a miss only costs a recomputation
 
 
 @njit(nogil=True, cache=True)
-def synthesis_2d(
-    aa,
-    ad,
-    da,
-    dd,
-    p0_ptr,
-    p0_idx,
-    p0_w,
-    q0_ptr,
-    q0_idx,
-    q0_w,
-    p1_ptr,
-    p1_idx,
-    p1_w,
-    p1_reg,
-    p1_pat,
-    q1_ptr,
-    q1_idx,
-    q1_w,
-    q1_reg,
-    q1_pat,
-    f,
-    inner,
-    outer_lo,
-    outer_hi,
-    row_lo,
-    row_hi,
-):
-    n1 = f.shape[2]  # flat rows: n1 * inner
-    low = np.empty((_RING, n1), dtype=f.dtype)
-    high = np.empty((_RING, n1), dtype=f.dtype)
-    chan_c = np.empty(n1 // inner + 2, dtype=f.dtype)
-    chan_d = np.empty(n1 // inner + 2, dtype=f.dtype)
-    f_buf = np.empty(n1 // inner, dtype=f.dtype)
-    low_tag = np.empty(_RING, dtype=np.intp)
-    high_tag = np.empty(_RING, dtype=np.intp)
-    slots = np.empty(64, dtype=np.intp)  # up to 32 taps per row and band (checked by callers)
-    weights = np.empty(64, dtype=f.dtype)
+def synthesis_2d(aa, ad, da, dd, p0, q0, p1, q1, f, inner, outer_lo, outer_hi, row_lo, row_hi):
+    width = f.shape[2]
+    n1 = width // inner
+    rings = np.empty((2, _RING, width), dtype=f.dtype)
+    tags = np.empty((2, _RING), dtype=np.intp)
+    chan_c = np.empty(aa.shape[2] // inner, dtype=f.dtype)
+    chan_d = np.empty(ad.shape[2] // inner, dtype=f.dtype)
+    f_buf = np.empty(n1, dtype=f.dtype)
+    slots = np.empty((2, 32), dtype=np.intp)  # up to 32 taps per row and half (checked by callers)
+    weights = np.empty((2, 32), dtype=f.dtype)
+    counts = np.zeros(2, dtype=np.intp)
     for o in range(outer_lo, outer_hi):
-        low_tag[:] = -1
-        high_tag[:] = -1
+        tags[:] = -1
         for r in range(row_lo, row_hi):
-            n_low = 0
-            for k in range(p0_ptr[r], p0_ptr[r + 1]):
-                i = p0_idx[k]
-                slot = i % _RING
-                if low_tag[slot] != i:
-                    _merge_row(
-                        aa[o, i],
-                        ad[o, i],
-                        inner,
-                        p1_ptr,
-                        p1_idx,
-                        p1_w,
-                        p1_reg,
-                        p1_pat,
-                        q1_ptr,
-                        q1_idx,
-                        q1_w,
-                        q1_reg,
-                        q1_pat,
-                        chan_c,
-                        chan_d,
-                        f_buf,
-                        low[slot],
-                    )
-                    low_tag[slot] = i
-                slots[n_low] = slot
-                weights[n_low] = p0_w[k]
-                n_low += 1
-            n_high = 0
-            for k in range(q0_ptr[r], q0_ptr[r + 1]):
-                i = q0_idx[k]
-                slot = i % _RING
-                if high_tag[slot] != i:
-                    _merge_row(
-                        da[o, i],
-                        dd[o, i],
-                        inner,
-                        p1_ptr,
-                        p1_idx,
-                        p1_w,
-                        p1_reg,
-                        p1_pat,
-                        q1_ptr,
-                        q1_idx,
-                        q1_w,
-                        q1_reg,
-                        q1_pat,
-                        chan_c,
-                        chan_d,
-                        f_buf,
-                        high[slot],
-                    )
-                    high_tag[slot] = i
-                slots[32 + n_high] = slot
-                weights[32 + n_high] = q0_w[k]
-                n_high += 1
+            for half in range(2):
+                ptr, idx, w = p0 if half == 0 else q0
+                coarse = aa[o] if half == 0 else da[o]
+                detail = ad[o] if half == 0 else dd[o]
+                n = 0
+                for k in range(ptr[r], ptr[r + 1]):
+                    i = idx[k]
+                    slot = i % _RING
+                    if tags[half, slot] != i:
+                        ring = rings[half, slot]
+                        for ch in range(inner):
+                            if inner > 1:
+                                for j in range(chan_c.shape[0]):
+                                    chan_c[j] = coarse[i, j * inner + ch]
+                                for j in range(chan_d.shape[0]):
+                                    chan_d[j] = detail[i, j * inner + ch]
+                            _row_synthesis(
+                                coarse[i] if inner == 1 else chan_c,
+                                detail[i] if inner == 1 else chan_d,
+                                p1,
+                                q1,
+                                ring if inner == 1 else f_buf,
+                            )
+                            if inner > 1:
+                                for j in range(n1):
+                                    ring[j * inner + ch] = f_buf[j]
+                        tags[half, slot] = i
+                    slots[half, n] = slot
+                    weights[half, n] = w[k]
+                    n += 1
+                counts[half] = n
             out = f[o, r]
-            if n_low == 2 and n_high == 2:
-                l0, l1 = low[slots[0]], low[slots[1]]
-                h0, h1 = high[slots[32]], high[slots[33]]
-                u0, u1, v0, v1 = weights[0], weights[1], weights[32], weights[33]
-                for j in range(n1):
+            if counts[0] == 2 and counts[1] == 2:
+                l0, l1 = rings[0, slots[0, 0]], rings[0, slots[0, 1]]
+                h0, h1 = rings[1, slots[1, 0]], rings[1, slots[1, 1]]
+                u0, u1, v0, v1 = weights[0, 0], weights[0, 1], weights[1, 0], weights[1, 1]
+                for j in range(width):
                     out[j] = u0 * l0[j] + u1 * l1[j] + v0 * h0[j] + v1 * h1[j]
                 continue
-            for j in range(n1):
+            for j in range(width):
                 out[j] = 0
-            for k in range(n_low):
-                wk = weights[k]
-                src = low[slots[k]]
-                for j in range(n1):
-                    out[j] += wk * src[j]
-            for k in range(n_high):
-                wk = weights[32 + k]
-                src = high[slots[32 + k]]
-                for j in range(n1):
-                    out[j] += wk * src[j]
+            for half in range(2):
+                for k in range(counts[half]):
+                    wk = weights[half, k]
+                    src = rings[half, slots[half, k]]
+                    for j in range(width):
+                        out[j] += wk * src[j]

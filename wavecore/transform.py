@@ -240,7 +240,7 @@ def analysis_step(
     c = np.empty((x.shape[0], r, x.shape[2]), dtype=arr.dtype)
     d = np.empty((x.shape[0], s, x.shape[2]), dtype=arr.dtype)
     if x.shape[2] == 1:
-        args = (x[:, :, 0], *mats["A+"], *mats["B+"], c[:, :, 0], d[:, :, 0])
+        args = (x[:, :, 0], mats["A+"], mats["B+"], c[:, :, 0], d[:, :, 0])
         _run_blocks(_kernels.analysis_last, args, x.shape[0], m, x.size, outer_only=True)
     else:
         args = (x, *mats["A"], *mats["B"], c, d)
@@ -320,7 +320,7 @@ def synthesis_step(
     dx = _view3(np.ascontiguousarray(d_arr, dtype=dtype), axis)
     f = np.empty((cx.shape[0], m, cx.shape[2]), dtype=dtype)
     if f.shape[2] == 1:
-        args = (cx[:, :, 0], dx[:, :, 0], *mats["P+"], *mats["Q+"], f[:, :, 0])
+        args = (cx[:, :, 0], dx[:, :, 0], mats["P+"], mats["Q+"], f[:, :, 0])
         _run_blocks(_kernels.synthesis_last, args, f.shape[0], m, f.size, outer_only=True)
     else:
         args = (cx, dx, *mats["P"], *mats["Q"], f)
@@ -380,7 +380,7 @@ def analysis_2d(
     r1, s1 = rule1.coarse_length(m1), rule1.detail_length(m1)
     sizes = ((r0, r1), (r0, s1), (s0, r1), (s0, s1))
     bands = [np.empty((outer, rows, cols * inner), dtype=arr.dtype) for rows, cols in sizes]
-    args = (x, *mats0["A"], *mats0["B"], *mats1["A+"], *mats1["B+"], *bands, inner)
+    args = (x, mats0["A"], mats0["B"], mats1["A+"], mats1["B+"], *bands, inner)
     _run_blocks(_kernels.analysis_2d, args, outer, max(r0, s0), x.size)
     lead, trail = arr.shape[:axis], arr.shape[axis + 2 :]
     aa, ad, da, dd = (
@@ -427,6 +427,6 @@ def synthesis_2d(
         for band in (aa, ad, da, dd)
     ]
     f = np.empty((outer, m0, m1 * inner), dtype=dtype)
-    args = (*views, *mats0["P"], *mats0["Q"], *mats1["P+"], *mats1["Q+"], f, inner)
+    args = (*views, mats0["P"], mats0["Q"], mats1["P+"], mats1["Q+"], f, inner)
     _run_blocks(_kernels.synthesis_2d, args, outer, m0, f.size, rows_even=True)
     return f.reshape((*lead, m0, m1, *trail))
