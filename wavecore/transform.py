@@ -240,7 +240,7 @@ def analysis_step(
     c = np.empty((x.shape[0], r, x.shape[2]), dtype=arr.dtype)
     d = np.empty((x.shape[0], s, x.shape[2]), dtype=arr.dtype)
     if x.shape[2] == 1:
-        args = (x[:, :, 0], mats["A+"], mats["B+"], c[:, :, 0], d[:, :, 0])
+        args: tuple[Any, ...] = (x[:, :, 0], mats["A+"], mats["B+"], c[:, :, 0], d[:, :, 0])
         _run_blocks(_kernels.analysis_last, args, x.shape[0], m, x.size, outer_only=True)
     else:
         args = (x, *mats["A"], *mats["B"], c, d)
@@ -320,7 +320,7 @@ def synthesis_step(
     dx = _view3(np.ascontiguousarray(d_arr, dtype=dtype), axis)
     f = np.empty((cx.shape[0], m, cx.shape[2]), dtype=dtype)
     if f.shape[2] == 1:
-        args = (cx[:, :, 0], dx[:, :, 0], mats["P+"], mats["Q+"], f[:, :, 0])
+        args: tuple[Any, ...] = (cx[:, :, 0], dx[:, :, 0], mats["P+"], mats["Q+"], f[:, :, 0])
         _run_blocks(_kernels.synthesis_last, args, f.shape[0], m, f.size, outer_only=True)
     else:
         args = (cx, dx, *mats["P"], *mats["Q"], f)
