@@ -24,7 +24,10 @@ _CSP = (
 )
 
 
-@router.get("/", response_class=FileResponse, include_in_schema=False)
+# HEAD too: link checkers and load balancers probe pages with it.
+@router.api_route(
+    "/", methods=["GET", "HEAD"], response_class=FileResponse, include_in_schema=False
+)
 async def index() -> FileResponse:
     return FileResponse(
         _INDEX,

@@ -2,7 +2,8 @@
 
 The browser is Debian's ``/usr/bin/chromium`` driven by Playwright's Python package (Playwright's
 own browser download is never used: it cannot reach the internet here, and CI installs Chromium
-from apt in ``scripts/run.sh test``). The server is a real uvicorn process on 127.0.0.1.
+from apt in ``scripts/run.sh test``). The server is the suite's real uvicorn process on 127.0.0.1
+(``live_server``); ``small_limit_server`` is a second one with a 100 kB upload limit.
 """
 
 from __future__ import annotations
@@ -13,11 +14,10 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-import httpx
 import pytest
 
 CHROMIUM = os.environ.get("WAVECORE_CHROMIUM", "/usr/bin/chromium")
@@ -44,41 +44,41 @@ def _require_chromium() -> None:
     pytest.skip(msg)
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
+@pytest.fixture(scope="session")
+def page_server(live_server: str) -> str:
+    """Base URL of the suite's real uvicorn process (``live_server`` in tests/conftest.py)."""
+    return live_server
 
 
 @pytest.fixture(scope="session")
-def page_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    """Base URL of a real uvicorn process serving ``service.app:create_app``."""
-    app = os.environ.get("WAVECORE_BROWSER_APP", "service.app:create_app")
-    pytest.importorskip(app.split(":")[0], reason="the service package is not importable")
-    port = _free_port()
-    log = tmp_path_factory.mktemp("page-server") / "uvicorn.log"
+def small_limit_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A second real server that accepts at most 100 kB per request (for the 413 message)."""
+    import httpx
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = int(sock.getsockname()[1])
+    log = tmp_path_factory.mktemp("small-limit-server") / "uvicorn.log"
     with log.open("wb") as out:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", app, "--factory", "--host", "127.0.0.1"]
-            + ["--port", str(port), "--log-level", "warning"],
+            [sys.executable, "-m", "uvicorn", "service.app:create_app", "--factory"]
+            + ["--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"],
             cwd=ROOT,
             stdout=out,
             stderr=subprocess.STDOUT,
+            env={**os.environ, "WAVECORE_MAX_UPLOAD_BYTES": "100000"},
         )
     url = f"http://127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + 60
         while True:
-            if proc.poll() is not None:
-                pytest.fail(f"the server exited with {proc.returncode}:\n{log.read_text()}")
+            if proc.poll() is not None or time.monotonic() > deadline:
+                pytest.fail(f"the small-limit server did not start:\n{log.read_text()}")
             try:
-                if httpx.get(url + "/", timeout=2).status_code == 200:
+                if httpx.get(url + "/healthz", timeout=2).status_code == 200:
                     break
             except httpx.TransportError:
-                pass
-            if time.monotonic() > deadline:
-                pytest.fail(f"the server did not answer on {url} within 60 s:\n{log.read_text()}")
-            time.sleep(0.2)
+                time.sleep(0.1)
         yield url
     finally:
         proc.terminate()
@@ -86,6 +86,7 @@ def page_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
             proc.wait(10)
         except subprocess.TimeoutExpired:
             proc.kill()
+            proc.wait()
 
 
 @pytest.fixture(scope="session")
@@ -119,32 +120,49 @@ def artifacts() -> Path:
 
 
 @pytest.fixture
-def page(browser_context: Any, page_server: str) -> Iterator[Any]:
-    """A fresh tab on ``GET /``; fails the test on any script error or off-host request."""
-    tab = browser_context.new_page()
-    tab.set_viewport_size({"width": 1280, "height": 900})
-    tab.set_default_timeout(30_000)
-    problems: list[str] = []
-    tab.on("pageerror", lambda exc: problems.append(f"script error: {exc}"))
-    tab.on(
-        "console",
-        lambda msg: problems.append(f"console error: {msg.text}") if msg.type == "error" else None,
-    )
+def open_tab(browser_context: Any) -> Iterator[Callable[[str], Any]]:
+    """Opens a fresh tab on ``<url>/``; at the end, fails the test on any script error or any
+    request that went off that server."""
+    opened: list[Any] = []
 
-    def only_this_server(route: Any) -> None:
-        url = route.request.url
-        if url.startswith((page_server, "blob:", "data:")):
-            route.continue_()
-        else:
-            problems.append(f"request off the server: {url}")
-            route.abort()
+    def open_(base: str) -> Any:
+        tab = browser_context.new_page()
+        tab.set_viewport_size({"width": 1280, "height": 900})
+        tab.set_default_timeout(30_000)
+        problems: list[str] = []
+        tab.on("pageerror", lambda exc: problems.append(f"script error: {exc}"))
+        tab.on(
+            "console",
+            lambda msg: (
+                problems.append(f"console error: {msg.text}") if msg.type == "error" else None
+            ),
+        )
 
-    tab.route("**/*", only_this_server)
-    tab.goto(page_server + "/")
-    tab.wait_for_selector("body[data-ready='true']")
-    tab.problems = problems
-    yield tab
-    tab.close()
-    # An error response shown to the user also logs "Failed to load resource" in the console;
-    # the tests that provoke errors clear those before the check.
-    assert not [p for p in problems if "Failed to load resource" not in p], problems
+        def only_this_server(route: Any) -> None:
+            url = route.request.url
+            if url.startswith((base, "blob:", "data:")):
+                route.continue_()
+            else:
+                problems.append(f"request off the server: {url}")
+                route.abort()
+
+        tab.route("**/*", only_this_server)
+        tab.goto(base + "/")
+        tab.wait_for_selector("body[data-ready='true']")
+        tab.problems = problems
+        opened.append(tab)
+        return tab
+
+    yield open_
+    for tab in opened:
+        tab.close()
+    # A shown error response also logs "Failed to load resource" in the console; nothing else
+    # may appear there.
+    for tab in opened:
+        assert not [p for p in tab.problems if "Failed to load resource" not in p], tab.problems
+
+
+@pytest.fixture
+def page(open_tab: Callable[[str], Any], page_server: str) -> Any:
+    """A fresh tab on the page served by the suite's server."""
+    return open_tab(page_server)

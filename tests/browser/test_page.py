@@ -316,3 +316,53 @@ def test_curve_json_file_is_encoded_in_its_own_coordinates(page: Any, tmp_path: 
     decoded = wavecore.decode(Path(info.value.path()).read_bytes())
     assert decoded.shape == circle.shape
     assert np.max(np.linalg.norm(decoded - circle, axis=1)) <= tolerance
+
+
+def test_a_text_file_named_png_gets_a_message_next_to_the_file_input(page: Any):
+    page.set_input_files(
+        "#image-file",
+        files=[{"name": "notes.png", "mimeType": "image/png", "buffer": b"just some text\n" * 20}],
+    )
+    error = page.locator("#image-file-error")
+    error.wait_for(state="visible")
+    assert "415" not in error.inner_text()  # a sentence, not a status code
+    assert len(error.inner_text()) > 20
+    assert page.locator("#encode-error").is_hidden()
+    page.problems.clear()
+
+
+def test_an_upload_over_the_limit_gets_a_message_next_to_the_file_input(
+    open_tab: Any, small_limit_server: str, astronaut_png: Path, artifacts: Path
+):
+    page = open_tab(small_limit_server)
+    page.set_input_files("#image-file", str(astronaut_png))  # about 110 kB > 100 kB
+    error = page.locator("#image-file-error")
+    error.wait_for(state="visible")
+    assert "large" in error.inner_text().lower()
+    assert page.locator("#progress").is_hidden()
+    page.screenshot(path=artifacts / "upload-too-large.png")
+    page.problems.clear()
+
+
+def test_drop_an_image_on_the_drop_zone(page: Any):
+    # What a drag from the desktop delivers: a drop event whose DataTransfer holds a file.
+    page.evaluate(
+        """async () => {
+            const canvas = new OffscreenCanvas(96, 64);
+            const ctx = canvas.getContext("2d");
+            ctx.fillStyle = "#3a5bd9";
+            ctx.fillRect(0, 0, 96, 64);
+            ctx.fillStyle = "#ffd18a";
+            ctx.fillRect(20, 10, 30, 40);
+            const blob = await canvas.convertToBlob({ type: "image/png" });
+            const transfer = new DataTransfer();
+            transfer.items.add(new File([blob], "dropped.png", { type: "image/png" }));
+            const zone = document.getElementById("image-drop");
+            const options = { dataTransfer: transfer, bubbles: true };
+            zone.dispatchEvent(new DragEvent("dragover", options));
+            zone.dispatchEvent(new DragEvent("drop", options));
+        }"""
+    )
+    wait_for_bundle(page, 1)
+    assert "dropped.png" in page.inner_text("#image-name")
+    assert page.get_attribute("#download", "download") == "dropped-bspline2.wcb"
