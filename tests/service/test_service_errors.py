@@ -175,6 +175,16 @@ async def test_body_limit_by_length_and_while_streaming(
             "/v1/curves/encode", content=chunks(), headers={"content-type": "application/json"}
         )
         _check_problem(r, 413, "body-too-large")
+        form = c.build_request("POST", "/", files={"file": ("a.png", bytes(20_000))})
+        body = form.read()
+
+        async def form_chunks() -> Any:  # a streamed multipart upload
+            for i in range(0, len(body), 1000):
+                yield body[i : i + 1000]
+
+        headers = {"content-type": form.headers["content-type"]}
+        r = await c.post("/v1/images/encode", content=form_chunks(), headers=headers)
+        _check_problem(r, 413, "body-too-large")
         # under the limit: read and answered (a truncated bundle still inspects: prefixes work)
         r = await c.post("/v1/bundles/inspect", content=IMAGE_BUNDLE[:3000])
         assert r.status_code == 200 and r.json()["kind"] == "image"
