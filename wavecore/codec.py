@@ -63,7 +63,11 @@ LOSSLESS_WAVELET = "reversible"
 _MAX_IMAGE_LEVELS = 5
 _MAX_CURVE_LEVELS = 8
 _SEARCH_STEPS = 18
-_BPP_EVALUATIONS = 40
+_BPP_EVALUATIONS = 24
+_MODEL_EVALUATIONS = 24
+_QUALITY_EVALUATIONS = 24
+_QUALITY_SLACK_DB = 0.02  # quality searches stop within this much above the target
+_HEADER_GUESS = 600.0  # bytes, for the size estimate before the real coder has run
 _LONGEST_FLOAT = 1.2345678901234567e-300  # 23 characters, the longest repr of a positive float
 
 
@@ -292,16 +296,26 @@ def _peak(arr: np.ndarray, dtype: str, kind: str) -> float:
 
 
 class _LossyEncoder:
-    """Holds one decomposition and codes it at any step, for the rate-control searches."""
+    """Holds one decomposition and codes it at any step, for the rate-control searches.
+
+    The last quantization and entropy coding are cached, so the searches' final bundle does not
+    redo them.
+    """
 
     def __init__(self, plan: _Plan, original: np.ndarray, transformed: np.ndarray) -> None:
         self.plan = plan
         self.original = original
         self.coeffs = _decompose(plan, transformed)
         self.kept = self.coeffs
+        self.kept_fraction = 1.0
         self.vector_axis = -1 if plan.kind != "image" else None
+        self._quantized: tuple[tuple[float, float], list[Any], dict[str, Any]] | None = None
+        self._coded: tuple[tuple[float, float], list[bytes], dict[str, Any]] | None = None
 
     def keep(self, fraction: float) -> None:
+        if fraction == self.kept_fraction:
+            return
+        self.kept_fraction = fraction
         self.kept = remove_smallest(
             self.coeffs,
             1.0 - fraction,
@@ -312,13 +326,24 @@ class _LossyEncoder:
         )
 
     def quantize(self, step: float) -> tuple[list[Any], dict[str, Any]]:
-        return quantize_bands(
-            self.kept,
-            step,
-            wavelet=self.plan.wavelet,
-            boundary=list(self.plan.boundary),
-            axes=self.plan.axes,
-        )
+        key = (step, self.kept_fraction)
+        if self._quantized is None or self._quantized[0] != key:
+            q, params = quantize_bands(
+                self.kept,
+                step,
+                wavelet=self.plan.wavelet,
+                boundary=list(self.plan.boundary),
+                axes=self.plan.axes,
+            )
+            self._quantized = (key, q, params)
+        return self._quantized[1], self._quantized[2]
+
+    def code(self, step: float) -> tuple[list[bytes], dict[str, Any]]:
+        key = (step, self.kept_fraction)
+        if self._coded is None or self._coded[0] != key:
+            chunks, cparams = encode_levels(self.quantize(step)[0], coder=DEFAULT_CODER)
+            self._coded = (key, chunks, cparams)
+        return self._coded[1], self._coded[2]
 
     def reconstruct(self, qcoeffs: list[Any], qparams: dict[str, Any]) -> np.ndarray:
         coeffs = dequantize_bands(
@@ -336,11 +361,9 @@ class _LossyEncoder:
         psnr, max_error = _errors(self.plan, self.original, self.reconstruct(q, params))
         return (math.inf if psnr is None else psnr), max_error
 
-    def _assemble(
-        self, step: float, errors: tuple[float | None, float] | None
-    ) -> tuple[bytes, list[Any], dict[str, Any]]:
+    def _assemble(self, step: float, errors: tuple[float | None, float] | None) -> bytes:
         q, qparams = self.quantize(step)
-        chunks, cparams = encode_levels(q, coder=DEFAULT_CODER)
+        chunks, cparams = self.code(step)
         if errors is None:
             errors = _errors(self.plan, self.original, self.reconstruct(q, qparams))
         header = self.plan.header()
@@ -352,19 +375,109 @@ class _LossyEncoder:
             psnr=errors[0],
             max_error=errors[1],
         )
-        return write_bundle(header, chunks), q, qparams
+        return write_bundle(header, chunks)
 
     def bundle(self, step: float) -> bytes:
         """The bundle at ``step``, with its measured PSNR and largest error in the header."""
-        return self._assemble(step, None)[0]
+        return self._assemble(step, None)
 
-    def size_bound(self, step: float) -> int:
+    def size_bound(self, step: float) -> float:
         """An upper bound on ``len(self.bundle(step))`` that skips measuring the errors.
 
         The placeholders are floats with the longest JSON form, so the real header can only
         be shorter (by at most a few dozen bytes).
         """
-        return len(self._assemble(step, (_LONGEST_FLOAT, _LONGEST_FLOAT))[0])
+        return float(len(self._assemble(step, (_LONGEST_FLOAT, _LONGEST_FLOAT))))
+
+    def size_estimate(self, step: float) -> float:
+        """A cheap stand-in for :meth:`size_bound`: first-order entropy of every band, in bytes.
+
+        Ten times cheaper than entropy coding; the bpp search uses it to get close first.
+        """
+        q, _ = self.quantize(step)
+        bits = 0.0
+        for entry in q:
+            for band in entry if isinstance(entry, tuple | list) else (entry,):
+                values = np.abs(np.asarray(band, dtype=np.int64)).ravel()
+                if not values.size:
+                    continue
+                # Magnitudes up to 255 by their histogram, larger ones by their bit length.
+                counts = np.bincount(np.minimum(values, 255))
+                counts = counts[counts > 0]
+                bits -= float(np.sum(counts * np.log2(counts / values.size)))
+                large = values[values > 255]
+                bits += float(np.sum(np.log2(large))) * 1.2 if large.size else 0.0
+                bits += float(np.count_nonzero(values))  # signs
+        return bits / 8.0 + _HEADER_GUESS
+
+
+class _Search:
+    """Finds the step whose measured value is as large as allowed (``value <= bound``).
+
+    ``measure(step)`` is a positive value that grows or shrinks with the step roughly like a
+    power law (bundle size ~ step**-1, squared error ~ step**2).  The search keeps the largest
+    value within the bound and the smallest beyond it, interpolates between them in log-log
+    (the secant method, clamped so both brackets move), and before it has both extrapolates
+    with the expected exponent, at most a factor 16 per step.  It stops once a value lies in
+    ``[enough, bound]``.
+    """
+
+    def __init__(
+        self,
+        measure: Callable[[float], float],
+        bound: float,
+        enough: float,
+        slope: float,
+        low: float,
+        high: float,
+    ) -> None:
+        self.measure, self.bound, self.enough = measure, bound, enough
+        self.aim = max(math.sqrt(bound * enough) if enough > 0 else bound, 1e-300)
+        self.slope, self.low, self.high = slope, low, high
+        self.within: tuple[float, float] | None = None  # (step, value) with value <= bound
+        self.beyond: tuple[float, float] | None = None  # (step, value) with value > bound
+        self.last: tuple[float, float] | None = None
+
+    def done(self) -> bool:
+        return self.within is not None and self.within[1] >= self.enough
+
+    def evaluate(self, step: float) -> float:
+        value = max(self.measure(step), 1e-300)
+        self.last = (step, value)
+        if value <= self.bound:
+            if self.within is None or value > self.within[1]:
+                self.within = (step, value)
+        elif self.beyond is None or value < self.beyond[1]:
+            self.beyond = (step, value)
+        return value
+
+    def next_step(self) -> float | None:
+        if self.within is not None and self.beyond is not None:
+            (s0, v0), (s1, v1) = self.within, self.beyond
+            if s0 == s1:
+                return None
+            t = 0.5
+            if v0 != v1:
+                t = (math.log(self.aim) - math.log(v0)) / (math.log(v1) - math.log(v0))
+            t = min(max(t, 0.1), 0.9)
+            step = math.exp(math.log(s0) + t * (math.log(s1) - math.log(s0)))
+            return None if step in (s0, s1) else step
+        assert self.last is not None
+        s, v = self.last
+        exponent = (math.log(self.aim) - math.log(v)) / self.slope
+        step = s * math.exp(min(max(exponent, -math.log(16)), math.log(16)))
+        step = min(max(step, self.low), self.high)
+        return None if step == s else step
+
+    def run(self, start: float, evaluations: int) -> None:
+        step: float | None = start
+        for _ in range(evaluations):
+            if step is None:
+                return
+            self.evaluate(step)
+            if self.done():
+                return
+            step = self.next_step()
 
 
 def _largest_step(ok: Callable[[float], bool], low: float, high: float) -> float:
@@ -399,15 +512,32 @@ def _encode_lossy(
         return _encode_to_tolerance(encoder, tolerance, low, high)
     if bpp is not None:
         return _encode_to_bpp(encoder, bpp, low, high)
-    target = DEFAULT_QUALITY if quality is None else quality
-    if encoder.quality(low)[0] < target:
+    return _encode_to_quality(encoder, DEFAULT_QUALITY if quality is None else quality, low, high)
+
+
+def _encode_to_quality(encoder: _LossyEncoder, target: float, low: float, high: float) -> bytes:
+    """The largest step whose PSNR meets ``target`` (and exceeds it by at most ~0.02 dB)."""
+    peak2 = encoder.plan.peak**2
+
+    def mse(step: float) -> float:
+        psnr = encoder.quality(step)[0]
+        return 0.0 if math.isinf(psnr) else peak2 * 10.0 ** (-psnr / 10.0)
+
+    bound = peak2 * 10.0 ** (-target / 10.0)
+    search = _Search(mse, bound, bound * 10.0 ** (-_QUALITY_SLACK_DB / 10.0), 2.0, low, high)
+    # A uniform quantizer's error is step**2 / 12: the first guess.
+    search.run(min(max(math.sqrt(12.0 * bound), low), high), _QUALITY_EVALUATIONS)
+    if search.within is None or encoder.quality(search.within[0])[0] < target:
         best = encoder.quality(low)[0]
-        msg = (
-            f"quality {target} dB cannot be reached for this data (the finest quantizer gives "
-            f"{best:.2f} dB); ask for less, or use lossless=True for 8/16-bit images"
-        )
-        raise InvalidParameter(msg)
-    step = _largest_step(lambda s: encoder.quality(s)[0] >= target, low, high)
+        if best < target:
+            msg = (
+                f"quality {target} dB cannot be reached for this data (the finest quantizer "
+                f"gives {best:.2f} dB); ask for less, or use lossless=True for 8/16-bit images"
+            )
+            raise InvalidParameter(msg)
+        step = _largest_step(lambda s: encoder.quality(s)[0] >= target, low, high)
+    else:
+        step = search.within[0]
     return encoder.bundle(step)
 
 
@@ -431,58 +561,43 @@ def _encode_to_tolerance(
 def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) -> bytes:
     """The bundle closest below ``bpp`` (whole bundle, header included), within 3 % of it.
 
-    A safeguarded secant search on log(size) against log(step): sizes follow a power law in the
-    step closely, so a handful of encodes usually lands in the window; bisection takes over
-    when the interpolation stalls.
+    First the step is found for the cheap size estimate (first-order entropy), then the real
+    coder is run from there, usually two or three times; if the size jumps between two
+    neighbouring steps, the finer one is trimmed by removing its least important details.
     """
     plan = encoder.plan
     pixels = plan.shape[0] * plan.shape[1]
     budget = math.floor(bpp * pixels / 8.0)
-    # Stop once 99 % of the budget is used (the promise is 97 %); the real header is at most
-    # 2 × 23 bytes shorter than the bound, hence the margin.
-    enough = min(budget, max(math.ceil(0.97 * bpp * pixels / 8.0) + 48, math.ceil(0.99 * budget)))
-    aim = budget - max(1.0, 0.004 * budget)
-    fits = (high, encoder.size_bound(high))
-    if fits[1] > budget:
-        smallest = len(encoder.bundle(high))
-        msg = (
-            f"bpp {bpp} is below what this image can be coded in: the smallest bundle is "
-            f"{smallest} bytes = {8 * smallest / pixels:.4f} bpp (header included)"
-        )
-        raise InvalidParameter(msg)
-    too_big: tuple[float, int] | None = None
-    last = fits
-    for _ in range(_BPP_EVALUATIONS):
-        if fits[1] >= enough:
-            break
-        if too_big is None:
-            # Below the budget with no upper bracket yet: extrapolate (size ~ 1 / step), and at
-            # least halve the step, since small bundles are mostly header and barely move.
-            if last[0] <= low:
-                break
-            step = max(low, last[0] * min(last[1] / aim, 0.5))
-        else:
-            lo_s, hi_s = math.log(too_big[0]), math.log(fits[0])
-            lo_n, hi_n = math.log(too_big[1]), math.log(max(fits[1], 1))
-            t = (lo_n - math.log(aim)) / (lo_n - hi_n) if lo_n != hi_n else 0.5
-            t = min(max(t, 0.1), 0.9)  # keep both brackets moving
-            step = math.exp(lo_s + t * (hi_s - lo_s))
-            if hi_s - lo_s < 1e-12:
-                break
-        if step == last[0]:
-            break  # the brackets met: no step between them gives another size
-        size = encoder.size_bound(step)
-        last = (step, size)
-        if size <= budget:
-            if size > fits[1]:
-                fits = (step, size)
-        elif too_big is None or step > too_big[0]:
-            too_big = (step, size)
-    if fits[1] < enough and too_big is not None:
+    # Stop once 98.5 % of the budget is used (the promise is 97 %; each further 1 % costs an
+    # entropy coding pass); the real header is at most 2 × 23 bytes shorter than the bound.
+    enough = min(budget, max(math.ceil(0.97 * bpp * pixels / 8.0) + 48, math.ceil(0.985 * budget)))
+    if budget < 64:  # not even a header fits: say what the smallest bundle would be
+        enough = budget = 0
+    model = _Search(encoder.size_estimate, budget, 0.98 * budget, -1.0, low, high)
+    model.run(plan.peak / 16.0, _MODEL_EVALUATIONS)
+    start = (model.within or model.last or (high, 0.0))[0]
+    slope = -1.0
+    if model.within is not None and model.beyond is not None and model.within[0] != model.beyond[0]:
+        (s0, v0), (s1, v1) = model.within, model.beyond
+        slope = min(-0.2, (math.log(v1) - math.log(v0)) / (math.log(s1) - math.log(s0)))
+    real = _Search(encoder.size_bound, budget, enough, slope, low, high)
+    real.run(start, _BPP_EVALUATIONS)
+    if real.within is None:
+        real.evaluate(high)
+        if real.within is None:
+            smallest = len(encoder.bundle(high))
+            msg = (
+                f"bpp {bpp} is below what this image can be coded in: the smallest bundle is "
+                f"{smallest} bytes = {8 * smallest / pixels:.4f} bpp (header included)"
+            )
+            raise InvalidParameter(msg)
+        real.run(real.next_step() or high, _BPP_EVALUATIONS)
+    fits = (real.within[0], int(real.within[1])) if real.within is not None else (high, 0)
+    if fits[1] < enough and real.beyond is not None:
         # The size jumps between two neighbouring steps (many coefficients cross a bin edge
         # together, e.g. on pixel-repeated images): take the finer step and drop its least
         # important details, which lowers the size smoothly, until the bundle fits.
-        fits = _fill_by_removal(encoder, too_big[0], fits, budget, enough)
+        fits = _fill_by_removal(encoder, real.beyond[0], fits, budget, enough)
     return encoder.bundle(fits[0])
 
 
@@ -498,7 +613,7 @@ def _fill_by_removal(
         if size <= budget:
             many = removed
             if size > fits[1]:
-                fits, best_removed = (step, size), removed
+                fits, best_removed = (step, int(size)), removed
             if size >= enough:
                 break
         else:
