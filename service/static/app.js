@@ -224,7 +224,10 @@
     clearInterval(progressTimer);
     progressTimer = setInterval(() => {
       const seconds = (performance.now() - started) / 1000;
-      if (seconds > 1) $("progress-text").dataset.elapsed = `${seconds.toFixed(0)} s`;
+      const text = $("progress-text");
+      if (seconds >= 2 && text.textContent.startsWith("Compressing")) {
+        text.textContent = `Compressing… ${seconds.toFixed(0)} s`;
+      }
     }, 500);
     return {
       upload(fraction) {
@@ -1176,6 +1179,7 @@
 
   const reconSoon = debounce(updateRecon, 120);
   const coarseSoon = debounce(updateCoarse, 120);
+  const transferSoon = debounce(transfer, 120);
   $("keep-slider").addEventListener("input", () => {
     $("keep-out").textContent = formatKeep(sliderToKeep($("keep-slider").value));
     reconSoon();
@@ -1183,7 +1187,7 @@
   $("level-slider").addEventListener("input", () => {
     $("level-out").textContent = $("level-slider").value;
     coarseSoon();
-    if (state.base.length >= 2) transfer(state.base);
+    if (state.base.length >= 2) transferSoon(state.base);
   });
   $("compare-run").addEventListener("click", runCompare);
 
