@@ -153,3 +153,24 @@ def test_threaded_fused_level_matches_per_axis_steps(
     rebuilt = wavecore.waverec2(coeffs, axes=axes)
     assert rebuilt.dtype == dtype
     np.testing.assert_allclose(rebuilt, image, atol=10 * tol)
+
+
+@pytest.mark.parametrize("boundary", ["open", "closed", ("closed", "open")])
+@pytest.mark.parametrize("trailing", [(), (3,)])
+def test_images_take_the_fused_pass(
+    boundary: str | tuple[str, str], trailing: tuple[int, ...], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The one-pass 2-D level is what makes images fast; the per-axis steps must not be used.
+    # 18 closed (9 coarse rows) wraps onto ring slots that a ring of 8 would share.
+    def per_axis_step(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the per-axis path was taken")
+
+    image = np.random.default_rng(3).standard_normal((18, 34, *trailing))
+    b0, b1 = (boundary, boundary) if isinstance(boundary, str) else boundary
+    low = wavecore.analysis_step(image, boundary=b0, axis=0)[0]
+    expected = wavecore.analysis_step(low, boundary=b1, axis=1)[0]
+    monkeypatch.setattr(wavecore.multilevel, "analysis_step", per_axis_step)
+    monkeypatch.setattr(wavecore.multilevel, "synthesis_step", per_axis_step)
+    coeffs = wavecore.wavedec2(image, boundary=boundary, level=1)
+    np.testing.assert_allclose(coeffs[0], expected, atol=1e-13)
+    np.testing.assert_allclose(wavecore.waverec2(coeffs, boundary=boundary), image, atol=1e-12)

@@ -231,15 +231,16 @@ def analysis_2d(x, a0, b0, a1, b1, aa, ad, da, dd, inner, outer_lo, outer_hi, ro
                                 out[j * inner + ch] = dest[j]
 
 
-_RING = 16  # rows of axis-1 syntheses kept per band; a miss only costs a recomputation
-
-
 @njit(nogil=True, cache=True)
-def synthesis_2d(aa, ad, da, dd, p0, q0, p1, q1, f, inner, outer_lo, outer_hi, row_lo, row_hi):
+def synthesis_2d(
+    aa, ad, da, dd, p0, q0, p1, q1, f, inner, ring_rows, outer_lo, outer_hi, row_lo, row_hi
+):
+    # ``ring_rows``: axis-1 syntheses kept per band, chosen by the caller so that the taps of
+    # one row never share a slot; a slot that holds another row only costs a recomputation.
     width = f.shape[2]
     n1 = width // inner
-    rings = np.empty((2, _RING, width), dtype=f.dtype)
-    tags = np.empty((2, _RING), dtype=np.intp)
+    rings = np.empty((2, ring_rows, width), dtype=f.dtype)
+    tags = np.empty((2, ring_rows), dtype=np.intp)
     chan_c = np.empty(aa.shape[2] // inner, dtype=f.dtype)
     chan_d = np.empty(ad.shape[2] // inner, dtype=f.dtype)
     f_buf = np.empty(n1, dtype=f.dtype)
@@ -256,7 +257,7 @@ def synthesis_2d(aa, ad, da, dd, p0, q0, p1, q1, f, inner, outer_lo, outer_hi, r
                 n = 0
                 for k in range(ptr[r], ptr[r + 1]):
                     i = idx[k]
-                    slot = i % _RING
+                    slot = i % ring_rows
                     if tags[half, slot] != i:
                         ring = rings[half, slot]
                         for ch in range(inner):

@@ -164,21 +164,10 @@ def _kernel_args(
 
 def _forget_cached_matrices() -> None:
     _kernel_args.cache_clear()
-    _fused_ok.cache_clear()
+    _synthesis_ring.cache_clear()
 
 
 filters.CACHE_CLEARERS.append(_forget_cached_matrices)
-
-
-def _max_span(matrix: Sparse) -> tuple[int, int]:
-    """The most taps in a row, and the widest column span of a row."""
-    counts = np.diff(matrix.indptr)
-    spans = [
-        int(matrix.indices[hi - 1] - matrix.indices[lo]) + 1
-        for lo, hi in itertools.pairwise(matrix.indptr)
-        if hi > lo
-    ]
-    return int(counts.max(initial=0)), max(spans, default=0)
 
 
 def analysis_step(
@@ -343,13 +332,26 @@ def fused_level_fits(shape: tuple[int, ...], axes: list[int], dtype: np.dtype[An
     )
 
 
+def _ring_fits(matrix: Sparse, ring: int) -> bool:
+    """Whether every row's taps land in distinct slots of a ring buffer of ``ring`` rows.
+
+    Periodic rows that wrap around (``c[n-1]`` and ``c[0]``) are fine unless two of their
+    indices are equal modulo the ring size; at most 32 taps per row are allowed.
+    """
+    counts = np.diff(matrix.indptr)
+    rows = np.repeat(np.arange(len(counts)), counts)
+    keys = rows * ring + matrix.indices % ring
+    return int(counts.max(initial=0)) <= 32 and len(np.unique(keys)) == len(keys)
+
+
 @lru_cache(maxsize=256)
-def _fused_ok(bank_name: str, boundary: str, m: int, synthesis: bool) -> bool:
-    """Whether the axis-0 rows of a fused level fit the kernels' tap and ring-buffer sizes."""
-    sparse = step_sparse(bank_name, boundary, m)
-    taps, span = _max_span(sparse[2] if synthesis else sparse[0])
-    taps_q, span_q = _max_span(sparse[3] if synthesis else sparse[1])
-    return max(taps, taps_q) <= 32 and max(span, span_q) < _kernels._RING
+def _synthesis_ring(bank_name: str, boundary: str, m: int) -> int:
+    """Rows of axis-1 syntheses the fused kernel keeps per band (0: it cannot run fused)."""
+    _, _, P, Q = step_sparse(bank_name, boundary, m)
+    for ring in range(8, 33):
+        if _ring_fits(P, ring) and _ring_fits(Q, ring):
+            return ring
+    return 0
 
 
 def _split_shape(shape: tuple[int, ...], axis: int) -> tuple[int, int, int, int]:
@@ -370,8 +372,6 @@ def analysis_2d(
     if not fused_level_fits(arr.shape, [axis, axis + 1], arr.dtype):
         return None
     outer, m0, m1, inner = _split_shape(arr.shape, axis)
-    if not _fused_ok(bank.name, boundaries[0], m0, synthesis=False):
-        return None
     rule0, rule1 = bank.rule(boundaries[0]), bank.rule(boundaries[1])
     mats0 = _kernel_args(bank.name, boundaries[0], m0, arr.dtype)
     mats1 = _kernel_args(bank.name, boundaries[1], m1, arr.dtype)
@@ -418,7 +418,8 @@ def synthesis_2d(
         and rule.detail_length(m) == s
         for rule, m, r, s in ((rule0, m0, r0, s0), (rule1, m1, r1, s1))
     )
-    if not fits or not _fused_ok(bank.name, boundaries[0], m0, synthesis=True):
+    ring = _synthesis_ring(bank.name, boundaries[0], m0) if fits else 0
+    if not ring:
         return None
     mats0 = _kernel_args(bank.name, boundaries[0], m0, dtype)
     mats1 = _kernel_args(bank.name, boundaries[1], m1, dtype)
@@ -427,6 +428,6 @@ def synthesis_2d(
         for band in (aa, ad, da, dd)
     ]
     f = np.empty((outer, m0, m1 * inner), dtype=dtype)
-    args = (*views, mats0["P"], mats0["Q"], mats1["P+"], mats1["Q+"], f, inner)
+    args = (*views, mats0["P"], mats0["Q"], mats1["P+"], mats1["Q+"], f, inner, ring)
     _run_blocks(_kernels.synthesis_2d, args, outer, m0, f.size, rows_even=True)
     return f.reshape((*lead, m0, m1, *trail))
