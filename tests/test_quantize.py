@@ -121,10 +121,12 @@ def test_bad_arguments() -> None:
     n=st.sampled_from([16, 32, 64]),
 )
 def test_curve_round_trip_error_is_bounded(seed: int, step: float, n: int) -> None:
-    """Every coefficient comes back within one band step (dead zone plus offset)."""
+    """Open loop, every coefficient comes back within one band step (dead zone plus offset)."""
     points = np.random.default_rng(seed).normal(0, 10, (n, 2))
     coeffs = wavedec(points, "bspline2", "closed", 2)
-    q, params = quantize_bands(coeffs, step, wavelet="bspline2", boundary="closed", axes=(0,))
+    q, params = quantize_bands(
+        coeffs, step, wavelet="bspline2", boundary="closed", axes=(0,), refine=0
+    )
     back = dequantize_bands(q, params, wavelet="bspline2", boundary="closed", axes=(0,))
     for index, (c, b) in enumerate(zip(coeffs, back, strict=True)):
         band_step = params["step"] * params["weights"][index][0]
@@ -154,3 +156,48 @@ def test_offset_lowers_error_on_laplacian_details() -> None:
     middle[q[1][2] == 0] = 0
     fitted_error = np.mean((back[1][2] - big[1][2]) ** 2)
     assert fitted_error < np.mean((middle - big[1][2]) ** 2)
+
+
+@pytest.mark.parametrize(
+    ("wavelet", "boundary", "shape"),
+    [
+        ("bspline2", "open", (66, 98)),
+        ("bspline2", "closed", (64, 32, 3)),
+        ("haar", "open", (64, 64)),
+    ],
+)
+def test_closed_loop_lowers_the_reconstruction_error(
+    wavelet: str, boundary: str, shape: tuple[int, ...]
+) -> None:
+    """Refinement keeps the dead zone's zeros and fits the rest to the image: less error."""
+    image = _image(5, shape)
+    coeffs = wavedec2(image, wavelet, boundary, 3)
+    errors, nonzeros = [], []
+    for refine in (0, 6):
+        q, params = quantize_bands(coeffs, 6.0, wavelet=wavelet, boundary=boundary, refine=refine)
+        back = waverec2(
+            dequantize_bands(q, params, wavelet=wavelet, boundary=boundary), wavelet, boundary
+        )
+        errors.append(float(np.mean((back - image) ** 2)))
+        nonzeros.append(sum(int(np.count_nonzero(b)) for e in q[1:] for b in e))
+    assert errors[1] < errors[0]
+    assert nonzeros[1] <= nonzeros[0]
+
+
+def test_closed_loop_curve_layout() -> None:
+    points = np.cumsum(np.random.default_rng(6).normal(0, 1, (66, 2)), axis=0)
+    coeffs = wavedec(points, "bspline2", "open", 3)
+    errors = []
+    for refine in (0, 8):
+        q, params = quantize_bands(
+            coeffs, 2.0, wavelet="bspline2", boundary="open", axes=(0,), refine=refine
+        )
+        back = waverec(dequantize_bands(q, params, wavelet="bspline2", boundary="open", axes=(0,)))
+        errors.append(float(np.mean((back - points) ** 2)))
+    assert errors[1] < errors[0]
+
+
+def test_refine_argument_is_checked() -> None:
+    coeffs = wavedec2(_image(shape=(64, 32)), "haar", "open", 1)
+    with pytest.raises(InvalidParameter, match="refine"):
+        quantize_bands(coeffs, 1.0, wavelet="haar", boundary="open", refine=-1)

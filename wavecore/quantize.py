@@ -25,12 +25,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
-from .errors import InvalidCoefficients, InvalidParameter
+from . import _kernels
+from .errors import InvalidCoefficients, InvalidLength, InvalidParameter
+from .filters import get_wavelet, step_sparse
+from .multilevel import waverec, waverec2
 from .norms import basis_norms
+from .transform import _run_blocks, _view3
 
 __all__ = ["dequantize_bands", "quantize_bands", "reconstruction_offset"]
 
@@ -42,6 +47,11 @@ APPROX_ROUNDING = 0.5
 #: Largest magnitude of a quantized integer (int32 with room for arithmetic in the coder).
 MAX_INDEX = 2**30
 QUANTIZER_NAME = "deadzone"
+#: Closed-loop iterations by default: the gain levels off after about six (see ``refine``).
+REFINE_ITERATIONS = 6
+#: Above this many coefficients the default is no refinement (a 1024 × 1024 grey image, or
+#: 590 × 590 RGB, is about the limit), to keep large encodes fast.
+REFINE_MAX_COEFFICIENTS = 1 << 20
 
 
 def _layout(coeffs: Sequence[Any]) -> list[list[np.ndarray]]:
@@ -123,8 +133,9 @@ def quantize_bands(
     boundary: str | Sequence[str],
     axes: Sequence[int] = (0, 1),
     rounding: float = DEFAULT_ROUNDING,
+    refine: int | None = None,
 ) -> tuple[list[Any], dict[str, Any]]:
-    """Quantize a decomposition to integers, band by band.
+    """Quantize a decomposition to integers, band by band, in closed loop.
 
     Parameters
     ----------
@@ -141,6 +152,17 @@ def quantize_bands(
     rounding : float
         Dead-zone parameter in ``(0, 0.5]``: a detail becomes nonzero from
         ``(1 - rounding) · step_b`` on.
+    refine : int, optional
+        Iterations of the closed-loop refinement (0 turns it off; ``None``, the default, runs
+        ``REFINE_ITERATIONS`` for decompositions of up to ``REFINE_MAX_COEFFICIENTS``
+        coefficients and none beyond, where its cost, a synthesis and its adjoint per
+        iteration, would dominate the encoder): with the dead zone's choice
+        of which details stay nonzero fixed, the kept coefficients are re-fitted by least
+        squares to the *reconstruction* (preconditioned conjugate gradients with the exact
+        adjoint of the synthesis) and quantized again.  The analysis coefficients of a
+        non-orthogonal transform are the best ones only when nothing is dropped; once the dead
+        zone drops details, the least-squares fit of the rest is better (about +1 dB for
+        ``bspline2`` at the same rate; ``cdf97`` is nearly orthogonal and gains little).
 
     Returns
     -------
@@ -188,6 +210,14 @@ def quantize_bands(
         "weights": weights,
         "rounding": float(rounding),
     }
+    if refine is None:
+        total = sum(band.size for level in levels for band in level)
+        refine = REFINE_ITERATIONS if total <= REFINE_MAX_COEFFICIENTS else 0
+    if isinstance(refine, bool) or not isinstance(refine, int | np.integer) or refine < 0:
+        msg = f"refine must be a number of iterations >= 0, not {refine!r}"
+        raise InvalidParameter(msg)
+    if refine and len(levels) > 1:
+        out_levels = _refine(coeffs, levels, out_levels, params, wavelet, boundary, axes, refine)
     return _unlayout(coeffs, out_levels), params
 
 
@@ -296,3 +326,146 @@ def reconstruction_offset(q: np.ndarray, rounding: float) -> float:
     theta = min(max(more / (ones + more), 0.02), 0.98)
     a = -math.log(theta)
     return 1.0 / a - theta / (1.0 - theta) - rounding
+
+
+# --------------------------------------------------------------------------------------------
+# Closed loop: least squares on the kept coefficients, with the adjoint of the synthesis
+# --------------------------------------------------------------------------------------------
+
+
+@lru_cache(maxsize=128)
+def _transposed(bank_name: str, boundary: str, m: int) -> tuple[tuple[np.ndarray, ...], ...]:
+    """``P.T`` and ``Q.T`` of one step of fine length ``m``, in compressed-row form (cached)."""
+    _, _, P, Q = step_sparse(bank_name, boundary, m)
+    out = []
+    for matrix in (P, Q):
+        rows = np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))
+        order = np.argsort(matrix.indices, kind="stable")
+        indptr = np.zeros(matrix.shape[1] + 1, dtype=np.intp)
+        np.add.at(indptr, matrix.indices + 1, 1)
+        out.append(
+            (np.cumsum(indptr), rows[order].astype(np.intp), matrix.weights[order].astype(float))
+        )
+    return out[0], out[1]
+
+
+def _adjoint_step(
+    data: np.ndarray, bank_name: str, boundary: str, axis: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(P.T @ data, Q.T @ data)`` along ``axis``, with the transform's compiled kernel."""
+    p_t, q_t = _transposed(bank_name, boundary, data.shape[axis])
+    arr = np.ascontiguousarray(data, dtype=np.float64)
+    x = _view3(arr, axis)
+    r, s = len(p_t[0]) - 1, len(q_t[0]) - 1
+    coarse = np.empty((x.shape[0], r, x.shape[2]))
+    detail = np.empty((x.shape[0], s, x.shape[2]))
+    args = (x, *p_t, *q_t, coarse, detail)
+    _run_blocks(_kernels.analysis3, args, x.shape[0], max(r, s), x.size)
+    shape_c = arr.shape[:axis] + (r,) + arr.shape[axis + 1 :]
+    shape_d = arr.shape[:axis] + (s,) + arr.shape[axis + 1 :]
+    return coarse.reshape(shape_c), detail.reshape(shape_d)
+
+
+def _adjoint(
+    residual: np.ndarray, bank_name: str, bounds: list[str], axes: tuple[int, ...], count: int
+) -> list[list[np.ndarray]]:
+    """``S.T @ residual`` for the synthesis ``S`` of ``count`` levels, in ``levels`` layout."""
+    details: list[list[np.ndarray]] = []
+    coarse = residual
+    for _ in range(count):
+        if len(axes) == 1:
+            coarse, high = _adjoint_step(coarse, bank_name, bounds[0], axes[0])
+            details.append([high])
+            continue
+        (a0, a1), (b0, b1) = axes, bounds
+        low, high = _adjoint_step(coarse, bank_name, b0, a0)
+        cH, cD = _adjoint_step(high, bank_name, b1, a1)
+        coarse, cV = _adjoint_step(low, bank_name, b1, a1)
+        details.append([cH, cV, cD])
+    return [[coarse], *reversed(details)]
+
+
+def _synthesis(
+    levels: list[list[np.ndarray]], wavelet: str, bounds: list[str], axes: tuple[int, ...]
+) -> np.ndarray:
+    if len(axes) == 1:
+        return waverec([lv[0] for lv in levels], wavelet, bounds[0], axis=axes[0])
+    return waverec2([levels[0][0], *(tuple(lv) for lv in levels[1:])], wavelet, bounds, axes)
+
+
+def _refine(
+    template: Sequence[Any],
+    levels: list[list[np.ndarray]],
+    q_levels: list[list[np.ndarray]],
+    params: dict[str, Any],
+    wavelet: str,
+    boundary: str | Sequence[str],
+    axes: tuple[int, ...],
+    iterations: int,
+) -> list[list[np.ndarray]]:
+    """Least-squares re-fit of the kept coefficients to the reconstruction, then re-quantize."""
+    bank = get_wavelet(wavelet)
+    bounds = [boundary] * len(axes) if isinstance(boundary, str) else list(boundary)
+    if len(axes) not in (1, 2) or any(a != i for i, a in enumerate(axes)):
+        return q_levels  # only the leading-axes layouts of wavedec and wavedec2
+    try:
+        target = _synthesis(levels, bank.name, bounds, axes)
+        _adjoint(np.zeros_like(target), bank.name, bounds, axes, len(levels) - 1)
+    except (InvalidLength, InvalidParameter, ValueError):
+        return q_levels  # a size the adjoint tables do not cover: keep the open-loop result
+    flat_q = [band for level in q_levels for band in level]
+    shape_of = [len(level) for level in q_levels]
+    steps = [params["step"] * w for level in params["weights"] for w in level]
+    deq = dequantize_bands(
+        _unlayout(template, q_levels), params, wavelet=wavelet, boundary=boundary, axes=axes
+    )
+    flat_c = [np.asarray(band, dtype=np.float64) for level in _layout(deq) for band in level]
+    keep = [np.ones(flat_q[0].shape, dtype=bool)] + [band != 0 for band in flat_q[1:]]
+    precondition = [(s / params["step"]) ** 2 for s in steps]  # 1 / norm² of each band
+
+    def nest(flat: list[np.ndarray]) -> list[list[np.ndarray]]:
+        out, start = [], 0
+        for size in shape_of:
+            out.append(flat[start : start + size])
+            start += size
+        return out
+
+    def normal(direction: list[np.ndarray]) -> list[np.ndarray]:
+        image = _synthesis(nest(direction), bank.name, bounds, axes)
+        back = _adjoint(image, bank.name, bounds, axes, len(levels) - 1)
+        return [k * b for k, b in zip(keep, [b for lv in back for b in lv], strict=True)]
+
+    def dot(a: list[np.ndarray], b: list[np.ndarray]) -> float:
+        return float(sum(float((u * v).sum()) for u, v in zip(a, b, strict=True)))
+
+    coefficients = [c * k for c, k in zip(flat_c, keep, strict=True)]
+    current = _synthesis(nest(coefficients), bank.name, bounds, axes)
+    gradient = _adjoint(target - current, bank.name, bounds, axes, len(levels) - 1)
+    residual = [k * g for k, g in zip(keep, [b for lv in gradient for b in lv], strict=True)]
+    scaled = [r * w for r, w in zip(residual, precondition, strict=True)]
+    direction = [s.copy() for s in scaled]
+    rz = dot(residual, scaled)
+    for _ in range(iterations):
+        if rz <= 0:
+            break
+        product = normal(direction)
+        curvature = dot(direction, product)
+        if curvature <= 0:
+            break
+        alpha = rz / curvature
+        coefficients = [c + alpha * d for c, d in zip(coefficients, direction, strict=True)]
+        residual = [r - alpha * p for r, p in zip(residual, product, strict=True)]
+        scaled = [r * w for r, w in zip(residual, precondition, strict=True)]
+        rz_next = dot(residual, scaled)
+        direction = [s + (rz_next / rz) * d for s, d in zip(scaled, direction, strict=True)]
+        rz = rz_next
+    rounding = float(params["rounding"])
+    refined = []
+    for index, (value, step, q, k) in enumerate(
+        zip(coefficients, steps, flat_q, keep, strict=True)
+    ):
+        offset = 0.0 if index == 0 else reconstruction_offset(q, rounding)
+        magnitude = np.maximum(np.round(np.abs(value) / step - offset), 0.0)
+        np.minimum(magnitude, MAX_INDEX, out=magnitude)
+        refined.append(np.where(k, np.copysign(magnitude, value), 0.0).astype(np.int32))
+    return nest(refined)
