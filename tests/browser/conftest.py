@@ -89,9 +89,13 @@ def small_limit_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str
             proc.wait()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser_context(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
-    """One Chromium with a fresh profile for the whole session."""
+    """One Chromium with a fresh profile per test module.
+
+    Not per session: Playwright's sync API keeps an event loop running in this thread while it
+    is open, and the async tests collected after these ones need the thread's loop free.
+    """
     _require_chromium()
     from playwright.sync_api import sync_playwright
 
@@ -128,7 +132,7 @@ def open_tab(browser_context: Any) -> Iterator[Callable[[str], Any]]:
     def open_(base: str) -> Any:
         tab = browser_context.new_page()
         tab.set_viewport_size({"width": 1280, "height": 900})
-        tab.set_default_timeout(30_000)
+        tab.set_default_timeout(60_000)  # the machine may be busy
         problems: list[str] = []
         tab.on("pageerror", lambda exc: problems.append(f"script error: {exc}"))
         tab.on(
