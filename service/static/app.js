@@ -497,10 +497,20 @@
 
   // ---------------------------------------------------------------- encode
 
+  // Deeper than 8 levels only pads a picture out to a huge size (2^levels × 3 pixels a side).
+  const MAX_LEVELS = 8;
+
   async function encode() {
     clearErrors(...ENCODE_ERRORS);
     if (state.mode === "bundle") return;
     const settings = readSettings();
+    if (settings.level !== undefined) {
+      const level = Number(settings.level);
+      if (!Number.isInteger(level) || level < 1 || level > MAX_LEVELS) {
+        showError("level-error", `Levels must be a whole number from 1 to ${MAX_LEVELS} (or empty for automatic), not “${settings.level}”.`);
+        return;
+      }
+    }
     if (state.mode === "image") {
       if (!state.source || !(state.source instanceof Blob)) {
         showError("image-file-error", "Choose an image first (or use the sample).");

@@ -369,3 +369,15 @@ def test_drop_an_image_on_the_drop_zone(page: Any):
     wait_for_bundle(page, 1)
     assert "dropped.png" in page.inner_text("#image-name")
     assert page.get_attribute("#download", "download") == "dropped-bspline2.wcb"
+
+
+def test_levels_out_of_range_are_caught_before_any_upload(page: Any, astronaut_png: Path):
+    uploads: list[str] = []
+    page.on("request", lambda r: uploads.append(r.url) if "/encode" in r.url else None)
+    page.fill("#level", "40")
+    page.set_input_files("#image-file", str(astronaut_png))
+    error = page.locator("#level-error")
+    error.wait_for(state="visible")
+    assert "40" in error.inner_text()
+    assert page.get_attribute("#level", "aria-invalid") == "true"
+    assert uploads == []
