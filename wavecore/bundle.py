@@ -58,7 +58,7 @@ version may add some.
 ``wavelet``     ``"bspline2"``, ``"haar"``, ``"cdf97"`` … or ``"reversible"`` (the integer
                 lifting of the lossless path, see :mod:`wavecore.lossless`)
 ``lifting``     only with ``"reversible"``: the integer filter of each level, finest first,
-                ``"legall53"`` or ``"haar"``
+                ``"legall53"``, ``"haar"`` or ``"bspline2"`` (closed, even sizes only)
 ``boundary``    one of ``"open"`` (the paper's endpoint-interpolating rows), ``"closed"``
                 (periodic) or ``"symmetric"`` (mirror extension: ``legall53``, ``cdf97``) per
                 transformed axis

@@ -725,7 +725,20 @@ def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
         level = min(
             _default_level(arr.shape[:2], _MAX_IMAGE_LEVELS), min(arr.shape[:2]).bit_length() - 1
         )
-    lifting = _lossless.choose_filters(data, level, (0, 1))
+    # First-order entropy only guides the choice of filters (the context coder ranks them
+    # differently), so code the choice with and without the closed bspline2 and keep the smaller.
+    choices = []
+    for candidates in (("legall53", "haar"), _lossless.FILTERS):
+        lifting = _lossless.choose_filters(data, level, (0, 1), candidates)
+        if lifting not in choices:
+            choices.append(lifting)
+    bundles = [_lossless_bundle(arr, data, dtype, colour, level, lifting) for lifting in choices]
+    return min(bundles, key=len)
+
+
+def _lossless_bundle(
+    arr: np.ndarray, data: np.ndarray, dtype: str, colour: str, level: int, lifting: list[str]
+) -> bytes:
     plan = _Plan(
         "image",
         arr.shape,
@@ -750,8 +763,7 @@ def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
         psnr=None,
         max_error=0.0,
     )
-    bundle = write_bundle(header, chunks)
-    return bundle
+    return write_bundle(header, chunks)
 
 
 def encode_curve(
@@ -936,6 +948,14 @@ def _plan_from_header(header: dict[str, Any]) -> _Plan:
                 f"({levels}), not {str(lifting)[:80]}"
             )
             raise BundleError(msg)
+        sizes = list(fitted[:2])
+        for index, name in enumerate(lifting):
+            if name == "bspline2" and any(n % 2 for n in sizes):
+                msg = (
+                    f"header field 'lifting': level {index + 1} has odd sizes {sizes} for bspline2"
+                )
+                raise BundleError(msg)
+            sizes = [(n + 1) // 2 for n in sizes]
     else:
         try:
             bank = get_wavelet(wavelet)

@@ -1,4 +1,4 @@
-"""The reversible integer transform of ``encode_image(..., lossless=True)``: LeGall 5/3 lifting.
+"""The reversible integer transforms of ``encode_image(..., lossless=True)``: LeGall 5/3 and others.
 
 Lossless coding needs a transform that maps integers to integers and back bit-exactly on any
 machine, so the decoder must not depend on float rounding.  This module implements the
@@ -10,13 +10,20 @@ symmetric extension at both ends:
     d[i] = x[2i+1] - floor((x[2i] + x[2i+2]) / 2)          (predict)
     s[i] = x[2i]   + floor((d[i-1] + d[i] + 2) / 4)         (update)
 
-Why not an integer form of the paper's ``bspline2`` filters: the interior of ``bspline2`` has a
-polyphase determinant of ±1, so an integer lifting factorisation exists for periodic data, but the
-paper's endpoint-interpolating start and end rows (eqs. 4–19) are not a restriction of that
-factorisation; they would need their own boundary lifting steps, derived and proved reversible
-separately.  The 5/3 lifting is the standard reversible wavelet, accepts every length (``n``
-samples split into ``ceil(n/2)`` coarse and ``floor(n/2)`` details), so a lossless image needs no
-padding, and its low-pass has unit DC gain, so the coarse band is a viewable thumbnail for
+Why not an integer form of the paper's open ``bspline2`` filters: it does not exist.  The
+analysis matrix ``[A; B]`` of the open (endpoint-interpolating) boundary has determinant ±2 at
+every size (checked for m = 8 … 34; each of the ``K - 1`` interior sample pairs contributes ½,
+each of the ``K`` sum/difference butterflies 2, and the end pairs 1), and a bijection of the
+integers that approximates a linear map within a bounded error must preserve volume, so it would
+need determinant ±1.  An integer form would have to rescale a coefficient of every level, which
+is no longer the paper's transform.  The closed (periodic) ``bspline2`` has determinant ±1, and
+this module does implement its exact integer lifting (below, ``"bspline2"``), but periodic
+wrapping suits images poorly: on camera, coins and brick it codes 1–4 % larger than 5/3.  It is
+offered per level all the same and wins where it wins.
+
+The 5/3 lifting is the standard reversible wavelet, accepts every length (``n`` samples split
+into ``ceil(n/2)`` coarse and ``floor(n/2)`` details), so a lossless image needs no padding, and
+its low-pass has unit DC gain, so the coarse band is a viewable thumbnail for
 ``decode(..., level=k)``.
 
 A second reversible filter, the integer Haar (S-transform: ``d = x[2i+1] - x[2i]``,
@@ -25,6 +32,22 @@ details in fewer bits: on images that were enlarged by pixel repetition (scikit-
 is a 2× nearest-neighbour enlargement) its details are exactly zero, where 5/3's are not.  The
 choice is made per level by :func:`choose_filters` (first-order entropy of the level's details)
 and recorded in the bundle header.
+
+The integer closed ``bspline2`` (even lengths only), with pairs ``E[i] = x[2i]``,
+``O[i] = x[2i+1]`` and indices taken modulo ``n / 2``, is five lifting steps:
+
+.. code-block:: text
+
+    t[i] = E[i] - O[i]
+    s[i] = O[i] + floor(t[i] / 2)                 (so s = floor((E + O) / 2))
+    e[i] = t[i] - s[i]
+    c[i] = s[i] + floor((e[i] - e[i-1]) / 2)
+    d[i] = c[i] + e[i-1]
+
+Without the floors this is exactly the paper's closed ``A`` and ``B`` (``NOTES.md``):
+``c[i] = -1/4 x[2i-2] + 3/4 x[2i-1] + 3/4 x[2i] - 1/4 x[2i+1]`` and
+``d[i] = 1/4 x[2i-2] - 3/4 x[2i-1] + 3/4 x[2i] - 1/4 x[2i+1]``; with them, ``c`` and ``d`` stay
+within 1 of the real transform.
 
 Only integer arithmetic in ``int64`` is used (floor division by shifts), so the result is the same
 everywhere.
@@ -42,7 +65,7 @@ from .errors import InvalidParameter
 __all__ = ["FILTERS", "band_shapes", "choose_filters", "forward", "inverse", "lift", "unlift"]
 
 #: The reversible filters, by the names the bundle header uses.
-FILTERS = ("legall53", "haar")
+FILTERS = ("legall53", "haar", "bspline2")
 
 
 def _neighbours(s: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -57,8 +80,9 @@ def _neighbours(s: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
 def lift(x: np.ndarray, axis: int = 0, filter: str = "legall53") -> tuple[np.ndarray, np.ndarray]:
     """One analysis step along ``axis``: ``(coarse, detail)`` as ``int64``.
 
-    ``n`` samples give ``ceil(n / 2)`` coarse samples and ``floor(n / 2)`` details for both
-    filters (Haar passes an unpaired last sample to the coarse band unchanged).
+    ``n`` samples give ``ceil(n / 2)`` coarse samples and ``floor(n / 2)`` details (Haar passes
+    an unpaired last sample to the coarse band unchanged; the closed ``bspline2`` needs an even
+    ``n``).
 
     Examples
     --------
@@ -68,6 +92,9 @@ def lift(x: np.ndarray, axis: int = 0, filter: str = "legall53") -> tuple[np.nda
     ([10, 14, 18], [0, 0])
     """
     data = np.moveaxis(np.asarray(x, dtype=np.int64), axis, 0)
+    if filter == "bspline2":
+        c, d = _bspline2_lift(data)
+        return np.moveaxis(c, 0, axis), np.moveaxis(d, 0, axis)
     if data.shape[0] < 2:
         return np.moveaxis(data.copy(), 0, axis), np.moveaxis(data[:0].copy(), 0, axis)
     s = data[0::2].copy()
@@ -83,12 +110,45 @@ def lift(x: np.ndarray, axis: int = 0, filter: str = "legall53") -> tuple[np.nda
     return np.moveaxis(s, 0, axis), np.moveaxis(d, 0, axis)
 
 
+def _check_even(n: int) -> None:
+    if n % 2 or n == 0:
+        msg = f"the integer closed bspline2 lifting needs an even length, not {n}"
+        raise InvalidParameter(msg)
+
+
+def _bspline2_lift(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    _check_even(data.shape[0])
+    t = data[0::2] - data[1::2]
+    s = data[1::2] + (t >> 1)
+    e = t - s
+    e_before = np.roll(e, 1, axis=0)
+    c = s + ((e - e_before) >> 1)
+    return c, c + e_before
+
+
+def _bspline2_unlift(c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    if c.shape != d.shape:
+        msg = f"closed bspline2 bands must have equal shapes, not {c.shape} and {d.shape}"
+        raise InvalidParameter(msg)
+    e_before = d - c
+    e = np.roll(e_before, -1, axis=0)
+    s = c - ((e - e_before) >> 1)
+    t = e + s
+    odd = s - (t >> 1)
+    out = np.empty((2 * len(c), *c.shape[1:]), dtype=np.int64)
+    out[0::2] = t + odd
+    out[1::2] = odd
+    return out
+
+
 def unlift(
     coarse: np.ndarray, detail: np.ndarray, axis: int = 0, filter: str = "legall53"
 ) -> np.ndarray:
     """The exact inverse of :func:`lift`."""
     s = np.moveaxis(np.asarray(coarse, dtype=np.int64), axis, 0).copy()
     d = np.moveaxis(np.asarray(detail, dtype=np.int64), axis, 0).copy()
+    if filter == "bspline2":
+        return np.moveaxis(_bspline2_unlift(s, d), 0, axis)
     if d.shape[0] == 0:
         return np.moveaxis(s, 0, axis)
     if filter == "haar":
@@ -159,8 +219,17 @@ def _level_step(coarse: np.ndarray, axes: tuple[int, ...], name: str) -> tuple[n
     return ll, (hl, lh, hh)
 
 
-def choose_filters(data: np.ndarray, level: int, axes: Sequence[int] = (0, 1)) -> list[str]:
-    """Per level (finest first), the filter whose details have the lower first-order entropy.
+def choose_filters(
+    data: np.ndarray,
+    level: int,
+    axes: Sequence[int] = (0, 1),
+    candidates: Sequence[str] = FILTERS,
+) -> list[str]:
+    """Per level (finest first), the candidate whose details have the lowest first-order entropy.
+
+    First-order entropy is only a guide: a context coder may rank the filters differently
+    (it does for ``bspline2`` against 5/3), so the codec codes more than one choice and keeps
+    the smaller bundle.
 
     Examples
     --------
@@ -174,7 +243,9 @@ def choose_filters(data: np.ndarray, level: int, axes: Sequence[int] = (0, 1)) -
     chosen: list[str] = []
     for _ in range(level):
         best: tuple[float, str, np.ndarray] | None = None
-        for name in FILTERS:
+        for name in candidates:
+            if name == "bspline2" and any(coarse.shape[a] % 2 for a in axes):
+                continue  # periodic pairs need even lengths
             low, bands = _level_step(coarse, axes, name)
             bits = _entropy_bits(bands if isinstance(bands, tuple) else (bands,))
             if best is None or bits < best[0]:
