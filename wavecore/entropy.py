@@ -19,12 +19,14 @@ declares (``shapes``), decompression is bounded by those sizes, and anything wro
 
 from __future__ import annotations
 
+import math
 import zlib
 from collections.abc import Sequence
 from typing import Any
 
 import constriction
 import numpy as np
+from numba import njit
 
 from .errors import BundleError, InvalidParameter
 
@@ -237,10 +239,13 @@ _ALPHABET = ESCAPE + 1
 _EXPONENTS = 33
 #: Upper edges of the activity bins (the activity is a weighted mean of known neighbour
 #: magnitudes, in quantizer steps); bin 0 is "every known neighbour is zero".
-_ACTIVITY_EDGES = np.array(
-    [1e-9, 0.1, 0.2, 0.35, 0.55, 0.8, 1.15, 1.6, 2.2, 3.0, 4.2, 6.0, 9.0, 14.0]
+#: Upper edges of the activity bins, in thousandths of a quantizer step (the activity is a
+#: weighted mean of known neighbour magnitudes); bin 0 is "every known neighbour is zero".
+_EDGES_MILLI = np.array(
+    [0, 100, 200, 350, 550, 800, 1150, 1600, 2200, 3000, 4200, 6000, 9000, 14000], dtype=np.int64
 )
-_BINS = len(_ACTIVITY_EDGES) + 1
+_ACTIVITY_EDGES = _EDGES_MILLI / 1000.0
+_BINS = len(_EDGES_MILLI) + 1
 #: Three interlaced passes over a band: (even, even); (odd, odd), which sees its four diagonal
 #: neighbours; then (even, odd) and (odd, even), which see the four direct ones.
 _PASSES = (((0, 0),), ((1, 1),), ((0, 1), (1, 0)))
@@ -252,19 +257,23 @@ _COUNT_LIMIT = 1 << 21
 #: 1/_UNIT observation: a symbol never seen keeps a small but nonzero probability.
 _UNIT = 32
 _PRIOR_WEIGHT = 8
-_DIRECT = ((-1, 0), (1, 0), (0, -1), (0, 1))
-_DIAGONAL = ((-1, -1), (-1, 1), (1, -1), (1, 1))
-_W_DIRECT, _W_DIAGONAL, _W_PARENT, _W_SIBLING, _W_LUMA = 2.0, 1.0, 2.0, 1.0, 1.0
+#: Context weights, in halves, so that all context arithmetic is in integers and every machine
+#: computes the same classes: the four direct neighbours, the four diagonal ones, the parent,
+#: each earlier band of the same level, and the first channel (luma) at the same place.
+_W_DIRECT, _W_DIAGONAL, _W_PARENT, _W_SIBLING, _W_LUMA = 4, 2, 2, 1, 6
+#: The parent term is (9 · parent + sum of its 3 × 3 neighbourhood) / 18: everything is scaled
+#: by 18.
+_PARENT_SCALE = 18
 CONTEXT_VERSION = 1
-_FIRST_SEGMENT = 16
+_FIRST_SEGMENT = 8
 #: At each new level the detail counts keep their shape but shrink to about this many
 #: observations, so the model re-learns the level's own statistics quickly.
-_LEVEL_MEMORY = 48
+_LEVEL_MEMORY = 24
 
 
 def _prior(bins: int) -> np.ndarray:
     """Initial pseudo-counts: geometric magnitudes whose mean grows with the activity bin."""
-    centres = np.concatenate([[0.02], _ACTIVITY_EDGES])[:bins]
+    centres = np.concatenate([[0.02], _ACTIVITY_EDGES[1:], [20.0]])[:bins]
     counts = np.empty((bins, _ALPHABET))
     k = np.arange(_ALPHABET)
     for b, mean in enumerate(centres):
@@ -299,6 +308,17 @@ class _Models:
             counts[:] = (counts + 1) // 2
 
 
+def _groups(classes: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """``(class, positions)`` for each class present, ascending, positions in scan order."""
+    small = classes.astype(np.uint8)  # fewer than 256 classes: NumPy radix-sorts bytes
+    order = np.argsort(small, kind="stable")
+    ordered = small[order]
+    edges = np.flatnonzero(np.diff(ordered)) + 1
+    starts = np.concatenate([[0], edges])
+    stops = np.concatenate([edges, [len(order)]])
+    return [(int(ordered[a]), order[a:b]) for a, b in zip(starts, stops, strict=True) if b > a]
+
+
 def _segments(count: int) -> list[slice]:
     """Split ``count`` symbols into runs of doubling length; the model adapts between runs."""
     out, start, size = [], 0, _FIRST_SEGMENT
@@ -318,60 +338,66 @@ def _fit(arr: np.ndarray, rows: int, cols: int) -> np.ndarray:
 
 
 def _external(
-    shape: tuple[int, int], parent: np.ndarray | None, siblings: list[tuple[np.ndarray, float]]
-) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted sum and weight of the context from other, already coded, bands."""
+    shape: tuple[int, int], parent: np.ndarray | None, siblings: list[tuple[np.ndarray, int]]
+) -> tuple[np.ndarray, int]:
+    """Scaled sum and weight of the context from other, already coded, bands (integers)."""
     rows, cols = shape
-    total = np.zeros(shape)
-    weight = 0.0
+    total = np.zeros(shape, dtype=np.int64)
+    weight = 0
     if parent is not None and parent.size:
         padded = np.pad(parent, 1, mode="edge")
-        box = (
-            sum(
-                padded[1 + di : 1 + di + parent.shape[0], 1 + dj : 1 + dj + parent.shape[1]]
-                for di in (-1, 0, 1)
-                for dj in (-1, 0, 1)
-            )
-            / 9.0
-        )
-        mix = 0.5 * (parent + box)
+        box = np.zeros(parent.shape, dtype=np.int64)
+        for di in (0, 1, 2):
+            for dj in (0, 1, 2):
+                box += padded[di : di + parent.shape[0], dj : dj + parent.shape[1]]
+        mix = 9 * parent + box  # 18 × the mean of the parent and its neighbourhood's mean
         total += _W_PARENT * _fit(np.repeat(np.repeat(mix, 2, 0), 2, 1), rows, cols)
-        weight += _W_PARENT
+        weight += _W_PARENT * _PARENT_SCALE
     for sibling, w in siblings:
         if sibling.size:
-            total += w * _fit(sibling, rows, cols)
-            weight += w
-    return total, np.full(shape, weight)
-
-
-def _pass_positions(shape: tuple[int, int], phase: tuple[int, int]) -> tuple[slice, slice]:
-    return slice(phase[0], None, 2), slice(phase[1], None, 2)
-
-
-def _own_context(
-    known_abs: np.ndarray, known: np.ndarray, phase: tuple[int, int], offsets: Any
-) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted sums of the known neighbours' magnitudes at the positions of ``phase``."""
-    rows, cols = known_abs.shape
-    n_i, n_j = len(range(phase[0], rows, 2)), len(range(phase[1], cols, 2))
-    padded_abs = np.pad(known_abs, 1)
-    padded_known = np.pad(known, 1)
-    total = np.zeros((n_i, n_j))
-    weight = np.zeros((n_i, n_j))
-    for (di, dj), w in offsets:
-        r0, c0 = 1 + phase[0] + di, 1 + phase[1] + dj
-        view = (slice(r0, r0 + 2 * n_i - 1, 2), slice(c0, c0 + 2 * n_j - 1, 2))
-        total += w * padded_abs[view]
-        weight += w * padded_known[view]
+            total += (w * _PARENT_SCALE) * _fit(sibling, rows, cols)
+            weight += w * _PARENT_SCALE
     return total, weight
 
 
-_OFFSETS = [(d, _W_DIRECT) for d in _DIRECT] + [(d, _W_DIAGONAL) for d in _DIAGONAL]
+@njit(nogil=True, cache=True)
+def _phase_classes(
+    magnitude, known, ext_sum, ext_weight, row0, col0, base, edges, scale, w_direct, w_diagonal
+):
+    """Context class of every position ``(row0 + 2i, col0 + 2j)`` of a plane.
 
-
-def _classes(activity_sum: np.ndarray, weight: np.ndarray, pass_index: int) -> np.ndarray:
-    activity = np.divide(activity_sum, weight, out=np.zeros_like(activity_sum), where=weight > 0)
-    return pass_index * _BINS + np.searchsorted(_ACTIVITY_EDGES, activity, side="left")
+    The activity is ``(ext_sum + scale · Σ w · |known neighbour|) / (ext_weight + scale · Σ w)``
+    over the eight neighbours already coded; its bin is the number of edges (in thousandths)
+    below it, all in integer arithmetic.
+    """
+    rows, cols = magnitude.shape
+    n_i = (rows - row0 + 1) // 2
+    n_j = (cols - col0 + 1) // 2
+    out = np.empty(n_i * n_j, dtype=np.int64)
+    k = 0
+    for i in range(row0, rows, 2):
+        for j in range(col0, cols, 2):
+            num = ext_sum[i, j]
+            den = ext_weight
+            for di in (-1, 0, 1):
+                ii = i + di
+                if ii < 0 or ii >= rows:
+                    continue
+                for dj in (-1, 0, 1):
+                    jj = j + dj
+                    if (di == 0 and dj == 0) or jj < 0 or jj >= cols or not known[ii, jj]:
+                        continue
+                    w = w_diagonal if di != 0 and dj != 0 else w_direct
+                    num += scale * w * magnitude[ii, jj]
+                    den += scale * w
+            b = 0
+            if den > 0:
+                for e in edges:
+                    if 1000 * num > e * den:
+                        b += 1
+            out[k] = base + b
+            k += 1
+    return out
 
 
 class _Writer:
@@ -390,8 +416,8 @@ class _Writer:
     ) -> np.ndarray:
         """Code ``values >= 0`` (1-D) with the class of each; escapes follow in the same stream."""
         symbols = np.minimum(values, ESCAPE).astype(np.int32)
-        for cls in np.unique(classes):
-            picked = symbols[classes == cls]
+        for cls, members in _groups(classes):
+            picked = symbols[members]
             for part in _segments(len(picked)):
                 self.encoder.encode(picked[part], models.model(counts[cls]))
                 models.update(counts[cls], picked[part])
@@ -404,6 +430,13 @@ class _Writer:
             if bits.size:
                 self.encoder.encode(bits, _BIT)
         return values
+
+    def uniform(self, values: np.ndarray, size: int, count: int) -> np.ndarray:
+        """Code ``count`` values below ``size``, each equally likely (raw bits, in effect)."""
+        del count
+        if values.size:
+            self.encoder.encode(values.astype(np.int32), _model.Uniform(size))
+        return values.astype(np.int64)
 
     def signs(self, negative: np.ndarray, nonzero: np.ndarray) -> np.ndarray:
         del nonzero
@@ -441,13 +474,12 @@ class _Reader:
     ) -> np.ndarray:
         del truth
         values = np.empty(classes.shape, dtype=np.int64)
-        for cls in np.unique(classes):
-            mask = classes == cls
-            picked = np.empty(int(np.count_nonzero(mask)), dtype=np.int64)
+        for cls, members in _groups(classes):
+            picked = np.empty(len(members), dtype=np.int64)
             for part in _segments(len(picked)):
                 picked[part] = self._decode(models.model(counts[cls]), part.stop - part.start)
                 models.update(counts[cls], picked[part])
-            values[mask] = picked
+            values[members] = picked
         escaped = values == ESCAPE
         count = int(np.count_nonzero(escaped))
         if count:
@@ -462,6 +494,10 @@ class _Reader:
                 raise BundleError(msg)
         return values
 
+    def uniform(self, values: None, size: int, count: int) -> np.ndarray:
+        del values
+        return self._decode(_model.Uniform(size), count) if count else np.zeros(0, np.int64)
+
     def signs(self, negative: None, nonzero: np.ndarray) -> np.ndarray:
         del negative
         count = int(np.count_nonzero(nonzero))
@@ -472,6 +508,7 @@ class _Reader:
 
 
 _MAX_MAGNITUDE = 2**31 - 1
+_MAX_SHIFT = 24
 
 
 def _bit_length(values: np.ndarray) -> np.ndarray:
@@ -517,17 +554,32 @@ def _as_planes(band: np.ndarray, two_d: bool) -> np.ndarray:
 
 
 def _code_approx(io: Any, models: _Models, plane: np.ndarray | None, shape: Any) -> np.ndarray:
-    """The coarsest band: differences along rows (first column: down it), magnitude and sign."""
+    """The coarsest band: differences along rows (first column: down it), Rice-style.
+
+    The residual magnitudes are split into ``shift`` raw low bits and the high part, which goes
+    through the adaptive model; the encoder picks ``shift`` from the mean magnitude and sends it
+    first, so the coarse band of a lossless or finely quantized image costs few escapes.
+    """
     rows, cols = shape
-    residual = None
+    count = rows * cols
+    residual = magnitudes = None
+    shift = np.zeros(1, dtype=np.int64)
     if plane is not None:
         residual = plane.astype(np.int64)
         residual[:, 1:] = np.diff(residual, axis=1)
         residual[1:, 0] = np.diff(plane[:, 0].astype(np.int64))
-    classes = np.zeros(rows * cols, dtype=np.int64)
-    magnitude = io.magnitudes(
-        models, models.approx, classes, None if residual is None else np.abs(residual).ravel()
+        magnitudes = np.abs(residual).ravel()
+        mean = float(magnitudes.mean()) if count else 0.0
+        shift[0] = min(_MAX_SHIFT, max(0, math.floor(math.log2(mean)) - 1)) if mean >= 1 else 0
+    k = int(io.uniform(None if plane is None else shift, _MAX_SHIFT + 1, 1)[0])
+    classes = np.zeros(count, dtype=np.int64)
+    high = io.magnitudes(
+        models, models.approx, classes, None if magnitudes is None else magnitudes >> k
     )
+    magnitude = high << k
+    if k:
+        low_bits = None if magnitudes is None else magnitudes & ((1 << k) - 1)
+        magnitude |= io.uniform(low_bits, 1 << k, count)
     nonzero = magnitude != 0
     negative = io.signs(None if residual is None else residual.ravel()[nonzero] < 0, nonzero)
     signed = magnitude.copy()
@@ -547,21 +599,30 @@ def _code_detail(
     plane: np.ndarray | None,
     shape: tuple[int, int],
     parent: np.ndarray | None,
-    siblings: list[tuple[np.ndarray, float]],
+    siblings: list[tuple[np.ndarray, int]],
 ) -> np.ndarray:
     """One detail plane in three interlaced passes, each symbol under its context class."""
     ext_sum, ext_weight = _external(shape, parent, siblings)
     magnitude_plane = None if plane is None else np.abs(plane.astype(np.int64))
-    known_abs = np.zeros(shape)
-    known = np.zeros(shape)
+    known_magnitude = np.zeros(shape, dtype=np.int64)
+    known = np.zeros(shape, dtype=np.bool_)
     out = np.zeros(shape, dtype=np.int64)
     for pass_index, phases in enumerate(_PASSES):
-        for phase in phases:
-            where = _pass_positions(shape, phase)
-            own_sum, own_weight = _own_context(known_abs, known, phase, _OFFSETS)
-            classes = _classes(
-                own_sum + ext_sum[where], own_weight + ext_weight[where], pass_index
-            ).ravel()
+        for row0, col0 in phases:
+            where = (slice(row0, None, 2), slice(col0, None, 2))
+            classes = _phase_classes(
+                known_magnitude,
+                known,
+                ext_sum,
+                ext_weight,
+                row0,
+                col0,
+                pass_index * _BINS,
+                _EDGES_MILLI,
+                _PARENT_SCALE,
+                _W_DIRECT,
+                _W_DIAGONAL,
+            )
             if not classes.size:
                 continue
             truth = None if magnitude_plane is None else magnitude_plane[where].ravel()
@@ -572,9 +633,10 @@ def _code_detail(
             )
             signed = magnitude.copy()
             signed[nonzero] *= 1 - 2 * negative
-            out[where] = signed.reshape(out[where].shape)
-            known_abs[where] = magnitude.reshape(out[where].shape)
-            known[where] = 1.0
+            block_shape = out[where].shape
+            out[where] = signed.reshape(block_shape)
+            known_magnitude[where] = magnitude.reshape(block_shape)
+            known[where] = True
     return out
 
 
@@ -608,13 +670,10 @@ def _code_levels(
                 if index >= 2 and k < len(decoded[index - 1]):
                     parent_planes = decoded[index - 1][k]
                     if channel < parent_planes.shape[2]:
-                        parent = np.abs(parent_planes[:, :, channel]).astype(np.float64)
-                siblings = [
-                    (np.abs(level_planes[s][:, :, channel]).astype(np.float64), _W_SIBLING)
-                    for s in range(k)
-                ]
+                        parent = np.abs(parent_planes[:, :, channel])
+                siblings = [(np.abs(level_planes[s][:, :, channel]), _W_SIBLING) for s in range(k)]
                 if channel > 0:
-                    siblings.append((np.abs(result[:, :, 0]).astype(np.float64), _W_LUMA))
+                    siblings.append((np.abs(result[:, :, 0]), _W_LUMA))
                 result[:, :, channel] = _code_detail(io, models, plane, dims[:2], parent, siblings)
             level_planes.append(result)
         decoded.append(level_planes)
