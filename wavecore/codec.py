@@ -579,7 +579,8 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
     slope = -1.0
     if model.within is not None and model.beyond is not None and model.within[0] != model.beyond[0]:
         (s0, v0), (s1, v1) = model.within, model.beyond
-        slope = min(-0.2, (math.log(v1) - math.log(v0)) / (math.log(s1) - math.log(s0)))
+        # A jump in size between close steps would claim a huge exponent: keep it plausible.
+        slope = min(-0.3, max(-3.0, (math.log(v1) - math.log(v0)) / (math.log(s1) - math.log(s0))))
     real = _Search(encoder.size_bound, budget, enough, slope, low, high)
     real.run(start, _BPP_EVALUATIONS)
     if real.within is None:
