@@ -426,7 +426,9 @@
     for (const el of [...svg.querySelectorAll("g")]) el.remove();
     const g = svgEl("g", { transform: view.flip });
     const u = view.unit;
-    g.appendChild(svgEl("path", { class: "original", d: pathData(original, closed), "stroke-width": 6 * u }));
+    if (original.length) {
+      g.appendChild(svgEl("path", { class: "original", d: pathData(original, closed), "stroke-width": 6 * u }));
+    }
     if (coarse && coarse.length) {
       g.appendChild(svgEl("path", { class: "coarse", d: pathData(coarse, closed), "stroke-width": 1.6 * u, "stroke-dasharray": `${5 * u} ${4 * u}` }));
       for (const [x, y] of coarse) g.appendChild(svgEl("circle", { class: "coarse-pt", cx: x, cy: y, r: 2.8 * u }));
@@ -865,8 +867,10 @@
 
   function redrawCurves() {
     const closed = state.curve ? state.curve.closed : Boolean(state.info && state.info.boundary && state.info.boundary[0] === "closed");
-    const original = state.curve ? state.curve.points : state.reconPoints || [];
+    const original = state.curve ? state.curve.points : [];
     drawCurvePlot(original, state.coarsePoints, state.reconPoints, closed);
+    // An opened bundle has no original to draw: its legend entry would name nothing.
+    document.querySelector("#curve-views .key.original").hidden = !state.curve;
   }
 
   function debounce(fn, ms) {
