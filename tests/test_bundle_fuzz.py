@@ -243,6 +243,18 @@ def test_a_large_declared_shape_with_a_small_payload_fails_without_large_allocat
     assert peak < 6 * 8 * 4098 * 3002
 
 
+def test_padding_far_beyond_the_original_is_refused() -> None:
+    """A tiny bundle cannot make the decoder allocate a grid far larger than its original."""
+    header, chunks = split(BUNDLES["lossy image"])
+    header["shape"] = [1, 1]
+    header["pads"] = [[0, 6145], [0, 6145]]
+    header["fitted"] = [6146, 6146]
+    header["levels"] = 11
+    chunks = chunks + [b""] * 9
+    with pytest.raises(BundleError, match="pads axis 0 far beyond its length"):
+        decode(assemble(json.dumps(header).encode(), chunks))
+
+
 def test_unknown_major_version_through_decode() -> None:
     data = bytearray(BUNDLES["surface"])
     data[8] = 9

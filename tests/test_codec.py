@@ -310,3 +310,42 @@ def test_height_field_and_keep() -> None:
     assert np.abs(all_details - z).max() < np.abs(few - z).max()
     with pytest.raises(InvalidParameter, match="closed must be a pair"):
         wavecore.encode_surface(z, closed=True)  # type: ignore[arg-type]
+
+
+# --- rate control on every benchmark picture (slow) --------------------------------------------
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["camera", "moon", "coins", "brick", "astronaut"])
+@pytest.mark.parametrize("wavelet", ["bspline2", "cdf97", "haar"])
+def test_rate_control_on_the_benchmark_pictures(name: str, wavelet: str) -> None:
+    data = pytest.importorskip("skimage.data", reason="scikit-image ships the test images")
+    image = getattr(data, name)()
+    pixels = image.shape[0] * image.shape[1]
+    for bpp in (0.25, 0.5, 1.0):
+        actual = 8 * len(encode_image(image, wavelet=wavelet, bpp=bpp)) / pixels
+        assert 0.97 * bpp <= actual <= bpp, (bpp, actual)
+    for target in (30.0, 40.0):
+        assert (
+            psnr(decode(encode_image(image, wavelet=wavelet, quality=target)), image, 255) >= target
+        )
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    height=st.integers(8, 90),
+    width=st.integers(8, 90),
+    channels=st.sampled_from([0, 3]),
+    target=st.floats(22, 48),
+)
+def test_quality_is_met_on_any_size(height: int, width: int, channels: int, target: float) -> None:
+    shape = (height, width, channels) if channels else (height, width)
+    image = smooth_image(shape, seed=height * width)
+    bundle = encode_image(image, quality=target)
+    assert psnr(decode(bundle), image, 255) >= target
+
+
+def test_too_deep_a_level_for_a_small_input_is_refused() -> None:
+    with pytest.raises(InvalidParameter, match="level 6 is too deep for length 20"):
+        encode_image(smooth_image((20, 40)), level=6)
+    assert decode(encode_image(smooth_image((20, 40)), level=4)).shape == (20, 40)

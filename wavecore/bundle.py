@@ -80,8 +80,9 @@ inflated: inflation stops at that size, so no "deflate bomb" gets through), the 
 field's type and range (the declared element count is at most ``MAX_ELEMENTS``), the header and
 table CRC, and that the chunk table's lengths fit in the bytes that are actually present.  Every
 failure is a :class:`~wavecore.errors.BundleError` whose message names the field being read.
-The codec then checks the kind-specific consistency (``fitted`` = ``shape`` + ``pads``, the
-lengths fit ``levels`` of the wavelet and boundary, the colour transform fits the channels) and
+The codec then checks the kind-specific consistency (``fitted`` = ``shape`` + ``pads``, each
+padded length at most ``2 × length + 64``, the lengths fit ``levels`` of the wavelet and boundary,
+the colour transform fits the channels) and
 the entropy decoder never produces more values than the subband shapes that follow from it.
 """
 

@@ -43,7 +43,7 @@ from .colour import rct_forward, rct_inverse, ycbcr_forward, ycbcr_inverse
 from .entropy import decode_levels, encode_levels
 from .errors import BundleError, InvalidLength, InvalidParameter, WavecoreError
 from .filters import get_wavelet
-from .multilevel import wavedec, wavedec2, waverec, waverec2
+from .multilevel import valid_length, wavedec, wavedec2, waverec, waverec2
 from .quantize import dequantize_bands, quantize_bands
 from .resample import crop_padding, pad_to_fit
 from .threshold import remove_smallest
@@ -68,6 +68,7 @@ _MODEL_EVALUATIONS = 24
 _QUALITY_EVALUATIONS = 24
 _QUALITY_SLACK_DB = 0.02  # quality searches stop within this much above the target
 _HEADER_GUESS = 600.0  # bytes, for the size estimate before the real coder has run
+_PAD_ALLOWANCE = 64  # padded length <= 2 × length + this (the default levels stay far below)
 _LONGEST_FLOAT = 1.2345678901234567e-300  # 23 characters, the longest repr of a positive float
 
 
@@ -217,8 +218,26 @@ def _fit(
     level = plan_level
     if level is None:
         level = _default_level([data.shape[a] for a in axes], most)
+    for axis in axes:
+        n = data.shape[axis]
+        fitted = valid_length(n, level, boundary[axes.index(axis)], wavelet)
+        if fitted > _padded_limit(n):
+            msg = (
+                f"level {level} is too deep for length {n} (axis {axis}): it would pad it to "
+                f"{fitted}, more than {_padded_limit(n)}; give a smaller level"
+            )
+            raise InvalidParameter(msg)
     padded, pads = pad_to_fit(data, level, axes=axes, boundary=list(boundary), wavelet=wavelet)
     return padded, tuple((int(b), int(a)) for b, a in pads), level
+
+
+def _padded_limit(n: int) -> int:
+    """The longest padded length a bundle may declare for an original length ``n``.
+
+    Bounding the padding keeps what a decoder allocates proportional to the original's size,
+    so a tiny bundle cannot ask for a huge grid by declaring many levels.
+    """
+    return 2 * n + _PAD_ALLOWANCE
 
 
 # --------------------------------------------------------------------------------------------
@@ -923,6 +942,10 @@ def _plan_from_header(header: dict[str, Any]) -> _Plan:
     if list(fitted) != expected:
         msg = f"header field 'fitted' is {list(fitted)}; shape and pads make it {expected}"
         raise BundleError(msg)
+    for axis in range(axes_count):
+        if fitted[axis] > _padded_limit(expected[axis] - sum(pads[axis])):
+            msg = f"header field 'pads' pads axis {axis} far beyond its length: {pads[axis]}"
+            raise BundleError(msg)
     if kind == "image" and len(shape) == 3 and shape[2] > 4:
         msg = f"header: an image has at most 4 channels, not {shape[2]}"
         raise BundleError(msg)
