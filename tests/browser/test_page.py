@@ -381,3 +381,29 @@ def test_levels_out_of_range_are_caught_before_any_upload(page: Any, astronaut_p
     assert "40" in error.inner_text()
     assert page.get_attribute("#level", "aria-invalid") == "true"
     assert uploads == []
+
+
+def test_keyboard_only_sample_image_then_slider(page: Any):
+    def tab_to(element_id: str) -> None:
+        for _ in range(40):
+            page.keyboard.press("Tab")
+            if page.evaluate("document.activeElement.id") == element_id:
+                # A visible focus ring on whatever has the focus.
+                shadow = page.evaluate("getComputedStyle(document.activeElement).boxShadow")
+                outline = page.evaluate("getComputedStyle(document.activeElement).outlineStyle")
+                assert shadow != "none" or outline != "none"
+                return
+        raise AssertionError(f"Tab never reached #{element_id}")
+
+    tab_to("sample-image")
+    page.keyboard.press("Enter")
+    wait_for_bundle(page, 1)
+    tab_to("keep-slider")
+    for _ in range(40):
+        page.keyboard.press("ArrowLeft")
+    keep = float(page.evaluate("(v) => window.wavecore.sliderToKeep(v)", 60))
+    page.wait_for_selector(f"#img-recon[data-keep='{keep}']")
+    missing_alt = page.evaluate(
+        "[...document.querySelectorAll('img[src]')].filter((i) => !i.alt.trim()).length"
+    )
+    assert missing_alt == 0
