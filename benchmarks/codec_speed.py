@@ -20,9 +20,11 @@ import argparse
 import cProfile
 import io
 import pstats
+import re
 import statistics
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 from PIL import Image
@@ -31,6 +33,21 @@ from skimage import data
 import wavecore
 from wavecore.entropy import decode_levels, encode_levels
 from wavecore.quantize import dequantize_bands, quantize_bands
+
+DOC = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
+START, END = "<!-- codec-speed:start -->", "<!-- codec-speed:end -->"
+
+
+def write_section(lines: list[str]) -> None:
+    """Replace the table of the "Codec speed" section (between its markers) with ``lines``."""
+    text = DOC.read_text() if DOC.exists() else "# Benchmarks\n"
+    body = "\n".join(["```text", *lines, "```"])
+    if START in text and END in text:
+        pattern = re.escape(START) + ".*?" + re.escape(END)
+        text = re.sub(pattern, lambda _: f"{START}\n{body}\n{END}", text, flags=re.S)
+    else:
+        text = text.rstrip("\n") + f"\n\n## Codec speed\n\n{START}\n{body}\n{END}\n"
+    DOC.write_text(text)
 
 
 def test_image(size: int) -> np.ndarray:
@@ -133,7 +150,13 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--wavelets", default="bspline2,cdf97")
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--write", action="store_true", help="put the table in docs/benchmarks.md")
     args = parser.parse_args()
+    report: list[str] = []
+
+    def say(line: str) -> None:
+        print(line, flush=True)
+        report.append(line)
 
     image = test_image(args.size)
     blob, j2k_encode, j2k_decode = openjpeg(image, args.rate)
@@ -141,8 +164,8 @@ def main() -> None:
     t_j2k_enc = median_time(j2k_encode, args.repeat)
     t_j2k_dec = median_time(j2k_decode, args.repeat)
     pixels = args.size * args.size
-    print(f"{args.size}x{args.size} RGB at {args.rate} bpp, medians of {args.repeat} runs")
-    print(
+    say(f"{args.size}x{args.size} RGB at {args.rate} bpp, medians of {args.repeat} runs")
+    say(
         f"OpenJPEG   encode {t_j2k_enc:6.2f} s  decode {t_j2k_dec:6.2f} s  "
         f"total {t_j2k_enc + t_j2k_dec:6.2f} s  ({8 * len(blob) / pixels:.3f} bpp)"
     )
@@ -153,7 +176,7 @@ def main() -> None:
         )
         t_dec = median_time(lambda b=bundle: wavecore.decode(b), args.repeat)
         total = t_enc + t_dec
-        print(
+        say(
             f"{wavelet:10s} encode {t_enc:6.2f} s  decode {t_dec:6.2f} s  total {total:6.2f} s"
             f"  ({8 * len(bundle) / pixels:.3f} bpp)  ratio to OpenJPEG "
             f"{total / (t_j2k_enc + t_j2k_dec):.2f}x"
@@ -164,13 +187,15 @@ def main() -> None:
         line = []
         for name, stage in stages.items():
             line.append(f"{name} {median_time(stage, args.repeat):.3f}")
-        print(f"{'':10s} one pass at the chosen step (s): " + ", ".join(line))
+        say(f"{'':10s} one pass at the chosen step (s): " + ", ".join(line))
         if args.profile:
             profiler = cProfile.Profile()
             profiler.enable()
             wavecore.decode(wavecore.encode_image(image, wavelet=wavelet, bpp=args.rate))
             profiler.disable()
             pstats.Stats(profiler).sort_stats("cumulative").print_stats(18)
+    if args.write:
+        write_section(report)
 
 
 if __name__ == "__main__":
