@@ -349,3 +349,25 @@ def test_too_deep_a_level_for_a_small_input_is_refused() -> None:
     with pytest.raises(InvalidParameter, match="level 6 is too deep for length 20"):
         encode_image(smooth_image((20, 40)), level=6)
     assert decode(encode_image(smooth_image((20, 40)), level=4)).shape == (20, 40)
+
+
+def test_the_public_signatures_are_the_issues_contract() -> None:
+    import inspect as pyinspect
+
+    expected = {
+        "encode_image": "(image, *, wavelet='bspline2', level=None, keep=None, quality=None, "
+        "bpp=None, lossless=False)",
+        "encode_curve": "(points, *, closed=False, level=None, keep=None, tolerance=None)",
+        "encode_surface": "(grid, *, closed=(False, False), level=None, keep=None, quality=None)",
+        "decode": "(bundle, *, keep=None, level=0)",
+        "inspect": "(bundle)",
+    }
+    for name, signature in expected.items():
+        assert name in wavecore.__all__
+        function = getattr(wavecore, name)
+        plain = pyinspect.signature(function).replace(return_annotation=pyinspect.Signature.empty)
+        parameters = [
+            p.replace(annotation=pyinspect.Parameter.empty) for p in plain.parameters.values()
+        ]
+        assert str(plain.replace(parameters=parameters)) == signature
+    assert issubclass(wavecore.BundleError, ValueError)
