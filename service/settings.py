@@ -32,10 +32,12 @@ class Settings(BaseSettings):
 
     # Request bodies
     max_upload_bytes: int = Field(
-        default=32 * 1024 * 1024, ge=1, description="Largest request body."
+        default=20 * 1024 * 1024, ge=1, description="Largest request body."
     )
     max_pixels: int = Field(
-        default=4096 * 4096,
+        # Coding needs about 80 bytes of memory per sample (pixel × channel): a 2048 × 2048 RGB
+        # image peaks near 1 GiB above idle, so this default bounds one request to that.
+        default=2048 * 2048,
         ge=1,
         description="Largest image (width × height); also Pillow's decompression-bomb limit.",
     )
