@@ -37,17 +37,20 @@ async def test_64_concurrent_encodes_all_succeed(client: httpx.AsyncClient) -> N
 
 async def test_health_answers_while_the_pool_is_busy(client: httpx.AsyncClient) -> None:
     big = image_file(test_image((512, 512), seed=7))
+    loop = asyncio.get_running_loop()
+    began = loop.time()
     work = [
         asyncio.create_task(client.post("/v1/images/encode", files={"file": ("b.png", big)}))
         for _ in range(6)
     ]
     await asyncio.sleep(0.05)
-    loop = asyncio.get_running_loop()
     start = loop.time()
     r = await client.get("/healthz")
     waited = loop.time() - start
     assert r.status_code == 200
     results = await asyncio.gather(*work)
+    wall = loop.time() - began
     assert all(res.status_code == 200 for res in results)
-    # The event loop is never blocked by encoding, so health is far quicker than the encodes.
-    assert waited < 1.0
+    # The event loop is never blocked by encoding: health answers long before the encodes end
+    # (relative, because the machine's load scales both).
+    assert waited < wall / 3, (waited, wall)
