@@ -264,7 +264,11 @@ _W_DIRECT, _W_DIAGONAL, _W_PARENT, _W_SIBLING, _W_LUMA = 4, 2, 2, 1, 6
 #: The parent term is (9 · parent + sum of its 3 × 3 neighbourhood) / 18: everything is scaled
 #: by 18.
 _PARENT_SCALE = 18
-CONTEXT_VERSION = 1
+CONTEXT_VERSION = 2
+#: Sign contexts per orientation: one for the first pass, then the sums of the known
+#: neighbours' signs (each in -2..2) along two directions: diagonals in the second pass,
+#: rows and columns in the third.  Textures (brick) have strongly aligned signs.
+_SIGN_CONTEXTS = 1 + 25 + 25
 _FIRST_SEGMENT = 8
 #: At each new level the detail counts keep their shape but shrink to about this many
 #: observations, so the model re-learns the level's own statistics quickly.
@@ -291,6 +295,7 @@ class _Models:
         self.detail = np.tile(_prior(_BINS), (len(_PASSES), 1))
         self.approx = _prior(_BINS)
         self.exponent = np.full(_EXPONENTS, _UNIT // 4, dtype=np.int64)
+        self.sign = np.full((3 * _SIGN_CONTEXTS, 2), _UNIT, dtype=np.int64)
 
     def new_level(self) -> None:
         totals = self.detail.sum(axis=1, keepdims=True)
@@ -431,6 +436,18 @@ class _Writer:
                 self.encoder.encode(bits, _BIT)
         return values
 
+    def grouped(
+        self, models: _Models, table: np.ndarray, contexts: np.ndarray, values: np.ndarray
+    ) -> np.ndarray:
+        """Code small ``values`` under adaptive counts ``table[context]``, context by context."""
+        symbols = values.astype(np.int32)
+        for ctx, members in _groups(contexts):
+            picked = symbols[members]
+            for part in _segments(len(picked)):
+                self.encoder.encode(picked[part], models.model(table[ctx]))
+                models.update(table[ctx], picked[part])
+        return values.astype(np.int64)
+
     def uniform(self, values: np.ndarray, size: int, count: int) -> np.ndarray:
         """Code ``count`` values below ``size``, each equally likely (raw bits, in effect)."""
         del count
@@ -493,6 +510,19 @@ class _Reader:
                 msg = "context-coded chunk decodes to a value beyond int32"
                 raise BundleError(msg)
         return values
+
+    def grouped(
+        self, models: _Models, table: np.ndarray, contexts: np.ndarray, values: None
+    ) -> np.ndarray:
+        del values
+        out = np.empty(contexts.shape, dtype=np.int64)
+        for ctx, members in _groups(contexts):
+            picked = np.empty(len(members), dtype=np.int64)
+            for part in _segments(len(picked)):
+                picked[part] = self._decode(models.model(table[ctx]), part.stop - part.start)
+                models.update(table[ctx], picked[part])
+            out[members] = picked
+        return out
 
     def uniform(self, values: None, size: int, count: int) -> np.ndarray:
         del values
@@ -593,6 +623,31 @@ def _code_approx(io: Any, models: _Models, plane: np.ndarray | None, shape: Any)
     return out
 
 
+def _sign_contexts(
+    signs: np.ndarray,
+    row0: int,
+    col0: int,
+    block_shape: tuple[int, ...],
+    pass_index: int,
+    orientation: int,
+) -> np.ndarray:
+    """Sign context of every position of a pass, from the signs of the neighbours known."""
+    n_i, n_j = block_shape[0], block_shape[1]
+    base = orientation * _SIGN_CONTEXTS
+    if pass_index == 0:
+        return np.full((n_i, n_j), base, dtype=np.int64)
+
+    def at(di: int, dj: int) -> np.ndarray:
+        r, c = 1 + row0 + di, 1 + col0 + dj
+        return signs[r : r + 2 * n_i - 1 : 2, c : c + 2 * n_j - 1 : 2]
+
+    if pass_index == 1:
+        first, second = at(-1, -1) + at(1, 1), at(-1, 1) + at(1, -1)
+        return base + 1 + (first + 2) * 5 + (second + 2)
+    across, down = at(0, -1) + at(0, 1), at(-1, 0) + at(1, 0)
+    return base + 26 + (across + 2) * 5 + (down + 2)
+
+
 def _code_detail(
     io: Any,
     models: _Models,
@@ -600,12 +655,14 @@ def _code_detail(
     shape: tuple[int, int],
     parent: np.ndarray | None,
     siblings: list[tuple[np.ndarray, int]],
+    orientation: int = 0,
 ) -> np.ndarray:
     """One detail plane in three interlaced passes, each symbol under its context class."""
     ext_sum, ext_weight = _external(shape, parent, siblings)
     magnitude_plane = None if plane is None else np.abs(plane.astype(np.int64))
     known_magnitude = np.zeros(shape, dtype=np.int64)
     known = np.zeros(shape, dtype=np.bool_)
+    signs = np.zeros((shape[0] + 2, shape[1] + 2), dtype=np.int64)  # known signs, zero-padded
     out = np.zeros(shape, dtype=np.int64)
     for pass_index, phases in enumerate(_PASSES):
         for row0, col0 in phases:
@@ -628,15 +685,22 @@ def _code_detail(
             truth = None if magnitude_plane is None else magnitude_plane[where].ravel()
             magnitude = io.magnitudes(models, models.detail, classes, truth)
             nonzero = magnitude != 0
-            negative = io.signs(
-                None if plane is None else plane[where].ravel()[nonzero] < 0, nonzero
+            block_shape = out[where].shape
+            contexts = _sign_contexts(signs, row0, col0, block_shape, pass_index, orientation)
+            negative = io.grouped(
+                models,
+                models.sign,
+                contexts.ravel()[nonzero],
+                None if plane is None else (plane[where].ravel()[nonzero] < 0),
             )
             signed = magnitude.copy()
             signed[nonzero] *= 1 - 2 * negative
-            block_shape = out[where].shape
             out[where] = signed.reshape(block_shape)
             known_magnitude[where] = magnitude.reshape(block_shape)
             known[where] = True
+            signs[1 + row0 :: 2, 1 + col0 :: 2][: block_shape[0], : block_shape[1]] = np.sign(
+                out[where]
+            )
     return out
 
 
@@ -674,7 +738,9 @@ def _code_levels(
                 siblings = [(np.abs(level_planes[s][:, :, channel]), _W_SIBLING) for s in range(k)]
                 if channel > 0:
                     siblings.append((np.abs(result[:, :, 0]), _W_LUMA))
-                result[:, :, channel] = _code_detail(io, models, plane, dims[:2], parent, siblings)
+                result[:, :, channel] = _code_detail(
+                    io, models, plane, dims[:2], parent, siblings, min(k, 2)
+                )
             level_planes.append(result)
         decoded.append(level_planes)
         io.done()
