@@ -111,11 +111,41 @@ def first_call(cache_dir: str, dtype: str) -> float:
     return float(out.stdout.strip())
 
 
+def plot(t: dict[str, float], path: str, n: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    names = ("float64", "float32")
+    rows = [
+        ("PyWavelets bior3.1", "pywt", "tab:gray"),
+        ("wavecore bspline2", "ours", "tab:blue"),
+        ("memory floor", "copyto", "tab:green"),
+    ]
+    for i, (label, key, colour) in enumerate(rows):
+        scale = passes(LEVELS) if key == "copyto" else 1.0
+        values = [t[f"{key} {name}"] * scale for name in names]
+        bars = ax.barh([j * 4 + i for j in range(2)], values, color=colour, label=label)
+        ax.bar_label(bars, fmt="%.3f s", padding=3, fontsize=8)
+    ax.set_yticks([1, 5], [f"{name}" for name in names])
+    ax.invert_yaxis()
+    ax.set_xlabel("seconds, median (wavedec2 + waverec2, 5 levels)")
+    ax.set_title(f"{n}x{n} image, {os.cpu_count()} cores (shared, noisy)", fontsize=10)
+    ax.set_xlim(0, max(t.values()) * 1.25)
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", type=int, default=4098, help="our image side (2**L*k + 2)")
     parser.add_argument("--repeat", type=int, default=9, help="rounds (runs per median)")
     parser.add_argument("--no-first-call", action="store_true", help="skip the compile timing")
+    parser.add_argument("--plot", metavar="PNG", help="also draw the medians as a bar chart")
     args = parser.parse_args()
     n = args.size
     rng = np.random.default_rng(0)
@@ -152,6 +182,8 @@ def main() -> None:
     print("load average after: {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
     print(f"\nfloat32 is {t['ours float64'] / t['ours float32']:.2f}x faster than float64 (ours)")
     print(f"pywt: float32 is {t['pywt float64'] / t['pywt float32']:.2f}x faster than float64")
+    if args.plot:
+        plot(t, args.plot, n)
     if not args.no_first_call:
         with tempfile.TemporaryDirectory() as cache:
             cold = first_call(cache, "float64")
