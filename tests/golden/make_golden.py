@@ -1,0 +1,104 @@
+"""Regenerate the golden bundles (run only when the format version changes on purpose).
+
+    .venv/bin/python tests/golden/make_golden.py
+
+Writes, next to this script, one ``<name>.wvb`` bundle and one ``<name>.npy`` decoded array per
+case, and ``MANIFEST.json`` with each bundle's SHA-256, format version and the arguments that
+made it.  ``tests/test_golden.py`` decodes every committed bundle on every test run and compares
+it with the committed array, so a change to the format, the quantizer or the entropy coder that
+would break old bundles fails the tests instead of passing silently.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import wavecore
+
+HERE = Path(__file__).resolve().parent
+
+
+def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
+    rng = np.random.default_rng(2026)
+    y, x = np.mgrid[0:40, 0:33] / 40.0
+    grey = (128 + 90 * np.sin(7 * x) * np.cos(5 * y) + rng.normal(0, 5, x.shape)).clip(0, 255)
+    y, x = np.mgrid[0:24, 0:30] / 30.0
+    rgb = np.stack([100 + 80 * np.sin(5 * x), 120 + 70 * np.cos(4 * y), 60 + 150 * x * y], -1)
+    rgba16 = rng.integers(0, 65536, (17, 23, 4)).astype(np.uint16)
+    small = rng.integers(0, 256, (16, 16))
+    repeated = np.kron(small, np.ones((2, 2), dtype=int)).astype(np.uint8)
+    y, x = np.mgrid[0:64, 0:64]
+    periodic = (128 + 100 * np.sin(2 * np.pi * x / 32) * np.cos(2 * np.pi * y / 32)).astype(
+        np.uint8
+    )
+    t = np.linspace(0, 1, 50)
+    open_curve = np.stack([t, np.sin(6 * t) * t], axis=1)
+    s = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    closed_curve = np.stack([np.cos(s), np.sin(s), 0.2 * np.sin(3 * s)], axis=1)
+    u = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    v = np.linspace(-1, 1, 14)
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    radius = 1 + 0.3 * vv**2
+    surface = np.stack([radius * np.cos(uu), radius * np.sin(uu), vv], axis=-1)
+    return {
+        "image_grey_u8_lossy": (
+            "image",
+            grey.astype(np.uint8),
+            {"level": 3, "quality": 35.0},
+        ),
+        "image_rgb_u8_bpp": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 6.0}),
+        "image_rgba_u16_lossless": ("image", rgba16, {"lossless": True}),
+        "image_grey_u8_lossless_repeated": ("image", repeated, {"lossless": True, "level": 3}),
+        "image_grey_u8_lossless_periodic": ("image", periodic, {"lossless": True, "level": 3}),
+        "image_grey_u8_cdf97_quality": (
+            "image",
+            grey.astype(np.uint8)[:33, :29],
+            {"wavelet": "cdf97", "quality": 38.0},
+        ),
+        "image_f32_haar_keep": (
+            "image",
+            (grey[:20, :20] / 255).astype(np.float32),
+            {"wavelet": "haar", "keep": 0.5},
+        ),
+        "curve_open_tolerance": ("curve", open_curve, {"tolerance": 1e-3}),
+        "curve_closed_3d_keep": ("curve", closed_curve, {"closed": True, "keep": 0.5}),
+        "surface_closed_open": ("surface", surface, {"closed": (True, False), "quality": 45.0}),
+    }
+
+
+def main() -> None:
+    encoders = {
+        "image": wavecore.encode_image,
+        "curve": wavecore.encode_curve,
+        "surface": wavecore.encode_surface,
+    }
+    manifest: dict[str, Any] = {}
+    for name, (kind, data, kwargs) in inputs().items():
+        bundle = encoders[kind](data, **kwargs)
+        decoded = wavecore.decode(bundle)
+        (HERE / f"{name}.wvb").write_bytes(bundle)
+        np.save(HERE / f"{name}.npy", decoded, allow_pickle=False)
+        info = wavecore.inspect(bundle)
+        manifest[name] = {
+            "sha256": hashlib.sha256(bundle).hexdigest(),
+            "bytes": len(bundle),
+            "version": info["version"],
+            "kind": kind,
+            "arguments": {k: list(v) if isinstance(v, tuple) else v for k, v in kwargs.items()},
+            "lossless": info["lossless"],
+            "coder": info["coder"],
+            "cparams": info["header"]["cparams"],
+            "lifting": info["header"].get("lifting"),
+            "quantizer": info["quantizer"],
+        }
+        print(f"{name}: {len(bundle)} bytes, {info['coder']}, psnr {info['psnr']}")
+    (HERE / "MANIFEST.json").write_text(json.dumps(manifest, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
