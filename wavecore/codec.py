@@ -41,7 +41,7 @@ from . import lossless as _lossless
 from .bundle import MAX_ELEMENTS, Bundle, read_bundle, write_bundle
 from .colour import rct_forward, rct_inverse, ycbcr_forward, ycbcr_inverse
 from .entropy import decode_levels, encode_levels
-from .errors import BundleError, InvalidLength, InvalidParameter, WavecoreError
+from .errors import BundleError, InvalidLength, InvalidParameter
 from .filters import get_wavelet
 from .multilevel import valid_length, wavedec, wavedec2, waverec, waverec2
 from .quantize import dequantize_bands, quantize_bands
@@ -1062,9 +1062,12 @@ def decode(bundle: Any, *, keep: float | None = None, level: int = 0) -> np.ndar
         return _decode(parsed, plan, keep, int(level))
     except BundleError:
         raise
-    except (WavecoreError, ArithmeticError, LookupError, TypeError, ValueError) as exc:
+    except MemoryError as exc:
+        msg = f"not enough memory to decode a bundle of {plan.fitted} samples"
+        raise BundleError(msg) from exc
+    except Exception as exc:
         # The header passed its checks but its parameters are still inconsistent (a crafted
-        # bundle with a valid CRC); report it as what it is.
+        # bundle with a valid CRC): whatever a stage tripped over, the bundle is what is wrong.
         msg = f"corrupt bundle: {type(exc).__name__}: {exc}"
         raise BundleError(msg) from exc
 
@@ -1138,7 +1141,11 @@ def inspect(bundle: Any) -> dict[str, Any]:
     """
     parsed, plan = _open(bundle)
     header = parsed.header
-    shapes = _band_shapes(plan)
+    try:
+        shapes = _band_shapes(plan)
+    except Exception as exc:  # a crafted header that passed every check; see decode
+        msg = f"corrupt bundle: {type(exc).__name__}: {exc}"
+        raise BundleError(msg) from exc
     chunks = []
     for index, (entry, chunk) in enumerate(zip(shapes, parsed.chunks, strict=True)):
         band_shapes = (
