@@ -55,7 +55,7 @@ class Settings(BaseSettings):
     )
     queue_size: int = Field(default=64, ge=0, description="Requests that may wait for a thread.")
     request_timeout: float = Field(
-        default=60.0, gt=0, description="Seconds a request may wait and work before it gets a 503."
+        default=120.0, gt=0, description="Seconds a request may wait and work before it gets a 503."
     )
     retry_after: int = Field(
         default=2, ge=0, description="The Retry-After (seconds) sent with a 503."
