@@ -165,3 +165,23 @@ def test_aligned_signs_cost_less_than_random_signs() -> None:
         q = [np.zeros((66, 66), np.int32), (band, np.zeros((66, 64), np.int32), band[:, :64])]
         sizes.append(sum(map(len, encode_levels(q)[0])))
     assert sizes[0] < 0.9 * sizes[1]
+
+
+@pytest.mark.slow
+@settings(max_examples=10_000, deadline=None)
+@given(
+    chunks=st.lists(st.binary(max_size=120), min_size=1, max_size=3),
+    two_d=st.booleans(),
+)
+def test_context_decoder_fuzz(chunks: list[bytes], two_d: bool) -> None:
+    """Any bytes either decode to arrays of the declared shapes or raise BundleError."""
+    shapes: list[object] = [(6, 6, 3), ((4, 6, 3), (6, 4, 3), (4, 4, 3)), ((8, 10, 3),) * 3]
+    if not two_d:
+        shapes = [(6, 2), (4, 2), (8, 2)]
+    params = {"coder": "context", "version": 2, "two_d": two_d}
+    try:
+        back = decode_levels(chunks, shapes, params)
+    except BundleError:
+        return
+    assert len(back) == len(chunks)
+    assert back[0].shape == shapes[0]
