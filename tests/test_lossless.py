@@ -180,6 +180,15 @@ def test_lossless_keep_at_decode_time_is_lossy_but_close() -> None:
     assert 0 < error < 10
 
 
+def test_lossless_levels_leave_no_empty_subband() -> None:
+    with pytest.raises(wavecore.InvalidParameter, match="at most 0 levels"):
+        wavecore.encode_image(np.zeros((1, 7), np.uint8), lossless=True, level=3)
+    image = np.arange(21, dtype=np.uint8).reshape(3, 7)
+    assert np.array_equal(
+        wavecore.decode(wavecore.encode_image(image, lossless=True, level=1)), image
+    )
+
+
 def test_lossless_refuses_floats_and_rate_targets() -> None:
     with pytest.raises(wavecore.InvalidParameter, match="uint8, uint16"):
         wavecore.encode_image(np.zeros((8, 8)), lossless=True)

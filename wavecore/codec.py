@@ -740,11 +740,16 @@ def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
     dtype = _dtype_name(arr, "image", integer_only=True)
     colour = "rct" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
     data = rct_forward(arr) if colour == "rct" else arr.astype(np.int64)
+    # At most as many levels as leave every subband non-empty (5/3 fits any size unpadded).
+    deepest = min(arr.shape[:2]).bit_length() - 1
     if level is None:
-        # As many levels as leave every subband non-empty (no padding here: 5/3 fits any size).
-        level = min(
-            _default_level(arr.shape[:2], _MAX_IMAGE_LEVELS), min(arr.shape[:2]).bit_length() - 1
+        level = min(_default_level(arr.shape[:2], _MAX_IMAGE_LEVELS), deepest)
+    elif level > deepest:
+        msg = (
+            f"level {level} is too deep for a lossless {arr.shape[0]}×{arr.shape[1]} image: "
+            f"at most {deepest} levels leave every subband non-empty"
         )
+        raise InvalidParameter(msg)
     # First-order entropy only guides the choice of filters (the context coder ranks them
     # differently), so code the choice with and without the closed bspline2 and keep the smaller.
     choices = []
