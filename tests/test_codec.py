@@ -10,7 +10,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import wavecore
-from wavecore import BundleError, InvalidParameter, decode, encode_curve, encode_image, inspect
+from wavecore import (
+    BundleError,
+    InvalidParameter,
+    decode,
+    encode_curve,
+    encode_image,
+    encode_surface,
+    inspect,
+)
+from wavecore.bundle import FORMAT_VERSION
 
 
 def psnr(a: np.ndarray, b: np.ndarray, peak: float) -> float:
@@ -138,9 +147,9 @@ def test_bad_arguments_are_named(kwargs: dict[str, object], message: str) -> Non
         (np.zeros((4, 4, 4, 4)), "image must be"),
         (np.zeros((8, 8, 5)), "1 to 4 channels"),
         (np.zeros((0, 8)), "empty"),
-        (np.zeros((8, 8), bool), "must hold numbers"),
+        (np.zeros((8, 8), bool), "must hold real numbers"),
         (np.full((8, 8), np.nan), "NaN"),
-        (np.zeros((8, 8), np.int32), "dtype int32"),
+        (np.zeros((8, 8), np.complex64), "not complex64"),
     ],
 )
 def test_bad_images_are_named(image: np.ndarray, message: str) -> None:
@@ -221,7 +230,7 @@ def test_inspect_describes_every_chunk() -> None:
     assert info["chunks"][1]["bands"] == ["cH", "cV", "cD"]
     assert info["header_bytes"] + sum(c["bytes"] for c in info["chunks"]) == len(bundle)
     assert info["psnr"] >= 33 and info["max_error"] > 0
-    assert info["version"] == "1.0"
+    assert info["version"] == "{}.{}".format(*FORMAT_VERSION)
     coarse_shape = info["chunks"][0]["shapes"][0]
     assert coarse_shape[2] == 3
 
@@ -371,3 +380,21 @@ def test_the_public_signatures_are_the_issues_contract() -> None:
         ]
         assert str(plain.replace(parameters=parameters)) == signature
     assert issubclass(wavecore.BundleError, ValueError)
+
+
+@pytest.mark.parametrize("dtype", [np.float16, np.int16, np.int32, np.int64, np.uint32])
+def test_curves_and_surfaces_come_back_in_their_own_dtype(dtype: type) -> None:
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    points = (np.c_[np.cos(t), np.sin(t)] * 100 + 200).astype(dtype)
+    out = decode(encode_curve(points, closed=True, tolerance=1.0))
+    assert out.dtype == points.dtype and out.shape == points.shape
+    assert np.max(np.abs(out.astype(np.float64) - points.astype(np.float64))) <= 2.0
+    grid = (np.add.outer(np.arange(20), np.arange(24)) * 3).astype(dtype)
+    decoded = decode(encode_surface(grid, quality=50.0))
+    assert decoded.dtype == grid.dtype and decoded.shape == grid.shape
+
+
+def test_float16_image_comes_back_as_float16() -> None:
+    image = np.random.default_rng(5).random((30, 41)).astype(np.float16)
+    out = decode(encode_image(image, quality=40.0))
+    assert out.dtype == np.float16 and out.shape == image.shape

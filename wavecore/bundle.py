@@ -1,6 +1,6 @@
 """The coefficient bundle: a versioned binary container, coarse to fine.
 
-This docstring is the specification of format version 1.0; ``docs/bundle-format.md`` says the
+This docstring is the specification of format version 1.1; ``docs/bundle-format.md`` says the
 same in more words.  Like NumPy's ``.npy`` format, a bundle is a fixed preamble, a bounded
 self-describing header, then the payload.  All integers are little-endian.
 
@@ -12,8 +12,8 @@ offset    size         field
 0         8            magic ``b"\\x89WVB\\r\\n\\x1a\\n"`` (PNG-style: catches 7-bit and newline
                        mangling, stops ``type`` on DOS)
 8         1            major version (``1``); a reader refuses any other major version
-9         1            minor version (``0``); a reader accepts any minor version of its major,
-                       because minor versions only add optional header keys
+9         1            minor version (``1``); a reader accepts any minor version of its major,
+                       because minor versions only add optional header keys or new values
 10        2            header length ``H`` (``uint16``), ``2 <= H <= MAX_HEADER_SIZE``
 12        H            header: a UTF-8 JSON object (see *Header*), compressed with raw
                        DEFLATE (RFC 1951, ``zlib`` with ``wbits=-15``); it inflates to at most
@@ -35,8 +35,10 @@ a clear error.  What a chunk's bytes mean is the business of the coder named in 
 Versions
 --------
 A reader refuses any other major version and accepts any minor version of its own: minor
-versions only add optional header keys.  Anything else — a new meaning for a field, a new layout,
-an entropy coder whose old bitstreams no longer decode — is a new major version, or a new coder
+versions only add optional header keys (ignored by older readers) or new values of an enumerated
+field (refused clearly by older readers, naming the field; 1.1 added six ``dtype`` values).
+Anything else — a new meaning for a field, a new layout, an entropy coder whose old
+bitstreams no longer decode — is a new major version, or a new coder
 *name* (which older readers refuse clearly).  The golden bundles in ``tests/golden`` are decoded
 in every test run to hold this promise.
 
@@ -49,7 +51,8 @@ version may add some.
 
 ``kind``        ``"image"``, ``"curve"`` or ``"surface"``
 ``shape``       the original array's shape (list of positive ints)
-``dtype``       the original dtype: ``uint8``, ``uint16``, ``float32`` or ``float64``
+``dtype``       the original dtype: ``uint8``, ``uint16``, ``float32``, ``float64``; since 1.1
+                also ``float16``, ``int8``, ``int16``, ``int32``, ``int64``, ``uint32``
 ``fit``         how the transformed grid was made from the original: ``"pad"`` (``pads`` says
                 how many samples were added before and after on each transformed axis) or
                 ``"none"``
@@ -112,7 +115,7 @@ __all__ = [
 ]
 
 MAGIC = b"\x89WVB\r\n\x1a\n"
-FORMAT_VERSION = (1, 0)
+FORMAT_VERSION = (1, 1)  # 1.1 added the dtypes float16, int8–int64 and uint32
 MAX_HEADER_SIZE = 65535
 MAX_CHUNKS = 64
 #: Largest element count (samples × channels) a bundle may declare: 2**27, about a 6700 × 6700
@@ -125,7 +128,19 @@ _TABLE_ENTRY = struct.Struct("<II")
 _CRC = struct.Struct("<I")
 
 KINDS = ("image", "curve", "surface")
-DTYPES = ("uint8", "uint16", "float32", "float64")
+DTYPES = (
+    "uint8",
+    "uint16",
+    "float32",
+    "float64",
+    # since 1.1
+    "float16",
+    "int8",
+    "int16",
+    "int32",
+    "int64",
+    "uint32",
+)
 COLOURS = ("none", "ycbcr", "rct")
 FITS = ("pad", "none")
 BOUNDARIES = ("open", "closed", "symmetric")

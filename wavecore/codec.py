@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from . import lossless as _lossless
-from .bundle import MAX_ELEMENTS, Bundle, read_bundle, write_bundle
+from .bundle import DTYPES, MAX_ELEMENTS, Bundle, read_bundle, write_bundle
 from .colour import rct_forward, rct_inverse, ycbcr_forward, ycbcr_inverse
 from .entropy import decode_levels, encode_levels
 from .errors import BundleError, InvalidLength, InvalidParameter
@@ -119,7 +119,7 @@ def _level_arg(level: Any) -> int | None:
 def _as_array(data: Any, name: str) -> np.ndarray:
     arr = np.asarray(data)
     if arr.dtype == np.bool_ or arr.dtype.kind not in "uif":
-        msg = f"{name} must hold numbers (uint8, uint16 or float), not {arr.dtype}"
+        msg = f"{name} must hold real numbers (integers or floats), not {arr.dtype}"
         raise InvalidParameter(msg)
     if arr.size == 0:
         msg = f"{name} is empty (shape {arr.shape})"
@@ -134,11 +134,11 @@ def _as_array(data: Any, name: str) -> np.ndarray:
 
 
 def _dtype_name(arr: np.ndarray, name: str, *, integer_only: bool = False) -> str:
-    allowed = ("uint8", "uint16") if integer_only else ("uint8", "uint16", "float32", "float64")
+    allowed = ("uint8", "uint16") if integer_only else DTYPES
     if arr.dtype.name in allowed:
         return arr.dtype.name
     if not integer_only and arr.dtype.kind == "f":
-        return "float64"  # float16 and longdouble are coded as float64
+        return "float64"  # longdouble: no wider float is portable, so it comes back as float64
     msg = f"{name} has dtype {arr.dtype}; expected one of {', '.join(allowed)}"
     raise InvalidParameter(msg)
 
@@ -281,7 +281,7 @@ def _finish(plan: _Plan, data: np.ndarray, level: int) -> np.ndarray:
 
 def _cast(data: np.ndarray, dtype: str) -> np.ndarray:
     target = np.dtype(dtype)
-    if target.kind == "u":
+    if target.kind in "iu":
         info = np.iinfo(target)
         values = np.nan_to_num(np.asarray(data, dtype=np.float64), nan=0.0)
         return np.clip(np.rint(values), info.min, info.max).astype(target)
