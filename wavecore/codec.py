@@ -46,7 +46,7 @@ from .filters import get_wavelet
 from .multilevel import valid_length, wavedec, wavedec2, waverec, waverec2
 from .quantize import dequantize_bands, quantize_bands
 from .resample import crop_padding, pad_to_fit
-from .threshold import remove_smallest
+from .threshold import check_share, remove_smallest
 
 __all__ = ["decode", "encode_curve", "encode_image", "encode_surface", "inspect"]
 
@@ -75,16 +75,6 @@ _LONGEST_FLOAT = 1.2345678901234567e-300  # 23 characters, the longest repr of a
 # --------------------------------------------------------------------------------------------
 # Validation of the caller's arguments
 # --------------------------------------------------------------------------------------------
-
-
-def _fraction(value: Any, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        msg = f"{name} must be a number in [0, 1] (the fraction of details kept), not {value!r}"
-        raise InvalidParameter(msg)
-    if not 0.0 <= float(value) <= 1.0:
-        msg = f"{name} must be in [0, 1] (the fraction of details kept), not {value!r}"
-        raise InvalidParameter(msg)
-    return float(value)
 
 
 def _positive(value: Any, name: str, what: str) -> float:
@@ -708,7 +698,7 @@ def encode_image(
             msg = "lossless=True cannot be combined with keep, quality or bpp"
             raise InvalidParameter(msg)
         return _encode_lossless(arr, level)
-    keep = None if keep is None else _fraction(keep, "keep")
+    keep = None if keep is None else check_share(keep, "keep", "details to keep")
     quality = None if quality is None else _positive(quality, "quality", "a PSNR in dB")
     bpp = None if bpp is None else _positive(bpp, "bpp", "bits per pixel")
     dtype = _dtype_name(arr, "image")
@@ -836,7 +826,7 @@ def encode_curve(
         msg = f"closed must be True or False, not {closed!r}"
         raise InvalidParameter(msg)
     level = _level_arg(level)
-    keep = None if keep is None else _fraction(keep, "keep")
+    keep = None if keep is None else check_share(keep, "keep", "details to keep")
     dtype = _dtype_name(arr, "points")
     data = arr.astype(np.float64).reshape(arr.shape[0], -1)
     boundary = ("closed",) if closed else ("open",)
@@ -906,7 +896,7 @@ def encode_surface(
         msg = f"closed must be a pair of booleans (one per grid axis), not {closed!r}"
         raise InvalidParameter(msg)
     level = _level_arg(level)
-    keep = None if keep is None else _fraction(keep, "keep")
+    keep = None if keep is None else check_share(keep, "keep", "details to keep")
     quality = None if quality is None else _positive(quality, "quality", "a PSNR in dB")
     dtype = _dtype_name(arr, "grid")
     data = arr.astype(np.float64)
@@ -1055,7 +1045,7 @@ def decode(bundle: Any, *, keep: float | None = None, level: int = 0) -> np.ndar
     >>> decode(bundle, level=2).shape
     (9, 12)
     """
-    keep = None if keep is None else _fraction(keep, "keep")
+    keep = None if keep is None else check_share(keep, "keep", "details to keep")
     if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
         msg = f"level must be an integer >= 0, not {level!r}"
         raise InvalidParameter(msg)

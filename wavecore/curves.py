@@ -29,7 +29,7 @@ from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import _as_int, wavedec, waverec
 from .resample import resample_curve
-from .threshold import remove_smallest
+from .threshold import keep_largest
 from .transform import as_float_array
 
 __all__ = ["CurveDecomposition", "decompose_curve", "fitting_length", "transfer_details"]
@@ -188,13 +188,9 @@ class CurveDecomposition:
         numpy.ndarray
             Points ``(length, d)``, or ``(input_length, d)`` with ``match_input``.
         """
-        keep = float(keep)
-        if not 0.0 <= keep <= 1.0:
-            msg = f"keep must be in [0, 1] (the share of details to keep), not {keep!r}"
-            raise InvalidParameter(msg)
-        coeffs = remove_smallest(
+        coeffs = keep_largest(
             self.coeffs,
-            1.0 - keep,
+            keep,
             wavelet=self.wavelet,
             boundary=self.boundary,
             weighted=weighted,

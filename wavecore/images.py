@@ -39,7 +39,7 @@ from .errors import InvalidCoefficients, InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import _as_int, wavedec2, waverec2
 from .resample import GridFit, fit_grid
-from .threshold import remove_smallest
+from .threshold import keep_largest
 from .transform import normalize_axis
 
 __all__ = ["ImageDecomposition", "decompose_image", "subband_mosaic"]
@@ -141,13 +141,9 @@ class ImageDecomposition:
         numpy.ndarray
             The input's shape and dtype.
         """
-        keep = float(keep)
-        if not 0.0 <= keep <= 1.0:
-            msg = f"keep must be in [0, 1] (the share of details to keep), not {keep!r}"
-            raise InvalidParameter(msg)
-        coeffs = remove_smallest(
+        coeffs = keep_largest(
             self.coeffs,
-            1.0 - keep,
+            keep,
             wavelet=self.wavelet,
             boundary=self.boundary,
             weighted=weighted,

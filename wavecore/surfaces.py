@@ -29,7 +29,7 @@ from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import _as_int, valid_length, wavedecn, waverecn
 from .resample import GridFit, fit_grid
-from .threshold import remove_smallest
+from .threshold import keep_largest
 from .transform import as_float_array
 
 __all__ = ["SurfaceDecomposition", "decompose_surface"]
@@ -98,13 +98,9 @@ class SurfaceDecomposition:
         numpy.ndarray
             Float, the input's shape.
         """
-        keep = float(keep)
-        if not 0.0 <= keep <= 1.0:
-            msg = f"keep must be in [0, 1] (the share of details to keep), not {keep!r}"
-            raise InvalidParameter(msg)
-        coeffs = remove_smallest(
+        coeffs = keep_largest(
             self.coeffs,
-            1.0 - keep,
+            keep,
             wavelet=self.wavelet,
             boundary=self.boundary,
             weighted=weighted,

@@ -93,7 +93,7 @@ def remove_smallest(
     >>> bool(np.array_equal(kept[0], coeffs[0]))
     True
     """
-    fraction = _check_fraction(fraction)
+    fraction = check_share(fraction)
     kind, coarse, levels = _as_bands(coeffs)
     if not levels:
         return [np.array(coarse, copy=True)]
@@ -145,17 +145,26 @@ def remove_smallest(
     return _from_bands(kind, np.array(coarse, copy=True), out_levels)
 
 
-def _check_fraction(fraction: Any) -> float:
-    if isinstance(fraction, bool) or not isinstance(
-        fraction, int | float | np.integer | np.floating
-    ):
-        msg = f"fraction must be a number in [0, 1], not {fraction!r}"
+def check_share(value: Any, name: str = "fraction", meaning: str = "details to remove") -> float:
+    """``value`` as a float in [0, 1], or an :class:`InvalidParameter` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        msg = f"{name} must be a number in [0, 1] (the share of {meaning}), not {value!r}"
         raise InvalidParameter(msg)
-    value = float(fraction)
-    if not 0.0 <= value <= 1.0:  # also rejects NaN
-        msg = f"fraction must be in [0, 1] (the share of details to remove), not {fraction!r}"
+    share = float(value)
+    if not 0.0 <= share <= 1.0:  # also rejects NaN
+        msg = f"{name} must be in [0, 1] (the share of {meaning}), not {value!r}"
         raise InvalidParameter(msg)
-    return value
+    return share
+
+
+def keep_largest(coeffs: Sequence[Any], keep: Any, **options: Any) -> list[Any]:
+    """:func:`remove_smallest` said the other way round: keep the largest ``keep`` share.
+
+    ``options`` are :func:`remove_smallest`'s keywords.  The front ends' ``reconstruct(keep=…)``
+    and the codec's ``keep`` all go through here, so they validate ``keep`` the same way.
+    """
+    share = check_share(keep, "keep", "details to keep")
+    return remove_smallest(coeffs, 1.0 - share, **options)
 
 
 def _as_bands(coeffs: Any) -> tuple[str, np.ndarray, list[dict[str, np.ndarray]]]:
