@@ -83,3 +83,18 @@ def live_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         yield url
     finally:
         stop_server(proc)
+
+
+@pytest.fixture(scope="session")
+def small_limit_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A second real server that accepts at most 100 kB per request (for 413 messages)."""
+    pytest.importorskip("service.app", reason="the service extra is not installed")
+    log = tmp_path_factory.mktemp("small-limit-server") / "uvicorn.log"
+    try:
+        proc, url = start_server(log, env={"WAVECORE_MAX_UPLOAD_BYTES": "100000"})
+    except RuntimeError as exc:
+        pytest.fail(str(exc))
+    try:
+        yield url
+    finally:
+        stop_server(proc)

@@ -3,17 +3,14 @@
 The browser is Debian's ``/usr/bin/chromium`` driven by Playwright's Python package (Playwright's
 own browser download is never used: it cannot reach the internet here, and CI installs Chromium
 from apt in ``scripts/run.sh test``). The server is the suite's real uvicorn process on 127.0.0.1
-(``live_server``); ``small_limit_server`` is a second one with a 100 kB upload limit.
+(``live_server``), and ``small_limit_server`` is a second one with a 100 kB upload limit (both
+in tests/conftest.py).
 """
 
 from __future__ import annotations
 
 import os
 import shutil
-import socket
-import subprocess
-import sys
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -48,45 +45,6 @@ def _require_chromium() -> None:
 def page_server(live_server: str) -> str:
     """Base URL of the suite's real uvicorn process (``live_server`` in tests/conftest.py)."""
     return live_server
-
-
-@pytest.fixture(scope="session")
-def small_limit_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    """A second real server that accepts at most 100 kB per request (for the 413 message)."""
-    import httpx
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = int(sock.getsockname()[1])
-    log = tmp_path_factory.mktemp("small-limit-server") / "uvicorn.log"
-    with log.open("wb") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "service.app:create_app", "--factory"]
-            + ["--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"],
-            cwd=ROOT,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            env={**os.environ, "WAVECORE_MAX_UPLOAD_BYTES": "100000"},
-        )
-    url = f"http://127.0.0.1:{port}"
-    try:
-        deadline = time.monotonic() + 60
-        while True:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                pytest.fail(f"the small-limit server did not start:\n{log.read_text()}")
-            try:
-                if httpx.get(url + "/healthz", timeout=2).status_code == 200:
-                    break
-            except httpx.TransportError:
-                time.sleep(0.1)
-        yield url
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 @pytest.fixture(scope="module")
