@@ -297,3 +297,49 @@ def synthesis_2d(
                     src = rings[half, slots[half, k]]
                     for j in range(width):
                         out[j] += wk * src[j]
+
+
+# --------------------------------------------------------------------------------------------
+# The decoder's last pass: colour matrix, rounding and clipping into the caller's integer dtype
+# --------------------------------------------------------------------------------------------
+
+
+@njit(nogil=True, cache=True)
+def colour_to_integers(src, matrix, use_matrix, lo, hi, out, row_lo, row_hi):
+    """``out = clip(rint(matrix @ src), lo, hi)`` per pixel (NaN → 0), rows ``[row_lo, row_hi)``.
+
+    ``src`` and ``out`` are ``(rows, cols, channels)``; the matrix applies to the first three
+    channels when ``use_matrix`` (the others pass through).  One pass, no float temporaries:
+    the NumPy version made five full-size float64 copies of a decoded picture.
+    """
+    cols, channels = src.shape[1], src.shape[2]
+    for i in range(row_lo, row_hi):
+        for j in range(cols):
+            pixel = src[i, j]
+            for c in range(channels):
+                if use_matrix and c < 3:
+                    v = matrix[c, 0] * pixel[0] + matrix[c, 1] * pixel[1] + matrix[c, 2] * pixel[2]
+                else:
+                    v = pixel[c]
+                if v != v:
+                    v = 0.0
+                v = np.rint(v)
+                if v < lo:
+                    v = lo
+                elif v > hi:
+                    v = hi
+                out[i, j, c] = v
+
+
+@njit(nogil=True, cache=True)
+def squared_and_largest_error(decoded, original):
+    """(sum of squared differences, largest absolute difference) of two same-shape 1-D arrays."""
+    total = 0.0
+    largest = 0.0
+    for k in range(decoded.size):
+        d = float(decoded[k]) - float(original[k])
+        total += d * d
+        d = abs(d)
+        if d > largest or d != d:
+            largest = d
+    return total, largest

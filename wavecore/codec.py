@@ -38,8 +38,9 @@ from typing import Any
 import numpy as np
 
 from . import lossless as _lossless
+from ._kernels import colour_to_integers, squared_and_largest_error
 from .bundle import DTYPES, MAX_ELEMENTS, Bundle, read_bundle, write_bundle
-from .colour import rct_forward, rct_inverse, ycbcr_forward, ycbcr_inverse
+from .colour import YCBCR_INVERSE_MATRIX, rct_forward, rct_inverse, ycbcr_forward, ycbcr_inverse
 from .entropy import decode_levels, encode_levels
 from .errors import BundleError, InvalidLength, InvalidParameter
 from .filters import get_wavelet
@@ -47,6 +48,7 @@ from .multilevel import valid_length, wavedec, wavedec2, waverec, waverec2
 from .quantize import dequantize_bands, quantize_bands
 from .resample import crop_padding, pad_to_fit
 from .threshold import check_share, remove_smallest
+from .transform import run_rows
 
 __all__ = ["decode", "encode_curve", "encode_image", "encode_surface", "inspect"]
 
@@ -260,6 +262,8 @@ def _finish(plan: _Plan, data: np.ndarray, level: int) -> np.ndarray:
             boundary=list(plan.boundary),
             wavelet=plan.wavelet,
         )
+    if plan.colour == "ycbcr" and np.dtype(plan.dtype).kind in "iu":
+        return _ycbcr_to_integers(cropped, plan.dtype)  # the common case, in one pass
     if plan.colour == "ycbcr":
         cropped = ycbcr_inverse(cropped)
     elif plan.colour == "rct":
@@ -269,8 +273,32 @@ def _finish(plan: _Plan, data: np.ndarray, level: int) -> np.ndarray:
     return _cast(cropped, plan.dtype)
 
 
+def _ycbcr_to_integers(ycc: np.ndarray, dtype: str) -> np.ndarray:
+    """``_cast(ycbcr_inverse(ycc), dtype)`` for integer dtypes, by one compiled pass in threads."""
+    info = np.iinfo(dtype)
+    src = np.asarray(ycc, dtype=np.float64)
+    out = np.empty(src.shape, dtype=dtype)
+    run_rows(
+        lambda lo, hi: colour_to_integers(
+            src, YCBCR_INVERSE_MATRIX, True, float(info.min), float(info.max), out, lo, hi
+        ),
+        src.shape[0],
+    )
+    return out
+
+
 def _cast(data: np.ndarray, dtype: str) -> np.ndarray:
     target = np.dtype(dtype)
+    if target.kind in "iu" and data.dtype == np.float64 and data.ndim in (2, 3):
+        info = np.iinfo(target)
+        src = data if data.ndim == 3 else data[:, :, None]
+        out = np.empty(src.shape, dtype=target)
+        matrix = YCBCR_INVERSE_MATRIX  # unused (use_matrix is False)
+        lo, hi = float(info.min), float(info.max)
+        run_rows(
+            lambda a, b: colour_to_integers(src, matrix, False, lo, hi, out, a, b), src.shape[0]
+        )
+        return out.reshape(data.shape)
     if target.kind in "iu":
         info = np.iinfo(target)
         values = np.nan_to_num(np.asarray(data, dtype=np.float64), nan=0.0)
@@ -278,18 +306,30 @@ def _cast(data: np.ndarray, dtype: str) -> np.ndarray:
     return np.nan_to_num(np.asarray(data, dtype=np.float64)).astype(target)
 
 
+#: Dtypes the compiled loops do not take (NumPy handles them instead).
+_UNCOMPILED_DTYPES = {np.dtype(np.float16), np.dtype(np.longdouble)}
+
+
 def _errors(plan: _Plan, original: np.ndarray, decoded: np.ndarray) -> tuple[float | None, float]:
     """(PSNR in dB or None when exact, largest error: per sample, or per point for curves)."""
+    per_point = plan.kind == "curve" and decoded.ndim == 2
+    if not per_point and {decoded.dtype, original.dtype}.isdisjoint(_UNCOMPILED_DTYPES):
+        # One compiled pass: pictures are large, and the rate searches measure them often.
+        total, largest = squared_and_largest_error(
+            np.ascontiguousarray(decoded).ravel(), np.ascontiguousarray(original).ravel()
+        )
+        return _psnr(plan, float(total) / decoded.size), float(largest)
     diff = decoded.astype(np.float64) - original.astype(np.float64)
-    if plan.kind == "curve" and diff.ndim == 2:
-        max_error = float(np.max(np.linalg.norm(diff, axis=1)))
-    else:
-        max_error = float(np.max(np.abs(diff)))
-    mse = float(np.mean(diff * diff))
+    magnitude = np.linalg.norm(diff, axis=1) if per_point else np.abs(diff)
+    return _psnr(plan, float(np.mean(diff * diff))), float(np.max(magnitude))
+
+
+def _psnr(plan: _Plan, mse: float) -> float | None:
+    """PSNR in dB against the plan's peak, or None when exact."""
     if mse == 0.0:
-        return None, max_error
+        return None
     # Rounded down, so that the recorded value never claims more than was measured.
-    return math.floor(10.0 * math.log10(plan.peak * plan.peak / mse) * 1e4) / 1e4, max_error
+    return math.floor(10.0 * math.log10(plan.peak * plan.peak / mse) * 1e4) / 1e4
 
 
 def _peak(arr: np.ndarray, dtype: str, kind: str) -> float:

@@ -26,6 +26,8 @@ _ICT = np.array(
     ]
 )
 _ICT_INVERSE = np.linalg.inv(_ICT)
+#: The matrix that :func:`ycbcr_inverse` applies (for the codec's fused decoding pass).
+YCBCR_INVERSE_MATRIX = np.ascontiguousarray(_ICT_INVERSE)
 
 
 def _check(data: np.ndarray) -> None:

@@ -313,96 +313,273 @@ class _Models:
             counts[:] = (counts + 1) // 2
 
 
-def _groups(classes: np.ndarray) -> list[tuple[int, np.ndarray]]:
-    """``(class, positions)`` for each class present, ascending, positions in scan order."""
-    small = classes.astype(np.uint8)  # fewer than 256 classes: NumPy radix-sorts bytes
-    order = np.argsort(small, kind="stable")
-    ordered = small[order]
-    edges = np.flatnonzero(np.diff(ordered)) + 1
-    starts = np.concatenate([[0], edges])
-    stops = np.concatenate([edges, [len(order)]])
-    return [(int(ordered[a]), order[a:b]) for a, b in zip(starts, stops, strict=True) if b > a]
+@njit(nogil=True, cache=True)
+def _group_by_class(classes, n_classes):
+    """Counting sort: ``order`` lists the positions class by class (ascending), each class in
+    scan order; class ``c`` occupies ``order[starts[c]:starts[c + 1]]``."""
+    starts = np.zeros(n_classes + 1, dtype=np.int64)
+    for k in range(classes.size):
+        starts[classes[k] + 1] += 1
+    for c in range(n_classes):
+        starts[c + 1] += starts[c]
+    fill = starts[:n_classes].copy()
+    order = np.empty(classes.size, dtype=np.int64)
+    for k in range(classes.size):
+        c = classes[k]
+        order[fill[c]] = k
+        fill[c] += 1
+    return order, starts
 
 
-def _segments(count: int) -> list[slice]:
-    """Split ``count`` symbols into runs of doubling length; the model adapts between runs."""
-    out, start, size = [], 0, _FIRST_SEGMENT
-    while start < count:
-        out.append(slice(start, min(count, start + size)))
-        start += size
-        size *= 2
-    return out
+@njit(nogil=True, cache=True)
+def _add_counts(table, row, symbols, unit, limit):
+    """The adaptive update after a segment: count its symbols; halve once the row is full."""
+    for k in range(symbols.size):
+        table[row, symbols[k]] += unit
+    total = 0
+    for x in range(table.shape[1]):
+        total += table[row, x]
+    if total > limit:
+        for x in range(table.shape[1]):
+            table[row, x] = (table[row, x] + 1) // 2
 
 
-def _fit(arr: np.ndarray, rows: int, cols: int) -> np.ndarray:
-    """Crop or edge-extend a 2-D array to ``rows × cols`` (bands of one level differ a little)."""
-    arr = arr[:rows, :cols]
-    if arr.shape != (rows, cols):
-        arr = np.pad(arr, ((0, rows - arr.shape[0]), (0, cols - arr.shape[1])), mode="edge")
-    return arr
+@njit(nogil=True, cache=True)
+def _plan_segments(symbols, order, starts, table, unit, limit, first):
+    """The encoder's side of :func:`_code_grouped`, all at once.
+
+    Each class's symbols are split into runs of doubling length (``first``, ``2 · first``, …);
+    a run is coded with the class's counts as they were before it, and the counts then learn
+    it.  Returns the symbols in coding order, the runs' bounds and each run's counts, and
+    leaves ``table`` updated exactly as the decoder's run-by-run updates will.
+    """
+    n_classes = table.shape[0]
+    ordered = np.empty(symbols.size, dtype=np.int32)
+    for k in range(symbols.size):
+        ordered[k] = symbols[order[k]]
+    runs = 0
+    for c in range(n_classes):
+        size, done, length = starts[c + 1] - starts[c], 0, first
+        while done < size:
+            runs += 1
+            done += length
+            length *= 2
+    bounds = np.empty(runs + 1, dtype=np.int64)
+    models = np.empty((runs, table.shape[1]), dtype=np.float64)
+    k = 0
+    for c in range(n_classes):
+        at, length = starts[c], first
+        while at < starts[c + 1]:
+            stop = min(starts[c + 1], at + length)
+            bounds[k] = at
+            for x in range(table.shape[1]):
+                models[k, x] = table[c, x]
+            _add_counts(table, c, ordered[at:stop], unit, limit)
+            k += 1
+            at = stop
+            length *= 2
+    bounds[runs] = symbols.size
+    return ordered, bounds, models
+
+
+@njit(nogil=True, cache=True)
+def _add_parent(total, parent, factor):
+    """``total[i, j] += factor · (9 |p| + Σ 3 × 3 |p|)`` at the parent ``p`` of ``(i, j)``.
+
+    The parent of ``(i, j)`` is ``(i // 2, j // 2)``, clamped to the parent band (bands of one
+    level differ by a sample or two), and its neighbourhood is edge-extended.
+    """
+    pr, pc = parent.shape
+    mix = np.empty((pr, pc), dtype=np.int64)
+    for i in range(pr):
+        for j in range(pc):
+            value = 9 * abs(np.int64(parent[i, j]))
+            for di in range(-1, 2):
+                ii = min(max(i + di, 0), pr - 1)
+                for dj in range(-1, 2):
+                    value += abs(np.int64(parent[ii, min(max(j + dj, 0), pc - 1)]))
+            mix[i, j] = value
+    rows, cols = total.shape
+    for i in range(rows):
+        pi = min(i // 2, pr - 1)
+        for j in range(cols):
+            total[i, j] += factor * mix[pi, min(j // 2, pc - 1)]
+
+
+@njit(nogil=True, cache=True)
+def _add_clamped(total, band, factor):
+    """``total[i, j] += factor · |band[i, j]|``, indices clamped to ``band``'s extent."""
+    br, bc = band.shape
+    rows, cols = total.shape
+    for i in range(rows):
+        bi = min(i, br - 1)
+        for j in range(cols):
+            total[i, j] += factor * abs(np.int64(band[bi, min(j, bc - 1)]))
 
 
 def _external(
     shape: tuple[int, int], parent: np.ndarray | None, siblings: list[tuple[np.ndarray, int]]
 ) -> tuple[np.ndarray, int]:
-    """Scaled sum and weight of the context from other, already coded, bands (integers)."""
-    rows, cols = shape
+    """Scaled sum and weight of the context from other, already coded, bands (integers).
+
+    The bands may hold signed values: only their magnitudes count.
+    """
     total = np.zeros(shape, dtype=np.int64)
     weight = 0
     if parent is not None and parent.size:
-        padded = np.pad(parent, 1, mode="edge")
-        box = np.zeros(parent.shape, dtype=np.int64)
-        for di in (0, 1, 2):
-            for dj in (0, 1, 2):
-                box += padded[di : di + parent.shape[0], dj : dj + parent.shape[1]]
-        mix = 9 * parent + box  # 18 × the mean of the parent and its neighbourhood's mean
-        total += _W_PARENT * _fit(np.repeat(np.repeat(mix, 2, 0), 2, 1), rows, cols)
+        _add_parent(total, parent, _W_PARENT)
         weight += _W_PARENT * _PARENT_SCALE
     for sibling, w in siblings:
         if sibling.size:
-            total += (w * _PARENT_SCALE) * _fit(sibling, rows, cols)
+            _add_clamped(total, sibling, w * _PARENT_SCALE)
             weight += w * _PARENT_SCALE
     return total, weight
 
 
+#: Which neighbours are already known when a phase is coded (``_PASSES``' order): none for
+#: (even, even); the four diagonal ones for (odd, odd); the four direct ones for (even, odd),
+#: which are (even, even) or (odd, odd); all eight for (odd, even), whose diagonal neighbours
+#: are the (even, odd) positions coded just before.
+_KNOWN_NEIGHBOURS = {(0, 0): (False, False), (1, 1): (False, True), (0, 1): (True, False)}
+_KNOWN_NEIGHBOURS[1, 0] = (True, True)
+
+
 @njit(nogil=True, cache=True)
 def _phase_classes(
-    magnitude, known, ext_sum, ext_weight, row0, col0, base, edges, scale, w_direct, w_diagonal
+    out, ext_sum, ext_weight, row0, col0, base, edges, scale, w_direct, w_diagonal, direct, diagonal
 ):
     """Context class of every position ``(row0 + 2i, col0 + 2j)`` of a plane.
 
     The activity is ``(ext_sum + scale · Σ w · |known neighbour|) / (ext_weight + scale · Σ w)``
-    over the eight neighbours already coded; its bin is the number of edges (in thousandths)
-    below it, all in integer arithmetic.
+    over the neighbours already coded (``out`` holds them; ``direct``/``diagonal`` say which
+    they are) and inside the plane; its bin is the number of edges (in thousandths) below it,
+    all in integer arithmetic.
     """
-    rows, cols = magnitude.shape
+    rows, cols = out.shape
     n_i = (rows - row0 + 1) // 2
     n_j = (cols - col0 + 1) // 2
-    out = np.empty(n_i * n_j, dtype=np.int64)
+    classes = np.empty(n_i * n_j, dtype=np.int64)
+    k = 0
+    for i in range(row0, rows, 2):
+        up, down = i > 0, i < rows - 1
+        for j in range(col0, cols, 2):
+            left, right = j > 0, j < cols - 1
+            num = ext_sum[i, j]
+            den = ext_weight
+            if direct:
+                total, count = 0, 0
+                if up:
+                    total += abs(out[i - 1, j])
+                    count += 1
+                if down:
+                    total += abs(out[i + 1, j])
+                    count += 1
+                if left:
+                    total += abs(out[i, j - 1])
+                    count += 1
+                if right:
+                    total += abs(out[i, j + 1])
+                    count += 1
+                num += scale * w_direct * total
+                den += scale * w_direct * count
+            if diagonal:
+                total, count = 0, 0
+                if up and left:
+                    total += abs(out[i - 1, j - 1])
+                    count += 1
+                if up and right:
+                    total += abs(out[i - 1, j + 1])
+                    count += 1
+                if down and left:
+                    total += abs(out[i + 1, j - 1])
+                    count += 1
+                if down and right:
+                    total += abs(out[i + 1, j + 1])
+                    count += 1
+                num += scale * w_diagonal * total
+                den += scale * w_diagonal * count
+            b = 0
+            if den > 0 and num > 0:  # num = 0 is bin 0: every edge is >= 0
+                for e in edges:  # ascending: stop at the first edge not exceeded
+                    if 1000 * num <= e * den:
+                        break
+                    b += 1
+            classes[k] = base + b
+            k += 1
+    return classes
+
+
+@njit(nogil=True, cache=True)
+def _phase_values(plane, row0, col0):
+    """The encoder's magnitudes and signs (1 for negative) at a phase's positions, scan order."""
+    rows, cols = plane.shape
+    n_j = (cols - col0 + 1) // 2
+    count = ((rows - row0 + 1) // 2) * n_j
+    magnitudes = np.empty(count, dtype=np.int64)
+    negative = np.empty(count, dtype=np.int64)
     k = 0
     for i in range(row0, rows, 2):
         for j in range(col0, cols, 2):
-            num = ext_sum[i, j]
-            den = ext_weight
-            for di in (-1, 0, 1):
-                ii = i + di
-                if ii < 0 or ii >= rows:
-                    continue
-                for dj in (-1, 0, 1):
-                    jj = j + dj
-                    if (di == 0 and dj == 0) or jj < 0 or jj >= cols or not known[ii, jj]:
-                        continue
-                    w = w_diagonal if di != 0 and dj != 0 else w_direct
-                    num += scale * w * magnitude[ii, jj]
-                    den += scale * w
-            b = 0
-            if den > 0:
-                for e in edges:
-                    if 1000 * num > e * den:
-                        b += 1
-            out[k] = base + b
+            value = np.int64(plane[i, j])
+            magnitudes[k] = abs(value)
+            negative[k] = 1 if value < 0 else 0
             k += 1
-    return out
+    return magnitudes, negative
+
+
+@njit(nogil=True, cache=True)
+def _sign_contexts(out, row0, col0, positions, pass_index, base):
+    """Sign context of each listed phase position, from the signs of the neighbours known.
+
+    One context for the first pass; then the sums of the known neighbours' signs (each in
+    -2..2) along the diagonals (second pass) or along the row and the column (third pass).
+    Unknown and outside neighbours are zero in ``out``.
+    """
+    rows, cols = out.shape
+    n_j = (cols - col0 + 1) // 2
+    contexts = np.empty(positions.size, dtype=np.int64)
+    for k in range(positions.size):
+        i = row0 + 2 * (positions[k] // n_j)
+        j = col0 + 2 * (positions[k] % n_j)
+        if pass_index == 0:
+            contexts[k] = base
+            continue
+        up, down, left, right = i > 0, i < rows - 1, j > 0, j < cols - 1
+        if pass_index == 1:
+            first, second = 0, 0
+            if up and left:
+                first += np.sign(out[i - 1, j - 1])
+            if down and right:
+                first += np.sign(out[i + 1, j + 1])
+            if up and right:
+                second += np.sign(out[i - 1, j + 1])
+            if down and left:
+                second += np.sign(out[i + 1, j - 1])
+            contexts[k] = base + 1 + (first + 2) * 5 + (second + 2)
+        else:
+            across, along = 0, 0
+            if left:
+                across += np.sign(out[i, j - 1])
+            if right:
+                across += np.sign(out[i, j + 1])
+            if up:
+                along += np.sign(out[i - 1, j])
+            if down:
+                along += np.sign(out[i + 1, j])
+            contexts[k] = base + 26 + (across + 2) * 5 + (along + 2)
+    return contexts
+
+
+@njit(nogil=True, cache=True)
+def _commit_phase(out, row0, col0, magnitudes, positions, negative):
+    """Write a coded phase into ``out``: magnitudes, negated where ``negative`` says."""
+    cols = out.shape[1]
+    n_j = (cols - col0 + 1) // 2
+    for k in range(magnitudes.size):
+        out[row0 + 2 * (k // n_j), col0 + 2 * (k % n_j)] = magnitudes[k]
+    for k in range(positions.size):
+        if negative[k]:
+            out[row0 + 2 * (positions[k] // n_j), col0 + 2 * (positions[k] % n_j)] *= -1
 
 
 class _Writer:
@@ -416,16 +593,21 @@ class _Writer:
         self.encoder = _queue.RangeEncoder()
         return self
 
+    def _grouped(self, table: np.ndarray, classes: np.ndarray, symbols: np.ndarray) -> None:
+        """Code ``symbols`` under the adaptive counts ``table[class]`` (see _plan_segments)."""
+        order, starts = _group_by_class(classes, table.shape[0])
+        ordered, bounds, models = _plan_segments(
+            symbols, order, starts, table, _UNIT, _COUNT_LIMIT, _FIRST_SEGMENT
+        )
+        encode, categorical = self.encoder.encode, _model.Categorical
+        for k in range(len(bounds) - 1):
+            encode(ordered[bounds[k] : bounds[k + 1]], categorical(models[k], perfect=False))
+
     def magnitudes(
         self, models: _Models, counts: np.ndarray, classes: np.ndarray, values: np.ndarray
     ) -> np.ndarray:
         """Code ``values >= 0`` (1-D) with the class of each; escapes follow in the same stream."""
-        symbols = np.minimum(values, ESCAPE).astype(np.int32)
-        for cls, members in _groups(classes):
-            picked = symbols[members]
-            for part in _segments(len(picked)):
-                self.encoder.encode(picked[part], models.model(counts[cls]))
-                models.update(counts[cls], picked[part])
+        self._grouped(counts, classes, np.minimum(values, ESCAPE).astype(np.int32))
         excess = values[values >= ESCAPE].astype(np.int64) - ESCAPE
         if excess.size:
             exponents = _bit_length(excess)
@@ -440,12 +622,8 @@ class _Writer:
         self, models: _Models, table: np.ndarray, contexts: np.ndarray, values: np.ndarray
     ) -> np.ndarray:
         """Code small ``values`` under adaptive counts ``table[context]``, context by context."""
-        symbols = values.astype(np.int32)
-        for ctx, members in _groups(contexts):
-            picked = symbols[members]
-            for part in _segments(len(picked)):
-                self.encoder.encode(picked[part], models.model(table[ctx]))
-                models.update(table[ctx], picked[part])
+        del models
+        self._grouped(table, contexts, values.astype(np.int32))
         return values.astype(np.int64)
 
     def uniform(self, values: np.ndarray, size: int, count: int) -> np.ndarray:
@@ -486,17 +664,33 @@ class _Reader:
             msg = f"corrupt context-coded chunk: {exc}"
             raise BundleError(msg) from exc
 
+    def _grouped(self, table: np.ndarray, classes: np.ndarray) -> np.ndarray:
+        """Decode what :meth:`_Writer._grouped` coded: run by run, learning after each."""
+        order, starts = _group_by_class(classes, table.shape[0])
+        ordered = np.empty(classes.size, dtype=np.int64)
+        decode, categorical = self.decoder.decode, _model.Categorical
+        for c in np.flatnonzero(np.diff(starts)):
+            at, stop, length = int(starts[c]), int(starts[c + 1]), _FIRST_SEGMENT
+            while at < stop:
+                end = min(stop, at + length)
+                try:
+                    run = decode(categorical(table[c].astype(np.float64), perfect=False), end - at)
+                except Exception as exc:  # constriction reports bad input in its own types
+                    msg = f"corrupt context-coded chunk: {exc}"
+                    raise BundleError(msg) from exc
+                ordered[at:end] = run
+                _add_counts(table, c, run, _UNIT, _COUNT_LIMIT)
+                at = end
+                length *= 2
+        values = np.empty(classes.size, dtype=np.int64)
+        values[order] = ordered
+        return values
+
     def magnitudes(
         self, models: _Models, counts: np.ndarray, classes: np.ndarray, truth: None
     ) -> np.ndarray:
         del truth
-        values = np.empty(classes.shape, dtype=np.int64)
-        for cls, members in _groups(classes):
-            picked = np.empty(len(members), dtype=np.int64)
-            for part in _segments(len(picked)):
-                picked[part] = self._decode(models.model(counts[cls]), part.stop - part.start)
-                models.update(counts[cls], picked[part])
-            values[members] = picked
+        values = self._grouped(counts, classes)
         escaped = values == ESCAPE
         count = int(np.count_nonzero(escaped))
         if count:
@@ -514,15 +708,8 @@ class _Reader:
     def grouped(
         self, models: _Models, table: np.ndarray, contexts: np.ndarray, values: None
     ) -> np.ndarray:
-        del values
-        out = np.empty(contexts.shape, dtype=np.int64)
-        for ctx, members in _groups(contexts):
-            picked = np.empty(len(members), dtype=np.int64)
-            for part in _segments(len(picked)):
-                picked[part] = self._decode(models.model(table[ctx]), part.stop - part.start)
-                models.update(table[ctx], picked[part])
-            out[members] = picked
-        return out
+        del models, values
+        return self._grouped(table, contexts)
 
     def uniform(self, values: None, size: int, count: int) -> np.ndarray:
         del values
@@ -623,31 +810,6 @@ def _code_approx(io: Any, models: _Models, plane: np.ndarray | None, shape: Any)
     return out
 
 
-def _sign_contexts(
-    signs: np.ndarray,
-    row0: int,
-    col0: int,
-    block_shape: tuple[int, ...],
-    pass_index: int,
-    orientation: int,
-) -> np.ndarray:
-    """Sign context of every position of a pass, from the signs of the neighbours known."""
-    n_i, n_j = block_shape[0], block_shape[1]
-    base = orientation * _SIGN_CONTEXTS
-    if pass_index == 0:
-        return np.full((n_i, n_j), base, dtype=np.int64)
-
-    def at(di: int, dj: int) -> np.ndarray:
-        r, c = 1 + row0 + di, 1 + col0 + dj
-        return signs[r : r + 2 * n_i - 1 : 2, c : c + 2 * n_j - 1 : 2]
-
-    if pass_index == 1:
-        first, second = at(-1, -1) + at(1, 1), at(-1, 1) + at(1, -1)
-        return base + 1 + (first + 2) * 5 + (second + 2)
-    across, down = at(0, -1) + at(0, 1), at(-1, 0) + at(1, 0)
-    return base + 26 + (across + 2) * 5 + (down + 2)
-
-
 def _code_detail(
     io: Any,
     models: _Models,
@@ -659,17 +821,12 @@ def _code_detail(
 ) -> np.ndarray:
     """One detail plane in three interlaced passes, each symbol under its context class."""
     ext_sum, ext_weight = _external(shape, parent, siblings)
-    magnitude_plane = None if plane is None else np.abs(plane.astype(np.int64))
-    known_magnitude = np.zeros(shape, dtype=np.int64)
-    known = np.zeros(shape, dtype=np.bool_)
-    signs = np.zeros((shape[0] + 2, shape[1] + 2), dtype=np.int64)  # known signs, zero-padded
-    out = np.zeros(shape, dtype=np.int64)
+    out = np.zeros(shape, dtype=np.int64)  # what is known so far; zero elsewhere
     for pass_index, phases in enumerate(_PASSES):
         for row0, col0 in phases:
-            where = (slice(row0, None, 2), slice(col0, None, 2))
+            direct, diagonal = _KNOWN_NEIGHBOURS[row0, col0]
             classes = _phase_classes(
-                known_magnitude,
-                known,
+                out,
                 ext_sum,
                 ext_weight,
                 row0,
@@ -679,28 +836,26 @@ def _code_detail(
                 _PARENT_SCALE,
                 _W_DIRECT,
                 _W_DIAGONAL,
+                direct,
+                diagonal,
             )
             if not classes.size:
                 continue
-            truth = None if magnitude_plane is None else magnitude_plane[where].ravel()
+            truth = negative_truth = None
+            if plane is not None:
+                truth, negative_truth = _phase_values(plane, row0, col0)
             magnitude = io.magnitudes(models, models.detail, classes, truth)
-            nonzero = magnitude != 0
-            block_shape = out[where].shape
-            contexts = _sign_contexts(signs, row0, col0, block_shape, pass_index, orientation)
+            positions = np.flatnonzero(magnitude)
+            contexts = _sign_contexts(
+                out, row0, col0, positions, pass_index, orientation * _SIGN_CONTEXTS
+            )
             negative = io.grouped(
                 models,
                 models.sign,
-                contexts.ravel()[nonzero],
-                None if plane is None else (plane[where].ravel()[nonzero] < 0),
+                contexts,
+                None if negative_truth is None else negative_truth[positions],
             )
-            signed = magnitude.copy()
-            signed[nonzero] *= 1 - 2 * negative
-            out[where] = signed.reshape(block_shape)
-            known_magnitude[where] = magnitude.reshape(block_shape)
-            known[where] = True
-            signs[1 + row0 :: 2, 1 + col0 :: 2][: block_shape[0], : block_shape[1]] = np.sign(
-                out[where]
-            )
+            _commit_phase(out, row0, col0, magnitude, positions, negative)
     return out
 
 
@@ -734,10 +889,10 @@ def _code_levels(
                 if index >= 2 and k < len(decoded[index - 1]):
                     parent_planes = decoded[index - 1][k]
                     if channel < parent_planes.shape[2]:
-                        parent = np.abs(parent_planes[:, :, channel])
-                siblings = [(np.abs(level_planes[s][:, :, channel]), _W_SIBLING) for s in range(k)]
+                        parent = parent_planes[:, :, channel]
+                siblings = [(level_planes[s][:, :, channel], _W_SIBLING) for s in range(k)]
                 if channel > 0:
-                    siblings.append((np.abs(result[:, :, 0]), _W_LUMA))
+                    siblings.append((result[:, :, 0], _W_LUMA))
                 result[:, :, channel] = _code_detail(
                     io, models, plane, dims[:2], parent, siblings, min(k, 2)
                 )

@@ -122,6 +122,22 @@ def _run_blocks(
         future.result()
 
 
+def run_rows(call: Callable[[int, int], None], rows: int, work: int | None = None) -> None:
+    """Call ``call(row_lo, row_hi)`` over blocks of ``rows`` rows, in threads if the work is big.
+
+    For the codec's compiled per-pixel passes (which release the GIL); ``work`` is the number
+    of elements processed (``rows`` times a large row by default).
+    """
+    threads = _thread_count()
+    if threads == 1 or rows < 2 or (work is not None and work < _THREADED_MIN_ELEMENTS):
+        call(0, rows)
+        return
+    edges = np.linspace(0, rows, min(rows, threads * 2) + 1).astype(int)
+    futures = [_pool().submit(call, lo, hi) for lo, hi in itertools.pairwise(edges) if hi > lo]
+    for future in futures:
+        future.result()
+
+
 def _view3(arr: np.ndarray, axis: int) -> np.ndarray:
     """A ``(outer, n, inner)`` view of a C-contiguous array around ``axis``."""
     shape = arr.shape
