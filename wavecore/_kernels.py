@@ -343,3 +343,46 @@ def squared_and_largest_error(decoded, original):
         if d > largest or d != d:
             largest = d
     return total, largest
+
+
+@njit(nogil=True, cache=True)
+def colour_to_floats(src, matrix, out, row_lo, row_hi):
+    """``out = matrix @ src`` per pixel on the first three channels (the others copied), as
+    float64, rows ``[row_lo, row_hi)``: the encoder's colour transform in one pass."""
+    cols, channels = src.shape[1], src.shape[2]
+    for i in range(row_lo, row_hi):
+        for j in range(cols):
+            pixel = src[i, j]
+            a, b, c = float(pixel[0]), float(pixel[1]), float(pixel[2])
+            for k in range(3):
+                out[i, j, k] = matrix[k, 0] * a + matrix[k, 1] * b + matrix[k, 2] * c
+            for k in range(3, channels):
+                out[i, j, k] = pixel[k]
+
+
+@njit(nogil=True, cache=True)
+def deadzone_quantize(values, inverse_step, rounding, largest, out):
+    """``out = sign(v) · min(floor(|v| · inverse_step + rounding), largest)``, elementwise."""
+    for k in range(values.size):
+        v = values[k]
+        q = min(np.floor(abs(v) * inverse_step + rounding), largest)
+        out[k] = -q if v < 0 else q
+
+
+@njit(nogil=True, cache=True)
+def magnitude_histogram(values, bins):
+    """Histogram of ``min(|v|, bins - 1)``, the number of nonzero values, and ``Σ log2 |v|``
+    over the values beyond the histogram."""
+    counts = np.zeros(bins, dtype=np.int64)
+    nonzero = 0
+    beyond = 0.0
+    for k in range(values.size):
+        a = abs(np.int64(values[k]))
+        if a != 0:
+            nonzero += 1
+        if a >= bins:
+            counts[bins - 1] += 1
+            beyond += np.log2(a)
+        else:
+            counts[a] += 1
+    return counts, nonzero, beyond

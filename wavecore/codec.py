@@ -38,9 +38,21 @@ from typing import Any
 import numpy as np
 
 from . import lossless as _lossless
-from ._kernels import colour_to_integers, squared_and_largest_error
+from ._kernels import (
+    colour_to_floats,
+    colour_to_integers,
+    magnitude_histogram,
+    squared_and_largest_error,
+)
 from .bundle import DTYPES, MAX_ELEMENTS, Bundle, read_bundle, write_bundle
-from .colour import YCBCR_INVERSE_MATRIX, rct_forward, rct_inverse, ycbcr_forward, ycbcr_inverse
+from .colour import (
+    YCBCR_INVERSE_MATRIX,
+    YCBCR_MATRIX,
+    rct_forward,
+    rct_inverse,
+    ycbcr_forward,
+    ycbcr_inverse,
+)
 from .entropy import decode_levels, encode_levels
 from .errors import BundleError, InvalidLength, InvalidParameter
 from .filters import get_wavelet
@@ -287,6 +299,15 @@ def _ycbcr_to_integers(ycc: np.ndarray, dtype: str) -> np.ndarray:
     return out
 
 
+def _ycbcr_from(rgb: np.ndarray) -> np.ndarray:
+    """``ycbcr_forward(rgb.astype(float64))``, by one compiled pass in threads."""
+    if rgb.dtype in _UNCOMPILED_DTYPES:
+        return ycbcr_forward(rgb.astype(np.float64))
+    out = np.empty(rgb.shape, dtype=np.float64)
+    run_rows(lambda lo, hi: colour_to_floats(rgb, YCBCR_MATRIX, out, lo, hi), rgb.shape[0])
+    return out
+
+
 def _cast(data: np.ndarray, dtype: str) -> np.ndarray:
     target = np.dtype(dtype)
     if target.kind in "iu" and data.dtype == np.float64 and data.ndim in (2, 3):
@@ -447,16 +468,13 @@ class _LossyEncoder:
         bits = 0.0
         for entry in q:
             for band in entry if isinstance(entry, tuple | list) else (entry,):
-                values = np.abs(np.asarray(band, dtype=np.int64)).ravel()
-                if not values.size:
+                if not band.size:
                     continue
                 # Magnitudes up to 255 by their histogram, larger ones by their bit length.
-                counts = np.bincount(np.minimum(values, 255))
+                counts, nonzero, beyond = magnitude_histogram(np.ravel(band), 256)
                 counts = counts[counts > 0]
-                bits -= float(np.sum(counts * np.log2(counts / values.size)))
-                large = values[values > 255]
-                bits += float(np.sum(np.log2(large))) * 1.2 if large.size else 0.0
-                bits += float(np.count_nonzero(values))  # signs
+                bits -= float(np.sum(counts * np.log2(counts / band.size)))
+                bits += 1.2 * beyond + nonzero  # and a bit per sign
         return bits / 8.0 + _HEADER_GUESS
 
 
@@ -743,9 +761,7 @@ def encode_image(
     bpp = None if bpp is None else _positive(bpp, "bpp", "bits per pixel")
     dtype = _dtype_name(arr, "image")
     colour = "ycbcr" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
-    data = arr.astype(np.float64)
-    if colour == "ycbcr":
-        data = ycbcr_forward(data)
+    data = _ycbcr_from(arr) if colour == "ycbcr" else arr.astype(np.float64)
     bank = get_wavelet(wavelet)
     # Images use the paper's endpoint-interpolating rows; a wavelet without them (cdf97's
     # symmetric extension) uses its own non-periodic boundary.

@@ -26,7 +26,9 @@ _ICT = np.array(
     ]
 )
 _ICT_INVERSE = np.linalg.inv(_ICT)
-#: The matrix that :func:`ycbcr_inverse` applies (for the codec's fused decoding pass).
+#: The matrices that :func:`ycbcr_forward` and :func:`ycbcr_inverse` apply (for the codec's
+#: fused passes).
+YCBCR_MATRIX = np.ascontiguousarray(_ICT)
 YCBCR_INVERSE_MATRIX = np.ascontiguousarray(_ICT_INVERSE)
 
 

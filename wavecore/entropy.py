@@ -383,12 +383,8 @@ def _plan_segments(symbols, order, starts, table, unit, limit, first):
 
 
 @njit(nogil=True, cache=True)
-def _add_parent(total, parent, factor):
-    """``total[i, j] += factor · (9 |p| + Σ 3 × 3 |p|)`` at the parent ``p`` of ``(i, j)``.
-
-    The parent of ``(i, j)`` is ``(i // 2, j // 2)``, clamped to the parent band (bands of one
-    level differ by a sample or two), and its neighbourhood is edge-extended.
-    """
+def _parent_mix(parent):
+    """``9 |p| + Σ 3 × 3 |p|`` at every parent position (the neighbourhood edge-extended)."""
     pr, pc = parent.shape
     mix = np.empty((pr, pc), dtype=np.int64)
     for i in range(pr):
@@ -399,8 +395,19 @@ def _add_parent(total, parent, factor):
                 for dj in range(-1, 2):
                     value += abs(np.int64(parent[ii, min(max(j + dj, 0), pc - 1)]))
             mix[i, j] = value
-    rows, cols = total.shape
-    for i in range(rows):
+    return mix
+
+
+@njit(nogil=True, cache=True)
+def _add_parent(total, mix, factor):
+    """``total[i, j] += factor · mix[i // 2, j // 2]``.
+
+    The parent of ``(i, j)`` is ``(i // 2, j // 2)``, clamped to the parent band (bands of one
+    level differ by a sample or two).
+    """
+    pr, pc = mix.shape
+    cols = total.shape[1]
+    for i in range(total.shape[0]):
         pi = min(i // 2, pr - 1)
         for j in range(cols):
             total[i, j] += factor * mix[pi, min(j // 2, pc - 1)]
@@ -410,8 +417,8 @@ def _add_parent(total, parent, factor):
 def _add_clamped(total, band, factor):
     """``total[i, j] += factor · |band[i, j]|``, indices clamped to ``band``'s extent."""
     br, bc = band.shape
-    rows, cols = total.shape
-    for i in range(rows):
+    cols = total.shape[1]
+    for i in range(total.shape[0]):
         bi = min(i, br - 1)
         for j in range(cols):
             total[i, j] += factor * abs(np.int64(band[bi, min(j, bc - 1)]))
@@ -427,7 +434,7 @@ def _external(
     total = np.zeros(shape, dtype=np.int64)
     weight = 0
     if parent is not None and parent.size:
-        _add_parent(total, parent, _W_PARENT)
+        _add_parent(total, _parent_mix(parent), _W_PARENT)
         weight += _W_PARENT * _PARENT_SCALE
     for sibling, w in siblings:
         if sibling.size:
@@ -446,21 +453,33 @@ _KNOWN_NEIGHBOURS[1, 0] = (True, True)
 
 @njit(nogil=True, cache=True)
 def _phase_classes(
-    out, ext_sum, ext_weight, row0, col0, base, edges, scale, w_direct, w_diagonal, direct, diagonal
+    out,
+    ext_sum,
+    ext_weight,
+    row0,
+    col0,
+    base,
+    edges,
+    scale,
+    w_direct,
+    w_diagonal,
+    direct,
+    diagonal,
+    classes,
+    lo,
+    hi,
 ):
-    """Context class of every position ``(row0 + 2i, col0 + 2j)`` of a plane.
+    """Context class of the positions ``(row0 + 2i, col0 + 2j)`` of a plane, ``lo <= i < hi``.
 
     The activity is ``(ext_sum + scale · Σ w · |known neighbour|) / (ext_weight + scale · Σ w)``
     over the neighbours already coded (``out`` holds them; ``direct``/``diagonal`` say which
     they are) and inside the plane; its bin is the number of edges (in thousandths) below it,
-    all in integer arithmetic.
+    all in integer arithmetic.  ``classes`` holds the phase's positions in scan order.
     """
     rows, cols = out.shape
-    n_i = (rows - row0 + 1) // 2
     n_j = (cols - col0 + 1) // 2
-    classes = np.empty(n_i * n_j, dtype=np.int64)
-    k = 0
-    for i in range(row0, rows, 2):
+    for i in range(row0 + 2 * lo, row0 + 2 * hi, 2):
+        k = ((i - row0) // 2) * n_j
         up, down = i > 0, i < rows - 1
         for j in range(col0, cols, 2):
             left, right = j > 0, j < cols - 1
@@ -506,7 +525,6 @@ def _phase_classes(
                     b += 1
             classes[k] = base + b
             k += 1
-    return classes
 
 
 @njit(nogil=True, cache=True)
@@ -825,7 +843,11 @@ def _code_detail(
     for pass_index, phases in enumerate(_PASSES):
         for row0, col0 in phases:
             direct, diagonal = _KNOWN_NEIGHBOURS[row0, col0]
-            classes = _phase_classes(
+            n_i, n_j = (shape[0] - row0 + 1) // 2, (shape[1] - col0 + 1) // 2
+            if n_i * n_j == 0:
+                continue
+            classes = np.empty(n_i * n_j, dtype=np.int64)
+            _phase_classes(
                 out,
                 ext_sum,
                 ext_weight,
@@ -838,9 +860,10 @@ def _code_detail(
                 _W_DIAGONAL,
                 direct,
                 diagonal,
+                classes,
+                0,
+                n_i,
             )
-            if not classes.size:
-                continue
             truth = negative_truth = None
             if plane is not None:
                 truth, negative_truth = _phase_values(plane, row0, col0)

@@ -200,10 +200,12 @@ def quantize_bands(
         band_rounding = APPROX_ROUNDING if index == 0 else float(rounding)
         level_q = []
         for band, weight in zip(bands, band_weights, strict=True):
-            values = np.asarray(band, dtype=np.float64)
-            q = np.floor(np.abs(values) * (1.0 / (step * weight)) + band_rounding)
-            np.minimum(q, MAX_INDEX, out=q)
-            level_q.append(np.copysign(q, values).astype(np.int32))
+            values = np.ascontiguousarray(band, dtype=np.float64)
+            q = np.empty(values.shape, dtype=np.int32)
+            _kernels.deadzone_quantize(
+                values.reshape(-1), 1.0 / (step * weight), band_rounding, MAX_INDEX, q.reshape(-1)
+            )
+            level_q.append(q)
         out_levels.append(level_q)
     params = {
         "name": QUANTIZER_NAME,
