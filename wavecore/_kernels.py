@@ -386,3 +386,30 @@ def magnitude_histogram(values, bins):
         else:
             counts[a] += 1
     return counts, nonzero, beyond
+
+
+@njit(nogil=True, cache=True)
+def dequantize(q, offset, step, out):
+    """``out = sign(q) · (|q| + offset) · step`` for ``q != 0``, and 0 where ``q == 0``."""
+    for k in range(q.size):
+        v = q[k]
+        if v > 0:
+            out[k] = (float(v) + offset) * step
+        elif v < 0:
+            out[k] = -(float(-np.int64(v)) + offset) * step
+        else:
+            out[k] = 0.0
+
+
+@njit(nogil=True, cache=True)
+def count_ones_and_more(q):
+    """How many values have magnitude 1, and how many 2 or more."""
+    ones = 0
+    more = 0
+    for k in range(q.size):
+        a = abs(np.int64(q[k]))
+        if a == 1:
+            ones += 1
+        elif a >= 2:
+            more += 1
+    return ones, more

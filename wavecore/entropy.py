@@ -264,7 +264,12 @@ _W_DIRECT, _W_DIAGONAL, _W_PARENT, _W_SIBLING, _W_LUMA = 4, 2, 2, 1, 6
 #: The parent term is (9 · parent + sum of its 3 × 3 neighbourhood) / 18: everything is scaled
 #: by 18.
 _PARENT_SCALE = 18
-CONTEXT_VERSION = 2
+#: Version 3 adds the tile flags; version 2 bundles (no tiles) still decode.
+CONTEXT_VERSION = 3
+CONTEXT_VERSIONS = (2, 3)
+#: Tiles of ``_TILE × _TILE`` detail coefficients: each is flagged as holding a nonzero value
+#: or not, and an all-zero tile costs nothing more (most of the finest levels, at most rates).
+_TILE = 8
 #: Sign contexts per orientation: one for the first pass, then the sums of the known
 #: neighbours' signs (each in -2..2) along two directions: diagonals in the second pass,
 #: rows and columns in the third.  Textures (brick) have strongly aligned signs.
@@ -296,6 +301,7 @@ class _Models:
         self.approx = _prior(_BINS)
         self.exponent = np.full(_EXPONENTS, _UNIT // 4, dtype=np.int64)
         self.sign = np.full((3 * _SIGN_CONTEXTS, 2), _UNIT, dtype=np.int64)
+        self.tile = np.full((_BINS, 2), _UNIT, dtype=np.int64)
 
     def new_level(self) -> None:
         totals = self.detail.sum(axis=1, keepdims=True)
@@ -465,84 +471,130 @@ def _phase_classes(
     w_diagonal,
     direct,
     diagonal,
-    classes,
-    lo,
-    hi,
+    significant,
+    tile,
 ):
-    """Context class of the positions ``(row0 + 2i, col0 + 2j)`` of a plane, ``lo <= i < hi``.
+    """Context classes of the positions ``(row0 + 2i, col0 + 2j)`` of a plane that lie in
+    significant tiles (``significant[i // tile, j // tile]``, in plane coordinates).
 
     The activity is ``(ext_sum + scale · Σ w · |known neighbour|) / (ext_weight + scale · Σ w)``
     over the neighbours already coded (``out`` holds them; ``direct``/``diagonal`` say which
     they are) and inside the plane; its bin is the number of edges (in thousandths) below it,
-    all in integer arithmetic.  ``classes`` holds the phase's positions in scan order.
+    all in integer arithmetic.  Returns the positions (indices into the phase in scan order)
+    and their classes.
     """
     rows, cols = out.shape
     n_j = (cols - col0 + 1) // 2
-    for i in range(row0 + 2 * lo, row0 + 2 * hi, 2):
-        k = ((i - row0) // 2) * n_j
+    count = ((rows - row0 + 1) // 2) * n_j
+    positions = np.empty(count, dtype=np.int64)
+    classes = np.empty(count, dtype=np.int64)
+    n = 0
+    for i in range(row0, rows, 2):
         up, down = i > 0, i < rows - 1
-        for j in range(col0, cols, 2):
-            left, right = j > 0, j < cols - 1
-            num = ext_sum[i, j]
-            den = ext_weight
-            if direct:
-                total, count = 0, 0
-                if up:
-                    total += abs(out[i - 1, j])
-                    count += 1
-                if down:
-                    total += abs(out[i + 1, j])
-                    count += 1
-                if left:
-                    total += abs(out[i, j - 1])
-                    count += 1
-                if right:
-                    total += abs(out[i, j + 1])
-                    count += 1
-                num += scale * w_direct * total
-                den += scale * w_direct * count
-            if diagonal:
-                total, count = 0, 0
-                if up and left:
-                    total += abs(out[i - 1, j - 1])
-                    count += 1
-                if up and right:
-                    total += abs(out[i - 1, j + 1])
-                    count += 1
-                if down and left:
-                    total += abs(out[i + 1, j - 1])
-                    count += 1
-                if down and right:
-                    total += abs(out[i + 1, j + 1])
-                    count += 1
-                num += scale * w_diagonal * total
-                den += scale * w_diagonal * count
-            b = 0
-            if den > 0 and num > 0:  # num = 0 is bin 0: every edge is >= 0
-                for e in edges:  # ascending: stop at the first edge not exceeded
-                    if 1000 * num <= e * den:
-                        break
-                    b += 1
-            classes[k] = base + b
-            k += 1
+        tile_row = significant[i // tile]
+        row_start = ((i - row0) // 2) * n_j
+        for t in range(tile_row.size):
+            if not tile_row[t]:
+                continue  # an all-zero tile: nothing in it is coded
+            # This phase's columns in the tile: j = col0 + 2m in [t · tile, (t + 1) · tile).
+            for m in range(
+                max(0, (t * tile - col0 + 1) // 2), min(n_j, ((t + 1) * tile - col0 + 1) // 2)
+            ):
+                j = col0 + 2 * m
+                left, right = j > 0, j < cols - 1
+                num = ext_sum[i, j]
+                den = ext_weight
+                if direct:
+                    total, seen = 0, 0
+                    if up:
+                        total += abs(out[i - 1, j])
+                        seen += 1
+                    if down:
+                        total += abs(out[i + 1, j])
+                        seen += 1
+                    if left:
+                        total += abs(out[i, j - 1])
+                        seen += 1
+                    if right:
+                        total += abs(out[i, j + 1])
+                        seen += 1
+                    num += scale * w_direct * total
+                    den += scale * w_direct * seen
+                if diagonal:
+                    total, seen = 0, 0
+                    if up and left:
+                        total += abs(out[i - 1, j - 1])
+                        seen += 1
+                    if up and right:
+                        total += abs(out[i - 1, j + 1])
+                        seen += 1
+                    if down and left:
+                        total += abs(out[i + 1, j - 1])
+                        seen += 1
+                    if down and right:
+                        total += abs(out[i + 1, j + 1])
+                        seen += 1
+                    num += scale * w_diagonal * total
+                    den += scale * w_diagonal * seen
+                positions[n] = row_start + m
+                classes[n] = base + _bin(num, den, edges)
+                n += 1
+    return positions[:n], classes[:n]
 
 
 @njit(nogil=True, cache=True)
-def _phase_values(plane, row0, col0):
-    """The encoder's magnitudes and signs (1 for negative) at a phase's positions, scan order."""
-    rows, cols = plane.shape
-    n_j = (cols - col0 + 1) // 2
-    count = ((rows - row0 + 1) // 2) * n_j
-    magnitudes = np.empty(count, dtype=np.int64)
-    negative = np.empty(count, dtype=np.int64)
-    k = 0
-    for i in range(row0, rows, 2):
-        for j in range(col0, cols, 2):
-            value = np.int64(plane[i, j])
-            magnitudes[k] = abs(value)
-            negative[k] = 1 if value < 0 else 0
-            k += 1
+def _bin(num, den, edges):
+    """How many of the ascending ``edges`` (thousandths) the ratio ``num / den`` exceeds."""
+    b = 0
+    if den > 0 and num > 0:  # num = 0 is bin 0: every edge is >= 0
+        for e in edges:
+            if 1000 * num <= e * den:
+                break
+            b += 1
+    return b
+
+
+@njit(nogil=True, cache=True)
+def _phase_values(plane, row0, col0, positions):
+    """The encoder's magnitudes and signs (1 for negative) at the listed phase positions."""
+    n_j = (plane.shape[1] - col0 + 1) // 2
+    magnitudes = np.empty(positions.size, dtype=np.int64)
+    negative = np.empty(positions.size, dtype=np.int64)
+    for k in range(positions.size):
+        value = np.int64(plane[row0 + 2 * (positions[k] // n_j), col0 + 2 * (positions[k] % n_j)])
+        magnitudes[k] = abs(value)
+        negative[k] = 1 if value < 0 else 0
     return magnitudes, negative
+
+
+@njit(nogil=True, cache=True)
+def _tile_flags(plane, tile):
+    """1 for each ``tile × tile`` tile of the plane that holds a nonzero value (the encoder's)."""
+    rows, cols = plane.shape
+    flags = np.zeros(((rows + tile - 1) // tile, (cols + tile - 1) // tile), dtype=np.int64)
+    for i in range(rows):
+        for j in range(cols):
+            if plane[i, j] != 0:
+                flags[i // tile, j // tile] = 1
+    return flags
+
+
+@njit(nogil=True, cache=True)
+def _tile_classes(ext_sum, ext_weight, tile, edges):
+    """Class of each tile's flag: the bin of the mean outside activity over the tile."""
+    rows, cols = ext_sum.shape
+    n_ti, n_tj = (rows + tile - 1) // tile, (cols + tile - 1) // tile
+    sums = np.zeros((n_ti, n_tj), dtype=np.int64)
+    for i in range(rows):
+        for j in range(cols):
+            sums[i // tile, j // tile] += ext_sum[i, j]
+    classes = np.empty(n_ti * n_tj, dtype=np.int64)
+    for ti in range(n_ti):
+        height = min(rows, (ti + 1) * tile) - ti * tile
+        for tj in range(n_tj):
+            width = min(cols, (tj + 1) * tile) - tj * tile
+            classes[ti * n_tj + tj] = _bin(sums[ti, tj], ext_weight * height * width, edges)
+    return classes
 
 
 @njit(nogil=True, cache=True)
@@ -589,15 +641,16 @@ def _sign_contexts(out, row0, col0, positions, pass_index, base):
 
 
 @njit(nogil=True, cache=True)
-def _commit_phase(out, row0, col0, magnitudes, positions, negative):
-    """Write a coded phase into ``out``: magnitudes, negated where ``negative`` says."""
-    cols = out.shape[1]
-    n_j = (cols - col0 + 1) // 2
-    for k in range(magnitudes.size):
-        out[row0 + 2 * (k // n_j), col0 + 2 * (k % n_j)] = magnitudes[k]
+def _commit_phase(out, row0, col0, positions, magnitudes, nonzero, negative):
+    """Write a coded phase into ``out``: the magnitudes at ``positions``, negated where
+    ``negative`` says (one entry per index in ``nonzero``)."""
+    n_j = (out.shape[1] - col0 + 1) // 2
     for k in range(positions.size):
+        out[row0 + 2 * (positions[k] // n_j), col0 + 2 * (positions[k] % n_j)] = magnitudes[k]
+    for k in range(nonzero.size):
         if negative[k]:
-            out[row0 + 2 * (positions[k] // n_j), col0 + 2 * (positions[k] % n_j)] *= -1
+            at = positions[nonzero[k]]
+            out[row0 + 2 * (at // n_j), col0 + 2 * (at % n_j)] *= -1
 
 
 class _Writer:
@@ -835,19 +888,31 @@ def _code_detail(
     shape: tuple[int, int],
     parent: np.ndarray | None,
     siblings: list[tuple[np.ndarray, int]],
-    orientation: int = 0,
+    orientation: int,
+    tiles: bool,
 ) -> np.ndarray:
-    """One detail plane in three interlaced passes, each symbol under its context class."""
+    """One detail plane in three interlaced passes, each symbol under its context class.
+
+    With ``tiles`` (version 3), a flag per ``_TILE × _TILE`` tile comes first, and only the
+    tiles flagged as holding a nonzero value are coded; version 2 codes every position.
+    """
     ext_sum, ext_weight = _external(shape, parent, siblings)
+    rows, cols = shape
+    if tiles:
+        classes = _tile_classes(ext_sum, ext_weight, _TILE, _EDGES_MILLI)
+        truth = None if plane is None else _tile_flags(plane, _TILE).ravel()
+        flags = io.grouped(models, models.tile, classes, truth)
+        significant = flags.reshape(-(-rows // _TILE), -(-cols // _TILE)).astype(np.bool_)
+    else:
+        significant = np.ones((1, 1), dtype=np.bool_)
+    tile = _TILE if tiles else max(rows, cols, 1)
     out = np.zeros(shape, dtype=np.int64)  # what is known so far; zero elsewhere
     for pass_index, phases in enumerate(_PASSES):
         for row0, col0 in phases:
-            direct, diagonal = _KNOWN_NEIGHBOURS[row0, col0]
-            n_i, n_j = (shape[0] - row0 + 1) // 2, (shape[1] - col0 + 1) // 2
-            if n_i * n_j == 0:
+            if row0 >= rows or col0 >= cols:
                 continue
-            classes = np.empty(n_i * n_j, dtype=np.int64)
-            _phase_classes(
+            direct, diagonal = _KNOWN_NEIGHBOURS[row0, col0]
+            positions, classes = _phase_classes(
                 out,
                 ext_sum,
                 ext_weight,
@@ -860,25 +925,26 @@ def _code_detail(
                 _W_DIAGONAL,
                 direct,
                 diagonal,
-                classes,
-                0,
-                n_i,
+                significant,
+                tile,
             )
+            if not positions.size:
+                continue
             truth = negative_truth = None
             if plane is not None:
-                truth, negative_truth = _phase_values(plane, row0, col0)
+                truth, negative_truth = _phase_values(plane, row0, col0, positions)
             magnitude = io.magnitudes(models, models.detail, classes, truth)
-            positions = np.flatnonzero(magnitude)
+            nonzero = np.flatnonzero(magnitude)
             contexts = _sign_contexts(
-                out, row0, col0, positions, pass_index, orientation * _SIGN_CONTEXTS
+                out, row0, col0, positions[nonzero], pass_index, orientation * _SIGN_CONTEXTS
             )
             negative = io.grouped(
                 models,
                 models.sign,
                 contexts,
-                None if negative_truth is None else negative_truth[positions],
+                None if negative_truth is None else negative_truth[nonzero],
             )
-            _commit_phase(out, row0, col0, magnitude, positions, negative)
+            _commit_phase(out, row0, col0, positions, magnitude, nonzero, negative)
     return out
 
 
@@ -887,6 +953,7 @@ def _code_levels(
     entries: list[list[np.ndarray]] | None,
     layout: list[list[tuple[int, ...]]],
     two_d: bool,
+    version: int,
 ) -> list[list[np.ndarray]]:
     """Walk the layout coarse to fine, coding (``entries`` given) or decoding every plane.
 
@@ -917,7 +984,7 @@ def _code_levels(
                 if channel > 0:
                     siblings.append((result[:, :, 0], _W_LUMA))
                 result[:, :, channel] = _code_detail(
-                    io, models, plane, dims[:2], parent, siblings, min(k, 2)
+                    io, models, plane, dims[:2], parent, siblings, min(k, 2), version >= 3
                 )
             level_planes.append(result)
         decoded.append(level_planes)
@@ -944,15 +1011,16 @@ def _encode_context(entries: list[list[np.ndarray]]) -> tuple[list[bytes], dict[
     two_d = len(entries) > 1 and len(entries[1]) == 3
     layout = [[band.shape for band in bands] for bands in entries]
     writer = _Writer()
-    _code_levels(writer, entries, layout, two_d)
+    _code_levels(writer, entries, layout, two_d, CONTEXT_VERSION)
     return writer.chunks, {"coder": "context", "version": CONTEXT_VERSION, "two_d": two_d}
 
 
 def _decode_context(
     chunks: Sequence[bytes], layout: list[list[tuple[int, ...]]], params: dict[str, Any]
 ) -> list[list[np.ndarray]]:
-    if params.get("version") != CONTEXT_VERSION or not isinstance(params.get("two_d"), bool):
-        msg = f"context coder parameters {params!r} are not version {CONTEXT_VERSION}'s"
+    version = params.get("version")
+    if version not in CONTEXT_VERSIONS or not isinstance(params.get("two_d"), bool):
+        msg = f"context coder parameters {params!r} are not of a version in {CONTEXT_VERSIONS}"
         raise BundleError(msg)
     readers = []
     for chunk in chunks:
@@ -960,7 +1028,7 @@ def _decode_context(
             msg = "each chunk must be bytes"
             raise BundleError(msg)
         readers.append(_Reader(bytes(chunk)))
-    planes = _code_levels(lambda index: readers[index], None, layout, params["two_d"])
+    planes = _code_levels(lambda index: readers[index], None, layout, params["two_d"], version)
     levels = []
     for bands, band_shapes in zip(planes, layout, strict=True):
         levels.append(

@@ -298,9 +298,9 @@ def dequantize_bands(
                 msg = f"quantized coefficients must be integers, not {q.dtype}"
                 raise InvalidParameter(msg)
             offset = 0.0 if index == 0 else reconstruction_offset(q, rounding)
-            magnitude = np.abs(q).astype(np.float64)
-            magnitude[magnitude > 0] += offset
-            restored.append(np.copysign(magnitude, q) * band_step)
+            values = np.empty(q.shape, dtype=np.float64)
+            _kernels.dequantize(np.ravel(q), offset, band_step, values.reshape(-1))
+            restored.append(values)
         out_levels.append(restored)
     return _unlayout(qcoeffs, out_levels)
 
@@ -321,9 +321,7 @@ def reconstruction_offset(q: np.ndarray, rounding: float) -> float:
     >>> bool(-0.4 < reconstruction_offset(q, 0.4) < 0.5 - 0.4)  # below the bin's middle
     True
     """
-    magnitude = np.abs(q)
-    ones = int(np.count_nonzero(magnitude == 1))
-    more = int(np.count_nonzero(magnitude >= 2))
+    ones, more = _kernels.count_ones_and_more(np.ravel(q))
     if ones + more == 0:
         return 0.5 - rounding
     theta = min(max(more / (ones + more), 0.02), 0.98)
