@@ -10,7 +10,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wavecore import wavedec2
-from wavecore.entropy import CODERS, decode_levels, encode_levels
+from wavecore.entropy import (
+    CODERS,
+    CONTEXT_VERSION,
+    CONTEXT_VERSIONS,
+    _encode_context,
+    decode_levels,
+    encode_levels,
+)
 from wavecore.errors import BundleError, InvalidParameter
 from wavecore.quantize import quantize_bands
 
@@ -167,18 +174,71 @@ def test_aligned_signs_cost_less_than_random_signs() -> None:
     assert sizes[0] < 0.9 * sizes[1]
 
 
+def _sparse_bands(seed: int, shape: tuple[int, int], count: int) -> list[np.ndarray]:
+    """Two levels whose detail planes hold ``count`` nonzero values each, the rest zero."""
+    rng = np.random.default_rng(seed)
+
+    def band(rows: int, cols: int) -> np.ndarray:
+        out = np.zeros((rows, cols), np.int32)
+        out.flat[rng.choice(rows * cols, min(count, rows * cols), replace=False)] = rng.choice(
+            [-40, -3, -1, 1, 2, 25], min(count, rows * cols)
+        )
+        return out
+
+    rows, cols = shape
+    small = (rows // 2 + 1, cols // 2 + 1)
+    return [
+        rng.integers(-9, 9, small, dtype=np.int32),
+        (band(*small), band(*small), band(*small)),
+        (band(rows, cols), band(rows, cols + 1), band(rows + 1, cols)),
+    ]
+
+
+@pytest.mark.parametrize("shape", [(37, 29), (8, 8), (9, 1), (1, 17), (64, 40)])
+@pytest.mark.parametrize("count", [0, 1, 5, 10_000])
+def test_every_context_version_round_trips_sparse_planes(
+    shape: tuple[int, int], count: int
+) -> None:
+    """Tiles cut planes that are not multiples of the tile size; empty and full planes too."""
+    q = _sparse_bands(count + shape[0], shape, count)
+    for version in CONTEXT_VERSIONS:
+        entries = [[q[0]], list(q[1]), list(q[2])]
+        chunks, params = _encode_context(entries, version)
+        assert params["version"] == version
+        _assert_equal(decode_levels(chunks, _shapes(q), params), q)
+
+
+def test_tile_flags_make_sparse_details_cheaper() -> None:
+    """Version 3 says "all zero" once per 8 × 8 tile instead of once per coefficient."""
+    q = _sparse_bands(3, (256, 256), 20)
+    entries = [[q[0]], list(q[1]), list(q[2])]
+    old = sum(map(len, _encode_context(entries, 2)[0]))
+    new = sum(map(len, encode_levels(q)[0]))
+    assert encode_levels(q)[1]["version"] == CONTEXT_VERSION == 3
+    assert new < old
+
+
+def test_unknown_context_versions_are_refused() -> None:
+    q = _laplace_bands(13)
+    chunks, params = encode_levels(q)
+    for version in (1, 4, "3", None):
+        with pytest.raises(BundleError, match="version"):
+            decode_levels(chunks, _shapes(q), {**params, "version": version})
+
+
 @pytest.mark.slow
 @settings(max_examples=10_000, deadline=None)
 @given(
     chunks=st.lists(st.binary(max_size=120), min_size=1, max_size=3),
     two_d=st.booleans(),
+    version=st.sampled_from(CONTEXT_VERSIONS),
 )
-def test_context_decoder_fuzz(chunks: list[bytes], two_d: bool) -> None:
+def test_context_decoder_fuzz(chunks: list[bytes], two_d: bool, version: int) -> None:
     """Any bytes either decode to arrays of the declared shapes or raise BundleError."""
     shapes: list[object] = [(6, 6, 3), ((4, 6, 3), (6, 4, 3), (4, 4, 3)), ((8, 10, 3),) * 3]
     if not two_d:
         shapes = [(6, 2), (4, 2), (8, 2)]
-    params = {"coder": "context", "version": 2, "two_d": two_d}
+    params = {"coder": "context", "version": version, "two_d": two_d}
     try:
         back = decode_levels(chunks, shapes, params)
     except BundleError:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import wavecore
+from wavecore.entropy import CONTEXT_VERSIONS
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
 MANIFEST = json.loads((GOLDEN / "MANIFEST.json").read_text())
@@ -23,6 +24,9 @@ def test_the_golden_set_is_complete() -> None:
     assert kinds == {"image", "curve", "surface"}
     assert any(entry["lossless"] for entry in MANIFEST.values())
     assert sorted(p.stem for p in GOLDEN.glob("*.wvb")) == sorted(MANIFEST)
+    # Every context coder version that decoders must still read has bundles here.
+    versions = {entry["cparams"].get("version") for entry in MANIFEST.values()}
+    assert versions >= set(CONTEXT_VERSIONS)
 
 
 @pytest.mark.parametrize("name", sorted(MANIFEST))

@@ -10,7 +10,11 @@ Coders:
 ``"zlib"``
     The generic baseline: the level's integers as little-endian ``int32``, deflated.
 ``"context"``
-    The default: a context-modelling range coder (for now it falls back to ``"zlib"``).
+    The default: a context-modelling range coder (``constriction``'s), version 3. Each detail
+    plane starts with a flag per 8 × 8 tile (holds a nonzero value or not); then the flagged
+    tiles' coefficients are coded in three interlaced passes, each magnitude under adaptive
+    counts chosen by its context class (parent, sibling bands, luma, known neighbours), and the
+    signs under their neighbours' signs.  Version 2 (no tile flags) still decodes.
 
 The decoder treats its input as hostile: every chunk is checked against the sizes the caller
 declares (``shapes``), decompression is bounded by those sizes, and anything wrong raises
@@ -1007,12 +1011,14 @@ _model = constriction.stream.model
 _BIT = _model.Uniform(2)
 
 
-def _encode_context(entries: list[list[np.ndarray]]) -> tuple[list[bytes], dict[str, Any]]:
+def _encode_context(
+    entries: list[list[np.ndarray]], version: int = CONTEXT_VERSION
+) -> tuple[list[bytes], dict[str, Any]]:
     two_d = len(entries) > 1 and len(entries[1]) == 3
     layout = [[band.shape for band in bands] for bands in entries]
     writer = _Writer()
-    _code_levels(writer, entries, layout, two_d, CONTEXT_VERSION)
-    return writer.chunks, {"coder": "context", "version": CONTEXT_VERSION, "two_d": two_d}
+    _code_levels(writer, entries, layout, two_d, version)
+    return writer.chunks, {"coder": "context", "version": version, "two_d": two_d}
 
 
 def _decode_context(

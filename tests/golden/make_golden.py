@@ -1,18 +1,21 @@
-"""Regenerate the golden bundles (run only when the format version changes on purpose).
+"""Add golden bundles for new cases (run when a format or coder version is added on purpose).
 
     .venv/bin/python tests/golden/make_golden.py
 
 Writes, next to this script, one ``<name>.wvb`` bundle and one ``<name>.npy`` decoded array per
-case, and ``MANIFEST.json`` with each bundle's SHA-256, format version and the arguments that
-made it.  ``tests/test_golden.py`` decodes every committed bundle on every test run and compares
-it with the committed array, so a change to the format, the quantizer or the entropy coder that
-would break old bundles fails the tests instead of passing silently.
+case that ``MANIFEST.json`` does not list yet, and adds each to the manifest with its SHA-256,
+format version and the arguments that made it.  Committed cases are never rewritten: they are
+what older versions wrote, and must keep decoding (``--replace NAME`` rewrites one on purpose).
+``tests/test_golden.py`` decodes every committed bundle on every test run and compares it with
+the committed array, so a change to the format, the quantizer or the entropy coder that would
+break old bundles fails the tests instead of passing silently.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +48,8 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
     uu, vv = np.meshgrid(u, v, indexing="ij")
     radius = 1 + 0.3 * vv**2
     surface = np.stack([radius * np.cos(uu), radius * np.sin(uu), vv], axis=-1)
+    y, x = np.mgrid[0:96, 0:130]
+    sparse = 60 + x + 0.5 * y + 120 * ((x - 70) ** 2 + (y - 40) ** 2 < 200)
     return {
         "image_grey_u8_lossy": (
             "image",
@@ -68,17 +73,31 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
         "curve_open_tolerance": ("curve", open_curve, {"tolerance": 1e-3}),
         "curve_closed_3d_keep": ("curve", closed_curve, {"closed": True, "keep": 0.5}),
         "surface_closed_open": ("surface", surface, {"closed": (True, False), "quality": 45.0}),
+        # Context coder version 3 (tile flags): a picture whose fine details are mostly zero
+        # tiles, a colour one at a set rate, lossless 16-bit, and a closed surface.
+        "image_grey_u8_sparse_ctx3": ("image", sparse, {"quality": 32.0}),
+        "image_rgb_u8_bpp_ctx3": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 8.0}),
+        "image_rgba_u16_lossless_ctx3": ("image", rgba16, {"lossless": True}),
+        "surface_closed_open_ctx3": (
+            "surface",
+            surface,
+            {"closed": (True, False), "quality": 40.0},
+        ),
     }
 
 
 def main() -> None:
+    replace = set(sys.argv[sys.argv.index("--replace") + 1 :]) if "--replace" in sys.argv else set()
+    path = HERE / "MANIFEST.json"
+    manifest: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
     encoders = {
         "image": wavecore.encode_image,
         "curve": wavecore.encode_curve,
         "surface": wavecore.encode_surface,
     }
-    manifest: dict[str, Any] = {}
     for name, (kind, data, kwargs) in inputs().items():
+        if name in manifest and name not in replace:
+            continue
         bundle = encoders[kind](data, **kwargs)
         decoded = wavecore.decode(bundle)
         (HERE / f"{name}.wvb").write_bytes(bundle)
@@ -97,7 +116,7 @@ def main() -> None:
             "quantizer": info["quantizer"],
         }
         print(f"{name}: {len(bundle)} bytes, {info['coder']}, psnr {info['psnr']}")
-    (HERE / "MANIFEST.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    path.write_text(json.dumps(manifest, indent=2) + "\n")
 
 
 if __name__ == "__main__":
