@@ -31,6 +31,7 @@ from PIL import Image
 from skimage import data
 
 import wavecore
+from wavecore.colour import ycbcr_forward
 from wavecore.entropy import decode_levels, encode_levels
 from wavecore.quantize import dequantize_bands, quantize_bands
 
@@ -94,7 +95,7 @@ def openjpeg(
 
 def single_pass(image: np.ndarray, wavelet: str, step: float) -> dict[str, Callable[[], object]]:
     """The stages of one encode and one decode at a fixed step (no rate search)."""
-    x = image.astype(np.float64)
+    x = ycbcr_forward(image.astype(np.float64))  # as encode_image does for colour pictures
     padded, _ = wavecore.pad_to_fit(x, 5, axes=(0, 1), boundary="open", wavelet=wavelet)
     state: dict[str, object] = {}
 

@@ -249,6 +249,10 @@ _EDGES_MILLI = np.array(
     [0, 100, 200, 350, 550, 800, 1150, 1600, 2200, 3000, 4200, 6000, 9000, 14000], dtype=np.int64
 )
 _ACTIVITY_EDGES = _EDGES_MILLI / 1000.0
+#: ``_EDGES_AT_MOST[v]``: how many edges are ``<= v`` (for the look-up in _phase_classes).
+_EDGES_AT_MOST = np.searchsorted(
+    _EDGES_MILLI, np.arange(_EDGES_MILLI[-1] + 1), side="right"
+).astype(np.int8)
 _BINS = len(_EDGES_MILLI) + 1
 #: Three interlaced passes over a band: (even, even); (odd, odd), which sees its four diagonal
 #: neighbours; then (even, odd) and (odd, even), which see the four direct ones.
@@ -409,47 +413,66 @@ def _parent_mix(parent):
 
 
 @njit(nogil=True, cache=True)
-def _add_parent(total, mix, factor):
-    """``total[i, j] += factor · mix[i // 2, j // 2]``.
+def _external_sum(total, mix, parent_factor, first, second, third, channels, factors):
+    """``total = parent_factor · mix[i // 2, j // 2] + Σ factor · |band[i, j, channel]|``.
 
-    The parent of ``(i, j)`` is ``(i // 2, j // 2)``, clamped to the parent band (bands of one
-    level differ by a sample or two).
+    The parent of ``(i, j)`` is ``(i // 2, j // 2)`` and a sibling's sample is ``(i, j)``, both
+    clamped to their band (bands of one level differ by a sample or two).  The three bands are
+    ``(rows, cols, channels)`` planes; a zero factor leaves one out.  One pass over ``total``.
     """
+    rows, cols = total.shape
     pr, pc = mix.shape
-    cols = total.shape[1]
-    for i in range(total.shape[0]):
+    for i in range(rows):
         pi = min(i // 2, pr - 1)
+        i1, i2, i3 = (
+            min(i, first.shape[0] - 1),
+            min(i, second.shape[0] - 1),
+            min(i, third.shape[0] - 1),
+        )
         for j in range(cols):
-            total[i, j] += factor * mix[pi, min(j // 2, pc - 1)]
+            value = parent_factor * mix[pi, min(j // 2, pc - 1)]
+            if factors[0]:
+                value += factors[0] * abs(first[i1, min(j, first.shape[1] - 1), channels[0]])
+            if factors[1]:
+                value += factors[1] * abs(second[i2, min(j, second.shape[1] - 1), channels[1]])
+            if factors[2]:
+                value += factors[2] * abs(third[i3, min(j, third.shape[1] - 1), channels[2]])
+            total[i, j] = value
 
 
-@njit(nogil=True, cache=True)
-def _add_clamped(total, band, factor):
-    """``total[i, j] += factor · |band[i, j]|``, indices clamped to ``band``'s extent."""
-    br, bc = band.shape
-    cols = total.shape[1]
-    for i in range(total.shape[0]):
-        bi = min(i, br - 1)
-        for j in range(cols):
-            total[i, j] += factor * abs(np.int64(band[bi, min(j, bc - 1)]))
+_NO_BAND = np.zeros((1, 1, 1), dtype=np.int64)
 
 
 def _external(
-    shape: tuple[int, int], parent: np.ndarray | None, siblings: list[tuple[np.ndarray, int]]
+    shape: tuple[int, int],
+    parent: np.ndarray | None,
+    siblings: list[tuple[np.ndarray, int, int]],
 ) -> tuple[np.ndarray, int]:
     """Scaled sum and weight of the context from other, already coded, bands (integers).
 
-    The bands may hold signed values: only their magnitudes count.
+    ``parent`` is a plane; each sibling is ``(planes, channel, weight)`` with ``planes`` an
+    ``int64`` ``(rows, cols, channels)`` array (at most three siblings).  Only magnitudes count.
     """
-    total = np.zeros(shape, dtype=np.int64)
+    total = np.empty(shape, dtype=np.int64)
     weight = 0
+    mix, parent_factor = _NO_BAND[:, :, 0], 0
     if parent is not None and parent.size:
-        _add_parent(total, _parent_mix(parent), _W_PARENT)
+        mix, parent_factor = _parent_mix(parent), _W_PARENT
         weight += _W_PARENT * _PARENT_SCALE
-    for sibling, w in siblings:
-        if sibling.size:
-            _add_clamped(total, sibling, w * _PARENT_SCALE)
-            weight += w * _PARENT_SCALE
+    bands, channels, factors = [_NO_BAND] * 3, [0, 0, 0], [0, 0, 0]
+    for slot, (planes, channel, w) in enumerate(s for s in siblings if s[0].size):
+        bands[slot], channels[slot], factors[slot] = planes, channel, w * _PARENT_SCALE
+        weight += w * _PARENT_SCALE
+    _external_sum(
+        total,
+        np.ascontiguousarray(mix),
+        parent_factor,
+        bands[0],
+        bands[1],
+        bands[2],
+        np.array(channels, dtype=np.int64),
+        np.array(factors, dtype=np.int64),
+    )
     return total, weight
 
 
@@ -470,6 +493,7 @@ def _phase_classes(
     col0,
     base,
     edges,
+    at_most,
     scale,
     w_direct,
     w_diagonal,
@@ -492,6 +516,8 @@ def _phase_classes(
     count = ((rows - row0 + 1) // 2) * n_j
     positions = np.empty(count, dtype=np.int64)
     classes = np.empty(count, dtype=np.int64)
+    nums = np.empty(count, dtype=np.int64)
+    dens = np.empty(count, dtype=np.int64)
     n = 0
     for i in range(row0, rows, 2):
         up, down = i > 0, i < rows - 1
@@ -541,8 +567,24 @@ def _phase_classes(
                     num += scale * w_diagonal * total
                     den += scale * w_diagonal * seen
                 positions[n] = row_start + m
-                classes[n] = base + _bin(num, den, edges)
+                nums[n] = num
+                dens[n] = den
                 n += 1
+    # Binned in a loop of its own: an exact look-up from the float ratio (off by at most one
+    # edge, which the integer comparisons correct).
+    top = edges.size
+    last = edges[top - 1]
+    for k in range(n):
+        num, den = nums[k], dens[k]
+        b = np.int64(0)
+        if den > 0 and num > 0:  # num = 0 is bin 0: every edge is >= 0
+            ratio = (1000.0 * num) / den
+            b = np.int64(at_most[np.int64(ratio)]) if ratio < last else np.int64(top)
+            if b > 0 and 1000 * num <= edges[b - 1] * den:
+                b -= 1
+            elif b < top and 1000 * num > edges[b] * den:
+                b += 1
+        classes[k] = base + b
     return positions[:n], classes[:n]
 
 
@@ -891,7 +933,7 @@ def _code_detail(
     plane: np.ndarray | None,
     shape: tuple[int, int],
     parent: np.ndarray | None,
-    siblings: list[tuple[np.ndarray, int]],
+    siblings: list[tuple[np.ndarray, int, int]],
     orientation: int,
     tiles: bool,
 ) -> np.ndarray:
@@ -924,6 +966,7 @@ def _code_detail(
                 col0,
                 pass_index * _BINS,
                 _EDGES_MILLI,
+                _EDGES_AT_MOST,
                 _PARENT_SCALE,
                 _W_DIRECT,
                 _W_DIAGONAL,
@@ -984,9 +1027,9 @@ def _code_levels(
                     parent_planes = decoded[index - 1][k]
                     if channel < parent_planes.shape[2]:
                         parent = parent_planes[:, :, channel]
-                siblings = [(level_planes[s][:, :, channel], _W_SIBLING) for s in range(k)]
+                siblings = [(level_planes[s], channel, _W_SIBLING) for s in range(k)]
                 if channel > 0:
-                    siblings.append((result[:, :, 0], _W_LUMA))
+                    siblings.append((result, 0, _W_LUMA))
                 result[:, :, channel] = _code_detail(
                     io, models, plane, dims[:2], parent, siblings, min(k, 2), version >= 3
                 )
