@@ -12,6 +12,8 @@ them on blocks in threads.  ``fastmath`` is deliberately off: results must not d
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -370,25 +372,6 @@ def deadzone_quantize(values, inverse_step, rounding, largest, out):
 
 
 @njit(nogil=True, cache=True)
-def magnitude_histogram(values, bins):
-    """Histogram of ``min(|v|, bins - 1)``, the number of nonzero values, and ``Σ log2 |v|``
-    over the values beyond the histogram."""
-    counts = np.zeros(bins, dtype=np.int64)
-    nonzero = 0
-    beyond = 0.0
-    for k in range(values.size):
-        a = abs(np.int64(values[k]))
-        if a != 0:
-            nonzero += 1
-        if a >= bins:
-            counts[bins - 1] += 1
-            beyond += np.log2(a)
-        else:
-            counts[a] += 1
-    return counts, nonzero, beyond
-
-
-@njit(nogil=True, cache=True)
 def dequantize(q, offset, step, out):
     """``out = sign(q) · (|q| + offset) · step`` for ``q != 0``, and 0 where ``q == 0``."""
     for k in range(q.size):
@@ -413,3 +396,31 @@ def count_ones_and_more(q):
         elif a >= 2:
             more += 1
     return ones, more
+
+
+@njit(nogil=True, cache=True)
+def log_histogram(values, scale, per_octave, octaves):
+    """Counts of ``|v| · scale`` in ``per_octave`` bins to an octave (equal steps of the
+    mantissa), over the ``octaves`` octaves below the largest; bin 0 also holds everything
+    smaller (zeros included).  Returns the counts and the top octave's exponent ``top``: bin
+    ``b = per_octave · o + k`` starts at ``2 ** (top - octaves + o) · (1 + k / per_octave)``.
+    Exponents come from ``frexp``: no logarithm per value.
+    """
+    largest = 0.0
+    for k in range(values.size):
+        largest = max(largest, abs(values[k]) * scale)
+    top = math.frexp(largest)[1] if largest > 0 else 0
+    bins = per_octave * octaves
+    counts = np.zeros(bins, dtype=np.int64)
+    for k in range(values.size):
+        a = abs(values[k]) * scale
+        if a == 0:
+            counts[0] += 1
+            continue
+        mantissa, exponent = math.frexp(a)  # a = mantissa · 2**exponent, mantissa in [0.5, 1)
+        octave = exponent - top + octaves - 1
+        if octave < 0:
+            counts[0] += 1
+        else:
+            counts[octave * per_octave + int((2.0 * mantissa - 1.0) * per_octave)] += 1
+    return counts, top

@@ -418,25 +418,25 @@ def _external_sum(total, mix, parent_factor, first, second, third, channels, fac
 
     The parent of ``(i, j)`` is ``(i // 2, j // 2)`` and a sibling's sample is ``(i, j)``, both
     clamped to their band (bands of one level differ by a sample or two).  The three bands are
-    ``(rows, cols, channels)`` planes; a zero factor leaves one out.  One pass over ``total``.
+    ``(channels, rows, cols)`` planes; a zero factor leaves one out.  One pass over ``total``.
     """
     rows, cols = total.shape
     pr, pc = mix.shape
     for i in range(rows):
         pi = min(i // 2, pr - 1)
         i1, i2, i3 = (
-            min(i, first.shape[0] - 1),
-            min(i, second.shape[0] - 1),
-            min(i, third.shape[0] - 1),
+            min(i, first.shape[1] - 1),
+            min(i, second.shape[1] - 1),
+            min(i, third.shape[1] - 1),
         )
         for j in range(cols):
             value = parent_factor * mix[pi, min(j // 2, pc - 1)]
             if factors[0]:
-                value += factors[0] * abs(first[i1, min(j, first.shape[1] - 1), channels[0]])
+                value += factors[0] * abs(first[channels[0], i1, min(j, first.shape[2] - 1)])
             if factors[1]:
-                value += factors[1] * abs(second[i2, min(j, second.shape[1] - 1), channels[1]])
+                value += factors[1] * abs(second[channels[1], i2, min(j, second.shape[2] - 1)])
             if factors[2]:
-                value += factors[2] * abs(third[i3, min(j, third.shape[1] - 1), channels[2]])
+                value += factors[2] * abs(third[channels[2], i3, min(j, third.shape[2] - 1)])
             total[i, j] = value
 
 
@@ -451,7 +451,7 @@ def _external(
     """Scaled sum and weight of the context from other, already coded, bands (integers).
 
     ``parent`` is a plane; each sibling is ``(planes, channel, weight)`` with ``planes`` an
-    ``int64`` ``(rows, cols, channels)`` array (at most three siblings).  Only magnitudes count.
+    ``int64`` ``(channels, rows, cols)`` array (at most three siblings).  Only magnitudes count.
     """
     total = np.empty(shape, dtype=np.int64)
     weight = 0
@@ -501,6 +501,7 @@ def _phase_classes(
     diagonal,
     significant,
     tile,
+    truth,
 ):
     """Context classes of the positions ``(row0 + 2i, col0 + 2j)`` of a plane that lie in
     significant tiles (``significant[i // tile, j // tile]``, in plane coordinates).
@@ -508,13 +509,18 @@ def _phase_classes(
     The activity is ``(ext_sum + scale · Σ w · |known neighbour|) / (ext_weight + scale · Σ w)``
     over the neighbours already coded (``out`` holds them; ``direct``/``diagonal`` say which
     they are) and inside the plane; its bin is the number of edges (in thousandths) below it,
-    all in integer arithmetic.  Returns the positions (indices into the phase in scan order)
-    and their classes.
+    all in integer arithmetic.  Returns the positions' rows and columns in scan order, their
+    classes, and (for the encoder, when ``truth`` is the plane rather than a 0 × 0 stand-in)
+    the magnitudes there and whether each value is negative.
     """
     rows, cols = out.shape
     n_j = (cols - col0 + 1) // 2
     count = ((rows - row0 + 1) // 2) * n_j
-    positions = np.empty(count, dtype=np.int64)
+    encoding = truth.shape[0] > 0
+    at_rows = np.empty(count, dtype=np.int64)
+    at_cols = np.empty(count, dtype=np.int64)
+    magnitudes = np.empty(count if encoding else 0, dtype=np.int64)
+    negative = np.empty(count if encoding else 0, dtype=np.int64)
     classes = np.empty(count, dtype=np.int64)
     nums = np.empty(count, dtype=np.int64)
     dens = np.empty(count, dtype=np.int64)
@@ -522,7 +528,6 @@ def _phase_classes(
     for i in range(row0, rows, 2):
         up, down = i > 0, i < rows - 1
         tile_row = significant[i // tile]
-        row_start = ((i - row0) // 2) * n_j
         for t in range(tile_row.size):
             if not tile_row[t]:
                 continue  # an all-zero tile: nothing in it is coded
@@ -566,7 +571,12 @@ def _phase_classes(
                         seen += 1
                     num += scale * w_diagonal * total
                     den += scale * w_diagonal * seen
-                positions[n] = row_start + m
+                at_rows[n] = i
+                at_cols[n] = j
+                if encoding:
+                    value = np.int64(truth[i, j])
+                    magnitudes[n] = abs(value)
+                    negative[n] = 1 if value < 0 else 0
                 nums[n] = num
                 dens[n] = den
                 n += 1
@@ -585,7 +595,9 @@ def _phase_classes(
             elif b < top and 1000 * num > edges[b] * den:
                 b += 1
         classes[k] = base + b
-    return positions[:n], classes[:n]
+    if encoding:
+        return at_rows[:n], at_cols[:n], classes[:n], magnitudes[:n], negative[:n]
+    return at_rows[:n], at_cols[:n], classes[:n], magnitudes, negative
 
 
 @njit(nogil=True, cache=True)
@@ -598,19 +610,6 @@ def _bin(num, den, edges):
                 break
             b += 1
     return b
-
-
-@njit(nogil=True, cache=True)
-def _phase_values(plane, row0, col0, positions):
-    """The encoder's magnitudes and signs (1 for negative) at the listed phase positions."""
-    n_j = (plane.shape[1] - col0 + 1) // 2
-    magnitudes = np.empty(positions.size, dtype=np.int64)
-    negative = np.empty(positions.size, dtype=np.int64)
-    for k in range(positions.size):
-        value = np.int64(plane[row0 + 2 * (positions[k] // n_j), col0 + 2 * (positions[k] % n_j)])
-        magnitudes[k] = abs(value)
-        negative[k] = 1 if value < 0 else 0
-    return magnitudes, negative
 
 
 @njit(nogil=True, cache=True)
@@ -644,19 +643,17 @@ def _tile_classes(ext_sum, ext_weight, tile, edges):
 
 
 @njit(nogil=True, cache=True)
-def _sign_contexts(out, row0, col0, positions, pass_index, base):
-    """Sign context of each listed phase position, from the signs of the neighbours known.
+def _sign_contexts(out, at_rows, at_cols, pass_index, base):
+    """Sign context of each listed position, from the signs of the neighbours known.
 
     One context for the first pass; then the sums of the known neighbours' signs (each in
     -2..2) along the diagonals (second pass) or along the row and the column (third pass).
     Unknown and outside neighbours are zero in ``out``.
     """
     rows, cols = out.shape
-    n_j = (cols - col0 + 1) // 2
-    contexts = np.empty(positions.size, dtype=np.int64)
-    for k in range(positions.size):
-        i = row0 + 2 * (positions[k] // n_j)
-        j = col0 + 2 * (positions[k] % n_j)
+    contexts = np.empty(at_rows.size, dtype=np.int64)
+    for k in range(at_rows.size):
+        i, j = at_rows[k], at_cols[k]
         if pass_index == 0:
             contexts[k] = base
             continue
@@ -687,16 +684,14 @@ def _sign_contexts(out, row0, col0, positions, pass_index, base):
 
 
 @njit(nogil=True, cache=True)
-def _commit_phase(out, row0, col0, positions, magnitudes, nonzero, negative):
-    """Write a coded phase into ``out``: the magnitudes at ``positions``, negated where
+def _commit_phase(out, at_rows, at_cols, magnitudes, nonzero, negative):
+    """Write a coded phase into ``out``: the magnitudes at the listed positions, negated where
     ``negative`` says (one entry per index in ``nonzero``)."""
-    n_j = (out.shape[1] - col0 + 1) // 2
-    for k in range(positions.size):
-        out[row0 + 2 * (positions[k] // n_j), col0 + 2 * (positions[k] % n_j)] = magnitudes[k]
+    for k in range(at_rows.size):
+        out[at_rows[k], at_cols[k]] = magnitudes[k]
     for k in range(nonzero.size):
         if negative[k]:
-            at = positions[nonzero[k]]
-            out[row0 + 2 * (at // n_j), col0 + 2 * (at % n_j)] *= -1
+            out[at_rows[nonzero[k]], at_cols[nonzero[k]]] *= -1
 
 
 class _Writer:
@@ -931,17 +926,19 @@ def _code_detail(
     io: Any,
     models: _Models,
     plane: np.ndarray | None,
-    shape: tuple[int, int],
+    out: np.ndarray,
     parent: np.ndarray | None,
     siblings: list[tuple[np.ndarray, int, int]],
     orientation: int,
     tiles: bool,
-) -> np.ndarray:
+) -> None:
     """One detail plane in three interlaced passes, each symbol under its context class.
 
-    With ``tiles`` (version 3), a flag per ``_TILE × _TILE`` tile comes first, and only the
-    tiles flagged as holding a nonzero value are coded; version 2 codes every position.
+    ``out`` (zeros, ``int64``) receives the plane.  With ``tiles`` (version 3), a flag per
+    ``_TILE × _TILE`` tile comes first, and only the tiles flagged as holding a nonzero value
+    are coded; version 2 codes every position.
     """
+    shape = out.shape
     ext_sum, ext_weight = _external(shape, parent, siblings)
     rows, cols = shape
     if tiles:
@@ -952,13 +949,13 @@ def _code_detail(
     else:
         significant = np.ones((1, 1), dtype=np.bool_)
     tile = _TILE if tiles else max(rows, cols, 1)
-    out = np.zeros(shape, dtype=np.int64)  # what is known so far; zero elsewhere
+    values = _NO_VALUES if plane is None else plane
     for pass_index, phases in enumerate(_PASSES):
         for row0, col0 in phases:
             if row0 >= rows or col0 >= cols:
                 continue
             direct, diagonal = _KNOWN_NEIGHBOURS[row0, col0]
-            positions, classes = _phase_classes(
+            at_rows, at_cols, classes, magnitudes, negatives = _phase_classes(
                 out,
                 ext_sum,
                 ext_weight,
@@ -974,25 +971,29 @@ def _code_detail(
                 diagonal,
                 significant,
                 tile,
+                values,
             )
-            if not positions.size:
+            if not at_rows.size:
                 continue
-            truth = negative_truth = None
-            if plane is not None:
-                truth, negative_truth = _phase_values(plane, row0, col0, positions)
-            magnitude = io.magnitudes(models, models.detail, classes, truth)
+            magnitude = io.magnitudes(
+                models, models.detail, classes, None if plane is None else magnitudes
+            )
             nonzero = np.flatnonzero(magnitude)
             contexts = _sign_contexts(
-                out, row0, col0, positions[nonzero], pass_index, orientation * _SIGN_CONTEXTS
+                out,
+                at_rows[nonzero],
+                at_cols[nonzero],
+                pass_index,
+                orientation * _SIGN_CONTEXTS,
             )
             negative = io.grouped(
-                models,
-                models.sign,
-                contexts,
-                None if negative_truth is None else negative_truth[nonzero],
+                models, models.sign, contexts, None if plane is None else negatives[nonzero]
             )
-            _commit_phase(out, row0, col0, positions, magnitude, nonzero, negative)
-    return out
+            _commit_phase(out, at_rows, at_cols, magnitude, nonzero, negative)
+
+
+#: The encoder's plane stand-in when decoding (``_phase_classes`` then gathers no values).
+_NO_VALUES = np.zeros((0, 0), dtype=np.int32)
 
 
 def _code_levels(
@@ -1007,31 +1008,32 @@ def _code_levels(
     Encoder and decoder run this same function, so their contexts cannot drift apart.
     """
     models = _Models()
-    decoded: list[list[np.ndarray]] = []  # per entry, per band: (rows, cols, channels) int64
+    decoded: list[list[np.ndarray]] = []  # per entry, per band: (channels, rows, cols) int64
     for index, band_shapes in enumerate(layout):
         io = io_for_level(index)
         if index > 1:
             models.new_level()
         level_planes: list[np.ndarray] = []
         for k, band_shape in enumerate(band_shapes):
-            dims = _plane_dims(band_shape, two_d)
+            rows, cols, channels = _plane_dims(band_shape, two_d)
             truth = None if entries is None else _as_planes(entries[index][k], two_d)
-            result = np.zeros(dims, dtype=np.int64)
-            for channel in range(dims[2]):
+            # Channel planes kept apart (channels first), so that each is contiguous.
+            result = np.zeros((channels, rows, cols), dtype=np.int64)
+            for channel in range(channels):
                 plane = None if truth is None else truth[:, :, channel]
                 if index == 0:
-                    result[:, :, channel] = _code_approx(io, models, plane, dims[:2])
+                    result[channel] = _code_approx(io, models, plane, (rows, cols))
                     continue
                 parent = None
                 if index >= 2 and k < len(decoded[index - 1]):
                     parent_planes = decoded[index - 1][k]
-                    if channel < parent_planes.shape[2]:
-                        parent = parent_planes[:, :, channel]
+                    if channel < parent_planes.shape[0]:
+                        parent = parent_planes[channel]
                 siblings = [(level_planes[s], channel, _W_SIBLING) for s in range(k)]
                 if channel > 0:
                     siblings.append((result, 0, _W_LUMA))
-                result[:, :, channel] = _code_detail(
-                    io, models, plane, dims[:2], parent, siblings, min(k, 2), version >= 3
+                _code_detail(
+                    io, models, plane, result[channel], parent, siblings, min(k, 2), version >= 3
                 )
             level_planes.append(result)
         decoded.append(level_planes)
@@ -1077,13 +1079,13 @@ def _decode_context(
             msg = "each chunk must be bytes"
             raise BundleError(msg)
         readers.append(_Reader(bytes(chunk)))
-    planes = _code_levels(lambda index: readers[index], None, layout, params["two_d"], version)
+    decoded = _code_levels(lambda index: readers[index], None, layout, params["two_d"], version)
     levels = []
-    for bands, band_shapes in zip(planes, layout, strict=True):
+    for bands, band_shapes in zip(decoded, layout, strict=True):
         levels.append(
             [
-                plane.reshape(shape).astype(np.int32)
-                for plane, shape in zip(bands, band_shapes, strict=True)
+                np.moveaxis(planes, 0, -1).reshape(shape).astype(np.int32)
+                for planes, shape in zip(bands, band_shapes, strict=True)
             ]
         )
     return levels
