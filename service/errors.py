@@ -36,6 +36,7 @@ PROBLEMS: dict[str, tuple[int, str]] = {
     "not-acceptable": (406, "No acceptable output format"),
     "body-too-large": (413, "Request body too large"),
     "image-too-large": (413, "Image too large"),
+    "bundle-too-large": (413, "Bundle decodes to too much data"),
     "unsupported-media-type": (415, "Unsupported media type"),
     "validation-error": (422, "Invalid request"),
     "invalid-parameter": (422, "Invalid parameter"),

@@ -23,10 +23,12 @@ from ..deps import (
     npy_bytes,
     parse_model,
     problem_responses,
+    settings_of,
 )
 from ..errors import Problem
 from ..imaging import IMAGE_FORMATS, encode_array
 from ..schemas import GridResult, PointsResult, ReconstructParams
+from ..settings import Settings
 from ..work import run_work
 
 router = APIRouter(prefix="/v1/bundles", tags=["bundles"])
@@ -86,10 +88,45 @@ def _choose_format(requested: str | None, kind: str, accept: str) -> str:
     return allowed[0]
 
 
+def _check_declared_size(info: dict[str, Any], settings: Settings) -> None:
+    """Refuse a bundle that declares more than an upload may hold (413), before decoding it.
+
+    A bundle is small, but what it decodes to is as large as its header says: without this a
+    few hundred crafted bytes could ask for the library's limit (2**27 samples, gigabytes of
+    working memory) on every request.
+    """
+    shape, kind = info["shape"], info["kind"]
+    if kind == "image":
+        count, limit, what = shape[0] * shape[1], settings.max_pixels, "pixels"
+        size = f"a {shape[1]} × {shape[0]} image"
+    elif kind == "curve":
+        count, limit, what = shape[0], settings.max_points, "points"
+        size = f"a curve of {shape[0]} points"
+    else:
+        count, limit, what = shape[0] * shape[1], settings.max_grid_points, "grid points"
+        size = f"a {shape[0]} × {shape[1]} surface"
+    if count > limit:
+        msg = f"the bundle decodes to {size}, more than this server's limit of {limit} {what}"
+        raise Problem("bundle-too-large", msg)
+    vector = kind != "image" and len(shape) > (1 if kind == "curve" else 2)
+    if vector and shape[-1] > settings.max_dimension:
+        msg = (
+            f"the bundle decodes to {shape[-1]}-D points, more than this server's limit of "
+            f"{settings.max_dimension} coordinates"
+        )
+        raise Problem("bundle-too-large", msg)
+
+
 def _reconstruct(
-    bundle: bytes, keep: float | None, level: int, requested: str | None, accept: str
+    bundle: bytes,
+    keep: float | None,
+    level: int,
+    requested: str | None,
+    accept: str,
+    settings: Settings,
 ) -> tuple[bytes, str, dict[str, str]]:
     info = wavecore.inspect(bundle)
+    _check_declared_size(info, settings)
     kind = info["kind"]
     fmt = _choose_format(requested, kind, accept)
     arr = wavecore.decode(bundle, keep=keep, level=level)
@@ -155,7 +192,7 @@ async def reconstruct(
         keep, level, format = params.keep, params.level, params.format
     accept = request.headers.get("accept", "")
     body, media_type, headers = await run_work(
-        request, _reconstruct, bundle, keep, level, format, accept
+        request, _reconstruct, bundle, keep, level, format, accept, settings_of(request)
     )
     return Response(body, media_type=media_type, headers=headers)
 

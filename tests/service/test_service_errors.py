@@ -190,6 +190,27 @@ async def test_body_limit_by_length_and_while_streaming(
         assert r.status_code == 200 and r.json()["kind"] == "image"
 
 
+async def test_bundles_that_decode_beyond_the_limits_are_refused_before_decoding(
+    make_client: Callable[..., httpx.AsyncClient],
+) -> None:
+    """A small bundle can declare a huge result: the limits of uploads apply to it too."""
+    surface = wavecore.encode_surface(np.zeros((12, 10, 3)), quality=40)
+    async with make_client(max_pixels=2000, max_points=29, max_grid_points=119) as c:
+        r = await c.post("/v1/bundles/reconstruct", content=IMAGE_BUNDLE)
+        detail = _check_problem(r, 413, "bundle-too-large")["detail"]
+        assert "52 × 40 image" in detail and "2000 pixels" in detail
+        r = await c.post("/v1/bundles/reconstruct", content=CURVE_BUNDLE, params={"level": 1})
+        assert "30 points" in _check_problem(r, 413, "bundle-too-large")["detail"]
+        r = await c.post("/v1/bundles/reconstruct", content=surface)
+        assert "12 × 10 surface" in _check_problem(r, 413, "bundle-too-large")["detail"]
+        # Describing a bundle decodes nothing: still allowed.
+        assert (await c.post("/v1/bundles/inspect", content=IMAGE_BUNDLE)).status_code == 200
+    async with make_client(max_dimension=2) as c:
+        r = await c.post("/v1/bundles/reconstruct", content=surface)
+        assert "3-D points" in _check_problem(r, 413, "bundle-too-large")["detail"]
+        assert (await c.post("/v1/bundles/reconstruct", content=CURVE_BUNDLE)).status_code == 200
+
+
 async def test_point_and_grid_limits(make_client: Callable[..., httpx.AsyncClient]) -> None:
     async with make_client(max_points=50, max_grid_points=100) as c:
         r = await c.post("/v1/curves/encode", json={"points": [[0.0, 1.0]] * 51})
