@@ -226,7 +226,9 @@ def cmd_encode(args: argparse.Namespace) -> int:
                 data, wavelet=args.wavelet, level=args.level, lossless=args.lossless, **targets
             )
         elif kind == "curve":
-            bundle = wavecore.encode_curve(data, closed=closed, level=args.level, **targets)
+            bundle = wavecore.encode_curve(
+                data, closed=closed, level=args.level, wavelet=args.wavelet, **targets
+            )
         else:
             bundle = wavecore.encode_surface(
                 data, closed=(closed, args.closed_v), level=args.level, **targets
@@ -375,7 +377,9 @@ def build_parser() -> argparse.ArgumentParser:
     target.add_argument("--bpp", type=float, help="target bits per pixel (images)")
     target.add_argument("--tolerance", type=float, help="largest point deviation (curves)")
     target.add_argument("--lossless", action="store_true", help="bit-exact (8/16-bit images)")
-    enc.add_argument("--wavelet", default="bspline2", help="bspline2 (default), cdf97, haar")
+    enc.add_argument(
+        "--wavelet", default="bspline2", help="bspline2 (default), cdf97, haar (images, curves)"
+    )
     enc.add_argument("--level", type=int, help="levels (default: automatic)")
     enc.add_argument("--kind", choices=["image", "curve", "surface"], help="override by suffix")
     enc.add_argument("--closed", action="store_true", help="closed curve / closed first axis")

@@ -34,6 +34,10 @@ class CurveEncodeRequest(_Body):
         gt=0,
         description="Largest allowed point deviation (default 1e-3 × the diagonal).",
     )
+    wavelet: str = Field(
+        default="bspline2",
+        description="bspline2 (the paper's, smooth; default), haar (a staircase) or cdf97.",
+    )
 
 
 class SurfaceEncodeRequest(_Body):

@@ -902,6 +902,7 @@ def encode_curve(
     level: int | None = None,
     keep: float | None = None,
     tolerance: float | None = None,
+    wavelet: str = "bspline2",
 ) -> bytes:
     """Encode a curve, ``(n, d)`` points (or ``(n,)`` samples), into a bundle.
 
@@ -920,6 +921,9 @@ def encode_curve(
     tolerance : float, optional
         The largest allowed distance between an original point and its decoded point; verified
         on the decoded bundle.  Default: ``1e-3`` × the bounding-box diagonal.
+    wavelet : str
+        ``"bspline2"`` (the paper's, smooth; the default), ``"haar"`` (piecewise constant: a
+        staircase once details are dropped) or ``"cdf97"``.
 
     Examples
     --------
@@ -944,13 +948,14 @@ def encode_curve(
     dtype = _dtype_name(arr, "points")
     data = arr.astype(np.float64).reshape(arr.shape[0], -1)
     boundary = ("closed",) if closed else ("open",)
-    fitted, pads, levels = _fit(data, level, "bspline2", boundary, _MAX_CURVE_LEVELS)
+    bank = get_wavelet(wavelet)
+    fitted, pads, levels = _fit(data, level, bank.name, boundary, _MAX_CURVE_LEVELS)
     diagonal = float(np.linalg.norm(data.max(axis=0) - data.min(axis=0)))
     plan = _Plan(
         "curve",
         arr.shape,
         dtype,
-        "bspline2",
+        bank.name,
         boundary,
         levels,
         "none",

@@ -570,12 +570,17 @@
     }
   }
 
+  function curveBody(points, closed, settings, wavelet) {
+    const body = { points, closed, level: null, keep: null, tolerance: null, wavelet };
+    for (const [key, value] of Object.entries(settings)) body[key] = Number(value);
+    return body;
+  }
+
   async function encodeCurve(points, closed, settings) {
     const seq = ++state.seq.encode;
     const progress = startProgress("Compressing…");
     progress.upload(1);
-    const body = { points, closed, level: null, keep: null, tolerance: null };
-    for (const [key, value] of Object.entries(settings)) body[key] = Number(value);
+    const body = curveBody(points, closed, settings, $("wavelet").value);
     try {
       const response = await request("encode", "POST", "/v1/curves/encode", JSON.stringify(body), {
         headers: { "Content-Type": "application/json" },
@@ -586,9 +591,10 @@
         ratio: Number(response.header("X-Wavecore-Ratio")),
       };
       state.compare = null;
+      state.compareSettings = { settings, curve: { points, closed } };
       const bundle = new Blob([response.blob], { type: BUNDLE_TYPE });
       state.figuresFor = bundle;
-      await loadBundle(bundle, "curve.wcb", {
+      await loadBundle(bundle, `curve-${body.wavelet}.wcb`, {
         curve: { points, closed },
       });
     } catch (err) {
@@ -663,8 +669,15 @@
     const imageMode = state.kind === "image";
     $("image-views").hidden = !imageMode;
     $("curve-views").hidden = imageMode;
-    $("compare").hidden = !imageMode || Boolean(info.lossless);
+    $("compare").hidden = Boolean(info.lossless) || (!imageMode && !from.curve);
     $("compare-views").hidden = true;
+    $("compare-help").textContent = imageMode
+      ? "The same image, both wavelets, the same fraction of details kept: smooth versus blocky."
+      : "The same curve, both wavelets, the same fraction of details kept: smooth versus angular (Haar repeats points, so only a coarse polygon is left).";
+    for (const name of ["bspline2", "haar"]) {
+      $(`cmp-${name}`).closest(".frame").hidden = !imageMode;
+      $(`cmp-${name}-plot`).toggleAttribute("hidden", imageMode); // an SVG element has no .hidden
+    }
     $("transfer").hidden = imageMode || !from.curve;
     $("compare-run").textContent = info.wavelet === "haar" ? "Compare with B-spline" : "Compare with Haar";
 
@@ -886,8 +899,8 @@
   async function runCompare() {
     clearErrors("compare-error");
     const saved = state.compareSettings;
-    if (!saved || !saved.file) {
-      showError("compare-error", "Compress an image first; a bundle opened from a file has no original to re-encode.");
+    if (!saved || !(saved.file || saved.curve)) {
+      showError("compare-error", "Compress an image or a curve first; a bundle opened from a file has no original to re-encode.");
       return;
     }
     if (saved.settings.lossless) {
@@ -900,7 +913,11 @@
     button.textContent = "Compressing…";
     try {
       const other = state.info.wavelet === "haar" ? "bspline2" : "haar";
-      const response = await request("compare-encode", "POST", "/v1/images/encode", imageForm(saved.file, saved.settings, other));
+      const response = saved.curve
+        ? await request("compare-encode", "POST", "/v1/curves/encode", JSON.stringify(curveBody(saved.curve.points, saved.curve.closed, saved.settings, other)), {
+            headers: { "Content-Type": "application/json" },
+          })
+        : await request("compare-encode", "POST", "/v1/images/encode", imageForm(saved.file, saved.settings, other));
       state.compare = { [state.info.wavelet]: state.bundle, [other]: new Blob([response.blob], { type: BUNDLE_TYPE }) };
       $("compare-views").hidden = false;
       await updateCompare();
@@ -914,6 +931,7 @@
 
   async function updateCompare() {
     if (!state.compare) return;
+    if (state.kind === "curve") return updateCompareCurves();
     const seq = ++state.seq.compare;
     const keep = sliderToKeep($("keep-slider").value);
     const params = keep < 1 ? { keep, format: "png" } : { format: "png" };
@@ -939,6 +957,39 @@
       if (!isAbort(err)) showError("compare-error", err);
     } finally {
       if (seq === state.seq.compare) ["bspline2", "haar"].forEach((name) => setLoading(`cmp-${name}`, false));
+    }
+  }
+
+  // Both wavelets' reconstructions of the encoded curve at the slider's keep, over the original.
+  async function updateCompareCurves() {
+    const seq = ++state.seq.compare;
+    const keep = sliderToKeep($("keep-slider").value);
+    const params = keep < 1 ? { keep } : {};
+    const names = ["bspline2", "haar"];
+    try {
+      const responses = await Promise.all(names.map((name) => reconstruct(`compare-${name}`, state.compare[name], params)));
+      if (seq !== state.seq.compare) return;
+      const original = state.curve ? state.curve.points : [];
+      const closed = state.curve ? state.curve.closed : false;
+      const curves = await Promise.all(responses.map(async (r) => asPoints(JSON.parse(await r.blob.text()))));
+      const view = fitView([original, ...curves]);
+      names.forEach((name, i) => {
+        const svg = $(`cmp-${name}-plot`);
+        svg.setAttribute("viewBox", view.box);
+        for (const el of [...svg.querySelectorAll("g")]) el.remove();
+        const g = svgEl("g", { transform: view.flip });
+        if (original.length) g.appendChild(svgEl("path", { class: "original", d: pathData(original, closed), "stroke-width": 6 * view.unit }));
+        g.appendChild(svgEl("path", { class: "recon", d: pathData(curves[i], closed), "stroke-width": 2 * view.unit }));
+        svg.appendChild(g);
+        svg.dataset.keep = String(keep);
+        svg.dataset.points = String(curves[i].length);
+        let tag = `keep ${formatKeep(keep)} · ${formatBytes(state.compare[name].size)}`;
+        const worst = maxDistance(original, curves[i]);
+        if (worst != null) tag += ` · max error ${worst.toPrecision(3)}`;
+        $(`cmp-${name}-tag`).textContent = tag;
+      });
+    } catch (err) {
+      if (!isAbort(err)) showError("compare-error", err);
     }
   }
 

@@ -204,6 +204,44 @@ def test_draw_a_curve_and_see_its_coarse_curve(page: Any, artifacts: Path):
     page.screenshot(path=artifacts / "curve-desktop.png", full_page=True)
 
 
+def path_points(page: Any, selector: str) -> np.ndarray:
+    """The points of an SVG path's ``d`` (``M x y L x y …``)."""
+    d = str(page.get_attribute(selector, "d"))
+    return np.array(re.findall(r"(-?[\d.]+) (-?[\d.]+)", d), dtype=np.float64)
+
+
+def test_haar_against_bspline_on_a_drawn_curve(page: Any, artifacts: Path):
+    page.click("label:has(input[name=mode][value=curve])")
+    draw(page, "#curve-pad", wiggle)
+    page.wait_for_selector("#curve-plot[data-keep]")
+    keep = float(page.evaluate("(v) => window.wavecore.sliderToKeep(v)", 20))
+    page.focus("#keep-slider")
+    for _ in range(int(page.input_value("#keep-slider")) - 20):
+        page.keyboard.press("ArrowLeft")
+    page.wait_for_selector(f"#curve-plot[data-keep='{keep}']")
+    page.click("#compare-run")
+    page.wait_for_selector(f"#cmp-haar-plot[data-keep='{keep}']")
+    page.wait_for_selector(f"#cmp-bspline2-plot[data-keep='{keep}']")
+    assert page.is_hidden("#cmp-haar") and page.is_visible("#cmp-haar-plot")
+    assert "max error" in page.inner_text("#cmp-haar-tag")
+
+    # Haar's curve, its details mostly dropped, is a staircase: many consecutive points coincide.
+    def repeated_share(points: np.ndarray) -> float:
+        return float(np.mean(np.all(np.abs(np.diff(points, axis=0)) < 1e-6, axis=1)))
+
+    smooth = path_points(page, "#cmp-bspline2-plot path.recon")
+    steps = path_points(page, "#cmp-haar-plot path.recon")
+    assert len(smooth) == len(steps) > 20
+    assert repeated_share(steps) > 0.3 > 3 * repeated_share(smooth)
+    page.screenshot(path=artifacts / "compare-haar-curve.png", full_page=True)
+
+    # The wavelet choice applies to curves too: choosing Haar re-encodes the curve with it.
+    before = bundles_shown(page)
+    page.select_option("#wavelet", "haar")
+    page.wait_for_selector(f"#curve-plot[data-bundle='{before + 1}']")
+    assert figure(page, "wavelet") == "haar"
+
+
 def test_corrupt_bundle_shows_a_readable_error_next_to_the_bundle_input(page: Any, artifacts: Path):
     page.click("label:has(input[name=mode][value=bundle])")
     junk = np.random.default_rng(6).integers(0, 256, 300, dtype=np.uint8).tobytes()

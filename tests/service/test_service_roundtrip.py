@@ -127,6 +127,18 @@ async def test_curve_round_trip(client: httpx.AsyncClient) -> None:
     assert np.load(io.BytesIO(r.content)).shape == (70, 2)
 
 
+async def test_curve_wavelet_choice(client: httpx.AsyncClient) -> None:
+    points = circle(40)
+    r = await client.post(
+        "/v1/curves/encode", json={"points": points, "closed": True, "wavelet": "haar"}
+    )
+    assert r.status_code == 200, r.text
+    info = (await client.post("/v1/bundles/inspect", content=r.content)).json()
+    assert info["wavelet"] == "haar"
+    r = await client.post("/v1/curves/encode", json={"points": points, "wavelet": "db4"})
+    assert r.status_code == 422 and "db4" in r.json()["detail"]
+
+
 async def test_curve_transfer(client: httpx.AsyncClient) -> None:
     t = np.linspace(0, 1, 66)
     wiggly = np.stack([t, 0.05 * np.sin(60 * t)], axis=1)
