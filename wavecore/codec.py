@@ -57,7 +57,13 @@ from .entropy import decode_levels, encode_levels
 from .errors import BundleError, InvalidLength, InvalidParameter
 from .filters import get_wavelet
 from .multilevel import valid_length, wavedec, wavedec2, waverec, waverec2
-from .quantize import APPROX_ROUNDING, dequantize_bands, quantize_bands
+from .quantize import (
+    APPROX_ROUNDING,
+    DEFAULT_ROUNDING,
+    band_weights,
+    dequantize_bands,
+    quantize_bands,
+)
 from .resample import crop_padding, pad_to_fit
 from .threshold import check_share, remove_smallest
 from .transform import run_rows
@@ -291,17 +297,25 @@ def _finish(plan: _Plan, data: np.ndarray, level: int) -> np.ndarray:
 
 
 def _ycbcr_to_integers(ycc: np.ndarray, dtype: str) -> np.ndarray:
-    """``_cast(ycbcr_inverse(ycc), dtype)`` for integer dtypes, by one compiled pass in threads."""
+    """``_cast(ycbcr_inverse(ycc), dtype)`` for integer dtypes, in one pass."""
+    return _to_integers(np.asarray(ycc, dtype=np.float64), dtype, YCBCR_INVERSE_MATRIX)
+
+
+def _to_integers(data: np.ndarray, dtype: str, matrix: np.ndarray | None) -> np.ndarray:
+    """Float64 ``(H, W)`` or ``(H, W, C)`` samples rounded and clipped into an integer dtype
+    (NaN → 0), after ``matrix`` on the first three channels when given: one compiled pass in
+    threads, where NumPy made five full-size float64 temporaries."""
     info = np.iinfo(dtype)
-    src = np.asarray(ycc, dtype=np.float64)
+    src = data if data.ndim == 3 else data[:, :, None]
     out = np.empty(src.shape, dtype=dtype)
+    colours = YCBCR_INVERSE_MATRIX if matrix is None else matrix  # unused when matrix is None
+    lo, hi = float(info.min), float(info.max)
     run_rows(
-        lambda lo, hi: colour_to_integers(
-            src, YCBCR_INVERSE_MATRIX, True, float(info.min), float(info.max), out, lo, hi
-        ),
+        lambda a, b: colour_to_integers(src, colours, matrix is not None, lo, hi, out, a, b),
         src.shape[0],
+        src.size,
     )
-    return out
+    return out.reshape(data.shape)
 
 
 def _ycbcr_from(rgb: np.ndarray) -> np.ndarray:
@@ -309,22 +323,16 @@ def _ycbcr_from(rgb: np.ndarray) -> np.ndarray:
     if rgb.dtype in _UNCOMPILED_DTYPES:
         return ycbcr_forward(rgb.astype(np.float64))
     out = np.empty(rgb.shape, dtype=np.float64)
-    run_rows(lambda lo, hi: colour_to_floats(rgb, YCBCR_MATRIX, out, lo, hi), rgb.shape[0])
+    run_rows(
+        lambda lo, hi: colour_to_floats(rgb, YCBCR_MATRIX, out, lo, hi), rgb.shape[0], rgb.size
+    )
     return out
 
 
 def _cast(data: np.ndarray, dtype: str) -> np.ndarray:
     target = np.dtype(dtype)
     if target.kind in "iu" and data.dtype == np.float64 and data.ndim in (2, 3):
-        info = np.iinfo(target)
-        src = data if data.ndim == 3 else data[:, :, None]
-        out = np.empty(src.shape, dtype=target)
-        matrix = YCBCR_INVERSE_MATRIX  # unused (use_matrix is False)
-        lo, hi = float(info.min), float(info.max)
-        run_rows(
-            lambda a, b: colour_to_integers(src, matrix, False, lo, hi, out, a, b), src.shape[0]
-        )
-        return out.reshape(data.shape)
+        return _to_integers(data, dtype, None)
     if target.kind in "iu":
         info = np.iinfo(target)
         values = np.nan_to_num(np.asarray(data, dtype=np.float64), nan=0.0)
@@ -494,13 +502,16 @@ class _LossyEncoder:
     def _histograms(self) -> list[tuple[np.ndarray, np.ndarray, float]]:
         """Per band: bin counts, bin centres (magnitude / band weight) and dead-zone rounding."""
         if self._histogram_cache is None or self._histogram_cache[0] != self.kept_fraction:
-            _, params = self.quantize(self.plan.peak / 16.0)  # for the band weights alone
+            levels = band_weights(
+                self.kept,
+                wavelet=self.plan.wavelet,
+                boundary=list(self.plan.boundary),
+                axes=self.plan.axes,
+            )
             out = []
-            for index, (entry, weights) in enumerate(
-                zip(self.kept, params["weights"], strict=True)
-            ):
+            for index, (entry, weights) in enumerate(zip(self.kept, levels, strict=True)):
                 bands = entry if isinstance(entry, tuple | list) else (entry,)
-                rounding = APPROX_ROUNDING if index == 0 else float(params["rounding"])
+                rounding = APPROX_ROUNDING if index == 0 else DEFAULT_ROUNDING
                 for band, weight in zip(bands, weights, strict=True):
                     values = np.ascontiguousarray(band, dtype=np.float64).reshape(-1)
                     counts, top = log_histogram(values, 1.0 / weight, _OCTAVE_BINS, _OCTAVES)

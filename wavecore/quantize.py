@@ -116,6 +116,23 @@ def _band_norms(
     return out
 
 
+def band_weights(
+    coeffs: Sequence[Any],
+    *,
+    wavelet: str,
+    boundary: str | Sequence[str],
+    axes: Sequence[int] = (0, 1),
+) -> list[list[float]]:
+    """Each band's step relative to the global one (``quantize_bands``' ``params["weights"]``).
+
+    The reciprocal of the RMS norm of the band's synthesis basis functions, to four significant
+    digits (they are stored in the header, and the encoder uses the rounded values too); listed
+    from the coarse end, ``[[cA], [level L bands], ...]``.
+    """
+    norms = _band_norms(_layout(coeffs), wavelet, boundary, tuple(int(a) for a in axes))
+    return [[float(f"{1.0 / max(norm, 1e-12):.4g}") for norm in level] for level in norms]
+
+
 def _check_step(step: Any) -> float:
     if isinstance(step, bool) or not isinstance(step, int | float | np.integer | np.floating):
         msg = f"step must be a positive number, not {step!r}"
@@ -192,14 +209,12 @@ def quantize_bands(
         raise InvalidParameter(msg)
     axes = tuple(int(a) for a in axes)
     levels = _layout(coeffs)
-    norms = _band_norms(levels, wavelet, boundary, axes)
-    # Four significant digits keep the header short; the encoder uses the rounded weights too.
-    weights = [[float(f"{1.0 / max(norm, 1e-12):.4g}") for norm in level] for level in norms]
+    weights = band_weights(coeffs, wavelet=wavelet, boundary=boundary, axes=axes)
     out_levels: list[list[np.ndarray]] = []
-    for index, (bands, band_weights) in enumerate(zip(levels, weights, strict=True)):
+    for index, (bands, level_weights) in enumerate(zip(levels, weights, strict=True)):
         band_rounding = APPROX_ROUNDING if index == 0 else float(rounding)
         level_q = []
-        for band, weight in zip(bands, band_weights, strict=True):
+        for band, weight in zip(bands, level_weights, strict=True):
             values = np.ascontiguousarray(band, dtype=np.float64)
             q = np.empty(values.shape, dtype=np.int32)
             _kernels.deadzone_quantize(
