@@ -368,18 +368,25 @@ def _transposed(bank_name: str, boundary: str, m: int) -> tuple[tuple[np.ndarray
 def _adjoint_step(
     data: np.ndarray, bank_name: str, boundary: str, axis: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(P.T @ data, Q.T @ data)`` along ``axis``, with the transform's compiled kernel."""
+    """``(P.T @ data, Q.T @ data)`` along ``axis``, with the transform's compiled kernel.
+
+    The axis is moved to the front first, so that the kernel's inner loop runs along whole rows
+    (contiguous and long) whatever the axis: the same sums in the same order, several times
+    faster than along the last axis of an image.
+    """
     p_t, q_t = _transposed(bank_name, boundary, data.shape[axis])
-    arr = np.ascontiguousarray(data, dtype=np.float64)
-    x = _view3(arr, axis)
+    arr = np.ascontiguousarray(np.moveaxis(np.asarray(data, dtype=np.float64), axis, 0))
+    x = _view3(arr, 0)
     r, s = len(p_t[0]) - 1, len(q_t[0]) - 1
     coarse = np.empty((x.shape[0], r, x.shape[2]))
     detail = np.empty((x.shape[0], s, x.shape[2]))
     args = (x, *p_t, *q_t, coarse, detail)
     _run_blocks(_kernels.analysis3, args, x.shape[0], max(r, s), x.size)
-    shape_c = arr.shape[:axis] + (r,) + arr.shape[axis + 1 :]
-    shape_d = arr.shape[:axis] + (s,) + arr.shape[axis + 1 :]
-    return coarse.reshape(shape_c), detail.reshape(shape_d)
+    rest = arr.shape[1:]
+    return (
+        np.moveaxis(coarse.reshape((r, *rest)), 0, axis),
+        np.moveaxis(detail.reshape((s, *rest)), 0, axis),
+    )
 
 
 def _adjoint(
