@@ -245,3 +245,17 @@ def test_context_decoder_fuzz(chunks: list[bytes], two_d: bool, version: int) ->
         return
     assert len(back) == len(chunks)
     assert back[0].shape == shapes[0]
+
+
+def test_activity_bins_are_exact_at_every_edge() -> None:
+    """The binning's float look-up is corrected by integer comparisons, even on the edges."""
+    from wavecore.entropy import _EDGES_AT_MOST, _EDGES_MILLI, _bin
+
+    rng = np.random.default_rng(14)
+    pairs = list(zip(rng.integers(0, 10**12, 3000), rng.integers(1, 10**9, 3000), strict=True))
+    for d in (1, 3, 7, 999_983, 10**9 + 7):  # exactly on each edge, and one unit either side
+        for edge in _EDGES_MILLI:
+            pairs += [(edge * d + delta, 1000 * d) for delta in (-1, 0, 1) if edge * d + delta >= 0]
+    for num, den in pairs:
+        expected = sum(1000 * int(num) > int(e) * int(den) for e in _EDGES_MILLI)
+        assert _bin(np.int64(num), np.int64(den), _EDGES_MILLI, _EDGES_AT_MOST) == expected
