@@ -19,11 +19,16 @@ COPY scripts ./scripts
 COPY wavecore ./wavecore
 COPY service ./service
 
-# Set up, then compile the transform's kernels once into the numba cache, so that a new
-# container answers its first request without a compile pause.
+# Set up, then compile the kernels once into the numba cache (the paths of colour and grey
+# pictures at a quality and at a rate, curves and surfaces), so that a new container answers
+# its first requests without a compile pause.
 RUN bash scripts/run.sh setup \
     && /opt/venv/bin/python -c "import numpy as np, wavecore; \
-wavecore.decode(wavecore.encode_image(np.zeros((64, 64, 3), np.uint8)))" \
+rgb = np.random.default_rng(0).integers(0, 256, (64, 64, 3), dtype=np.uint8); \
+[wavecore.decode(wavecore.encode_image(rgb, **t)) for t in ({}, {'bpp': 2.0})]; \
+wavecore.decode(wavecore.encode_image(rgb[:, :, 0], bpp=2.0)); \
+wavecore.decode(wavecore.encode_curve(rgb[:, 0, :2] / 255.0)); \
+wavecore.decode(wavecore.encode_surface(rgb / 255.0))" \
     && chown -R wavecore /opt/numba-cache
 
 USER wavecore

@@ -48,3 +48,11 @@ def test_healthcheck_command_works(live_server: str) -> None:
         subprocess.run([sys.executable, "-c", dead], capture_output=True, timeout=30).returncode
         != 0
     )
+
+
+def test_the_kernel_warm_up_runs() -> None:
+    """The build's ``python -c`` step that fills the numba cache runs (here, with this venv)."""
+    run = next(r for r in _instruction("RUN") if "scripts/run.sh setup" in r)
+    code = re.search(r'python -c "(.*?)"', run).group(1)  # type: ignore[union-attr]
+    assert "encode_curve" in code and "encode_surface" in code and "bpp" in code
+    assert subprocess.run([sys.executable, "-c", code], timeout=300).returncode == 0
