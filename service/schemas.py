@@ -36,7 +36,7 @@ class CurveEncodeRequest(_Body):
     )
     wavelet: str = Field(
         default="bspline2",
-        description="bspline2 (the paper's, smooth; default), haar (a staircase) or cdf97.",
+        description="bspline2 (the paper's, smooth; default), haar (piecewise constant) or cdf97.",
     )
 
 

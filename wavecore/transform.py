@@ -125,8 +125,8 @@ def _run_blocks(
 def run_rows(call: Callable[[int, int], None], rows: int, work: int | None = None) -> None:
     """Call ``call(row_lo, row_hi)`` over blocks of ``rows`` rows, in threads if the work is big.
 
-    For the codec's compiled per-pixel passes (which release the GIL); ``work`` is the number
-    of elements processed (``rows`` times a large row by default).
+    For the codec's compiled per-pixel passes (which release the GIL).  ``work``, the number of
+    elements processed, keeps small jobs on the calling thread; without it a job counts as big.
     """
     threads = _thread_count()
     if threads == 1 or rows < 2 or (work is not None and work < _THREADED_MIN_ELEMENTS):
