@@ -1092,7 +1092,7 @@ def _decode_context(
     for bands, band_shapes in zip(decoded, layout, strict=True):
         levels.append(
             [
-                np.moveaxis(planes, 0, -1).reshape(shape).astype(np.int32)
+                np.moveaxis(planes, 0, -1).astype(np.int32, order="C").reshape(shape)
                 for planes, shape in zip(bands, band_shapes, strict=True)
             ]
         )
