@@ -286,7 +286,8 @@ def _finish(plan: _Plan, data: np.ndarray, level: int) -> np.ndarray:
             wavelet=plan.wavelet,
         )
     if plan.colour == "ycbcr" and np.dtype(plan.dtype).kind in "iu":
-        return _ycbcr_to_integers(cropped, plan.dtype)  # the common case, in one pass
+        # The common case, in one pass: colour matrix, rounding and clipping together.
+        return _to_integers(np.asarray(cropped, dtype=np.float64), plan.dtype, YCBCR_INVERSE_MATRIX)
     if plan.colour == "ycbcr":
         cropped = ycbcr_inverse(cropped)
     elif plan.colour == "rct":
@@ -294,11 +295,6 @@ def _finish(plan: _Plan, data: np.ndarray, level: int) -> np.ndarray:
     if len(plan.shape) == 1:  # a 1-D curve (a time series) was coded as (n, 1)
         cropped = cropped[:, 0]
     return _cast(cropped, plan.dtype)
-
-
-def _ycbcr_to_integers(ycc: np.ndarray, dtype: str) -> np.ndarray:
-    """``_cast(ycbcr_inverse(ycc), dtype)`` for integer dtypes, in one pass."""
-    return _to_integers(np.asarray(ycc, dtype=np.float64), dtype, YCBCR_INVERSE_MATRIX)
 
 
 def _to_integers(data: np.ndarray, dtype: str, matrix: np.ndarray | None) -> np.ndarray:

@@ -307,7 +307,7 @@ class _Models:
     def __init__(self) -> None:
         self.detail = np.tile(_prior(_BINS), (len(_PASSES), 1))
         self.approx = _prior(_BINS)
-        self.exponent = np.full(_EXPONENTS, _UNIT // 4, dtype=np.int64)
+        self.exponent = np.full((1, _EXPONENTS), _UNIT // 4, dtype=np.int64)  # one class
         self.sign = np.full((3 * _SIGN_CONTEXTS, 2), _UNIT, dtype=np.int64)
         self.tile = np.full((_BINS, 2), _UNIT, dtype=np.int64)
 
@@ -320,11 +320,9 @@ class _Models:
     def model(counts: np.ndarray) -> Any:
         return _model.Categorical(counts.astype(np.float64), perfect=False)
 
-    @staticmethod
-    def update(counts: np.ndarray, symbols: np.ndarray) -> None:
-        counts += _UNIT * np.bincount(symbols, minlength=len(counts))
-        if counts.sum() > _COUNT_LIMIT:
-            counts[:] = (counts + 1) // 2
+    def learn_exponents(self, exponents: np.ndarray) -> None:
+        """The adaptive update of the escape exponents' counts (as after any run)."""
+        _add_counts(self.exponent, 0, exponents, _UNIT, _COUNT_LIMIT)
 
 
 @njit(nogil=True, cache=True)
@@ -731,8 +729,8 @@ class _Writer:
         excess = values[values >= ESCAPE].astype(np.int64) - ESCAPE
         if excess.size:
             exponents = _bit_length(excess)
-            self.encoder.encode(exponents.astype(np.int32), models.model(models.exponent))
-            models.update(models.exponent, exponents)
+            self.encoder.encode(exponents.astype(np.int32), models.model(models.exponent[0]))
+            models.learn_exponents(exponents)
             bits = _mantissa_bits(excess, exponents)
             if bits.size:
                 self.encoder.encode(bits, _BIT)
@@ -814,8 +812,8 @@ class _Reader:
         escaped = values == ESCAPE
         count = int(np.count_nonzero(escaped))
         if count:
-            exponents = self._decode(models.model(models.exponent), count)
-            models.update(models.exponent, exponents)
+            exponents = self._decode(models.model(models.exponent[0]), count)
+            models.learn_exponents(exponents)
             lengths = np.maximum(exponents - 1, 0)
             bits = self._decode(_BIT, int(lengths.sum()))
             excess = _from_mantissa(exponents, bits)
