@@ -68,15 +68,26 @@ def test_round_trip_keeps_header_and_chunks() -> None:
     header = make_header()
     parsed = read_bundle(write_bundle(header, CHUNKS))
     assert parsed.header == header
-    assert parsed.version == FORMAT_VERSION
+    # Without a "scale" key a bundle is labelled 1.1, so that every 1.x reader reads it right.
+    assert parsed.version == (FORMAT_VERSION[0], 1)
     assert [parsed.chunk(i) for i in range(3)] == CHUNKS
     assert parsed.available == 3
+
+
+def test_a_scaled_header_is_labelled_1_2_and_checked() -> None:
+    header = {**make_header(), "scale": -1070}
+    parsed = read_bundle(write_bundle(header, CHUNKS))
+    assert parsed.version == (1, 2) == FORMAT_VERSION
+    assert parsed.header["scale"] == -1070
+    for bad in (True, 1.5, "3", None, 5000, -5000):
+        with pytest.raises(BundleError, match="'scale'"):
+            write_bundle({**make_header(), "scale": bad}, CHUNKS)
 
 
 def test_layout_matches_the_spec() -> None:
     data = write_bundle(make_header(), CHUNKS)
     magic, major, minor, size = struct.unpack_from("<8sBBH", data)
-    assert (magic, (major, minor)) == (MAGIC, FORMAT_VERSION)
+    assert (magic, (major, minor)) == (MAGIC, (FORMAT_VERSION[0], 1))
     assert json.loads(inflate_header(data[12 : 12 + size])) == make_header()
     assert data[12 + size] == len(CHUNKS)
     table = 13 + size

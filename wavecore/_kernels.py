@@ -339,7 +339,7 @@ def squared_and_largest_error(decoded, original):
     total = 0.0
     largest = 0.0
     for k in range(decoded.size):
-        d = float(decoded[k]) - float(original[k])
+        d = np.float64(decoded[k]) - np.float64(original[k])  # float32 pairs too
         total += d * d
         d = abs(d)
         if d > largest or d != d:

@@ -1,6 +1,6 @@
 """The coefficient bundle: a versioned binary container, coarse to fine.
 
-This docstring is the specification of format version 1.1; ``docs/bundle-format.md`` says the
+This docstring is the specification of format version 1.2; ``docs/bundle-format.md`` says the
 same in more words.  Like NumPy's ``.npy`` format, a bundle is a fixed preamble, a bounded
 self-describing header, then the payload.  All integers are little-endian.
 
@@ -12,7 +12,8 @@ offset    size         field
 0         8            magic ``b"\\x89WVB\\r\\n\\x1a\\n"`` (PNG-style: catches 7-bit and newline
                        mangling, stops ``type`` on DOS)
 8         1            major version (``1``); a reader refuses any other major version
-9         1            minor version (``1``); a reader accepts any minor version of its major,
+9         1            minor version (``1``, or ``2`` with ``scale``); a reader accepts any minor
+                       version of its major,
                        because minor versions only add optional header keys or new values
 10        2            header length ``H`` (``uint16``), ``2 <= H <= MAX_HEADER_SIZE``
 12        H            header: a UTF-8 JSON object (see *Header*), compressed with raw
@@ -74,6 +75,12 @@ version may add some.
                 exact)
 ``max_error``   the encoder's measured largest absolute error (per sample, or per point for
                 curves)
+``scale``       optional, since 1.2: an integer ``s``; the coded values are the original's
+                times ``2**-s`` (exact), and decoding multiplies by ``2**s``.  Written only for
+                float data whose largest magnitude is beyond ``2**±256``, so that any finite
+                float64 (``±1.7e308`` down to subnormals) is coded without overflow.  ``peak``
+                is then in the coded units, ``max_error`` in the original's.  Bundles with this
+                key are labelled 1.2, every other bundle 1.1.
 
 Limits and safety
 -----------------
@@ -115,13 +122,21 @@ __all__ = [
 ]
 
 MAGIC = b"\x89WVB\r\n\x1a\n"
-FORMAT_VERSION = (1, 1)  # 1.1 added the dtypes float16, int8–int64 and uint32
+#: The newest version this module reads and writes.  1.1 added the dtypes float16, int8–int64
+#: and uint32; 1.2 the optional ``scale`` key.  A writer labels each bundle with the oldest
+#: minor version that holds it (1.2 only when the header has ``scale``), so that 1.1 readers,
+#: which would ignore that key, never get a bundle they would decode wrongly… by a power of two.
+FORMAT_VERSION = (1, 2)
+#: The minor version of a bundle whose header has no ``scale`` key.
+_UNSCALED_MINOR = 1
 MAX_HEADER_SIZE = 65535
 MAX_CHUNKS = 64
 #: Largest element count (samples × channels) a bundle may declare: 2**27, about a 6700 × 6700
 #: RGB image.  Decoding allocates a few float64 arrays of this size, so this bounds memory use.
 MAX_ELEMENTS = 2**27
 MAX_LEVELS = 30
+#: Largest ``|scale|`` (float64 exponents run from -1074 to 1024).
+MAX_SCALE = 1100
 
 _PREAMBLE = struct.Struct("<8sBBH")
 _TABLE_ENTRY = struct.Struct("<II")
@@ -238,7 +253,8 @@ def write_bundle(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
     if not 1 <= len(chunks) <= MAX_CHUNKS or len(chunks) != header["levels"] + 1:
         msg = f"a bundle of {header['levels']} levels needs {header['levels'] + 1} chunks"
         raise BundleError(msg)
-    parts = [_PREAMBLE.pack(MAGIC, *FORMAT_VERSION, len(text)), text, bytes([len(chunks)])]
+    minor = FORMAT_VERSION[1] if "scale" in header else _UNSCALED_MINOR
+    parts = [_PREAMBLE.pack(MAGIC, FORMAT_VERSION[0], minor, len(text)), text, bytes([len(chunks)])]
     for chunk in chunks:
         parts.append(_TABLE_ENTRY.pack(len(chunk), zlib.crc32(chunk)))
     head = b"".join(parts)
@@ -449,3 +465,8 @@ def check_header(header: Any) -> None:
     if psnr is not None and not math.isfinite(psnr):
         msg = f"header field 'psnr' must be a finite number or null, not {psnr!r}"
         raise BundleError(msg)
+    if "scale" in header:
+        scale = _field(header, "scale", int)
+        if not -MAX_SCALE <= scale <= MAX_SCALE:
+            msg = f"header field 'scale' must be between {-MAX_SCALE} and {MAX_SCALE}, not {scale}"
+            raise BundleError(msg)

@@ -30,6 +30,7 @@ Contract notes for the owners of ``quantize.py`` and ``entropy.py`` (read by the
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -44,6 +45,7 @@ from ._kernels import (
     log_histogram,
     squared_and_largest_error,
 )
+from .arguments import as_native, closed_flags
 from .bundle import DTYPES, MAX_ELEMENTS, Bundle, read_bundle, write_bundle
 from .colour import (
     YCBCR_INVERSE_MATRIX,
@@ -95,6 +97,12 @@ _OCTAVES = 48  # and octaves below each band's largest magnitude
 _TYPICAL_CODED_RATIO = 0.8
 _PAD_ALLOWANCE = 64  # padded length <= 2 × length + this (the default levels stay far below)
 _LONGEST_FLOAT = 1.2345678901234567e-300  # 23 characters, the longest repr of a positive float
+#: Float data whose largest magnitude lies outside ``[2**-256, 2**256]`` is coded in a scaled
+#: domain, multiplied by an exact power of two (recorded as the header's ``scale``), so that
+#: squares, sums and steps never overflow or underflow; ordinary data is coded unscaled, as
+#: before (its bundles do not change).
+_UNSCALED_EXPONENT = 256
+_LARGEST_FLOAT = float(np.finfo(np.float64).max)
 
 
 # --------------------------------------------------------------------------------------------
@@ -132,7 +140,7 @@ def _level_arg(level: Any) -> int | None:
 
 
 def _as_array(data: Any, name: str) -> np.ndarray:
-    arr = np.asarray(data)
+    arr = np.asarray(as_native(data))
     if arr.dtype == np.bool_ or arr.dtype.kind not in "uif":
         msg = f"{name} must hold real numbers (integers or floats), not {arr.dtype}"
         raise InvalidParameter(msg)
@@ -176,6 +184,7 @@ class _Plan:
     fitted: tuple[int, ...]
     peak: float
     lifting: tuple[str, ...] = ()  # lossless only: the reversible filter per level, finest first
+    scale: int = 0  # the coded values are the original's times 2**-scale (see _scaled)
 
     @property
     def axes(self) -> tuple[int, ...]:
@@ -195,6 +204,7 @@ class _Plan:
             "colour": self.colour,
             "peak": self.peak,
             **({"lifting": list(self.lifting)} if self.wavelet == LOSSLESS_WAVELET else {}),
+            **({"scale": self.scale} if self.scale else {}),
         }
 
 
@@ -294,7 +304,59 @@ def _finish(plan: _Plan, data: np.ndarray, level: int) -> np.ndarray:
         cropped = rct_inverse(cropped)
     if len(plan.shape) == 1:  # a 1-D curve (a time series) was coded as (n, 1)
         cropped = cropped[:, 0]
+    if plan.scale:
+        # Clipped first, so that a value just past the largest float does not become infinite.
+        limit = math.ldexp(_LARGEST_FLOAT, -plan.scale) if plan.scale > 0 else math.inf
+        cropped = np.ldexp(np.clip(cropped, -limit, limit), plan.scale)
     return _cast(cropped, plan.dtype)
+
+
+def _scaled(arr: np.ndarray) -> tuple[np.ndarray, int]:
+    """``(arr × 2**-scale, scale)``: float data brought near magnitude 1 when it is huge or tiny.
+
+    A power of two is exact (no rounding, short of underflow far below the peak), so any finite
+    float64 round-trips within the requested target, from subnormals to ``±1.7e308``.
+    """
+    if arr.dtype.kind != "f":
+        return arr, 0
+    largest = np.max(np.abs(arr))
+    if largest == 0:
+        return arr, 0
+    exponent = int(np.frexp(largest)[1])
+    if abs(exponent) <= _UNSCALED_EXPONENT:
+        return arr, 0
+    if not -1073 <= exponent <= 1024:  # only a longdouble gets here: it comes back as float64
+        msg = (
+            f"the data's largest magnitude, {largest!r}, is outside the float64 range that a "
+            "bundle stores (5e-324 to 1.8e308 for the largest magnitude)"
+        )
+        raise InvalidParameter(msg)
+    return np.ldexp(arr, -exponent).astype(np.float64), exponent
+
+
+def _scaled_tolerance(tolerance: float, scale: int) -> float:
+    """A distance in the original's units → the coded units (``tolerance × 2**-scale``)."""
+    if not scale:
+        return tolerance
+    try:
+        scaled = math.ldexp(tolerance, -scale)
+    except OverflowError:
+        return _LARGEST_FLOAT
+    if scaled == 0.0:
+        msg = (
+            f"tolerance {tolerance!r} is below what float64 can resolve for points as large as "
+            f"2**{scale}; ask for a larger tolerance"
+        )
+        raise InvalidParameter(msg)
+    return scaled
+
+
+def _unscaled(value: float, scale: int) -> float:
+    """A scaled-domain distance back in the original's units (capped at the largest float)."""
+    try:
+        return min(math.ldexp(value, scale), _LARGEST_FLOAT)
+    except OverflowError:
+        return _LARGEST_FLOAT
 
 
 def _to_integers(data: np.ndarray, dtype: str, matrix: np.ndarray | None) -> np.ndarray:
@@ -333,7 +395,13 @@ def _cast(data: np.ndarray, dtype: str) -> np.ndarray:
         info = np.iinfo(target)
         values = np.nan_to_num(np.asarray(data, dtype=np.float64), nan=0.0)
         return np.clip(np.rint(values), info.min, info.max).astype(target)
-    return np.nan_to_num(np.asarray(data, dtype=np.float64)).astype(target)
+    values = np.nan_to_num(np.asarray(data, dtype=np.float64))
+    if target.itemsize < 8:
+        # A float16/float32 original near its dtype's largest value may decode a little beyond
+        # it: saturate, rather than turn it into infinity.
+        largest = float(np.finfo(target).max)
+        values = np.clip(values, -largest, largest)
+    return values.astype(target)
 
 
 #: Dtypes the compiled loops do not take (NumPy handles them instead).
@@ -358,8 +426,12 @@ def _psnr(plan: _Plan, mse: float) -> float | None:
     """PSNR in dB against the plan's peak, or None when exact."""
     if mse == 0.0:
         return None
+    # In logarithms, so that no square or ratio overflows or underflows; an error too large
+    # for a float still gives a (very low) finite figure.
+    mse = min(mse, _LARGEST_FLOAT) if mse == mse else _LARGEST_FLOAT
+    db = 20.0 * math.log10(max(plan.peak, 1e-300)) - 10.0 * math.log10(mse)
     # Rounded down, so that the recorded value never claims more than was measured.
-    return math.floor(10.0 * math.log10(plan.peak * plan.peak / mse) * 1e4) / 1e4
+    return math.floor(db * 1e4) / 1e4
 
 
 def _peak(arr: np.ndarray, dtype: str, kind: str) -> float:
@@ -436,7 +508,12 @@ class _LossyEncoder:
             boundary=list(self.plan.boundary),
             axes=self.plan.axes,
         )
-        return _finish(self.plan, _reconstruct(self.plan, coeffs), 0)
+        decoded = _finish(self.plan, _reconstruct(self.plan, coeffs), 0)
+        if self.plan.scale:
+            # Measured on exactly what decode returns (subnormals rounded, the largest values
+            # saturated), brought back to the coded units, where the squares cannot overflow.
+            decoded = np.ldexp(decoded, -self.plan.scale)
+        return decoded
 
     def quality(self, step: float) -> tuple[float, float]:
         """(PSNR, max error) at ``step``; an exact result counts as infinite PSNR."""
@@ -456,7 +533,7 @@ class _LossyEncoder:
             coder=str(cparams.get("coder", DEFAULT_CODER)),
             cparams=cparams,
             psnr=errors[0],
-            max_error=errors[1],
+            max_error=_unscaled(errors[1], self.plan.scale),
         )
         return write_bundle(header, chunks)
 
@@ -672,7 +749,10 @@ def _encode_to_tolerance(
     step = _largest_step(lambda s: encoder.quality(s)[1] <= tolerance, low, high)
     while True:  # verify on the decoded bundle, and tighten until the guarantee holds
         data = encoder.bundle(step)
-        if _errors(encoder.plan, encoder.original, decode(data))[1] <= tolerance or step <= low:
+        decoded = decode(data)
+        if encoder.plan.scale:
+            decoded = np.ldexp(decoded, -encoder.plan.scale)
+        if _errors(encoder.plan, encoder.original, decoded)[1] <= tolerance or step <= low:
             return data
         step /= 2
 
@@ -755,6 +835,23 @@ def _fill_by_removal(
     return fits
 
 
+def _refuses_as_parameter(encoder: Callable[..., bytes]) -> Callable[..., bytes]:
+    """An encoder's ``BundleError`` (say, a header past the format's limits) is its input's
+    fault: raise it as ``InvalidParameter``, so that callers (the service) never mistake an
+    encode for a bad bundle."""
+
+    @functools.wraps(encoder)
+    def checked(*args: Any, **kwargs: Any) -> bytes:
+        try:
+            return encoder(*args, **kwargs)
+        except BundleError as exc:
+            msg = f"this input cannot be stored in a bundle: {exc}"
+            raise InvalidParameter(msg) from exc
+
+    return checked
+
+
+@_refuses_as_parameter
 def encode_image(
     image: Any,
     *,
@@ -825,6 +922,7 @@ def encode_image(
     quality = None if quality is None else _positive(quality, "quality", "a PSNR in dB")
     bpp = None if bpp is None else _positive(bpp, "bpp", "bits per pixel")
     dtype = _dtype_name(arr, "image")
+    arr, scale = _scaled(arr)
     colour = "ycbcr" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
     data = _ycbcr_from(arr) if colour == "ycbcr" else arr.astype(np.float64)
     bank = get_wavelet(wavelet)
@@ -843,6 +941,7 @@ def encode_image(
         pads,
         fitted.shape,
         _peak(arr, dtype, "image"),
+        scale=scale,
     )
     return _encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None)
 
@@ -902,14 +1001,16 @@ def _lossless_bundle(
     return write_bundle(header, chunks)
 
 
+@_refuses_as_parameter
 def encode_curve(
     points: Any,
     *,
-    closed: bool = False,
+    closed: bool | None = None,
     level: int | None = None,
     keep: float | None = None,
     tolerance: float | None = None,
     wavelet: str = "bspline2",
+    boundary: str | None = None,
 ) -> bytes:
     """Encode a curve, ``(n, d)`` points (or ``(n,)`` samples), into a bundle.
 
@@ -919,8 +1020,9 @@ def encode_curve(
         The points in order, any ``n >= 1`` and ``d >= 1``.  The curve is extended at its end to
         a length that fits (``wavecore.pad_to_fit``: repeated last point when open, a straight
         blend back to the first point when closed); the decoder gives back exactly ``n`` points.
-    closed : bool
-        A closed curve (periodic boundary) or an open one (endpoint interpolating).
+    closed : bool, optional
+        A closed curve (periodic boundary) or an open one (endpoint interpolating, the
+        default).
     level : int, optional
         Levels; ``None`` picks up to 8, keeping at least about 4 coarse points.
     keep : float, optional
@@ -931,6 +1033,9 @@ def encode_curve(
     wavelet : str
         ``"bspline2"`` (the paper's, smooth; the default), ``"haar"`` (piecewise constant: a
         staircase once details are dropped) or ``"cdf97"``.
+    boundary : {"open", "closed"}, optional
+        The same choice as ``closed``, spelled as elsewhere in the library: ``"closed"`` is
+        ``closed=True``.  Give either; both is accepted only when they agree.
 
     Examples
     --------
@@ -947,43 +1052,47 @@ def encode_curve(
     if arr.ndim not in (1, 2):
         msg = f"points must be (n, d) or (n,), not shape {arr.shape}"
         raise InvalidParameter(msg)
-    if not isinstance(closed, bool | np.bool_):
-        msg = f"closed must be True or False, not {closed!r}"
-        raise InvalidParameter(msg)
+    (is_closed,) = closed_flags(closed, boundary, 1)
     level = _level_arg(level)
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
     dtype = _dtype_name(arr, "points")
+    arr, scale = _scaled(arr)
     data = arr.astype(np.float64).reshape(arr.shape[0], -1)
-    boundary = ("closed",) if closed else ("open",)
+    boundaries = ("closed",) if is_closed else ("open",)
     bank = get_wavelet(wavelet)
-    fitted, pads, levels = _fit(data, level, bank.name, boundary, _MAX_CURVE_LEVELS)
+    fitted, pads, levels = _fit(data, level, bank.name, boundaries, _MAX_CURVE_LEVELS)
     diagonal = float(np.linalg.norm(data.max(axis=0) - data.min(axis=0)))
     plan = _Plan(
         "curve",
         arr.shape,
         dtype,
         bank.name,
-        boundary,
+        boundaries,
         levels,
         "none",
         pads,
         fitted.shape,
         _peak(data, dtype, "curve"),
+        scale=scale,
     )
     if keep is None:
         if tolerance is None:
             tolerance = DEFAULT_RELATIVE_TOLERANCE * (diagonal if diagonal > 0 else 1.0)
-        tolerance = _positive(tolerance, "tolerance", "a distance")
+        else:  # in the coded (scaled) units
+            tolerance = _scaled_tolerance(_positive(tolerance, "tolerance", "a distance"), scale)
     return _encode_lossy(plan, arr, fitted, keep=keep, quality=None, bpp=None, tolerance=tolerance)
 
 
+@_refuses_as_parameter
 def encode_surface(
     grid: Any,
     *,
-    closed: tuple[bool, bool] = (False, False),
+    closed: tuple[bool, bool] | None = None,
     level: int | None = None,
     keep: float | None = None,
     quality: float | None = None,
+    wavelet: str = "bspline2",
+    boundary: str | tuple[str, str] | None = None,
 ) -> bytes:
     """Encode a surface, a ``(U, V, d)`` grid of points or a ``(U, V)`` height field.
 
@@ -991,8 +1100,9 @@ def encode_surface(
     ----------
     grid : array_like
         The grid; each of the two grid axes is padded to a length that fits and cropped again.
-    closed : pair of bool
-        Per grid axis, periodic (``True``, e.g. the circles of a surface of revolution) or open.
+    closed : pair of bool, optional
+        Per grid axis, periodic (``True``, e.g. the circles of a surface of revolution) or open
+        (the default).
     level : int, optional
         Levels; ``None`` picks up to 5.
     keep : float, optional
@@ -1000,6 +1110,12 @@ def encode_surface(
     quality : float, optional
         Target PSNR in dB against the data range (largest minus smallest value), met or
         exceeded.  Default: 40 dB.
+    wavelet : str
+        ``"bspline2"`` (the paper's, the default), ``"haar"``, ``"cdf97"`` or an alias (see
+        :func:`wavecore.wavelet_names`); the bundle records it.
+    boundary : str or pair of str, optional
+        The same choice as ``closed``, spelled ``"open"`` / ``"closed"`` (one for both axes, or
+        one per axis).  Give either; both is accepted only when they agree.
 
     Examples
     --------
@@ -1014,31 +1130,28 @@ def encode_surface(
     if arr.ndim not in (2, 3):
         msg = f"grid must be (U, V) or (U, V, d), not shape {arr.shape}"
         raise InvalidParameter(msg)
-    if (
-        not isinstance(closed, tuple | list)
-        or len(closed) != 2
-        or not all(isinstance(c, bool | np.bool_) for c in closed)
-    ):
-        msg = f"closed must be a pair of booleans (one per grid axis), not {closed!r}"
-        raise InvalidParameter(msg)
+    flags = closed_flags(closed, boundary, 2)
     level = _level_arg(level)
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
     quality = None if quality is None else _positive(quality, "quality", "a PSNR in dB")
     dtype = _dtype_name(arr, "grid")
+    arr, scale = _scaled(arr)
     data = arr.astype(np.float64)
-    boundary = tuple("closed" if c else "open" for c in closed)
-    fitted, pads, levels = _fit(data, level, "bspline2", boundary, _MAX_IMAGE_LEVELS)
+    bank = get_wavelet(wavelet)
+    boundaries = tuple("closed" if c else "open" for c in flags)
+    fitted, pads, levels = _fit(data, level, bank.name, boundaries, _MAX_IMAGE_LEVELS)
     plan = _Plan(
         "surface",
         arr.shape,
         dtype,
-        "bspline2",
-        boundary,
+        bank.name,
+        boundaries,
         levels,
         "none",
         pads,
         fitted.shape,
         _peak(data, dtype, "surface"),
+        scale=scale,
     )
     return _encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=None, tolerance=None)
 
@@ -1102,6 +1215,7 @@ def _plan_from_header(header: dict[str, Any]) -> _Plan:
                 raise BundleError(msg)
             sizes = [(n + 1) // 2 for n in sizes]
     else:
+        lifting = []  # the key means nothing for the other wavelets: ignored, as unknown keys are
         try:
             bank = get_wavelet(wavelet)
             for axis, b in enumerate(boundary):
@@ -1122,8 +1236,18 @@ def _plan_from_header(header: dict[str, Any]) -> _Plan:
         tuple((int(b), int(a)) for b, a in pads),
         fitted,
         float(header["peak"]),
-        tuple(header.get("lifting", ())),
+        tuple(lifting),
+        _scale_from_header(header),
     )
+
+
+def _scale_from_header(header: dict[str, Any]) -> int:
+    """The optional ``scale`` key (format 1.2): decoded values are multiplied by 2**scale."""
+    scale = int(header.get("scale", 0))  # its type and range are checked by check_header
+    if scale and np.dtype(header["dtype"]).kind != "f":
+        msg = f"header field 'scale' is {scale}, but only float data is ever scaled"
+        raise BundleError(msg)
+    return scale
 
 
 def _open(bundle: Any) -> tuple[Bundle, _Plan]:
@@ -1131,10 +1255,20 @@ def _open(bundle: Any) -> tuple[Bundle, _Plan]:
         msg = f"a bundle must be bytes, not {type(bundle).__name__}"
         raise BundleError(msg)
     parsed = read_bundle(bundle)
-    return parsed, _plan_from_header(parsed.header)
+    try:
+        return parsed, _plan_from_header(parsed.header)
+    except BundleError:
+        raise
+    except Exception as exc:
+        # A field combination the checks above did not foresee: still the bundle's fault, and
+        # the promise is "an array or BundleError" for any bytes.
+        msg = f"header: inconsistent fields ({type(exc).__name__}: {exc})"
+        raise BundleError(msg[:300]) from exc
 
 
-def decode(bundle: Any, *, keep: float | None = None, level: int = 0) -> np.ndarray:
+def decode(
+    bundle: Any, *, keep: float | None = None, level: int = 0, drop_levels: int | None = None
+) -> np.ndarray:
     """Decode a bundle back into an array of the original's shape and dtype.
 
     Parameters
@@ -1149,6 +1283,11 @@ def decode(bundle: Any, *, keep: float | None = None, level: int = 0) -> np.ndar
         ``0`` for full resolution; ``k`` for the coarse approximation after ``k`` levels,
         cropped to the original's extent (about ``ceil(n / 2**k)`` samples per side), decoded
         from the first ``L - k + 1`` chunks only, so a truncated bundle still gives it.
+        Note that this counts levels *dropped*, where ``encode_*(level=L)`` counts levels
+        made; ``drop_levels`` says so in its name.
+    drop_levels : int, optional
+        The same as ``level``, under a name that says what it does: leave out the
+        ``drop_levels`` finest levels of detail.  Give one of the two (both only when equal).
 
     Returns
     -------
@@ -1168,13 +1307,25 @@ def decode(bundle: Any, *, keep: float | None = None, level: int = 0) -> np.ndar
     >>> import numpy as np
     >>> image = np.random.default_rng(0).integers(0, 256, (33, 47), dtype=np.uint8)
     >>> bundle = encode_image(image, lossless=True, level=3)
-    >>> decode(bundle, level=2).shape
-    (9, 12)
+    >>> decode(bundle, level=2).shape, decode(bundle, drop_levels=2).shape
+    ((9, 12), (9, 12))
     """
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
     if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
         msg = f"level must be an integer >= 0, not {level!r}"
         raise InvalidParameter(msg)
+    if drop_levels is not None:
+        if (
+            isinstance(drop_levels, bool)
+            or not isinstance(drop_levels, int | np.integer)
+            or drop_levels < 0
+        ):
+            msg = f"drop_levels must be None or an integer >= 0, not {drop_levels!r}"
+            raise InvalidParameter(msg)
+        if level not in (0, drop_levels):
+            msg = f"drop_levels={drop_levels} and level={level} disagree; give one of them"
+            raise InvalidParameter(msg)
+        level = drop_levels
     parsed, plan = _open(bundle)
     if level > plan.levels:
         msg = f"level {level} is deeper than the bundle's {plan.levels} levels"
@@ -1196,6 +1347,10 @@ def decode(bundle: Any, *, keep: float | None = None, level: int = 0) -> np.ndar
 def _decode(parsed: Bundle, plan: _Plan, keep: float | None, level: int) -> np.ndarray:
     count = plan.levels - level + 1
     chunks = [parsed.chunk(i) for i in range(count)]
+    for index, chunk in enumerate(chunks):
+        if not chunk:  # every coder writes a few bytes even for all-zero bands
+            msg = f"chunk {index} is empty; no encoder writes an empty chunk"
+            raise BundleError(msg)
     shapes = _band_shapes(plan)[:count]
     header = parsed.header
     with np.errstate(all="ignore"):
