@@ -1192,6 +1192,9 @@ def _plan_from_header(header: dict[str, Any]) -> _Plan:
         if kind != "image" or colour == "ycbcr" or header["dtype"] not in ("uint8", "uint16"):
             msg = "header: the lossless wavelet is only for uint8/uint16 images"
             raise BundleError(msg)
+        if any(b != "symmetric" for b in boundary):
+            msg = f"header field 'boundary' must be symmetric for lossless, not {list(boundary)}"
+            raise BundleError(msg)
         if any(before or after for before, after in pads):
             msg = "header: a lossless bundle is never padded"
             raise BundleError(msg)
@@ -1225,6 +1228,16 @@ def _plan_from_header(header: dict[str, Any]) -> _Plan:
         except InvalidParameter as exc:
             msg = f"header: wavelet {wavelet!r}, boundary {list(boundary)}, levels: {exc}"
             raise BundleError(msg) from exc
+    # The header names each stage twice (its name, and again inside its parameters): the two
+    # must agree, or a reader that trusts either would be misled.
+    coder = header["cparams"].get("coder")
+    if header["coder"] != coder:
+        msg = f"header field 'coder' is {header['coder']!r}, but 'cparams' names {coder!r}"
+        raise BundleError(msg[:200])
+    quantizer = "none" if wavelet == LOSSLESS_WAVELET else header["qparams"].get("name")
+    if header["quantizer"] != quantizer:
+        msg = f"header field 'quantizer' is {header['quantizer']!r}; expected {quantizer!r}"
+        raise BundleError(msg[:200])
     return _Plan(
         kind,
         shape,
@@ -1360,13 +1373,17 @@ def _decode(parsed: Bundle, plan: _Plan, keep: float | None, level: int) -> np.n
                 return _decode_lossless_keep(plan, qcoeffs, keep, level)
             data = _lossless.inverse(qcoeffs, plan.axes, plan.lifting)
             return _finish(plan, data, level)
-        coeffs = dequantize_bands(
-            qcoeffs,
-            header["qparams"],
-            wavelet=plan.wavelet,
-            boundary=list(plan.boundary),
-            axes=plan.axes,
-        )
+        try:
+            coeffs = dequantize_bands(
+                qcoeffs,
+                header["qparams"],
+                wavelet=plan.wavelet,
+                boundary=list(plan.boundary),
+                axes=plan.axes,
+            )
+        except InvalidParameter as exc:
+            msg = f"header field 'qparams' does not fit the bundle: {exc}"
+            raise BundleError(msg[:300]) from exc
         if keep is not None and keep < 1.0 and len(coeffs) > 1:
             coeffs = remove_smallest(
                 coeffs,
@@ -1404,9 +1421,11 @@ def inspect(bundle: Any) -> dict[str, Any]:
         ``version``, ``kind``, ``shape``, ``dtype``, ``wavelet``, ``boundary``, ``levels``,
         ``colour``, ``lossless``, ``quantizer``, ``coder``, ``psnr`` (the encoder's measured
         PSNR in dB, ``None`` when exact), ``max_error``, ``total_bytes``, ``header_bytes``,
-        ``bpp`` (images), ``chunks`` (one entry per chunk, coarse to fine: its resolution
-        ``level``, its subband ``shapes``, its ``bytes`` and whether it is ``present``), and
-        ``header`` (the raw header).
+        ``peak`` (in the original's units), ``scale`` (the power of two the values were
+        coded under, ``0`` for all but huge or tiny floats), ``bpp`` (images), ``chunks``
+        (one entry per chunk, coarse to fine: its resolution ``level``, its subband
+        ``shapes``, its ``bytes`` and whether it is ``present``), and ``header`` (the raw
+        header).
 
     Examples
     --------
@@ -1454,7 +1473,8 @@ def inspect(bundle: Any) -> dict[str, Any]:
         "coder": header["coder"],
         "psnr": header["psnr"],
         "max_error": header["max_error"],
-        "peak": plan.peak,
+        "peak": _unscaled(plan.peak, plan.scale),
+        "scale": plan.scale,
         "total_bytes": total,
         "header_bytes": total - payload,
         "chunks": chunks,
