@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from .arguments import as_native
 from .errors import InvalidCoefficients, InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import _as_int, wavedec2, waverec2
@@ -215,7 +216,7 @@ level of the open boundary of 'bspline2' needs at least 8 samples per axis
     if fit not in ("pad", "resample"):
         msg = f"fit must be 'pad' (exact) or 'resample' (section 4.5), not {fit!r}"
         raise InvalidParameter(msg)
-    arr = np.asarray(image)
+    arr = as_native(np.asarray(image))
     _check_dtype(arr.dtype)
     bank = get_wavelet(wavelet)
     if channel_axis is None:

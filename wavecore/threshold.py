@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from .arguments import as_native
 from .errors import InvalidCoefficients, InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import _boundaries
@@ -172,7 +173,7 @@ def _as_bands(coeffs: Any) -> tuple[str, np.ndarray, list[dict[str, np.ndarray]]
     if isinstance(coeffs, np.ndarray | dict) or not isinstance(coeffs, Sequence) or not coeffs:
         msg = "coeffs must be a non-empty list as wavedec, wavedec2 or wavedecn returns it"
         raise InvalidCoefficients(msg)
-    coarse = np.asarray(coeffs[0])
+    coarse = as_native(np.asarray(coeffs[0]))
     if coarse.ndim == 0:
         msg = "cA must have at least one dimension"
         raise InvalidCoefficients(msg)
@@ -217,7 +218,7 @@ def _band(value: Any, name: str) -> np.ndarray:
     if value is None:
         msg = f"detail band {name!r} is None; remove_smallest needs every band as an array"
         raise InvalidCoefficients(msg)
-    return np.asarray(value)
+    return as_native(np.asarray(value))
 
 
 def _from_bands(kind: str, coarse: np.ndarray, levels: list[dict[str, np.ndarray]]) -> list[Any]:
