@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -114,3 +115,64 @@ def test_norm_errors() -> None:
         wavecore.basis_norms(34, "db2")
     with pytest.raises(InvalidParameter, match="2 boundaries for 3 axes"):
         wavecore.basis_norms_nd((10, 10, 10), boundary=("open", "open"))
+
+
+def dense_reference_norms(n: int, wavelet: str, boundary: str, level: int) -> list[np.ndarray]:
+    """The basis functions themselves, as columns of products of the dense step matrices."""
+    basis = np.eye(n)
+    details = []
+    for _ in range(level):
+        _, _, P, Q = wavecore.matrices(basis.shape[1], wavelet, boundary)
+        details.append(np.linalg.norm(basis @ Q, axis=0))
+        basis = basis @ P
+    return [np.linalg.norm(basis, axis=0), *reversed(details)]
+
+
+def _lengths(wavelet: str, boundary: str) -> list[int]:
+    """Short lengths (full matrices) and long ones (the stand-in path), every level they hold."""
+    extra = 2 if (wavelet, boundary) == ("bspline2", "open") else 0
+    short = [valid for valid in range(2, 60, 2) if wavecore.max_level(valid, boundary, wavelet)]
+    long = [130 + extra, 258 + extra, 64 * 7 + extra]
+    return short[:10] + [n for n in long if wavecore.max_level(n, boundary, wavelet)]
+
+
+@pytest.mark.parametrize("wavelet", ["bspline2", "haar", "cdf97"])
+@pytest.mark.parametrize("boundary", ["open", "closed"])
+def test_norms_equal_the_dense_basis_for_every_wavelet_length_and_level(
+    wavelet: str, boundary: str
+) -> None:
+    for n in _lengths(wavelet, boundary):
+        for level in range(wavecore.max_level(n, boundary, wavelet) + 1):
+            got = wavecore.basis_norms(n, wavelet, boundary, level)
+            want = dense_reference_norms(n, wavelet, boundary, level)
+            assert [len(g) for g in got] == [len(w) for w in want], (n, level)
+            for g, w in zip(got, want, strict=True):
+                np.testing.assert_allclose(g, w, rtol=1e-12, err_msg=f"n={n} level={level}")
+
+
+@pytest.mark.parametrize("name", wavecore.wavelet_names())
+def test_every_name_and_alias_has_exact_norms(name: str) -> None:
+    for n, boundary in ((64, "closed"), (wavecore.valid_length(200, 3, "open", name), "open")):
+        got = wavecore.basis_norms(n, name, boundary, 3)
+        for g, w in zip(got, dense_reference_norms(n, name, boundary, 3), strict=True):
+            np.testing.assert_allclose(g, w, rtol=1e-12)
+
+
+def test_long_norms_repeat_the_interior_and_cost_little() -> None:
+    # 2**20 samples: the old impulse method took minutes here.  The interior value of every
+    # band equals that of a length whose dense reference is cheap (translates of one function).
+    n = 2**20 + 2
+    norms = wavecore.basis_norms(n, level=6)
+    small = dense_reference_norms(2**6 * 5 + 2, "bspline2", "open", 6)
+    for big_band, small_band in zip(norms, small, strict=True):
+        np.testing.assert_allclose(big_band[:2], small_band[:2], rtol=1e-12)
+        np.testing.assert_allclose(big_band[-2:], small_band[-2:], rtol=1e-12)
+        np.testing.assert_allclose(big_band[len(big_band) // 2], small_band[2], rtol=1e-12)
+    # Only small things are cached: the long vectors are gone once the caller drops them.
+    del norms
+    tracemalloc.start()
+    for level in (3, 4, 5):
+        wavecore.basis_norms(n, level=level)
+    retained, _ = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert retained < 1 << 20

@@ -27,7 +27,13 @@ import numpy as np
 
 from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet
-from .multilevel import _as_int, wavedec, waverec
+from .multilevel import (
+    _as_int,
+    check_level_bound,
+    growth_limit,
+    wavedec,
+    waverec,
+)
 from .resample import resample_curve
 from .threshold import keep_largest
 from .transform import as_float_array
@@ -42,6 +48,9 @@ def fitting_length(
 ) -> int:
     """The length nearest to ``n`` that fits ``level`` levels (the longer one on a tie).
 
+    A ``level`` whose fitting length would be more than ``2 * n + 64`` is refused
+    (:class:`~wavecore.InvalidParameter`, naming the largest accepted level).
+
     Examples
     --------
     >>> fitting_length(100, 3), fitting_length(99, 3, "closed"), fitting_length(5, 2)
@@ -50,6 +59,12 @@ def fitting_length(
     rule = get_wavelet(wavelet).rule(boundary)
     n = _as_int(n, "n", minimum=1)
     level = _as_int(level, "level")
+    check_level_bound(
+        level,
+        rule,
+        growth_limit(n),
+        f"length {n} (fitted, it may grow to at most {growth_limit(n)})",
+    )
     if level == 0:
         return n
     step = 1 << level
@@ -233,7 +248,8 @@ def decompose_curve(
     closed : bool, keyword-only
         Periodic (closed boundary) or endpoint interpolating (open boundary).
     wavelet : str, keyword-only
-        ``"bspline2"`` (the paper's) or ``"haar"``.
+        ``"bspline2"`` (the paper's; alias ``"chaikin"``), ``"haar"`` or ``"cdf97"`` (alias
+        ``"jpeg2000"``); see :func:`wavecore.wavelet_names`.
 
     Returns
     -------
@@ -265,6 +281,12 @@ def decompose_curve(
     if level is None:
         level = _default_level(n, boundary, bank)
     level = _as_int(level, "level", minimum=1)
+    check_level_bound(
+        level,
+        bank.rule(boundary),
+        growth_limit(n),
+        f"a curve of {n} points (re-sampled to fit, it may grow to {growth_limit(n)} points)",
+    )
     m = fitting_length(n, level, boundary, bank)
     parameters = None
     if m != n:

@@ -245,7 +245,7 @@ class FilterBank:
             return self.rules[boundary]
         except (KeyError, TypeError):
             accepted = ", ".join(repr(b) for b in BOUNDARIES)
-            msg = f"unknown boundary {boundary!r}; accepted boundaries are {accepted}"
+            msg = f"unknown boundary {boundary!r} (boundary=); accepted boundaries are {accepted}"
             raise InvalidParameter(msg) from None
 
 
@@ -407,7 +407,8 @@ def check_fine_length(rule: BoundaryRule, m: int, wavelet: str, boundary: str) -
     if m % 2 or m < rule.min_length:
         msg = (
             f"length {m} does not fit one level of the {boundary} boundary of {wavelet!r}: "
-            f"it needs an even length of at least {rule.min_length}"
+            f"it needs an even length of at least {rule.min_length} (wavecore.pad_to_fit and "
+            "the decompose_* functions fit any size)"
         )
         raise InvalidLength(msg)
 

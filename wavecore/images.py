@@ -179,7 +179,8 @@ def decompose_image(
     channel_axis : int or None, keyword-only
         The axis of the colour channels, as in scikit-image; ``None`` for a grey image.
     wavelet : str, keyword-only
-        ``"bspline2"`` (the paper's) or ``"haar"``.
+        ``"bspline2"`` (the paper's; alias ``"chaikin"``), ``"haar"`` or ``"cdf97"`` (alias
+        ``"jpeg2000"``); see :func:`wavecore.wavelet_names`.
     boundary : {"open", "closed"}, keyword-only
         ``"open"`` (endpoint interpolating) suits photographs; ``"closed"`` treats the image as
         periodic.

@@ -71,6 +71,50 @@ def _level_count(rule: BoundaryRule, n: int) -> int:
     return level
 
 
+#: No length beyond this is ever accepted: 2**40 float64 samples are 8 TiB.
+MAX_LENGTH = 1 << 40
+#: Padding or re-sampling to fit a level may make an axis at most this long (as in the codec).
+_GROWTH, _GROWTH_ALLOWANCE = 2, 64
+_FIT_ANY_SIZE = (
+    "wavecore.decompose_image, decompose_surface and decompose_curve fit any size; "
+    "wavecore.pad_to_fit pads exactly (undone by crop_padding), and resample_curve to "
+    "wavecore.fitting_length re-samples; wavecore.valid_length gives the next length that fits"
+)
+
+
+def smallest_fitting_length(rule: BoundaryRule, level: int) -> int:
+    """The shortest length that ``level`` levels accept (``level`` at most 64)."""
+    if level == 0:
+        return 1
+    return (1 << level) * rule.smallest_k(level) + rule.extra
+
+
+def growth_limit(n: int) -> int:
+    """The longest an axis of ``n`` samples may become when it is padded or re-sampled to fit."""
+    return _GROWTH * n + _GROWTH_ALLOWANCE
+
+
+def deepest_level(rule: BoundaryRule, limit: int) -> int:
+    """The most levels whose shortest fitting length is at most ``limit``."""
+    level = 0
+    while level < 64 and smallest_fitting_length(rule, level + 1) <= limit:
+        level += 1
+    return level
+
+
+def check_level_bound(level: int, rule: BoundaryRule, limit: int, what: str) -> None:
+    """Refuse, before any work, a ``level`` whose shortest fitting length exceeds ``limit``.
+
+    ``what`` says what the limit is for the message.  Cheap whatever ``level`` is: the bound
+    is compared before ``2**level`` is ever formed.
+    """
+    if level <= 64 and smallest_fitting_length(rule, level) <= limit:
+        return
+    deepest = deepest_level(rule, limit)
+    msg = f"level {level} is too deep for {what}; the largest accepted level is {deepest}"
+    raise InvalidParameter(msg)
+
+
 def max_level(n: int, boundary: str = "open", wavelet: str | FilterBank = "bspline2") -> int:
     """How many levels a length ``n`` allows, exactly (no padding, no re-sampling).
 
@@ -103,7 +147,9 @@ def valid_length(
     """The smallest length ``>= n`` that fits ``level`` levels.
 
     That is ``2**level * k + 2`` with ``k >= 3`` for the open boundary and ``2**level * k``
-    (``k >= 1``) for the closed one and for Haar.
+    (``k >= 1``) for the closed one and for Haar.  A ``level`` whose fitting length would be
+    more than ``2 * n + 64`` is refused (:class:`~wavecore.InvalidParameter`): it asks for more
+    levels than ``n`` samples can hold.
 
     Examples
     --------
@@ -113,6 +159,12 @@ def valid_length(
     _, rule = _rule(wavelet, boundary)
     n = _as_int(n, "length")
     level = _as_int(level, "level")
+    check_level_bound(
+        level,
+        rule,
+        growth_limit(n),
+        f"length {n} (fitted, it may grow to at most {growth_limit(n)})",
+    )
     if level == 0:
         return n
     step = 1 << level
@@ -137,13 +189,23 @@ def _check_length(bank: FilterBank, boundary: str, n: int, level: int, axis: int
     rule = bank.rule(boundary)
     if rule.fits(n, level):
         return
+    as_is = _level_count(rule, n)
+    deepest = deepest_level(rule, growth_limit(n))
+    if level > deepest:
+        # No padding that keeps the data's size in proportion fits: do not even name lengths.
+        msg = (
+            f"level {level} is too deep for length {n} (axis {axis}): it allows {as_is} "
+            f"level(s) as it is, and at most {deepest} once padded or re-sampled to fit "
+            f"({_FIT_ANY_SIZE})"
+        )
+        raise InvalidLength(msg)
     below, above = _nearest_lengths(rule, n, level)
     nearest = f"{below} and {above}" if below is not None else f"{above}"
     form = "2**L*k + 2 with k >= 3" if rule.extra else "2**L*k"
     msg = (
         f"length {n} (axis {axis}) does not fit {level} level(s) of the {boundary} boundary "
         f"of {bank.name!r}, which needs {form}; the nearest lengths that fit are {nearest} "
-        "(see wavecore.valid_length, or pad or re-sample the data)"
+        f"({_FIT_ANY_SIZE})"
     )
     raise InvalidLength(msg)
 
@@ -170,6 +232,19 @@ def _resolve_level(
 def _boundaries(boundary: str | Sequence[str], count: int, bank: FilterBank) -> list[str]:
     if isinstance(boundary, str):
         result = [boundary] * count
+    elif not isinstance(boundary, Sequence) or isinstance(boundary, bytes):
+        # PyWavelets' order is wavedec(data, wavelet, mode, level): a level passed third lands
+        # here, in ``boundary``.
+        hint = (
+            f"; to ask for {boundary} levels write level={boundary} (the third argument here is "
+            "the boundary, not PyWavelets' mode or level)"
+            if isinstance(boundary, int | np.integer) and not isinstance(boundary, bool)
+            else ""
+        )
+        msg = (
+            f"boundary= must be 'open' or 'closed', or one of them per axis, not {boundary!r}{hint}"
+        )
+        raise InvalidParameter(msg)
     else:
         result = list(boundary)
         if len(result) != count:
@@ -209,7 +284,8 @@ def wavedec(
     data : array_like
         Samples along ``axis``; other axes are carried along (curve points ``(m, d)``).
     wavelet : str
-        ``"bspline2"`` (alias ``"chaikin"``) or ``"haar"``.
+        ``"bspline2"`` (alias ``"chaikin"``), ``"haar"`` or ``"cdf97"`` (alias ``"jpeg2000"``);
+        see :func:`wavecore.wavelet_names`.
     boundary : {"open", "closed"}
         Endpoint-interpolating or periodic.
     level : int, optional

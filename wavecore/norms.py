@@ -7,45 +7,228 @@ smallest details") and quantizers weight by these norms.
 
 In 1-D the basis function of ``cD_l[j]`` is ``P_1 … P_{l-1} Q_l e_j``; in n-D it is the tensor
 product of one 1-D basis function per axis, so its norm is the product of the 1-D norms.
+
+How they are computed, in time and memory independent of the length
+    The norms come from the Gram matrices of the coarse basis functions, level by level:
+    ``G_0 = I``, ``G_l = P_lᵀ G_{l-1} P_l``; the squared norms of the level-``l`` details are
+    ``diag(Q_lᵀ G_{l-1} Q_l)`` and those of ``cA_L`` are ``diag(G_L)``.  ``P`` and ``Q`` are
+    banded, so each ``G_l`` is banded too, and away from the boundary rows it is Toeplitz (the
+    interior basis functions are translates of one another).  A long Gram matrix therefore
+    carries no more information than a short one with the same start rows, the same end rows
+    and a shorter Toeplitz middle.  Every length above ``_PROXY_LENGTH`` is replaced by such a
+    short stand-in before each step (rows of the Toeplitz middle are dropped, or repeated), the
+    step runs on small dense matrices, and the long norm vectors are rebuilt at the end by
+    repeating their constant middle value.  That is exact, not an approximation: the stand-in's
+    middle is checked to be Toeplitz (or the stand-in is made longer) before it is used.  Lengths
+    up to ``_PROXY_LENGTH`` are computed on the full matrices.
 """
 
 from __future__ import annotations
 
 import itertools
+import threading
+from collections import OrderedDict
 from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
 
-from .filters import FilterBank, get_wavelet
-from .multilevel import _axes, _boundaries, _resolve_level, wavedec, waverec
+from .filters import CACHE_CLEARERS, BoundaryRule, FilterBank, get_wavelet
+from .multilevel import _axes, _boundaries, _resolve_level
 
 __all__ = ["basis_norms", "basis_norms_nd"]
 
-_BATCH = 256  # impulses reconstructed at once; bounds the temporary memory to n × 256 floats
+# Lengths up to this are computed exactly on full matrices; longer ones through a stand-in of
+# about this length.  The filters here have Gram bands of at most 5 and boundary regions of at
+# most 3 coefficients, so 128 leaves a wide Toeplitz middle; a wider filter makes the check
+# below fail and the stand-in grows.
+_PROXY_LENGTH = 128
+# Entries of a stand-in's Gram matrix farther than this from the diagonal must be zero.
+_BAND_FRACTION = 8  # the band may take at most 1/8 of the stand-in's length
+
+# Expanded norm vectors are kept for repeated calls only while they are small: all of them
+# together take at most this many bytes (the compact form is always cached; it is tiny).
+_EXPANDED_CACHE_BYTES = 4 << 20
 
 
-@lru_cache(maxsize=64)
-def _basis_norms_cached(n: int, wavelet: str, boundary: str, level: int) -> tuple[np.ndarray, ...]:
-    template = wavedec(np.zeros(n), wavelet, boundary, level)
-    norms: list[np.ndarray] = []
-    for band_index, band in enumerate(template):
-        size = band.shape[0]
-        out = np.empty(size)
-        for start in range(0, size, _BATCH):
-            stop = min(size, start + _BATCH)
-            coeffs: list[np.ndarray | None] = [None] * len(template)
-            coeffs[0] = np.zeros((template[0].shape[0], stop - start))
-            impulses = np.zeros((size, stop - start))
-            impulses[np.arange(start, stop), np.arange(stop - start)] = 1.0
-            if band_index == 0:
-                coeffs[0] = impulses
-            else:
-                coeffs[band_index] = impulses
-            out[start:stop] = np.linalg.norm(waverec(coeffs, wavelet, boundary), axis=0)
-        out.setflags(write=False)
-        norms.append(out)
-    return tuple(norms)
+class _NotToeplitz(Exception):
+    """The stand-in is too short for this filter: its middle is not (yet) Toeplitz."""
+
+
+def _band_rows(gram: np.ndarray, band: int, periodic: bool) -> np.ndarray:
+    """``rows[i, band + k] = gram[i, i + k]`` for ``|k| <= band`` (wrapping when periodic).
+
+    Raises :class:`_NotToeplitz` when the matrix has entries farther out than ``band``.
+    """
+    p = gram.shape[0]
+    i = np.arange(p)[:, None]
+    k = np.arange(-band, band + 1)[None, :]
+    cols = i + k
+    if periodic:
+        rows = gram[i, cols % p]
+    else:
+        inside = (cols >= 0) & (cols < p)
+        rows = np.where(inside, gram[i, np.clip(cols, 0, p - 1)], 0.0)
+    scale = float(np.abs(gram).max(initial=0.0))
+    distance = np.abs(np.arange(p)[:, None] - np.arange(p)[None, :])
+    if periodic:
+        distance = np.minimum(distance, p - distance)
+    if np.any(np.abs(gram[distance > band]) > 1e-14 * scale):
+        raise _NotToeplitz
+    return rows
+
+
+def _from_band_rows(rows: np.ndarray, periodic: bool) -> np.ndarray:
+    p, width = rows.shape
+    band = width // 2
+    gram = np.zeros((p, p))
+    i = np.repeat(np.arange(p), width)
+    cols = (np.arange(p)[:, None] + np.arange(-band, band + 1)[None, :]).ravel()
+    values = rows.ravel()
+    if periodic:
+        cols = cols % p
+        keep = np.ones(cols.shape, dtype=bool)
+    else:
+        keep = (cols >= 0) & (cols < p)
+    gram[i[keep], cols[keep]] = values[keep]
+    return gram
+
+
+def _resize(gram: np.ndarray, length: int, periodic: bool) -> np.ndarray:
+    """The Gram matrix with its Toeplitz middle made ``length - len(gram)`` rows longer."""
+    p = gram.shape[0]
+    if length == p:
+        return gram
+    band = p // _BAND_FRACTION
+    rows = _band_rows(gram, band, periodic)
+    middle = p // 2
+    # Every row whose band reaches the cut must be the same row (the Toeplitz middle), with
+    # room for the start and end rows on either side.
+    around = rows[middle - 2 * band : middle + max(0, p - length) + 2 * band + 1]
+    scale = float(np.abs(rows).max(initial=0.0))
+    if np.any(np.abs(around - rows[middle]) > 1e-13 * max(scale, 1e-300)):
+        raise _NotToeplitz
+    if length > p:
+        extra = np.repeat(rows[middle : middle + 1], length - p, axis=0)
+        rows = np.concatenate([rows[:middle], extra, rows[middle:]])
+    else:
+        rows = np.concatenate([rows[:middle], rows[middle + p - length :]])
+    return _from_band_rows(rows, periodic)
+
+
+def _stand_in(n: int, target: int) -> int:
+    """The stand-in for a true length ``n``: ``n`` itself, or near ``target`` with its parity."""
+    if n <= target:
+        return n
+    return target - (target - n) % 2
+
+
+def _expand(values: np.ndarray, length: int) -> np.ndarray:
+    """A stand-in's per-coefficient values at the true ``length`` (the middle value repeated)."""
+    count = len(values)
+    if length == count:
+        return values
+    middle = count // 2
+    return np.concatenate(
+        [values[:middle], np.full(length - count, values[middle]), values[middle:]]
+    )
+
+
+def _squared_norms(
+    rule: BoundaryRule, n: int, level: int, target: int
+) -> tuple[tuple[np.ndarray, int], ...]:
+    """Squared norms in compact form: per band, (stand-in values, true length), coarse first."""
+    gram: np.ndarray | None = None  # None: the identity (G_0), at any length
+    true_m = n
+    m = _stand_in(n, target)
+    details: list[tuple[np.ndarray, int]] = []
+    for _ in range(level):
+        if gram is None:
+            gram = np.eye(m)
+        r, s = rule.coarse_length(m), rule.detail_length(m)
+        P = rule.P.dense(m, r, rule.periodic)
+        Q = rule.Q.dense(m, s, rule.periodic)
+        details.append((np.einsum("ij,ik,kj->j", Q, gram, Q), rule.detail_length(true_m)))
+        # einsum's own loops rather than BLAS: on matrices this small a threaded BLAS spends
+        # far longer waking its threads (tens of ms on a busy machine) than multiplying.
+        gram = np.einsum("ik,kl->il", np.einsum("ji,jk->ik", P, gram), P)
+        true_m = rule.coarse_length(true_m)
+        m = _stand_in(true_m, target)
+        gram = _resize(gram, m, rule.periodic)
+    coarse = np.ones(m) if gram is None else np.diag(gram).copy()
+    return ((coarse, true_m), *reversed(details))
+
+
+@lru_cache(maxsize=256)
+def _compact_norms(
+    n: int, wavelet: str, boundary: str, level: int
+) -> tuple[tuple[np.ndarray, int], ...]:
+    """Norms in compact form (each band: at most a few hundred values and its true length).
+
+    Small whatever ``n`` is, so the cache may hold many of them.
+    """
+    rule = get_wavelet(wavelet).rule(boundary)
+    target = _PROXY_LENGTH
+    while True:
+        try:
+            squared = _squared_norms(rule, n, level, target)
+            break
+        except _NotToeplitz:
+            # A wider filter than the stand-in allows for: a longer one (at worst the full
+            # length, which needs no stand-in at all).
+            target *= 2
+    out = []
+    for values, length in squared:
+        norms = np.sqrt(np.maximum(values, 0.0))
+        norms.setflags(write=False)
+        out.append((norms, length))
+    return tuple(out)
+
+
+_expanded: OrderedDict[tuple[int, str, str, int], tuple[np.ndarray, ...]] = OrderedDict()
+_expanded_bytes = 0
+_expanded_lock = threading.Lock()
+
+
+def _norms(n: int, wavelet: str, boundary: str, level: int) -> tuple[np.ndarray, ...]:
+    """Read-only norm vectors, ``[cA_L, cD_L, …, cD_1]``; small results are kept for reuse."""
+    global _expanded_bytes
+    key = (n, wavelet, boundary, level)
+    with _expanded_lock:
+        hit = _expanded.get(key)
+        if hit is not None:
+            _expanded.move_to_end(key)
+            return hit
+    vectors = []
+    for values, length in _compact_norms(n, wavelet, boundary, level):
+        vector = _expand(values, length)
+        if vector is values:
+            vector = values.copy()
+        vector.setflags(write=False)
+        vectors.append(vector)
+    result = tuple(vectors)
+    size = sum(v.nbytes for v in result)
+    if size <= _EXPANDED_CACHE_BYTES // 8:
+        with _expanded_lock:
+            if key not in _expanded:
+                _expanded[key] = result
+                _expanded_bytes += size
+            while _expanded_bytes > _EXPANDED_CACHE_BYTES:
+                _, dropped = _expanded.popitem(last=False)
+                _expanded_bytes -= sum(v.nbytes for v in dropped)
+            result = _expanded[key]
+    return result
+
+
+def _forget() -> None:
+    global _expanded_bytes
+    _compact_norms.cache_clear()
+    with _expanded_lock:
+        _expanded.clear()
+        _expanded_bytes = 0
+
+
+CACHE_CLEARERS.append(_forget)  # a wavelet registered again under its name has other norms
 
 
 def basis_norms(
@@ -55,6 +238,9 @@ def basis_norms(
     level: int | None = None,
 ) -> list[np.ndarray]:
     """L2 norm of every coefficient's synthesis basis function, for a 1-D decomposition.
+
+    Computed from the filters by a recursion over the levels, in time and memory that do not
+    grow with ``n`` beyond the result itself.
 
     Parameters
     ----------
@@ -67,7 +253,7 @@ def basis_norms(
     -------
     list of numpy.ndarray
         Laid out like ``wavedec``'s result, ``[norms of cA_L, norms of cD_L, ..., cD_1]``; each
-        a read-only 1-D array (cached).
+        a read-only 1-D array (small results are cached and shared).
 
     Examples
     --------
@@ -80,7 +266,7 @@ def basis_norms(
     bank = get_wavelet(wavelet)
     (b,) = _boundaries(boundary, 1, bank)
     lvl = _resolve_level(level, bank, [b], [int(n)], [0])
-    return list(_basis_norms_cached(int(n), bank.name, b, lvl))
+    return list(_norms(int(n), bank.name, b, lvl))
 
 
 def basis_norms_nd(
@@ -116,10 +302,10 @@ def basis_norms_nd(
         return result
 
     def coarse(axis: int, lvl_: int) -> np.ndarray:
-        return _basis_norms_cached(shape[axis], bank.name, bounds[axis], lvl_)[0]
+        return _norms(shape[axis], bank.name, bounds[axis], lvl_)[0]
 
     def detail(axis: int, lvl_: int) -> np.ndarray:
-        return _basis_norms_cached(shape[axis], bank.name, bounds[axis], lvl_)[1]
+        return _norms(shape[axis], bank.name, bounds[axis], lvl_)[1]
 
     out: list[object] = [outer([coarse(i, lvl) for i in range(len(shape))])]
     for lvl_ in range(lvl, 0, -1):

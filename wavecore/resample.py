@@ -34,7 +34,16 @@ import numpy as np
 
 from .errors import InvalidLength, InvalidParameter
 from .filters import FilterBank, get_wavelet
-from .multilevel import _as_int, _axes, _boundaries, valid_length
+from .multilevel import (
+    MAX_LENGTH,
+    _as_int,
+    _axes,
+    _boundaries,
+    check_level_bound,
+    growth_limit,
+    max_level,
+    valid_length,
+)
 from .transform import as_float_array
 
 __all__ = [
@@ -105,6 +114,12 @@ def pad_to_fit(
         if n == 0:
             msg = f"axis {a} is empty; there is nothing to pad"
             raise InvalidParameter(msg)
+        check_level_bound(
+            level,
+            bank.rule(b),
+            growth_limit(n),
+            f"axis {a} of {n} samples (padded to fit, it may grow to {growth_limit(n)})",
+        )
         after = valid_length(n, level, b, bank) - n
         pads.append((0, after))
         if after:
@@ -171,6 +186,12 @@ def coarse_extent(
     level = _as_int(level, "level")
     bank = get_wavelet(wavelet)
     rule = bank.rule(boundary)
+    if not rule.fits(n + after, level):
+        msg = (
+            f"level {level} does not fit the padded length {n + after}: the largest accepted "
+            f"level is {max_level(n + after, boundary, bank)}"
+        )
+        raise InvalidParameter(msg)
     coarse = n + after
     for _ in range(level):
         coarse = rule.coarse_length(coarse)
@@ -252,7 +273,8 @@ def crop_padding(
         # The padded fine length is unknown here; recover it from the coarse length.
         rule = get_wavelet(wavelet).rule(b)
         padded = arr.shape[a]
-        for _ in range(_as_int(level, "level")):
+        check_level_bound(_as_int(level, "level"), rule, MAX_LENGTH, "a coarse approximation")
+        for _ in range(level):
             padded = 2 * padded - rule.extra
         keep = coarse_extent(
             padded - before - after, (before, after), level, boundary=b, wavelet=wavelet
@@ -518,6 +540,12 @@ def fit_grid(
     level = _as_int(level, "level")
     original = tuple(arr.shape[a] for a in ax)
     for a, b, n in zip(ax, bounds, original, strict=True):
+        check_level_bound(
+            level,
+            bank.rule(b),
+            growth_limit(n),
+            f"axis {a} of {n} samples (fitted, it may grow to {growth_limit(n)})",
+        )
         least = minimum_length(b, bank)
         if n < least:
             sizes = "×".join(str(s) for s in original)

@@ -133,7 +133,8 @@ def decompose_surface(
         ``("closed", "open")`` for a surface of revolution (u around, v along the axis),
         ``"closed"`` for a torus.
     wavelet : str, keyword-only
-        ``"bspline2"`` (the paper's) or ``"haar"``.
+        ``"bspline2"`` (the paper's; alias ``"chaikin"``), ``"haar"`` or ``"cdf97"`` (alias
+        ``"jpeg2000"``); see :func:`wavecore.wavelet_names`.
     fit : {"pad", "resample"}, keyword-only
         How a direction whose length does not fit is made to fit: padding at the end (exact;
         the default), or linear re-sampling to the nearest fitting length (section 4.5).

@@ -201,7 +201,8 @@ def analysis_step(
         Any shape; the step runs along ``axis`` for every position of the other axes (curve
         points ``(m, d)``, images, grids of points).
     wavelet : str or FilterBank
-        ``"bspline2"`` (alias ``"chaikin"``) or ``"haar"``.
+        ``"bspline2"`` (alias ``"chaikin"``), ``"haar"`` or ``"cdf97"`` (alias ``"jpeg2000"``);
+        see :func:`wavecore.wavelet_names`.
     boundary : {"open", "closed"}
         Endpoint-interpolating (the paper's start and end rows) or periodic (section 4.4).
     axis : int
