@@ -39,7 +39,7 @@ from .errors import Problem, validation_problem
 #: Bytes a JSON array of numbers may hold besides brackets and commas.
 _NUMBER_BYTES = b"0123456789.eE+- \t\r\n"
 _BRACKETS_TO_SPACES = bytes.maketrans(b"[]", b"  ")
-_EMPTY_ARRAY = re.compile(rb"\[\s*\]")
+_EMPTY_ARRAY = re.compile(rb"\[\s*\]")  # slices are cut at commas, so none is split
 _PATH_PART = re.compile(r"\[(\d+)\]|\.([A-Za-z_][A-Za-z_0-9]*)")
 
 #: The msgspec type of an array field of each nesting depth (for exact error paths).
@@ -64,7 +64,7 @@ def _msgspec_loc(name: str, message: str) -> list[Any]:
 
 
 def parse_json_body(
-    body: bytes, options: type[BaseModel], arrays: dict[str, tuple[int, ...]]
+    body: bytes | bytearray, options: type[BaseModel], arrays: dict[str, tuple[int, ...]]
 ) -> tuple[Any, dict[str, np.ndarray]]:
     """Split a JSON object into its validated small fields and its float64 arrays.
 
@@ -112,7 +112,7 @@ def parse_json_body(
         raw = fields.pop(name, None)
         if raw is None:
             raise _field_error([name], "Field required", "missing")
-        parsed[name] = numeric_array(bytes(raw), name, ndims)
+        parsed[name] = numeric_array(raw, name, ndims)
     small: dict[str, Any] = {}
     for key, raw in fields.items():
         try:
@@ -122,9 +122,17 @@ def parse_json_body(
     return parse_model(options, small), parsed
 
 
-def numeric_array(text: bytes, name: str, ndims: tuple[int, ...]) -> np.ndarray:
-    """A float64 array from the JSON text of a rectangular nest of numbers (valid JSON)."""
-    structure = text.translate(None, _NUMBER_BYTES)
+def numeric_array(text: bytes | msgspec.Raw, name: str, ndims: tuple[int, ...]) -> np.ndarray:
+    """A float64 array from the JSON text of a rectangular nest of numbers (valid JSON).
+
+    The text is read in slices of about 256 KiB, cut at commas: only the brackets and commas
+    of the whole (a fifth of it or less) and the array itself are ever held besides the body,
+    and no step holds the GIL for more than a few milliseconds (/healthz stays quick).
+    """
+    view = memoryview(text)
+    slices = list(_comma_slices(view))
+    # The slices are cut at commas, so the commas between them come back with the join.
+    structure = b",".join(bytes(view[a:b]).translate(None, _NUMBER_BYTES) for a, b in slices)
     if structure.translate(None, b"[],"):
         return _typed_decode(text, name, ndims)  # strings, null, objects: msgspec names them
     depth = len(structure) - len(structure.lstrip(b"["))
@@ -132,24 +140,37 @@ def numeric_array(text: bytes, name: str, ndims: tuple[int, ...]) -> np.ndarray:
         expected = " or ".join(f"{n}-level" for n in ndims)
         msg = f"{name} must be a {expected} nested array of numbers, not {depth}-level"
         raise _field_error([name], msg, "list_type")
-    if _EMPTY_ARRAY.search(text):  # "[]" and "[5]" leave the same brackets behind
-        if not any(c in text for c in b"0123456789"):
+    if any(_EMPTY_ARRAY.search(view[a:b]) for a, b in slices):
+        # "[]" and "[5]" leave the same brackets behind: an empty array is told apart here.
+        if structure == b"[" * depth + b"]" * depth:
             raise _field_error([name], f"{name} is empty: it needs at least one point", "too_short")
         shape = None
     else:
         shape = _shape_of(structure, depth)
     if shape is None or _nest(shape) != structure:
         msg = f"{name} is ragged: every row must have the same number of values"
-        raise Problem(
-            "invalid-parameter", msg, errors=[{"loc": ["body", name], "msg": msg, "type": "ragged"}]
-        )
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", DeprecationWarning)  # numpy's "could not be read to its end"
-        try:
-            values = np.fromstring(text.translate(_BRACKETS_TO_SPACES), dtype=np.float64, sep=",")
-        except (ValueError, DeprecationWarning):
+        errors = [{"loc": ["body", name], "msg": msg, "type": "ragged"}]
+        raise Problem("invalid-parameter", msg, errors=errors)
+    del structure
+    values = np.empty(math.prod(shape), dtype=np.float64)
+    filled = 0
+    for a, b in slices:
+        piece = bytes(view[a:b])
+        # Every comma of a valid nest without empty arrays separates two numbers, so a slice
+        # cut at commas holds one number more than it has commas; numpy's parser is lenient
+        # (a blank field reads as -1), and this count catches any such slip.
+        count = piece.count(b",") + 1
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", DeprecationWarning)  # "could not be read to its end"
+            try:
+                parsed = np.fromstring(piece.translate(_BRACKETS_TO_SPACES), np.float64, sep=",")
+            except (ValueError, DeprecationWarning):
+                return _typed_decode(text, name, ndims)
+        if parsed.size != count or filled + count > values.size:
             return _typed_decode(text, name, ndims)
-    if values.size != math.prod(shape):
+        values[filled : filled + count] = parsed
+        filled += count
+    if filled != values.size:
         return _typed_decode(text, name, ndims)
     if not np.isfinite(values).all():
         index = np.unravel_index(int(np.argmin(np.isfinite(values))), shape)
@@ -157,6 +178,20 @@ def numeric_array(text: bytes, name: str, ndims: tuple[int, ...]) -> np.ndarray:
         msg = f"{name}{where} is out of float64's range (about ±1.8e308)"
         raise _field_error([name, *map(int, index)], msg, "finite_number")
     return values.reshape(shape)
+
+
+def _comma_slices(view: memoryview, size: int = 1 << 18) -> list[tuple[int, int]]:
+    """``(start, end)`` slices of about ``size`` bytes, each ending just before a comma."""
+    slices = []
+    start, n = 0, len(view)
+    while start < n:
+        end = min(start + size, n)
+        while end < n and view[end] != ord(","):
+            found = bytes(view[end : end + 4096]).find(b",")
+            end = min(end + 4096, n) if found < 0 else end + found
+        slices.append((start, end))
+        start = end + 1
+    return slices
 
 
 def _shape_of(structure: bytes, depth: int) -> tuple[int, ...] | None:
@@ -185,12 +220,12 @@ def _nest(shape: tuple[int, ...]) -> bytes:
     return inner
 
 
-def _typed_decode(text: bytes, name: str, ndims: tuple[int, ...]) -> np.ndarray:
+def _typed_decode(text: bytes | msgspec.Raw, name: str, ndims: tuple[int, ...]) -> np.ndarray:
     """The slow, exact path: msgspec against the field's type names the bad element."""
     error: msgspec.ValidationError | None = None
     for ndim in ndims:
         try:
-            nested = msgspec.json.decode(text, type=_TYPES[ndim])
+            nested = msgspec.json.decode(bytes(memoryview(text)), type=_TYPES[ndim])
         except msgspec.ValidationError as exc:
             error = error or exc
             continue

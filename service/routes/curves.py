@@ -42,7 +42,7 @@ def _limits(settings: Settings) -> dict[str, Any]:
     return {"ndim": (2,), "max_count": settings.max_points, "max_dim": settings.max_dimension}
 
 
-def encode_job(body: bytes, settings: Settings) -> tuple[bytes, dict[str, str]]:
+def encode_job(body: bytes | bytearray, settings: Settings) -> tuple[bytes, dict[str, str]]:
     """Parse, check the cost, encode: the whole of ``POST /v1/curves/encode`` off the loop."""
     options, arrays = parse_json_body(body, CurveOptions, {"points": (2,)})
     points = check_array(arrays["points"], "points", **_limits(settings))
@@ -77,7 +77,7 @@ async def encode_curve(request: Request) -> Response:
     return Response(bundle, media_type=BUNDLE_MEDIA_TYPE, headers=headers)
 
 
-def transfer_job(body: bytes, settings: Settings) -> bytes:
+def transfer_job(body: bytes | bytearray, settings: Settings) -> bytes:
     """Parse, check the level and the cost, transfer, write the JSON answer."""
     options, arrays = parse_json_body(body, TransferOptions, {"source": (2,), "base": (2,)})
     source = check_array(arrays["source"], "source", **_limits(settings))

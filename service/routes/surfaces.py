@@ -52,7 +52,7 @@ def _limits(settings: Settings) -> dict[str, Any]:
     }
 
 
-def encode_json_job(body: bytes, settings: Settings) -> tuple[bytes, dict[str, str]]:
+def encode_json_job(body: bytes | bytearray, settings: Settings) -> tuple[bytes, dict[str, str]]:
     """A JSON surface: parse, check the cost, encode (all on a worker)."""
     options, arrays = parse_json_body(body, SurfaceOptions, {"grid": (2, 3)})
     grid = check_array(arrays["grid"], "grid", **_limits(settings))
