@@ -157,7 +157,11 @@ def read_npy(data: bytes, name: str, *, max_elements: int) -> np.ndarray:
         )
         raise Problem("unsupported-media-type", msg)
     arr = np.load(io.BytesIO(data), allow_pickle=False)
-    return np.asarray(arr, dtype=np.float64) if dtype.kind != "f" else arr
+    if dtype.kind != "f":
+        return np.asarray(arr, dtype=np.float64)
+    # A big-endian file (">f8", written on another machine) becomes native: the compiled
+    # kernels take native byte order only.
+    return arr.astype(arr.dtype.newbyteorder("="), copy=False)
 
 
 def npy_bytes(arr: np.ndarray) -> bytes:

@@ -103,7 +103,8 @@ def parse_json_body(
         fields = msgspec.json.decode(body, type=dict[str, msgspec.Raw])
     except msgspec.ValidationError as exc:
         raise _field_error([], f"the body must be a JSON object ({exc})", "model_type") from None
-    except msgspec.DecodeError as exc:
+    except (msgspec.DecodeError, RecursionError, UnicodeDecodeError) as exc:
+        # RecursionError: msgspec's bound on nesting (a few hundred levels), not a crash.
         raise validation_problem(
             [{"loc": ["body"], "msg": str(exc), "type": "json_invalid"}]
         ) from None
@@ -119,6 +120,8 @@ def parse_json_body(
             small[key] = msgspec.json.decode(raw)
         except msgspec.ValidationError as exc:  # a number beyond float64's range
             raise _field_error(_msgspec_loc(key, str(exc)), str(exc), "finite_number") from None
+        except (msgspec.DecodeError, RecursionError, UnicodeDecodeError) as exc:  # bad text
+            raise _field_error([key], str(exc), "json_invalid") from None
     return parse_model(options, small), parsed
 
 
@@ -226,9 +229,11 @@ def _typed_decode(text: bytes | msgspec.Raw, name: str, ndims: tuple[int, ...]) 
     for ndim in ndims:
         try:
             nested = msgspec.json.decode(bytes(memoryview(text)), type=_TYPES[ndim])
-        except msgspec.ValidationError as exc:
+        except msgspec.ValidationError as exc:  # (a subclass of DecodeError: first)
             error = error or exc
             continue
+        except (msgspec.DecodeError, RecursionError, UnicodeDecodeError) as exc:
+            raise _field_error([name], str(exc), "json_invalid") from None
         try:
             return np.array(nested, dtype=np.float64)
         except ValueError:
