@@ -35,6 +35,38 @@ def problem_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
     }
 
 
+#: Media types a JSON body may come with (none at all is taken as JSON too).
+JSON_MEDIA_TYPES = ("application/json", "")
+
+
+def json_body_openapi(model: type[BaseModel]) -> dict[str, Any]:
+    """``openapi_extra`` documenting a JSON body the route reads as bytes (for /docs and
+    schemathesis): the route itself declares no body parameter, so FastAPI parses nothing."""
+    return {
+        "requestBody": {
+            "required": True,
+            "content": {"application/json": {"schema": model.model_json_schema()}},
+        }
+    }
+
+
+async def read_json_bytes(request: Request) -> bytearray:
+    """The raw body of a JSON request (415 for another media type).
+
+    Only the bytes are read here, on the event loop (bounded by ``WAVECORE_MAX_UPLOAD_BYTES``
+    as they stream in); parsing is the job's, on a worker.  The chunks go straight into one
+    buffer, so the body is held once (``Request.body()`` joins a list of chunks: twice).
+    """
+    content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if content_type not in JSON_MEDIA_TYPES and not content_type.endswith("+json"):
+        msg = f"send the body as application/json, not {content_type}"
+        raise Problem("unsupported-media-type", msg)
+    body = bytearray()
+    async for chunk in request.stream():
+        body += chunk
+    return body
+
+
 def parse_model(model: type[BaseModel], data: bytes | dict[str, Any]) -> Any:
     """Validate JSON bytes (or form fields) against ``model``; a 422 problem on failure."""
     try:
@@ -125,7 +157,11 @@ def read_npy(data: bytes, name: str, *, max_elements: int) -> np.ndarray:
         )
         raise Problem("unsupported-media-type", msg)
     arr = np.load(io.BytesIO(data), allow_pickle=False)
-    return np.asarray(arr, dtype=np.float64) if dtype.kind != "f" else arr
+    if dtype.kind != "f":
+        return np.asarray(arr, dtype=np.float64)
+    # A big-endian file (">f8", written on another machine) becomes native: the compiled
+    # kernels take native byte order only.
+    return arr.astype(arr.dtype.newbyteorder("="), copy=False)
 
 
 def npy_bytes(arr: np.ndarray) -> bytes:

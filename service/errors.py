@@ -3,8 +3,10 @@
 A problem has ``type`` (a URN naming the kind, listed in ``PROBLEMS``), ``title``, ``status``
 and ``detail``; validation problems add ``errors`` (``loc``, ``msg``, ``type`` per field).
 ``wavecore``'s own exceptions map by class: ``BundleError`` → 400, any other
-``WavecoreError`` (a bad parameter) → 422.  Nothing a client sends can produce a 500: an
-unexpected exception is logged and answered with a plain 500 problem without internals.
+``WavecoreError`` (a bad parameter) → 422.  Nothing a client sends can produce a 500: a
+``MemoryError`` anywhere in a request is a 503 ``insufficient-memory`` problem, a client that
+leaves before its body is in is logged at info level and counted with status 499, and any
+other unexpected exception is logged and answered with a plain 500 problem without internals.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.requests import ClientDisconnect
+from starlette.responses import Response
 from starlette.types import Scope, Send
 
 import wavecore
@@ -35,12 +39,14 @@ PROBLEMS: dict[str, tuple[int, str]] = {
     "method-not-allowed": (405, "Method not allowed"),
     "not-acceptable": (406, "No acceptable output format"),
     "body-too-large": (413, "Request body too large"),
+    "too-costly": (413, "Request would cost more than this server allows"),
     "image-too-large": (413, "Image too large"),
     "bundle-too-large": (413, "Bundle decodes to too much data"),
     "unsupported-media-type": (415, "Unsupported media type"),
     "validation-error": (422, "Invalid request"),
     "invalid-parameter": (422, "Invalid parameter"),
     "overloaded": (503, "Server busy"),
+    "insufficient-memory": (503, "Not enough memory for this request now"),
     "timeout": (503, "Request took too long"),
     "internal-error": (500, "Internal server error"),
 }
@@ -76,6 +82,30 @@ class Problem(Exception):
         self.detail = detail
         self.headers = headers or {}
         self.errors = errors
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Jobs may run in worker processes: a problem raised there is pickled back whole
+        # (Exception's default pickling would call Problem(detail) and lose the kind).
+        return (_rebuild_problem, (self.kind, self.detail, self.headers, self.errors))
+
+
+def _rebuild_problem(
+    kind: str, detail: str, headers: dict[str, str], errors: list[dict[str, Any]] | None
+) -> Problem:
+    return Problem(kind, detail, headers=headers, errors=errors)
+
+
+#: The status the metrics give a request whose client left before it was answered (nginx's).
+CLIENT_CLOSED = 499
+
+
+def client_left(request: Request) -> Response:
+    """A client that closed the connection mid-request: an info line, not an error.
+
+    Nothing reaches the client; the response only gives the metrics their status (499).
+    """
+    log.info("client left during %s %s", request.method, request.url.path)
+    return Response(status_code=CLIENT_CLOSED)
 
 
 class BodyTooLarge(StarletteHTTPException):
@@ -187,8 +217,24 @@ def install(app: FastAPI) -> None:
     async def _wavecore(request: Request, exc: wavecore.WavecoreError) -> JSONResponse:
         return problem_response(Problem("invalid-parameter", str(exc)), request)
 
+    @app.exception_handler(ClientDisconnect)
+    async def _disconnect(request: Request, exc: ClientDisconnect) -> Response:
+        return client_left(request)
+
+    @app.exception_handler(MemoryError)
+    async def _memory(request: Request, exc: MemoryError) -> JSONResponse:
+        log.warning("out of memory on %s %s", request.method, request.url.path)
+        msg = (
+            "the server ran out of memory for this request; retry later, or send a smaller "
+            "input (docs/deploy.md, 'Memory per request')"
+        )
+        headers = {"Retry-After": str(request.app.state.settings.retry_after)}
+        return problem_response(Problem("insufficient-memory", msg, headers=headers), request)
+
     @app.exception_handler(StarletteHTTPException)
-    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+    async def _http(request: Request, exc: StarletteHTTPException) -> Response:
+        if isinstance(exc.__cause__, ClientDisconnect):  # FastAPI wraps form-reading errors
+            return client_left(request)
         kind = _HTTP_KINDS.get(exc.status_code)
         if kind is None:
             problem = Problem("bad-request", str(exc.detail))

@@ -9,6 +9,21 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from .errors import BodyTooLarge, Problem, send_problem
 
+#: The methods that get their own label; any other is counted as "other", so that made-up
+#: methods cannot create one time series each (series are never freed).
+KNOWN_METHODS = frozenset(
+    ("GET", "HEAD", "POST", "PUT", "DELETE", "PATCH", "OPTIONS", "TRACE", "CONNECT")
+)
+
+
+def method_label(method: str) -> str:
+    """The ``method`` label of a request.
+
+    >>> method_label("POST"), method_label("BREW")
+    ('POST', 'other')
+    """
+    return method if method in KNOWN_METHODS else "other"
+
 
 class BodyLimitMiddleware:
     """Refuse bodies over ``limit`` bytes: at once by ``Content-Length``, else while reading.
@@ -131,7 +146,7 @@ class MetricsMiddleware:
         finally:
             route = getattr(scope.get("route"), "path", None) or "unmatched"
             m = self.metrics
-            m.requests.labels(route, scope["method"], str(status)).inc()
+            m.requests.labels(route, method_label(scope["method"]), str(status)).inc()
             m.duration.labels(route).observe(time.perf_counter() - start)
             m.bytes_in.labels(route).inc(bytes_in)
             m.bytes_out.labels(route).inc(bytes_out)

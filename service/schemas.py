@@ -18,14 +18,9 @@ class _Body(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
-class CurveEncodeRequest(_Body):
-    """A curve to encode: ``points`` in order, ``(n, d)`` with ``d`` from 1 to 3."""
+class CurveOptions(_Body):
+    """The fields of :class:`CurveEncodeRequest` besides ``points``."""
 
-    points: Points = Field(
-        min_length=1,
-        description="The points in order: [[x, y], …] or [[x, y, z], …].",
-        examples=[[[0, 0], [1, 2], [2, 1], [3, 3], [4, 0], [5, 1]]],
-    )
     closed: bool = Field(default=False, description="A closed curve (periodic) or an open one.")
     level: int | None = Field(default=None, ge=0, description="Levels; null picks up to 8.")
     keep: float | None = Field(default=None, ge=0, le=1, description="Fraction of details kept.")
@@ -40,13 +35,19 @@ class CurveEncodeRequest(_Body):
     )
 
 
-class SurfaceEncodeRequest(_Body):
-    """A surface to encode: a ``(U, V, d)`` grid of points or a ``(U, V)`` height field."""
+class CurveEncodeRequest(CurveOptions):
+    """A curve to encode: ``points`` in order, ``(n, d)`` with ``d`` from 1 to 3."""
 
-    grid: list[Points] | list[list[Number]] = Field(
-        description="[[[x, y, z], …], …] (U rows of V points) or [[z, …], …] (a height field).",
-        examples=[[[0.0, 0.1, 0.2, 0.1], [0.1, 0.3, 0.4, 0.2], [0.0, 0.2, 0.3, 0.1]]],
+    points: Points = Field(
+        min_length=1,
+        description="The points in order: [[x, y], …] or [[x, y, z], …].",
+        examples=[[[0, 0], [1, 2], [2, 1], [3, 3], [4, 0], [5, 1]]],
     )
+
+
+class SurfaceOptions(_Body):
+    """The fields of :class:`SurfaceEncodeRequest` besides ``grid``."""
+
     closed: tuple[bool, bool] = Field(
         default=(False, False), description="Per grid axis: periodic (true) or open (false)."
     )
@@ -54,6 +55,15 @@ class SurfaceEncodeRequest(_Body):
     keep: float | None = Field(default=None, ge=0, le=1, description="Fraction of details kept.")
     quality: float | None = Field(
         default=None, gt=0, description="Target PSNR in dB against the data range (default 40)."
+    )
+
+
+class SurfaceEncodeRequest(SurfaceOptions):
+    """A surface to encode: a ``(U, V, d)`` grid of points or a ``(U, V)`` height field."""
+
+    grid: list[Points] | list[list[Number]] = Field(
+        description="[[[x, y, z], …], …] (U rows of V points) or [[z, …], …] (a height field).",
+        examples=[[[0.0, 0.1, 0.2, 0.1], [0.1, 0.3, 0.4, 0.2], [0.0, 0.2, 0.3, 0.1]]],
     )
 
 
@@ -66,13 +76,18 @@ class SurfaceUploadParams(_Body):
     quality: float | None = Field(default=None, gt=0)
 
 
-class TransferRequest(_Body):
+class TransferOptions(_Body):
+    """The fields of :class:`TransferRequest` besides ``source`` and ``base``."""
+
+    closed: bool = False
+    level: int | None = Field(default=None, ge=0, description="Levels of details to transfer.")
+
+
+class TransferRequest(TransferOptions):
     """The paper's figure 1 (d): the details of ``source`` put onto the coarse curve ``base``."""
 
     source: Points = Field(min_length=1, description="The curve whose details to take.")
     base: Points = Field(min_length=1, description="The new coarse curve.")
-    closed: bool = False
-    level: int | None = Field(default=None, ge=0, description="Levels of details to transfer.")
 
 
 class ReconstructParams(_Body):

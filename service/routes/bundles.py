@@ -15,6 +15,7 @@ from starlette.datastructures import UploadFile
 
 import wavecore
 
+from .. import cost
 from ..deps import (
     BUNDLE_MEDIA_TYPE,
     NPY_MEDIA_TYPE,
@@ -127,6 +128,7 @@ def _reconstruct(
 ) -> tuple[bytes, str, dict[str, str]]:
     info = wavecore.inspect(bundle)
     _check_declared_size(info, settings)
+    cost.check_bundle(info, settings)
     kind = info["kind"]
     fmt = _choose_format(requested, kind, accept)
     arr = wavecore.decode(bundle, keep=keep, level=level)

@@ -1,4 +1,8 @@
-"""``POST /v1/curves/encode`` and ``POST /v1/curves/transfer``."""
+"""``POST /v1/curves/encode`` and ``POST /v1/curves/transfer``.
+
+The JSON body is read as bytes and parsed by the job, on a worker (``service.intake``): a
+20 MB body never blocks the event loop, and never becomes millions of Python floats.
+"""
 
 from __future__ import annotations
 
@@ -10,15 +14,42 @@ from fastapi.responses import Response
 
 import wavecore
 
-from ..deps import BUNDLE_MEDIA_TYPE, as_points, finite_list, problem_responses, settings_of
-from ..schemas import CurveEncodeRequest, PointsResult, TransferRequest
+from .. import cost
+from ..deps import (
+    BUNDLE_MEDIA_TYPE,
+    check_array,
+    finite_list,
+    json_body_openapi,
+    problem_responses,
+    read_json_bytes,
+    settings_of,
+)
+from ..intake import parse_json_body
+from ..schemas import (
+    CurveEncodeRequest,
+    CurveOptions,
+    PointsResult,
+    TransferOptions,
+    TransferRequest,
+)
+from ..settings import Settings
 from ..work import run_work
 
 router = APIRouter(prefix="/v1/curves", tags=["curves"])
 
 
-def _encode(points: np.ndarray, options: dict[str, Any]) -> tuple[bytes, dict[str, str]]:
-    bundle = wavecore.encode_curve(points, **options)
+def _limits(settings: Settings) -> dict[str, Any]:
+    return {"ndim": (2,), "max_count": settings.max_points, "max_dim": settings.max_dimension}
+
+
+def encode_job(body: bytes | bytearray, settings: Settings) -> tuple[bytes, dict[str, str]]:
+    """Parse, check the cost, encode: the whole of ``POST /v1/curves/encode`` off the loop."""
+    options, arrays = parse_json_body(body, CurveOptions, {"points": (2,)})
+    points = check_array(arrays["points"], "points", **_limits(settings))
+    cost.check_curve(
+        len(points), points.shape[1], options.closed, options.level, options.wavelet, settings
+    )
+    bundle = wavecore.encode_curve(points, **options.model_dump(exclude_none=True))
     info = wavecore.inspect(bundle)
     headers = {
         "X-Wavecore-Bytes": str(len(bundle)),
@@ -32,44 +63,52 @@ def _encode(points: np.ndarray, options: dict[str, Any]) -> tuple[bytes, dict[st
     "/encode",
     response_class=Response,
     summary="Encode a curve into a bundle",
+    openapi_extra=json_body_openapi(CurveEncodeRequest),
     responses={
         200: {"content": {BUNDLE_MEDIA_TYPE: {}}, "description": "The bundle."},
-        **problem_responses(413, 422, 503),
+        **problem_responses(413, 415, 422, 503),
     },
 )
-async def encode_curve(request: Request, body: CurveEncodeRequest) -> Response:
+async def encode_curve(request: Request) -> Response:
     """Without `keep` or `tolerance` the largest point deviation is 1e-3 × the bounding box's
     diagonal.  `X-Wavecore-Max-Error` gives the measured largest deviation."""
-    settings = settings_of(request)
-    points = as_points(
-        body.points,
-        "points",
-        ndim=(2,),
-        max_count=settings.max_points,
-        max_dim=settings.max_dimension,
-    )
-    options = body.model_dump(exclude={"points"}, exclude_none=True)
-    bundle, headers = await run_work(request, _encode, points, options)
+    body = await read_json_bytes(request)
+    bundle, headers = await run_work(request, encode_job, body, settings_of(request))
     return Response(bundle, media_type=BUNDLE_MEDIA_TYPE, headers=headers)
 
 
-def _transfer(source: np.ndarray, base: np.ndarray, closed: bool, level: int | None) -> Any:
-    return wavecore.transfer_details(source, base, closed=closed, level=level)
+def transfer_job(body: bytes | bytearray, settings: Settings) -> bytes:
+    """Parse, check the level and the cost, transfer, write the JSON answer."""
+    options, arrays = parse_json_body(body, TransferOptions, {"source": (2,), "base": (2,)})
+    source = check_array(arrays["source"], "source", **_limits(settings))
+    base = check_array(arrays["base"], "base", **_limits(settings))
+    cost.check_transfer(len(source), source.shape[1], options.closed, options.level, settings)
+    result = np.asarray(
+        wavecore.transfer_details(source, base, closed=options.closed, level=options.level)
+    )
+    answer = PointsResult(
+        shape=list(result.shape), dtype=str(result.dtype), points=finite_list(result)
+    )
+    return answer.model_dump_json().encode()
 
 
 @router.post(
     "/transfer",
+    response_class=Response,
     summary="Put one curve's details onto another coarse curve (the paper's figure 1)",
-    responses=problem_responses(413, 422, 503),
+    openapi_extra=json_body_openapi(TransferRequest),
+    responses={
+        200: {
+            "content": {"application/json": {"schema": PointsResult.model_json_schema()}},
+            "description": "The new curve.",
+        },
+        **problem_responses(413, 415, 422, 503),
+    },
 )
-async def transfer(request: Request, body: TransferRequest) -> PointsResult:
+async def transfer(request: Request) -> Response:
     """Decomposes `source`, replaces its coarse curve by `base` (re-sampled by arc length to
     the coarse length) and reconstructs with `source`'s details: the new curve has as many
     points as `source`."""
-    settings = settings_of(request)
-    limits = {"ndim": (2,), "max_count": settings.max_points, "max_dim": settings.max_dimension}
-    source = as_points(body.source, "source", **limits)  # type: ignore[arg-type]
-    base = as_points(body.base, "base", **limits)  # type: ignore[arg-type]
-    result = await run_work(request, _transfer, source, base, body.closed, body.level)
-    arr = np.asarray(result)
-    return PointsResult(shape=list(arr.shape), dtype=str(arr.dtype), points=finite_list(arr))
+    body = await read_json_bytes(request)
+    answer = await run_work(request, transfer_job, body, settings_of(request))
+    return Response(answer, media_type="application/json")

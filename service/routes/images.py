@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
-from typing import IO, Annotated, Any
+import io
+import warnings
+from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, File, Form, Request, UploadFile
 from fastapi.responses import Response
+from PIL import Image
 
 import wavecore
 
+from .. import cost
 from ..deps import BUNDLE_MEDIA_TYPE, problem_responses, settings_of
 from ..imaging import read_image
+from ..settings import Settings
 from ..work import run_work
 
 router = APIRouter(prefix="/v1/images", tags=["images"])
@@ -23,9 +28,33 @@ def _format(value: float | None) -> str:
     return f"{value:.4g}" if np.isfinite(value) else str(value)
 
 
-def _encode(file: IO[bytes], max_pixels: int, options: dict[str, Any]) -> tuple[bytes, dict]:
-    file.seek(0)
-    image = read_image(file.read(), max_pixels=max_pixels)
+#: Channels after ``read_image``'s conversion, by Pillow mode (at most, for the cost check).
+_MODE_CHANNELS = {"1": 1, "L": 1, "I": 1, "F": 1, "LA": 2, "La": 2, "P": 4, "PA": 4}
+
+
+def _header_size(data: bytes) -> tuple[int, int, int] | None:
+    """Width, height and channels from the file's header, or None when Pillow cannot tell
+    (``read_image`` then answers with the precise problem)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(io.BytesIO(data)) as image:
+                width, height = image.size
+                mode = image.mode
+    except Exception:
+        return None
+    channels = _MODE_CHANNELS.get(mode, 1 if mode.startswith("I;16") else 4)
+    return width, height, channels
+
+
+def encode_job(
+    data: bytes, options: dict[str, Any], settings: Settings
+) -> tuple[bytes, dict[str, str]]:
+    """Check the cost from the header, decode the file, encode: all on a worker."""
+    size = _header_size(data)
+    if size is not None and size[0] * size[1] <= settings.max_pixels:
+        cost.check_image(*size, options, settings)
+    image = read_image(data, max_pixels=settings.max_pixels)
     bundle = wavecore.encode_image(image, **options)
     info = wavecore.inspect(bundle)
     height, width = image.shape[:2]
@@ -77,6 +106,6 @@ async def encode_image(
     for name, value in (("keep", keep), ("quality", quality), ("bpp", bpp)):
         if value is not None:
             options[name] = value
-    max_pixels = settings_of(request).max_pixels
-    bundle, headers = await run_work(request, _encode, file.file, max_pixels, options)
+    data = await file.read()
+    bundle, headers = await run_work(request, encode_job, data, options, settings_of(request))
     return Response(bundle, media_type=BUNDLE_MEDIA_TYPE, headers=headers)

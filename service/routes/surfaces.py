@@ -12,17 +12,20 @@ from starlette.datastructures import UploadFile
 
 import wavecore
 
+from .. import cost
 from ..deps import (
     BUNDLE_MEDIA_TYPE,
-    as_points,
     check_array,
     parse_model,
     problem_responses,
+    read_json_bytes,
     read_npy,
     settings_of,
 )
 from ..errors import Problem
-from ..schemas import SurfaceEncodeRequest, SurfaceUploadParams
+from ..intake import parse_json_body
+from ..schemas import SurfaceEncodeRequest, SurfaceOptions, SurfaceUploadParams
+from ..settings import Settings
 from ..work import run_work
 
 router = APIRouter(prefix="/v1/surfaces", tags=["surfaces"])
@@ -40,7 +43,37 @@ _UPLOAD_SCHEMA = {
 }
 
 
-def _encode(grid: np.ndarray, options: dict[str, Any]) -> tuple[bytes, dict[str, str]]:
+def _limits(settings: Settings) -> dict[str, Any]:
+    return {
+        "ndim": (2, 3),
+        "max_count": settings.max_grid_points,
+        "max_dim": settings.max_dimension,
+        "point_axes": 2,
+    }
+
+
+def encode_json_job(body: bytes | bytearray, settings: Settings) -> tuple[bytes, dict[str, str]]:
+    """A JSON surface: parse, check the cost, encode (all on a worker)."""
+    options, arrays = parse_json_body(body, SurfaceOptions, {"grid": (2, 3)})
+    grid = check_array(arrays["grid"], "grid", **_limits(settings))
+    return _encode(grid, options.model_dump(exclude_none=True), settings)
+
+
+def encode_npy_job(
+    data: bytes, options: dict[str, Any], settings: Settings
+) -> tuple[bytes, dict[str, str]]:
+    """An uploaded ``.npy`` surface: read (header first), check the cost, encode."""
+    max_values = settings.max_grid_points * settings.max_dimension
+    grid = read_npy(data, "file", max_elements=max_values)
+    grid = check_array(grid, "file", **_limits(settings))
+    return _encode(grid, options, settings)
+
+
+def _encode(
+    grid: np.ndarray, options: dict[str, Any], settings: Settings
+) -> tuple[bytes, dict[str, str]]:
+    options["closed"] = tuple(options.get("closed", (False, False)))
+    cost.check_grid(grid.shape, options["closed"], options.get("level"), settings)
     bundle = wavecore.encode_surface(grid, **options)
     info = wavecore.inspect(bundle)
     psnr = info.get("psnr")
@@ -86,12 +119,6 @@ async def encode_surface(request: Request) -> Response:
     40 dB against the data range unless `keep` or `quality` says otherwise."""
     settings = settings_of(request)
     content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
-    limits = {
-        "ndim": (2, 3),
-        "max_count": settings.max_grid_points,
-        "max_dim": settings.max_dimension,
-        "point_axes": 2,
-    }
     if content_type == "multipart/form-data":
         async with request.form(max_files=1, max_fields=8) as form:
             upload = form.get("file")
@@ -106,17 +133,9 @@ async def encode_surface(request: Request) -> Response:
                 fields["closed"] = _closed_field(fields["closed"])
             params = parse_model(SurfaceUploadParams, {k: v for k, v in fields.items() if v})
             data = await upload.read()
-        max_values = settings.max_grid_points * settings.max_dimension
-        grid = read_npy(data, "file", max_elements=max_values)
-        grid = check_array(grid, "file", **limits)  # type: ignore[arg-type]
         options = params.model_dump(exclude_none=True)
-    elif content_type in ("application/json", ""):
-        body: SurfaceEncodeRequest = parse_model(SurfaceEncodeRequest, await request.body())
-        grid = as_points(body.grid, "grid", **limits)  # type: ignore[arg-type]
-        options = body.model_dump(exclude={"grid"}, exclude_none=True)
+        bundle, headers = await run_work(request, encode_npy_job, data, options, settings)
     else:
-        msg = f"send application/json or multipart/form-data (a .npy), not {content_type}"
-        raise Problem("unsupported-media-type", msg)
-    options["closed"] = tuple(options.get("closed", (False, False)))
-    bundle, headers = await run_work(request, _encode, grid, options)
+        body = await read_json_bytes(request)
+        bundle, headers = await run_work(request, encode_json_job, body, settings)
     return Response(bundle, media_type=BUNDLE_MEDIA_TYPE, headers=headers)

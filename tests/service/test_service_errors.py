@@ -252,3 +252,78 @@ async def test_timeout_gets_a_503(make_client: Callable[..., httpx.AsyncClient])
                 break
             await asyncio.sleep(0.05)
         assert pool.in_use == 0
+
+
+async def test_made_up_methods_share_one_metrics_label(
+    make_client: Callable[..., httpx.AsyncClient],
+) -> None:
+    async with make_client() as c:
+        for i in range(50):
+            r = await c.request(f"BREW{i}", "/healthz")
+            assert r.status_code == 405
+        metrics = (await c.get("/metrics")).text
+        assert "BREW" not in metrics
+        assert 'method="other"' in metrics
+
+
+async def test_memory_error_is_a_503_problem(
+    make_client: Callable[..., httpx.AsyncClient], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def out_of_memory(*args: Any, **kwargs: Any) -> bytes:
+        raise MemoryError
+
+    monkeypatch.setattr(wavecore, "encode_curve", out_of_memory)
+    async with make_client() as c:
+        r = await c.post("/v1/curves/encode", json={"points": [[0.0, 1.0]] * 20})
+        body = _check_problem(r, 503, "insufficient-memory")
+        assert "memory" in body["detail"] and r.headers["retry-after"].isdigit()
+
+
+def test_problems_survive_pickling() -> None:
+    """Jobs may run in worker processes: a problem must come back whole."""
+    import pickle
+
+    from service.errors import Problem
+
+    problem = Problem("too-costly", "too much", headers={"X": "1"}, errors=[{"loc": ["a"]}])
+    back = pickle.loads(pickle.dumps(problem))
+    assert (back.kind, back.status, back.detail, back.headers, back.errors) == (
+        "too-costly",
+        413,
+        "too much",
+        {"X": "1"},
+        [{"loc": ["a"]}],
+    )
+
+
+async def test_cost_check_names_the_figure_and_the_limit(
+    make_client: Callable[..., httpx.AsyncClient],
+) -> None:
+    # max_pixels 2000 → 10 000 samples per request.  A 1 × 2000 image passes the pixel limit
+    # but is padded to 8 rows for one level: 16 000 samples.
+    async with make_client(max_pixels=2000) as c:
+        thin = image(image_file(np.zeros((1, 2000), np.uint8)))
+        detail = _check_problem(await c.post("/v1/images/encode", **thin), 413, "too-costly")[
+            "detail"
+        ]
+        assert "2000 × 1 image" in detail and "16000 samples" in detail and "10000" in detail
+        lossless = image(image_file(np.zeros((1, 2000), np.uint8)), lossless="true")
+        assert (await c.post("/v1/images/encode", **lossless)).status_code == 200  # unpadded
+        square = image(image_file(test_image((40, 50))))
+        assert (await c.post("/v1/images/encode", **square)).status_code == 200
+        # A bundle is judged by what its header declares: its padded size, 8 × 1990.
+        thin_bundle = wavecore.encode_image(test_image((1, 1990)), quality=35)
+        r = await c.post("/v1/bundles/reconstruct", content=thin_bundle)
+        assert "8 × 1990 samples" in _check_problem(r, 413, "too-costly")["detail"]
+
+
+async def test_transfer_level_is_bounded_by_the_source(client: httpx.AsyncClient) -> None:
+    source = np.cumsum(np.random.default_rng(4).normal(size=(40, 2)), axis=0).tolist()
+    body = {"source": source, "base": [[0, 0], [1, 1]], "level": 30}
+    r = await client.post("/v1/curves/transfer", json=body)
+    problem = _check_problem(r, 422, "invalid-parameter")
+    assert "level 30" in problem["detail"] and problem["errors"][0]["loc"] == ["body", "level"]
+    # the deepest level the message offers is accepted
+    deepest = int(problem["detail"].rsplit(" ", 1)[-1])
+    r = await client.post("/v1/curves/transfer", json={**body, "level": deepest})
+    assert r.status_code == 200 and r.json()["shape"] == [40, 2]

@@ -1,0 +1,171 @@
+"""What a request will cost, computed before the work starts, and the 413 when it is too much.
+
+The cost of a request is the number of samples the library will hold while coding it: the
+input's values after the padding (or re-sampling) that its ``level`` implies, times its
+channels or coordinates.  Every endpoint's memory is a small constant per such sample
+(docs/deploy.md, "Memory per request", measures it), so bounding the samples bounds the memory
+and the time of any request, whatever its shape: a 4 KB PNG of 1 × 4 194 304 pixels is padded
+to 8 rows for one level, 33 554 432 samples, and is refused here before a pixel is decoded.
+
+The limit is :data:`SAMPLES_PER_PIXEL` × ``WAVECORE_MAX_PIXELS``: the largest image the server
+accepts anyway (4 channels) with room for its padding, so no request that was served before is
+refused, and one request's working memory stays within the budget of docs/deploy.md.
+
+The helpers mirror how ``wavecore``'s codec chooses its default level and pads (public
+``valid_length`` and ``fitting_length``); if they drift, the check only becomes a little looser
+or tighter, and the codec's own checks still hold.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import wavecore
+
+from .errors import Problem
+from .settings import Settings
+
+#: Working samples allowed per pixel of ``WAVECORE_MAX_PIXELS``: 4 channels, plus a quarter
+#: for the padding of a large image to a length that fits its levels.
+SAMPLES_PER_PIXEL = 5
+
+#: The codec's deepest default levels (``codec._MAX_IMAGE_LEVELS`` / ``_MAX_CURVE_LEVELS``).
+DEFAULT_MOST_LEVELS = {"image": 5, "surface": 5, "curve": 8}
+
+
+def sample_limit(settings: Settings) -> int:
+    """The most samples one request may code (``SAMPLES_PER_PIXEL × max_pixels``)."""
+    return SAMPLES_PER_PIXEL * settings.max_pixels
+
+
+def check(samples: int, what: str, settings: Settings) -> None:
+    """Refuse with 413 ``too-costly`` when ``samples`` is over the limit.
+
+    >>> try:
+    ...     check(12, "a 3 × 4 grid", Settings(max_pixels=2))
+    ... except Problem as problem:
+    ...     print(problem.status, problem.detail.replace("; ", ";\\n"))
+    413 a 3 × 4 grid means coding 12 samples;
+    this server codes at most 10 in one request (5 × WAVECORE_MAX_PIXELS)
+    """
+    limit = sample_limit(settings)
+    if samples > limit:
+        msg = (
+            f"{what} means coding {samples} samples; this server codes at most {limit} "
+            f"in one request ({SAMPLES_PER_PIXEL} × WAVECORE_MAX_PIXELS)"
+        )
+        raise Problem("too-costly", msg)
+
+
+def _default_level(sizes: Sequence[int], most: int) -> int:
+    # The codec's rule: up to ``most`` levels, fewer for a small side.
+    smallest = min(sizes)
+    return max(1, min(most, math.floor(math.log2(max(smallest, 8) / 4))))
+
+
+def padded_lengths(
+    sizes: Sequence[int],
+    level: int | None,
+    boundaries: Sequence[str],
+    wavelet: str,
+    kind: str,
+) -> tuple[list[int], int]:
+    """The lengths the codec pads ``sizes`` to for ``level`` (its default when ``None``).
+
+    A length the codec would refuse to pad (beyond ``2 n + 64``) counts as that bound: the
+    codec answers those with its own 422, which names the level.
+
+    >>> padded_lengths([1, 4_194_304], None, ["open", "open"], "bspline2", "image")
+    ([8, 4194304], 1)
+
+    (one level of the open B-spline needs ``2 k + 2`` samples with ``k >= 3``: one row
+    becomes 8; 4 194 304 is already of that form.)
+    """
+    if level is None:
+        level = _default_level(sizes, DEFAULT_MOST_LEVELS[kind])
+    level = min(level, 30)  # deeper is refused by the codec (422) before any work
+    fitted = [
+        min(wavecore.valid_length(n, level, b, wavelet), 2 * n + 64)
+        for n, b in zip(sizes, boundaries, strict=True)
+    ]
+    return fitted, level
+
+
+def check_image(
+    width: int, height: int, bands: int, options: dict[str, Any], settings: Settings
+) -> None:
+    """The cost of encoding a ``width × height`` image of ``bands`` channels."""
+    if options.get("lossless"):
+        fitted = [height, width]  # the reversible 5/3 lifting fits every size, unpadded
+    else:
+        wavelet = options.get("wavelet", "bspline2")
+        fitted, _ = padded_lengths(
+            [height, width], options.get("level"), ["open", "open"], wavelet, "image"
+        )
+    samples = fitted[0] * fitted[1] * bands
+    what = f"a {width} × {height} image with {bands} channel{'s' * (bands > 1)}"
+    if fitted != [height, width]:
+        what += f", padded to {fitted[1]} × {fitted[0]} for its levels,"
+    check(samples, what, settings)
+
+
+def check_grid(
+    shape: Sequence[int], closed: Sequence[bool], level: int | None, settings: Settings
+) -> None:
+    """The cost of encoding a surface grid ``(U, V[, d])``."""
+    boundaries = ["closed" if c else "open" for c in closed]
+    fitted, _ = padded_lengths(list(shape[:2]), level, boundaries, "bspline2", "surface")
+    dims = shape[2] if len(shape) > 2 else 1
+    check(fitted[0] * fitted[1] * dims, f"a {shape[0]} × {shape[1]} grid", settings)
+
+
+def check_curve(
+    n: int, dims: int, closed: bool, level: int | None, wavelet: str, settings: Settings
+) -> None:
+    """The cost of encoding a curve of ``n`` points of ``dims`` coordinates."""
+    boundary = "closed" if closed else "open"
+    fitted, _ = padded_lengths([n], level, [boundary], wavelet, "curve")
+    check(fitted[0] * dims, f"a curve of {n} points", settings)
+
+
+def check_transfer(n: int, dims: int, closed: bool, level: int | None, settings: Settings) -> None:
+    """Bound ``level`` by what ``source`` holds (422), then the cost of the transfer (413).
+
+    ``transfer_details`` re-samples ``source`` to a length that fits ``level`` levels, about
+    ``2**level`` times a few points however short the source: a 100-byte body with ``level``
+    30 would ask for billions of points.  Like the codec's padding, the re-sampled length may
+    be at most ``2 n + 64``.
+    """
+    if level is None:
+        check(n * dims, f"a curve of {n} points", settings)
+        return
+    boundary = "closed" if closed else "open"
+    bound = 2 * n + 64
+    if wavecore.fitting_length(n, level, boundary) > bound:
+        deepest = 0
+        while deepest < 30 and wavecore.fitting_length(n, deepest + 1, boundary) <= bound:
+            deepest += 1
+        msg = (
+            f"level {level} is too deep for a source of {n} points: it would re-sample it to "
+            f"{wavecore.fitting_length(n, level, boundary)} points; give a level from 0 to "
+            f"{deepest}"
+        )
+        errors = [{"loc": ["body", "level"], "msg": msg, "type": "less_than_equal"}]
+        raise Problem("invalid-parameter", msg, errors=errors)
+    m = wavecore.fitting_length(n, level, boundary)
+    check(m * dims, f"a curve of {n} points re-sampled to {m} for {level} levels", settings)
+
+
+def check_bundle(info: dict[str, Any], settings: Settings) -> None:
+    """The cost of decoding a bundle, from what its header declares (its padded ``fitted``)."""
+    header = info.get("header") or {}
+    declared = header.get("fitted") or info.get("shape") or []
+    try:
+        sizes = [int(s) for s in declared]
+    except (TypeError, ValueError):
+        sizes = [int(s) for s in info.get("shape", [])]
+    samples = math.prod(max(s, 0) for s in sizes)
+    shape = " × ".join(str(s) for s in sizes)
+    check(samples, f"a bundle that decodes {shape} samples", settings)
