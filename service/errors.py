@@ -34,14 +34,17 @@ PROBLEMS: dict[str, tuple[int, str]] = {
     "not-found": (404, "Not found"),
     "method-not-allowed": (405, "Method not allowed"),
     "not-acceptable": (406, "No acceptable output format"),
+    "body-timeout": (408, "Request body too slow"),
     "body-too-large": (413, "Request body too large"),
     "image-too-large": (413, "Image too large"),
     "bundle-too-large": (413, "Bundle decodes to too much data"),
+    "out-of-memory": (413, "Request needs more memory than a worker has"),
     "unsupported-media-type": (415, "Unsupported media type"),
     "validation-error": (422, "Invalid request"),
     "invalid-parameter": (422, "Invalid parameter"),
     "overloaded": (503, "Server busy"),
     "timeout": (503, "Request took too long"),
+    "worker-lost": (503, "The worker coding the request stopped"),
     "internal-error": (500, "Internal server error"),
 }
 
