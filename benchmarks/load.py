@@ -105,6 +105,13 @@ def proc_cpu_seconds(pid: int) -> float | None:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def tree_cpu_seconds(pid: int | None) -> float:
+    """CPU time spent so far by a process and its live descendants (0 without a pid)."""
+    if pid is None:
+        return 0.0
+    return sum(proc_cpu_seconds(p) or 0.0 for p in descendants(pid))
+
+
 def rss_mib(pid: int) -> float:
     """Resident memory of a process and all its descendants, in MiB."""
     return sum(proc_rss_mib(p) for p in descendants(pid))
@@ -248,12 +255,31 @@ async def run(args: argparse.Namespace, url: str, pid: int | None) -> list[str]:
         one_request = statistics.median(request_times)
         ratios = [r / e for r, e in zip(request_times, encode_times, strict=True)]
 
-        # 3. throughput: one client in sequence, then concurrent clients, back to back
-        start = time.perf_counter()
-        for _ in range(args.sequential):
-            await encode(client, png)
-        sequential_rps = args.sequential / (time.perf_counter() - start)
-        load = await concurrent(client, png, args.clients, args.requests)
+        # 3. throughput: one client in sequence, then concurrent clients, back to back, in
+        # rounds, so that a change in the machine's other load hits both alike
+        # (and the cores the server used: its CPU seconds over each phase's wall time)
+        sequential_rps, concurrent_rps, round_ratios = [], [], []
+        sequential_cores, concurrent_cores = [], []
+        loads = []
+        for _ in range(args.rounds):
+            start, cpu = time.perf_counter(), tree_cpu_seconds(pid)
+            for _ in range(args.sequential):
+                await encode(client, png)
+            wall = time.perf_counter() - start
+            sequential_rps.append(args.sequential / wall)
+            sequential_cores.append((tree_cpu_seconds(pid) - cpu) / wall)
+            cpu = tree_cpu_seconds(pid)
+            loads.append(await concurrent(client, png, args.clients, args.requests))
+            concurrent_rps.append(loads[-1]["rps"])
+            concurrent_cores.append((tree_cpu_seconds(pid) - cpu) / loads[-1]["wall"])
+            round_ratios.append(concurrent_rps[-1] / sequential_rps[-1])
+        load = {
+            "rps": statistics.median(concurrent_rps),
+            "requests": sum(x["requests"] for x in loads),
+            "errors": sum(x["errors"] for x in loads),
+            "p50": statistics.median(x["p50"] for x in loads),
+            "p99": max(x["p99"] for x in loads),
+        }
 
         # 4. memory over many requests
         samples, memory_errors = await memory_run(client, png, bundle, args.memory_requests, pid)
@@ -266,16 +292,31 @@ async def run(args: argparse.Namespace, url: str, pid: int | None) -> list[str]:
     say(f"ratio request / in-process encode:         {one_request / in_process:8.3f}")
     say(f"ratio request / in-process read + encode:  {one_request / in_process_read:8.3f}")
     say(f"median of the paired ratios request / encode: {statistics.median(ratios):.3f}")
-    say(f"one client, {args.sequential} requests in sequence: {sequential_rps:.2f} requests/s")
+    rounds = f"{args.rounds} rounds"
     say(
-        f"{args.clients} clients × {args.requests} requests: {load['rps']:.2f} requests/s, "
-        f"p50 {load['p50'] * 1e3:.0f} ms, p99 {load['p99'] * 1e3:.0f} ms, "
-        f"errors {load['errors']} of {load['requests']:.0f}"
+        f"one client, {args.sequential} requests in sequence ({rounds}): "
+        + ", ".join(f"{x:.2f}" for x in sequential_rps)
+        + " requests/s"
     )
     say(
-        f"throughput ratio {args.clients} clients / one client in sequence: "
-        f"{load['rps'] / sequential_rps:.2f}"
+        f"{args.clients} clients × {args.requests} requests ({rounds}): "
+        + ", ".join(f"{x:.2f}" for x in concurrent_rps)
+        + f" requests/s; p50 {load['p50'] * 1e3:.0f} ms (median), p99 {load['p99'] * 1e3:.0f} ms "
+        f"(max), errors {load['errors']} of {load['requests']:.0f}"
     )
+    say(
+        f"throughput ratio {args.clients} clients / one client in sequence, per round: "
+        + ", ".join(f"{x:.2f}" for x in round_ratios)
+        + f"; median {statistics.median(round_ratios):.2f}"
+    )
+    if pid:
+        say(
+            "cores used by the server (CPU s / wall s), sequential | concurrent, per round: "
+            + ", ".join(
+                f"{a:.2f} | {b:.2f}"
+                for a, b in zip(sequential_cores, concurrent_cores, strict=True)
+            )
+        )
     if pid:
         trail = ", ".join(f"{n}: {m:.0f}" for n, m in samples)
         say(f"server RSS (MiB): idle {idle:.0f}, after warm-up {warm:.0f}, end {after:.0f}")
@@ -334,9 +375,10 @@ async def deadline_run(url: str, pid: int) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--clients", type=int, default=32)
-    parser.add_argument("--requests", type=int, default=4, help="per client")
+    parser.add_argument("--requests", type=int, default=2, help="per client and round")
+    parser.add_argument("--rounds", type=int, default=3, help="sequential + concurrent rounds")
     parser.add_argument("--repeat", type=int, default=15, help="sequential timings")
-    parser.add_argument("--sequential", type=int, default=16, help="requests for throughput")
+    parser.add_argument("--sequential", type=int, default=8, help="per round, one client")
     parser.add_argument("--memory-requests", type=int, default=1000)
     parser.add_argument("--workers", type=int, default=1, help="uvicorn processes")
     parser.add_argument("--url", help="an already running server on 127.0.0.1")
@@ -351,7 +393,11 @@ def main(argv: list[str] | None = None) -> int:
         env["WAVECORE_REQUEST_TIMEOUT"] = "1"
     if not 1 <= args.clients <= MAX_CLIENTS:
         parser.error(f"--clients must be 1 to {MAX_CLIENTS}")
-    total = args.clients * args.requests + args.memory_requests + args.repeat + args.sequential
+    total = (
+        args.rounds * (args.clients * args.requests + args.sequential)
+        + args.memory_requests
+        + args.repeat
+    )
     if total > MAX_REQUESTS:
         parser.error(f"at most {MAX_REQUESTS} requests in all, not {total}")
     proc = None
