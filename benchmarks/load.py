@@ -7,21 +7,32 @@ Starts ``uvicorn --factory service.app:create_app`` on a free port of 127.0.0.1 
 1. in process: the median time of ``wavecore.encode_image`` (and of Pillow's PNG read plus
    the encode, which is all the work a request does);
 2. one client, sequential requests: the median request time, and its ratio to (1);
-3. ``--clients`` concurrent clients × ``--requests`` each: requests per second, p50 / p99
-   latency, errors;
+3. throughput: ``--sequential`` requests sent one after another by one client, then
+   ``--clients`` concurrent clients × ``--requests`` each (requests per second, p50 / p99
+   latency, errors), and the ratio of the two throughputs, measured back to back;
 4. ``--memory-requests`` mixed requests (encode, reconstruct, inspect): the server's resident
-   memory (RSS, from /proc) at idle, after warm-up and every 10 %, to show it stays flat.
+   memory (RSS, from /proc, the server and all its descendants: the worker processes) at idle,
+   after warm-up and every 10 %, to show it stays flat.
+
+``--deadline`` measures instead what a request past its deadline leaves running: it starts a
+server with ``WAVECORE_REQUEST_TIMEOUT=1``, sends a 2048 × 2048 RGB encode (several seconds of
+work), and prints the CPU time and RSS of every worker process for 3 s after the 503.
+
+``--env NAME=VALUE`` passes settings to the server; ``--server-root`` serves another checkout
+of the project (e.g. ``git archive main``), to compare against it in the same conditions.
 
 Every count and the total time are bounded.  Run::
 
     .venv/bin/python benchmarks/load.py                # the figures in docs/benchmarks.md
     .venv/bin/python benchmarks/load.py --clients 64 --requests 2 --memory-requests 200
+    .venv/bin/python benchmarks/load.py --deadline
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import io
 import os
 import socket
@@ -61,28 +72,58 @@ def png_bytes(image: np.ndarray) -> bytes:
     return out.getvalue()
 
 
+def descendants(pid: int) -> list[int]:
+    """A process and all its descendants (uvicorn workers, the fork server, the coders)."""
+    found, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        found.append(p)
+        for task in Path(f"/proc/{p}/task").glob("*/children"):
+            with contextlib.suppress(FileNotFoundError, ProcessLookupError):
+                todo += [int(c) for c in task.read_text().split()]
+    return found
+
+
+def proc_rss_mib(pid: int) -> float:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except (FileNotFoundError, ProcessLookupError):
+        pass
+    return 0.0
+
+
+def proc_cpu_seconds(pid: int) -> float | None:
+    """User + system CPU time of a live process; ``None`` once it is gone (or a zombie)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (FileNotFoundError, ProcessLookupError):
+        return None
+    if fields[0] == "Z":
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def tree_cpu_seconds(pid: int | None) -> float:
+    """CPU time spent so far by a process and its live descendants (0 without a pid)."""
+    if pid is None:
+        return 0.0
+    return sum(proc_cpu_seconds(p) or 0.0 for p in descendants(pid))
+
+
 def rss_mib(pid: int) -> float:
-    """Resident memory of a process and its children (uvicorn workers), in MiB."""
-    total = 0
-    pids = [pid]
-    children = Path(f"/proc/{pid}/task/{pid}/children")
-    if children.exists():
-        pids += [int(p) for p in children.read_text().split()]
-    for p in pids:
-        try:
-            for line in Path(f"/proc/{p}/status").read_text().splitlines():
-                if line.startswith("VmRSS:"):
-                    total += int(line.split()[1])
-        except FileNotFoundError:
-            pass
-    return total / 1024
+    """Resident memory of a process and all its descendants, in MiB."""
+    return sum(proc_rss_mib(p) for p in descendants(pid))
 
 
 def percentile(values: list[float], q: float) -> float:
     return float(np.percentile(np.asarray(values), q))
 
 
-def start_server(workers: int, env: dict[str, str]) -> tuple[subprocess.Popen[bytes], str]:
+def start_server(
+    workers: int, env: dict[str, str], root: Path = ROOT
+) -> tuple[subprocess.Popen[bytes], str]:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
@@ -90,11 +131,11 @@ def start_server(workers: int, env: dict[str, str]) -> tuple[subprocess.Popen[by
         [sys.executable, "-m", "uvicorn", "service.app:create_app", "--factory"]
         + ["--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"]
         + ["--workers", str(workers)],
-        cwd=ROOT,
-        env={**os.environ, **env},
+        cwd=root,
+        env={**os.environ, **env, "PYTHONPATH": str(root)},
     )
     url = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 180  # the workers warm up before the server answers
     while time.monotonic() < deadline:
         try:
             if httpx.get(url + "/healthz", timeout=2).status_code == 200:
@@ -102,7 +143,7 @@ def start_server(workers: int, env: dict[str, str]) -> tuple[subprocess.Popen[by
         except httpx.TransportError:
             time.sleep(0.2)
     proc.kill()
-    msg = "the server did not start within 60 s"
+    msg = "the server did not start within 180 s"
     raise RuntimeError(msg)
 
 
@@ -214,8 +255,31 @@ async def run(args: argparse.Namespace, url: str, pid: int | None) -> list[str]:
         one_request = statistics.median(request_times)
         ratios = [r / e for r, e in zip(request_times, encode_times, strict=True)]
 
-        # 3. concurrent clients
-        load = await concurrent(client, png, args.clients, args.requests)
+        # 3. throughput: one client in sequence, then concurrent clients, back to back, in
+        # rounds, so that a change in the machine's other load hits both alike
+        # (and the cores the server used: its CPU seconds over each phase's wall time)
+        sequential_rps, concurrent_rps, round_ratios = [], [], []
+        sequential_cores, concurrent_cores = [], []
+        loads = []
+        for _ in range(args.rounds):
+            start, cpu = time.perf_counter(), tree_cpu_seconds(pid)
+            for _ in range(args.sequential):
+                await encode(client, png)
+            wall = time.perf_counter() - start
+            sequential_rps.append(args.sequential / wall)
+            sequential_cores.append((tree_cpu_seconds(pid) - cpu) / wall)
+            cpu = tree_cpu_seconds(pid)
+            loads.append(await concurrent(client, png, args.clients, args.requests))
+            concurrent_rps.append(loads[-1]["rps"])
+            concurrent_cores.append((tree_cpu_seconds(pid) - cpu) / loads[-1]["wall"])
+            round_ratios.append(concurrent_rps[-1] / sequential_rps[-1])
+        load = {
+            "rps": statistics.median(concurrent_rps),
+            "requests": sum(x["requests"] for x in loads),
+            "errors": sum(x["errors"] for x in loads),
+            "p50": statistics.median(x["p50"] for x in loads),
+            "p99": max(x["p99"] for x in loads),
+        }
 
         # 4. memory over many requests
         samples, memory_errors = await memory_run(client, png, bundle, args.memory_requests, pid)
@@ -228,11 +292,31 @@ async def run(args: argparse.Namespace, url: str, pid: int | None) -> list[str]:
     say(f"ratio request / in-process encode:         {one_request / in_process:8.3f}")
     say(f"ratio request / in-process read + encode:  {one_request / in_process_read:8.3f}")
     say(f"median of the paired ratios request / encode: {statistics.median(ratios):.3f}")
+    rounds = f"{args.rounds} rounds"
     say(
-        f"{args.clients} clients × {args.requests} requests: {load['rps']:.2f} requests/s, "
-        f"p50 {load['p50'] * 1e3:.0f} ms, p99 {load['p99'] * 1e3:.0f} ms, "
-        f"errors {load['errors']} of {load['requests']:.0f}"
+        f"one client, {args.sequential} requests in sequence ({rounds}): "
+        + ", ".join(f"{x:.2f}" for x in sequential_rps)
+        + " requests/s"
     )
+    say(
+        f"{args.clients} clients × {args.requests} requests ({rounds}): "
+        + ", ".join(f"{x:.2f}" for x in concurrent_rps)
+        + f" requests/s; p50 {load['p50'] * 1e3:.0f} ms (median), p99 {load['p99'] * 1e3:.0f} ms "
+        f"(max), errors {load['errors']} of {load['requests']:.0f}"
+    )
+    say(
+        f"throughput ratio {args.clients} clients / one client in sequence, per round: "
+        + ", ".join(f"{x:.2f}" for x in round_ratios)
+        + f"; median {statistics.median(round_ratios):.2f}"
+    )
+    if pid:
+        say(
+            "cores used by the server (CPU s / wall s), sequential | concurrent, per round: "
+            + ", ".join(
+                f"{a:.2f} | {b:.2f}"
+                for a, b in zip(sequential_cores, concurrent_cores, strict=True)
+            )
+        )
     if pid:
         trail = ", ".join(f"{n}: {m:.0f}" for n, m in samples)
         say(f"server RSS (MiB): idle {idle:.0f}, after warm-up {warm:.0f}, end {after:.0f}")
@@ -248,20 +332,72 @@ async def run(args: argparse.Namespace, url: str, pid: int | None) -> list[str]:
     return lines
 
 
+async def deadline_run(url: str, pid: int) -> None:
+    """One encode past a 1 s deadline: what its worker does after the 503."""
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[:2048, :2048]
+    smooth = 120 + 60 * np.sin(x / 37)[:, :, None] * np.cos(y / 53)[:, :, None]
+    image = np.clip(smooth + rng.normal(0, 8, (2048, 2048, 3)), 0, 255).astype(np.uint8)
+    png = png_bytes(image)
+    workers = [p for p in descendants(pid) if p != pid]
+    before = {p: proc_cpu_seconds(p) for p in workers}
+    async with httpx.AsyncClient(base_url=url, timeout=120) as client:
+        start = time.perf_counter()
+        r = await client.post("/v1/images/encode", files={"file": ("big.png", png, "image/png")})
+        answered = time.perf_counter() - start
+        print(f"2048×2048 RGB encode, WAVECORE_REQUEST_TIMEOUT=1: {r.status_code} after "
+              f"{answered:.2f} s ({r.headers.get('content-type')})")  # fmt: skip
+        # the job's worker: gone already, or still spending CPU
+        busy = [
+            p
+            for p in workers
+            if proc_cpu_seconds(p) is None or (proc_cpu_seconds(p) or 0) > (before[p] or 0) + 0.3
+        ]
+        print(f"processes of the server gone or that spent > 0.3 s CPU on the job: {busy}")
+        for wait in (0.0, 0.1, 0.1, 0.1, 0.2, 0.5, 1.0, 1.0):
+            await asyncio.sleep(wait)
+            rows = []
+            for p in busy:
+                cpu = proc_cpu_seconds(p)
+                state = "gone" if cpu is None else f"{cpu:.2f} s CPU, {proc_rss_mib(p):.0f} MiB"
+                rows.append(f"{p}: {state}")
+            print(f"  +{time.perf_counter() - start - answered:4.2f} s after the 503: "
+                  + "; ".join(rows))  # fmt: skip
+        small = {"file": ("s.png", png_bytes(image[:256, :256]))}
+        for _ in range(3):
+            start = time.perf_counter()
+            r = await client.post("/v1/images/encode", files=small)
+            took = time.perf_counter() - start
+            print(f"a 256×256 encode after it: {r.status_code} in {took:.2f} s; "
+                  f"server RSS {rss_mib(pid):.0f} MiB")  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--clients", type=int, default=32)
-    parser.add_argument("--requests", type=int, default=4, help="per client")
+    parser.add_argument("--requests", type=int, default=2, help="per client and round")
+    parser.add_argument("--rounds", type=int, default=3, help="sequential + concurrent rounds")
     parser.add_argument("--repeat", type=int, default=15, help="sequential timings")
+    parser.add_argument("--sequential", type=int, default=8, help="per round, one client")
     parser.add_argument("--memory-requests", type=int, default=1000)
     parser.add_argument("--workers", type=int, default=1, help="uvicorn processes")
     parser.add_argument("--url", help="an already running server on 127.0.0.1")
     parser.add_argument("--pid", type=int, help="its process id, to read its memory")
     parser.add_argument("--time-limit", type=float, default=900.0, help="seconds, in all")
+    parser.add_argument("--env", action="append", default=[], help="NAME=VALUE for the server")
+    parser.add_argument("--server-root", type=Path, default=ROOT, help="the checkout to serve")
+    parser.add_argument("--deadline", action="store_true", help="the timed-out job's worker")
     args = parser.parse_args(argv)
+    env = dict(item.split("=", 1) for item in args.env)
+    if args.deadline:
+        env["WAVECORE_REQUEST_TIMEOUT"] = "1"
     if not 1 <= args.clients <= MAX_CLIENTS:
         parser.error(f"--clients must be 1 to {MAX_CLIENTS}")
-    total = args.clients * args.requests + args.memory_requests + args.repeat
+    total = (
+        args.rounds * (args.clients * args.requests + args.sequential)
+        + args.memory_requests
+        + args.repeat
+    )
     if total > MAX_REQUESTS:
         parser.error(f"at most {MAX_REQUESTS} requests in all, not {total}")
     proc = None
@@ -270,10 +406,17 @@ def main(argv: list[str] | None = None) -> int:
             parser.error("--url must be a loopback address (127.0.0.1)")
         url, pid = args.url.rstrip("/"), args.pid
     else:
-        proc, url = start_server(args.workers, {})
+        proc, url = start_server(args.workers, env, args.server_root)
         pid = proc.pid
+    print(f"load average before: {Path('/proc/loadavg').read_text().strip()}", flush=True)
     try:
-        asyncio.run(asyncio.wait_for(run(args, url, pid), args.time_limit))
+        if args.deadline:
+            if pid is None:
+                parser.error("--deadline needs the server's --pid")
+            asyncio.run(asyncio.wait_for(deadline_run(url, pid), args.time_limit))
+        else:
+            asyncio.run(asyncio.wait_for(run(args, url, pid), args.time_limit))
+        print(f"load average after: {Path('/proc/loadavg').read_text().strip()}")
     finally:
         if proc is not None:
             proc.terminate()

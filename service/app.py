@@ -1,7 +1,9 @@
 """The app factory: ``uvicorn --factory service.app:create_app``.
 
-Nothing happens at import time: the settings are read, the thread pool is sized and Pillow's
+Nothing happens at import time: the settings are read, the work pool is sized and Pillow's
 pixel limit is set when :func:`create_app` runs, so that tests build apps with their own limits.
+The worker processes start, warm, during the app's start-up (its lifespan): a server answers
+only once they are ready.
 
 >>> app = create_app(Settings(max_upload_bytes=1000))
 >>> app.state.settings.max_upload_bytes
@@ -10,6 +12,9 @@ pixel limit is set when :func:`create_app` runs, so that tests build apps with t
 
 from __future__ import annotations
 
+import asyncio
+import logging
+import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -40,15 +45,26 @@ Errors are `application/problem+json` (RFC 9457); their `type` is
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
-    """Build the service with ``settings`` (default: read from ``WAVECORE_*`` variables)."""
-    settings = settings or Settings()
+    """Build the service with ``settings`` (default: read from ``WAVECORE_*`` variables).
+
+    Raises :class:`~service.settings.SettingsError` (one line naming the variable) when a
+    ``WAVECORE_*`` variable has a bad value.
+    """
+    settings = settings or Settings.from_env()
     set_pixel_limit(settings.max_pixels)
     pool = WorkPool(settings)
 
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
-        yield
-        pool.shutdown()
+        log = logging.getLogger("service")
+        log.info("starting %d warm worker processes", settings.concurrency)
+        began = time.monotonic()
+        await asyncio.to_thread(pool.start)
+        log.info("workers ready in %.1f s", time.monotonic() - began)
+        try:
+            yield
+        finally:
+            pool.shutdown()
 
     app = FastAPI(
         title="wavecore",
@@ -64,8 +80,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.include_router(module.router)
     if STATIC.is_dir():
         app.mount("/static", StaticFiles(directory=STATIC), name="static")
-    # Added innermost first: metrics see everything, admission runs before the body is read.
-    app.add_middleware(BodyLimitMiddleware, limit=settings.max_upload_bytes)
+    # Added innermost first: metrics see everything; the size limit applies while admission
+    # reads the whole body (within WAVECORE_BODY_TIMEOUT), and only then takes a work slot.
     app.add_middleware(AdmissionMiddleware, pool=pool)
+    app.add_middleware(BodyLimitMiddleware, limit=settings.max_upload_bytes)
     app.add_middleware(MetricsMiddleware, metrics=app.state.metrics)
     return app

@@ -7,28 +7,41 @@
 from __future__ import annotations
 
 import os
+from typing import Any
 
-from pydantic import Field, model_validator
+from pydantic import AliasChoices, Field, ValidationError, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
-def _default_threads() -> int:
-    # The transform's compiled loops release the GIL, so one thread per core keeps every core
-    # busy; more threads would only add memory (each holds a whole decoded image).
+def _default_concurrency() -> int:
+    # One worker process per core keeps every core busy; more would only add memory (each
+    # worker holds a whole decoded image while it codes).
     return max(1, os.cpu_count() or 1)
+
+
+class SettingsError(ValueError):
+    """A ``WAVECORE_*`` variable has a value the service cannot use; the message is one line
+    that names the variable, its value and what is accepted."""
 
 
 class Settings(BaseSettings):
     """The service's settings; each field is read from ``WAVECORE_<FIELD NAME>``.
 
-    The defaults let 64 concurrent clients all succeed on one process: ``threads`` requests
-    are worked on at once and up to ``queue_size`` more wait for a thread; past that, requests
-    get an immediate 503 with ``Retry-After``.  The worst-case memory of one process is about
-    ``(threads + queue_size) × max_upload_bytes`` for waiting bodies (uploads larger than 1 MiB
-    are spooled to disk) plus ``threads ×`` the working memory of the largest allowed image.
+    The defaults let 64 concurrent clients all succeed on one process: ``concurrency`` jobs
+    are worked on at once, each in its own worker process, and up to ``queue_size`` more wait
+    for a worker; past that, requests get an immediate 503 with ``Retry-After``.  A request
+    takes its slot only once its whole body has arrived (within ``body_timeout``).  The
+    worst-case memory is about ``(concurrency + queue_size) × max_upload_bytes`` for bodies
+    plus ``concurrency ×`` the working memory of the largest allowed image (docs/deploy.md).
+
+    ``concurrency`` is read from ``WAVECORE_CONCURRENCY``, or from its old spelling
+    ``WAVECORE_THREADS`` when that is the only one set (``WAVECORE_THREADS`` is also the
+    library's own thread count, inside each worker).
     """
 
-    model_config = SettingsConfigDict(env_prefix="WAVECORE_", extra="forbid", frozen=True)
+    model_config = SettingsConfigDict(
+        env_prefix="WAVECORE_", extra="forbid", frozen=True, populate_by_name=True
+    )
 
     # Request bodies
     max_upload_bytes: int = Field(
@@ -49,13 +62,32 @@ class Settings(BaseSettings):
         default=3, ge=1, description="Most coordinates per curve/surface point."
     )
 
-    # Work
-    threads: int = Field(
-        default_factory=_default_threads, ge=1, description="Requests encoded/decoded at once."
+    body_timeout: float = Field(
+        default=30.0,
+        gt=0,
+        description="Seconds a request's whole body may take to arrive before it gets a 408.",
     )
-    queue_size: int = Field(default=64, ge=0, description="Requests that may wait for a thread.")
+
+    # Work
+    concurrency: int = Field(
+        default_factory=_default_concurrency,
+        ge=1,
+        # No env_prefix for aliases: both spellings are written out; the first one set wins.
+        validation_alias=AliasChoices("WAVECORE_CONCURRENCY", "WAVECORE_THREADS"),
+        description="Requests encoded/decoded at once: the worker processes.",
+    )
+    queue_size: int = Field(default=64, ge=0, description="Requests that may wait for a worker.")
     request_timeout: float = Field(
-        default=120.0, gt=0, description="Seconds a request may wait and work before it gets a 503."
+        default=120.0,
+        gt=0,
+        description="Seconds a request may wait and work (after its body is in) before a 503; "
+        "its worker is then ended and replaced.",
+    )
+    worker_memory_bytes: int = Field(
+        default=0,
+        ge=0,
+        description="Address-space limit (RLIMIT_AS) of each worker process; 0: none.  A job "
+        "that needs more gets a 413.",
     )
     retry_after: int = Field(
         default=2, ge=0, description="The Retry-After (seconds) sent with a 503."
@@ -68,14 +100,58 @@ class Settings(BaseSettings):
         default=1, ge=1, description="uvicorn worker processes (one per pod is best)."
     )
 
-    @model_validator(mode="after")
-    def _capacity(self) -> Settings:
-        if self.threads + self.queue_size < 1:
-            msg = "threads + queue_size must be at least 1"
-            raise ValueError(msg)
-        return self
+    @model_validator(mode="before")
+    @classmethod
+    def _old_keyword(cls, data: Any) -> Any:
+        # ``Settings(threads=2)``: the keyword of the field's old name still works.
+        if isinstance(data, dict) and "threads" in data:
+            data = dict(data)
+            threads = data.pop("threads")
+            data.setdefault("concurrency", threads)
+        return data
+
+    @property
+    def threads(self) -> int:
+        """The old name of :attr:`concurrency`."""
+        return self.concurrency
 
     @property
     def capacity(self) -> int:
         """Requests admitted at once (working plus waiting)."""
-        return self.threads + self.queue_size
+        return self.concurrency + self.queue_size
+
+    @classmethod
+    def from_env(cls, **overrides: Any) -> Settings:
+        """The settings from ``WAVECORE_*`` variables, or a one-line :class:`SettingsError`.
+
+        >>> import os
+        >>> os.environ["WAVECORE_QUEUE_SIZE"] = "many"
+        >>> try:
+        ...     Settings.from_env()
+        ... except SettingsError as exc:
+        ...     print(exc)  # doctest: +ELLIPSIS
+        WAVECORE_QUEUE_SIZE='many': Input should be a valid integer...
+        >>> del os.environ["WAVECORE_QUEUE_SIZE"]
+        """
+        try:
+            return cls(**overrides)
+        except ValidationError as exc:
+            raise SettingsError(_one_line(exc)) from None
+
+
+def _environ_upper() -> set[str]:
+    return {key.upper() for key in os.environ}
+
+
+def _one_line(exc: ValidationError) -> str:
+    """The first problem of a validation error as ``VARIABLE='value': what is wrong``."""
+    error = exc.errors(include_url=False)[0]
+    name = str(error["loc"][0]) if error["loc"] else ""
+    if name and not name.upper().startswith("WAVECORE_"):
+        name = "WAVECORE_" + name.upper()
+    name = name.upper() or "WAVECORE_*"
+    if name == "WAVECORE_CONCURRENCY" and name not in _environ_upper():
+        name = "WAVECORE_THREADS"  # the value came from the old spelling
+    more = len(exc.errors()) - 1
+    tail = f" (and {more} more)" if more else ""
+    return f"{name}={error.get('input')!r}: {error['msg']}{tail}"

@@ -1,29 +1,192 @@
-"""Bounded work: CPU-bound coding runs on a fixed thread pool, never on the event loop.
+"""Bounded work that stops: coding runs in worker processes that are ended at the deadline.
 
-Every ``/v1/`` request takes a *slot* when it arrives, before its body is read; there are
-``threads + queue_size`` slots.  A request that finds none free gets an immediate 503 with
-``Retry-After`` instead of piling up.  A slot is held until the response is sent *and* every
-job the request started has finished, so a job abandoned by a timeout keeps counting against
-the bound until its thread is really free.
+Intake.  A ``/v1/`` request's body is read in full first, within ``body_timeout`` seconds of
+its arrival (else a 408 ``body-timeout`` problem), without holding a work slot: slow bodies
+cannot starve the server.  The bytes of bodies being read are bounded in all by
+``capacity × max_upload_bytes`` (past that: 503 at once).
+
+Admission.  With its body in, the request takes one of ``concurrency + queue_size`` slots, or
+gets an immediate 503 with ``Retry-After``.  The slot is held until the response is sent and
+the request's jobs have ended.
+
+Work.  Jobs run in a pool of ``concurrency`` worker processes (:mod:`pebble`).  A job past the
+request's deadline (``request_timeout`` from admission) is cancelled: its worker is killed
+within about 0.1 s (SIGTERM, then SIGKILL), so its CPU and memory are freed, and the pool
+starts a fresh worker.  A worker that dies (the kernel's OOM killer, a crash) answers its
+request with a 503 ``worker-lost`` problem; a ``MemoryError`` (a worker's address space is
+capped by ``worker_memory_bytes``) with a 413 ``out-of-memory`` problem.  Workers start warm:
+each imports wavecore and codes a tiny input of every kind, so numba's on-disk cache is loaded
+before the pool reports ready.
+
+Why processes rather than cooperative checks in threads: the codec holds the GIL in its
+entropy stage, so threads code on about one core; and a check between stages can stop a job
+only between library calls, which for the largest allowed image last seconds
+(docs/deploy.md, "Work that stops").  Why pebble: its futures, when cancelled or timed out,
+end the one worker running them and the pool replaces it; ``concurrent.futures`` and loky can
+only end the whole pool.
+
+Jobs cross to the workers by pickle: ``fn`` must be a module-level function and its arguments
+picklable (bytes, arrays, dicts).  An open file (an upload) is sent as its bytes.
 """
 
 from __future__ import annotations
 
 import asyncio
+import atexit
 import contextlib
-import functools
+import io
+import logging
+import multiprocessing
+import os
+import pickle
+import resource
+import tempfile
+import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import CancelledError, Future
+from concurrent.futures import TimeoutError as FutureTimeout
 from typing import Any, TypeVar
 
+import numpy as np
+from pebble import ProcessExpired, ProcessPool
 from starlette.requests import Request
-from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from .errors import Problem, send_problem
+import wavecore
+
+from .errors import BodyTooLarge, Problem, send_problem
 from .settings import Settings
 
 T = TypeVar("T")
+log = logging.getLogger("service")
+
+# How long start-up waits for every worker to report warm before it goes on regardless.
+WARM_TIMEOUT = 300.0
+
+
+# --- in the worker processes --------------------------------------------------------------
+
+
+def warm_up() -> None:
+    """Code a tiny input of each kind, so that every compiled kernel is loaded from the cache."""
+    rng = np.random.default_rng(0)
+    rgb = rng.integers(0, 256, (64, 64, 3), dtype=np.uint8)
+    grey = rgb[:, :, 0]
+    for bundle in (
+        wavecore.encode_image(rgb),
+        wavecore.encode_image(grey[:32, :32], bpp=8.0),  # the rate search (slow on big inputs)
+        wavecore.encode_image(grey, lossless=True),
+        wavecore.encode_image(rgb.astype(np.uint16) * 257, lossless=True),
+        wavecore.encode_image(grey / 255.0),
+        wavecore.encode_curve(rgb[:, 0, :2] / 255.0),
+        wavecore.encode_surface(rgb / 255.0),
+    ):
+        wavecore.decode(bundle)
+        wavecore.decode(bundle, keep=0.5)
+        wavecore.inspect(bundle)
+
+
+def _start_worker(memory_bytes: int) -> None:
+    """A worker's initializer: cap its address space, then warm up."""
+    if memory_bytes > 0:
+        resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
+    warm_up()
+
+
+def _worker_pid(pause: float) -> int:
+    time.sleep(pause)
+    return os.getpid()
+
+
+class JobProblem(Exception):
+    """A :class:`~service.errors.Problem` raised in a worker, in a form that pickles."""
+
+    def __init__(
+        self, kind: str, detail: str, headers: dict[str, str], errors: list[Any] | None
+    ) -> None:
+        super().__init__(kind, detail, headers, errors)
+        self.kind, self.detail, self.headers, self.errors = kind, detail, headers, errors
+
+
+def _run_job(fn: Callable[..., T], args: tuple[Any, ...], kwargs: dict[str, Any]) -> T:
+    """Run ``fn`` in a worker; exceptions come back as ones that survive the pickle."""
+    try:
+        return fn(*args, **kwargs)
+    except Problem as exc:
+        raise JobProblem(exc.kind, exc.detail, exc.headers, exc.errors) from None
+    except MemoryError:
+        raise MemoryError("the job ran out of memory") from None
+    except Exception as exc:
+        try:  # an exception whose __init__ takes other arguments cannot be re-created
+            pickle.loads(pickle.dumps(exc))
+        except Exception:
+            raise RuntimeError(f"{type(exc).__name__}: {exc}") from None
+        raise
+
+
+# --- in the server process ----------------------------------------------------------------
+
+
+class _SharedPools:
+    """Process pools by (workers, memory cap), shared by the apps of one server process.
+
+    A server has one app; tests build many apps in one process, and starting warm workers for
+    each would cost seconds apiece.  A pool is stopped when the last app that started it
+    stops (its lifespan), or at exit.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._pools: dict[tuple[int, int], tuple[ProcessPool, int]] = {}
+
+    def get(self, workers: int, memory_bytes: int, *, hold: bool) -> ProcessPool:
+        key = (workers, memory_bytes)
+        with self._lock:
+            pool, holders = self._pools.get(key, (None, 0))
+            if pool is None or not pool.active:
+                pool = ProcessPool(
+                    max_workers=workers,
+                    initializer=_start_worker,
+                    initargs=(memory_bytes,),
+                    context=_context(),
+                )
+            self._pools[key] = (pool, holders + hold)
+            return pool
+
+    def release(self, workers: int, memory_bytes: int) -> None:
+        key = (workers, memory_bytes)
+        with self._lock:
+            pool, holders = self._pools.get(key, (None, 0))
+            if pool is None:
+                return
+            if holders > 1:
+                self._pools[key] = (pool, holders - 1)
+                return
+            del self._pools[key]
+        pool.stop()
+        pool.join(timeout=10)
+
+    def stop_all(self) -> None:
+        with self._lock:
+            pools = [pool for pool, _ in self._pools.values()]
+            self._pools.clear()
+        for pool in pools:
+            pool.stop()
+            pool.join(timeout=10)
+
+
+def _context() -> Any:
+    # forkserver: workers are forked from a clean single-threaded server process (forking
+    # uvicorn itself, with its threads, is unsafe), which has already imported the service,
+    # so a replacement worker starts in well under a second of import time.
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(["wavecore", "service.app"])
+    return ctx
+
+
+_POOLS = _SharedPools()
+atexit.register(_POOLS.stop_all)
 
 
 class Slot:
@@ -44,23 +207,36 @@ class Slot:
 
 
 class WorkPool:
-    """The thread pool and the admission count, both sized from the settings."""
+    """The worker processes, the admission count and the intake budget, sized from settings."""
 
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         self.capacity = settings.capacity
         self.in_use = 0
         self.rejected = 0
-        self._executor: ThreadPoolExecutor | None = None
+        self.intake_bytes = 0
+        self.intake_budget = settings.capacity * settings.max_upload_bytes
+        self._held = False
 
     @property
-    def executor(self) -> ThreadPoolExecutor:
-        # Created lazily so that building the app does no work (and no threads) at import.
-        if self._executor is None:
-            self._executor = ThreadPoolExecutor(
-                self.settings.threads, thread_name_prefix="wavecore-work"
-            )
-        return self._executor
+    def processes(self) -> ProcessPool:
+        # Got lazily, so that building an app starts no process (an app served without its
+        # lifespan, as in tests, gets its pool at its first job).
+        return _POOLS.get(self.settings.concurrency, self.settings.worker_memory_bytes, hold=False)
+
+    def start(self) -> None:
+        """Start the workers and wait until each is warm (blocking: call it off the loop)."""
+        if not self._held:
+            _POOLS.get(self.settings.concurrency, self.settings.worker_memory_bytes, hold=True)
+            self._held = True
+        pool = self.processes
+        seen: set[int] = set()
+        deadline = time.monotonic() + WARM_TIMEOUT
+        # A worker runs its warm-up before its first job, so an answer from every worker
+        # means every one is warm.  Rounds of short pauses let each worker take one.
+        while len(seen) < self.settings.concurrency and time.monotonic() < deadline:
+            jobs = [pool.submit(_worker_pid, None, 0.1) for _ in range(self.settings.concurrency)]
+            seen.update(job.result() for job in jobs)
 
     def admit(self) -> Slot | None:
         """A slot, or ``None`` when every slot is taken (only called on the event loop)."""
@@ -71,37 +247,83 @@ class WorkPool:
         return Slot(self)
 
     async def run(self, slot: Slot, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
-        """Run ``fn`` on a worker thread; a 503 ``timeout`` problem past the request's deadline."""
+        """Run ``fn`` in a worker; a 503 ``timeout`` problem past the request's deadline."""
         loop = asyncio.get_running_loop()
+        args = tuple(_sendable(arg) for arg in args)
+        remaining = slot.started + self.settings.request_timeout - time.monotonic()
+        if remaining <= 0:
+            raise self._timeout()
         slot.hold()
-        job: Future[T] = self.executor.submit(functools.partial(fn, *args, **kwargs))
+        try:
+            # pebble's own timeout is a backstop; the deadline is kept on this side.
+            job: Future[T] = self.processes.submit(_run_job, remaining + 1, fn, args, kwargs)
+        except RuntimeError:  # the pool was stopped (shutdown) or broke
+            slot.release()
+            raise self._worker_lost("the work pool is not running") from None
 
         def done(_: Future[T]) -> None:
             with contextlib.suppress(RuntimeError):  # the loop may be closed at shutdown
                 loop.call_soon_threadsafe(slot.release)
 
         job.add_done_callback(done)
-        remaining = slot.started + self.settings.request_timeout - time.monotonic()
         try:
             return await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(job)), remaining)
-        except TimeoutError:
-            job.cancel()  # only stops a job that has not started; a running one finishes
-            msg = (
-                f"the request did not finish within {self.settings.request_timeout:g} s "
-                "(WAVECORE_REQUEST_TIMEOUT); the server is busy or the input is very large"
-            )
-            raise Problem(
-                "timeout", msg, headers={"Retry-After": str(self.settings.retry_after)}
+        except (TimeoutError, FutureTimeout):
+            job.cancel()  # a running job's worker is killed and replaced
+            raise self._timeout() from None
+        except asyncio.CancelledError:
+            job.cancel()  # the request itself was cancelled (client gone, shutdown)
+            raise
+        except JobProblem as exc:
+            raise Problem(exc.kind, exc.detail, headers=exc.headers, errors=exc.errors) from None
+        except MemoryError:
+            limit = self.settings.worker_memory_bytes
+            cap = f" of {limit} bytes (WAVECORE_WORKER_MEMORY_BYTES)" if limit else ""
+            msg = f"the request needs more memory than a worker's limit{cap}; send less data"
+            raise Problem("out-of-memory", msg) from None
+        except ProcessExpired as exc:
+            log.warning("a worker ended during a job (exit code %s)", exc.exitcode)
+            raise self._worker_lost(
+                f"the worker coding this request stopped (exit code {exc.exitcode}), "
+                "most likely out of memory; retry, or send less data"
             ) from None
+        except CancelledError:
+            raise self._worker_lost("the work pool stopped during the request") from None
+
+    def _timeout(self) -> Problem:
+        msg = (
+            f"the request did not finish within {self.settings.request_timeout:g} s "
+            "(WAVECORE_REQUEST_TIMEOUT); the server is busy or the input is very large"
+        )
+        return Problem("timeout", msg, headers={"Retry-After": str(self.settings.retry_after)})
+
+    def _worker_lost(self, detail: str) -> Problem:
+        headers = {"Retry-After": str(self.settings.retry_after)}
+        return Problem("worker-lost", detail, headers=headers)
 
     def shutdown(self) -> None:
-        if self._executor is not None:
-            self._executor.shutdown(wait=False, cancel_futures=True)
-            self._executor = None
+        """Stop the workers (unless another app of this process still uses them)."""
+        if self._held:
+            self._held = False
+            _POOLS.release(self.settings.concurrency, self.settings.worker_memory_bytes)
+
+
+def _sendable(arg: Any) -> Any:
+    """An open file (an upload, which may be spooled to disk) becomes its bytes, as a file."""
+    if isinstance(arg, tempfile.SpooledTemporaryFile | io.BufferedIOBase | io.RawIOBase) and not (
+        isinstance(arg, io.BytesIO)
+    ):
+        arg.seek(0)
+        return io.BytesIO(arg.read())
+    return arg
 
 
 async def run_work(request: Request, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
-    """Run CPU-bound ``fn`` for this request on the app's bounded pool."""
+    """Run CPU-bound ``fn(*args, **kwargs)`` for this request in a worker process.
+
+    ``fn`` is a module-level function and its arguments pickle; its exceptions come back as
+    they were raised (:class:`~service.errors.Problem` included).
+    """
     pool: WorkPool = request.app.state.pool
     slot: Slot | None = request.scope.get("state", {}).get("work_slot")
     if slot is None:  # a route outside /v1/ (not admitted by the middleware)
@@ -114,8 +336,12 @@ async def run_work(request: Request, fn: Callable[..., T], *args: Any, **kwargs:
     return await pool.run(slot, fn, *args, **kwargs)
 
 
+class _ClientGone(Exception):
+    pass
+
+
 class AdmissionMiddleware:
-    """Admit ``/v1/`` requests into a slot, or answer 503 at once when all are taken."""
+    """Read a ``/v1/`` request's body within the deadline, then admit it into a slot."""
 
     def __init__(self, app: ASGIApp, pool: WorkPool) -> None:
         self.app = app
@@ -125,17 +351,80 @@ class AdmissionMiddleware:
         if scope["type"] != "http" or not scope["path"].startswith("/v1/"):
             await self.app(scope, receive, send)
             return
-        slot = self.pool.admit()
-        if slot is None:
-            detail = (
-                f"all {self.pool.capacity} request slots are taken "
-                "(WAVECORE_THREADS + WAVECORE_QUEUE_SIZE); retry shortly"
-            )
-            headers = {"Retry-After": str(self.pool.settings.retry_after)}
-            await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
-            return
-        scope.setdefault("state", {})["work_slot"] = slot
+        settings = self.pool.settings
+        reserved = 0
         try:
-            await self.app(scope, receive, send)
+            try:
+                async with asyncio.timeout(settings.body_timeout):
+                    body, reserved = await self._read_body(receive)
+            except TimeoutError:
+                detail = (
+                    f"the request body did not arrive in full within {settings.body_timeout:g} s "
+                    "(WAVECORE_BODY_TIMEOUT)"
+                )
+                headers = {"Connection": "close"}
+                await send_problem(scope, send, Problem("body-timeout", detail, headers=headers))
+                return
+            except BodyTooLarge as exc:
+                detail = f"{exc.detail} (WAVECORE_MAX_UPLOAD_BYTES)"
+                await send_problem(scope, send, Problem("body-too-large", detail))
+                return
+            except _ClientGone:
+                log.info("the client left before sending its whole body: %s", scope["path"])
+                return
+            except _IntakeFull:
+                detail = "too many request bodies are arriving at once; retry shortly"
+                headers = {"Retry-After": str(settings.retry_after)}
+                await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
+                return
+            slot = self.pool.admit()
+            if slot is None:
+                detail = (
+                    f"all {self.pool.capacity} request slots are taken "
+                    "(WAVECORE_CONCURRENCY + WAVECORE_QUEUE_SIZE); retry shortly"
+                )
+                headers = {"Retry-After": str(settings.retry_after)}
+                await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
+                return
+            scope.setdefault("state", {})["work_slot"] = slot
+            replayed = False
+
+            async def replay() -> Message:
+                nonlocal replayed
+                if not replayed:
+                    replayed = True
+                    return {"type": "http.request", "body": body, "more_body": False}
+                return await receive()  # after the body: only the disconnect is left
+
+            try:
+                await self.app(scope, replay, send)
+            finally:
+                slot.release()
         finally:
-            slot.release()
+            self.pool.intake_bytes -= reserved
+
+    async def _read_body(self, receive: Receive) -> tuple[bytes, int]:
+        """The whole body, and the bytes it reserved of the intake budget."""
+        chunks: list[bytes] = []
+        reserved = 0
+        try:
+            while True:
+                message = await receive()
+                if message["type"] == "http.disconnect":
+                    raise _ClientGone
+                chunk = message.get("body", b"")
+                if chunk:
+                    if self.pool.intake_bytes + len(chunk) > self.pool.intake_budget:
+                        raise _IntakeFull
+                    self.pool.intake_bytes += len(chunk)
+                    reserved += len(chunk)
+                    chunks.append(chunk)
+                if not message.get("more_body", False):
+                    return b"".join(chunks), reserved
+        except BaseException:
+            self.pool.intake_bytes -= reserved
+            raise
+
+
+class _IntakeFull(Exception):
+    pass

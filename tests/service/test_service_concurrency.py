@@ -54,3 +54,47 @@ async def test_health_answers_while_the_pool_is_busy(client: httpx.AsyncClient) 
     # The event loop is never blocked by encoding: health answers long before the encodes end
     # (relative, because the machine's load scales both).
     assert waited < wall / 3, (waited, wall)
+
+
+TRICKLERS = 70
+
+
+@pytest.mark.slow
+async def test_70_trickling_bodies_do_not_stop_a_normal_encode(live_server: str) -> None:
+    """70 sockets send their bodies at 1 byte a second (more than the 66 work slots); a
+    normal encode meanwhile succeeds, because a slot is taken only once a body is in."""
+    host, port = live_server.removeprefix("http://").split(":")
+    head = (
+        f"POST /v1/curves/encode HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/json\r\n"
+        "Content-Length: 10000\r\n\r\n"
+    )
+    writers: list[asyncio.StreamWriter] = []
+    for _ in range(TRICKLERS):
+        _, writer = await asyncio.open_connection(host, int(port))
+        writer.write(head.encode())
+        writers.append(writer)
+    stop = asyncio.Event()
+
+    async def trickle() -> None:
+        while not stop.is_set():
+            for writer in writers:
+                writer.write(b" ")
+            await asyncio.gather(*(writer.drain() for writer in writers))
+            await asyncio.sleep(1.0)
+
+    trickling = asyncio.create_task(trickle())
+    try:
+        await asyncio.sleep(2.0)  # every trickler is connected and mid-body
+        image = test_image((128, 160), seed=3)
+        async with httpx.AsyncClient(base_url=live_server, timeout=60) as client:
+            files = {"file": ("n.png", image_file(image), "image/png")}
+            r = await client.post("/v1/images/encode", files=files, data={"quality": "35"})
+            assert r.status_code == 200, r.text
+            assert wavecore.decode(r.content).shape == image.shape
+            assert (await client.get("/healthz")).status_code == 200
+        assert not trickling.done()  # the tricklers were still sending all along
+    finally:
+        stop.set()
+        await trickling
+        for writer in writers:
+            writer.close()

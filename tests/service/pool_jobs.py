@@ -1,0 +1,40 @@
+"""Module-level jobs for the work-pool tests (the worker processes import them by name)."""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+
+def spin(pid_file: str, seconds: float) -> int:
+    """Write this worker's process id, then burn CPU for ``seconds``."""
+    Path(pid_file).write_text(str(os.getpid()))
+    end = time.monotonic() + seconds
+    count = 0
+    while time.monotonic() < end:
+        count += 1
+    return count
+
+
+def run_out_of_memory() -> None:
+    raise MemoryError
+
+
+def die() -> None:
+    os._exit(3)
+
+
+def worker_pid() -> int:
+    return os.getpid()
+
+
+class TwoArgumentError(Exception):
+    """An exception whose ``__init__`` needs two arguments: it cannot be unpickled as is."""
+
+    def __init__(self, value: int, reason: str) -> None:
+        super().__init__(f"{value}: {reason}")
+
+
+def raise_unpicklable() -> None:
+    raise TwoArgumentError(7, "seven is not accepted")

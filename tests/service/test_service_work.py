@@ -1,0 +1,215 @@
+"""The work pool: jobs that stop at the deadline, dead workers, body deadlines, settings.
+
+The jobs run in the real worker processes of the pool (shared by the in-process apps of the
+session); the body tests drive the app's ASGI interface directly, with a client that stalls.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from pathlib import Path
+from typing import Any
+
+import pool_jobs
+import pytest
+from service_helpers import image_file, test_image
+
+import wavecore
+from service.app import create_app
+from service.errors import Problem
+from service.settings import Settings, SettingsError
+from service.work import WorkPool
+
+pytestmark = pytest.mark.anyio
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process is still running (a zombie waiting to be reaped is not)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:
+        return False
+    return state != "Z"
+
+
+async def _wait_until(condition: Any, seconds: float) -> float:
+    """Seconds until ``condition()`` held, polling; fails past ``seconds``."""
+    start = time.monotonic()
+    while not condition():
+        if time.monotonic() - start > seconds:
+            pytest.fail(f"not within {seconds} s")
+        await asyncio.sleep(0.02)
+    return time.monotonic() - start
+
+
+async def test_a_job_past_its_deadline_is_killed_and_its_slot_freed(tmp_path: Path) -> None:
+    pool = WorkPool(Settings(request_timeout=3.0))
+    await asyncio.to_thread(pool.start)  # warm workers, so the deadline is all the job's
+    pid_file = tmp_path / "pid"
+    slot = pool.admit()
+    assert slot is not None
+    began = time.monotonic()
+    with pytest.raises(Problem) as caught:
+        await pool.run(slot, pool_jobs.spin, str(pid_file), 60.0)
+    assert caught.value.status == 503 and caught.value.kind == "timeout"
+    assert "WAVECORE_REQUEST_TIMEOUT" in caught.value.detail
+    assert time.monotonic() - began < 3.0 + 1.0
+    pid = int(pid_file.read_text())
+    # The worker that was spinning is ended (its CPU and memory with it) within about a second
+    # of the 503, instead of spinning on for the 60 s the job asked for.
+    await _wait_until(lambda: not _alive(pid), 1.5)
+    slot.release()
+    await _wait_until(lambda: pool.in_use == 0, 1.0)
+    # and the pool still codes, on a fresh worker
+    again = pool.admit()
+    assert again is not None
+    new_pid = await pool.run(again, pool_jobs.worker_pid)
+    again.release()
+    assert new_pid != pid and _alive(new_pid)
+    # (no pool.shutdown(): the workers are shared with the other in-process apps of the run)
+
+
+async def test_a_dead_worker_gives_a_503_and_is_replaced() -> None:
+    pool = WorkPool(Settings())
+    slot = pool.admit()
+    assert slot is not None
+    with pytest.raises(Problem) as caught:
+        await pool.run(slot, pool_jobs.die)
+    assert caught.value.status == 503 and caught.value.kind == "worker-lost"
+    assert "exit code 3" in caught.value.detail and "Retry-After" in caught.value.headers
+    assert isinstance(await pool.run(slot, pool_jobs.worker_pid), int)
+    slot.release()
+    await _wait_until(lambda: pool.in_use == 0, 1.0)
+
+
+async def test_memory_error_in_a_worker_gives_a_413() -> None:
+    pool = WorkPool(Settings())
+    slot = pool.admit()
+    assert slot is not None
+    with pytest.raises(Problem) as caught:
+        await pool.run(slot, pool_jobs.run_out_of_memory)
+    assert caught.value.status == 413 and caught.value.kind == "out-of-memory"
+    slot.release()
+
+
+async def test_exceptions_cross_back_from_the_workers() -> None:
+    pool = WorkPool(Settings())
+    slot = pool.admit()
+    assert slot is not None
+    # the library's own exceptions come back as themselves (the app maps them to problems)
+    with pytest.raises(wavecore.BundleError):
+        await pool.run(slot, wavecore.decode, b"not a bundle")
+    # one that cannot be re-created on this side comes back as a RuntimeError naming it
+    with pytest.raises(RuntimeError, match="TwoArgumentError: 7: seven is not accepted"):
+        await pool.run(slot, pool_jobs.raise_unpicklable)
+    slot.release()
+
+
+async def _call_stalling(app: Any, path: str, first: bytes, total: int) -> tuple[int, bytes]:
+    """Send ``first`` of a ``total``-byte body, then nothing: the response's status and body."""
+    stalled = asyncio.Event()
+    sent: list[dict[str, Any]] = []
+    calls = 0
+
+    async def receive() -> dict[str, Any]:
+        nonlocal calls
+        calls += 1
+        if calls == 1:
+            return {"type": "http.request", "body": first, "more_body": True}
+        stalled.set()
+        await asyncio.Event().wait()  # the rest never comes
+        return {}
+
+    async def send(message: dict[str, Any]) -> None:
+        sent.append(message)
+
+    scope = {
+        "type": "http",
+        "asgi": {"version": "3.0"},
+        "http_version": "1.1",
+        "method": "POST",
+        "scheme": "http",
+        "path": path,
+        "raw_path": path.encode(),
+        "query_string": b"",
+        "root_path": "",
+        "headers": [
+            (b"host", b"testserver"),
+            (b"content-type", b"application/json"),
+            (b"content-length", str(total).encode()),
+        ],
+        "client": ("127.0.0.1", 40000),
+        "server": ("testserver", 80),
+    }
+    await app(scope, receive, send)
+    assert stalled.is_set()
+    start = next(m for m in sent if m["type"] == "http.response.start")
+    body = b"".join(m.get("body", b"") for m in sent if m["type"] == "http.response.body")
+    return start["status"], body
+
+
+async def test_a_stalled_body_gets_a_408_within_the_deadline() -> None:
+    app = create_app(Settings(body_timeout=0.5))
+    began = time.monotonic()
+    status, body = await _call_stalling(app, "/v1/curves/encode", b'{"points": [[0', 1000)
+    waited = time.monotonic() - began
+    assert status == 408, body
+    assert b"urn:wavecore:problem:body-timeout" in body and b"WAVECORE_BODY_TIMEOUT" in body
+    assert 0.5 <= waited < 1.5
+    assert app.state.pool.in_use == 0 and app.state.pool.intake_bytes == 0
+
+
+async def test_slow_bodies_hold_no_slot() -> None:
+    """With one slot and no queue, ten stalled bodies still leave room for a real request."""
+    import httpx
+
+    app = create_app(Settings(concurrency=1, queue_size=0, body_timeout=5.0))
+    stalled = [
+        asyncio.create_task(_call_stalling(app, "/v1/curves/encode", b"{", 1000)) for _ in range(10)
+    ]
+    await asyncio.sleep(0.1)
+    assert app.state.pool.in_use == 0
+    assert app.state.pool.intake_bytes == 10  # one byte each, and nothing more is held
+    png = image_file(test_image((64, 80)))
+    transport = httpx.ASGITransport(app=app)
+    async with httpx.AsyncClient(transport=transport, base_url="http://testserver") as client:
+        r = await client.post("/v1/images/encode", files={"file": ("a.png", png, "image/png")})
+    assert r.status_code == 200, r.text
+    for task in stalled:
+        task.cancel()
+    await asyncio.gather(*stalled, return_exceptions=True)
+
+
+def test_concurrency_reads_the_new_variable_and_the_old_spelling(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.delenv("WAVECORE_CONCURRENCY", raising=False)
+    monkeypatch.setenv("WAVECORE_THREADS", "3")
+    assert Settings().concurrency == 3 and Settings().threads == 3
+    monkeypatch.setenv("WAVECORE_CONCURRENCY", "5")  # the new name wins over the old one
+    assert Settings().concurrency == 5 and Settings().capacity == 5 + Settings().queue_size
+    assert Settings(threads=2).concurrency == 2  # the old keyword too
+
+
+@pytest.mark.parametrize(
+    ("variable", "value"),
+    [
+        ("WAVECORE_CONCURRENCY", "many"),
+        ("WAVECORE_THREADS", "0"),
+        ("WAVECORE_BODY_TIMEOUT", "-1"),
+        ("WAVECORE_WORKER_MEMORY_BYTES", "1.5"),
+        ("WAVECORE_MAX_PIXELS", ""),
+    ],
+)
+def test_a_bad_setting_is_one_line_naming_the_variable(
+    monkeypatch: pytest.MonkeyPatch, variable: str, value: str
+) -> None:
+    monkeypatch.delenv("WAVECORE_CONCURRENCY", raising=False)
+    monkeypatch.setenv(variable, value)
+    with pytest.raises(SettingsError) as caught:
+        Settings.from_env()
+    message = str(caught.value)
+    assert "\n" not in message and message.startswith(f"{variable}={value!r}: ")
+    with pytest.raises(SettingsError):
+        create_app()
