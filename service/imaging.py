@@ -4,6 +4,12 @@ Decoding is defended against decompression bombs twice: Pillow's own ``MAX_IMAGE
 from the settings, and the size in the file's header is checked against the limit before a
 single pixel is decoded.  Anything Pillow cannot read completely is an "unsupported image".
 
+No bits are dropped silently.  Pillow reads 16-bit grey (modes ``I;16``/``I;16B``) as it is, but
+opens 48- and 64-bit RGB(A) TIFFs and PNGs as 8-bit RGB(A).  Those TIFFs are read again with
+tifffile (a well-kept TIFF reader, by the author of the format's reference tests), which keeps
+16 bits; those PNGs, which no dependency of ours decodes at 16 bits, are refused with a 415
+that names the formats that do keep them (16-bit TIFF, ``.npy``).
+
 >>> import numpy as np
 >>> png = encode_array(np.zeros((4, 5, 3), np.uint8), "png")
 >>> read_image(png, max_pixels=100).shape
@@ -16,6 +22,7 @@ import io
 import warnings
 
 import numpy as np
+import tifffile
 from PIL import Image
 
 from .errors import Problem
@@ -54,6 +61,9 @@ def read_image(data: bytes, *, max_pixels: int) -> np.ndarray:
                     f"{max_pixels} pixels (WAVECORE_MAX_PIXELS)"
                 )
                 raise Problem("image-too-large", msg)
+            deeper = _bits_beyond_the_mode(image, data)  # from the header, before decoding
+            if deeper:
+                return _read_deep(image, data, deeper)
             image.load()
             return _to_array(image)
     except Problem:
@@ -72,6 +82,51 @@ def read_image(data: bytes, *, max_pixels: int) -> np.ndarray:
         # SyntaxError and ValueError from plugins): any of them means "not a readable image".
         msg = f"not a complete image that Pillow can read ({type(exc).__name__}: {exc})"
         raise Problem("unsupported-media-type", msg[:500]) from None
+
+
+def _bits_beyond_the_mode(image: Image.Image, data: bytes) -> int:
+    """The file's bits per sample when Pillow's mode holds fewer (it drops them), else 0."""
+    if image.mode not in ("RGB", "RGBA", "LA", "L", "CMYK", "P"):
+        return 0  # the I;16, I and F modes keep every bit
+    if image.format == "TIFF":
+        tags = getattr(image, "tag_v2", {})  # Pillow's TIFF plugin has it; typing does not
+        bits = tags.get(258, (8,))  # BitsPerSample, one value per sample
+        deepest = max(bits) if isinstance(bits, tuple) else int(bits)
+        return deepest if deepest > 8 else 0
+    if image.format == "PNG" and data[12:16] == b"IHDR" and data[24] == 16:
+        return 16
+    return 0
+
+
+def _read_deep(image: Image.Image, data: bytes, bits: int) -> np.ndarray:
+    """A file of more than 8 bits per sample that Pillow would have read as 8: all its bits,
+    or a 415 that says what to send instead."""
+    instead = "send a 16-bit TIFF (uncompressed or deflate) or the array as .npy"
+    if image.format != "TIFF":
+        msg = (
+            f"this {bits}-bit {image.format} ({image.mode}) would be read as 8 bits per sample, "
+            f"losing its low bits; {instead}"
+        )
+        raise Problem("unsupported-media-type", msg)
+    try:
+        array = tifffile.imread(io.BytesIO(data), key=0)
+    except Exception as exc:
+        # A compression that needs imagecodecs (LZW, JPEG, …), or a layout tifffile refuses.
+        msg = (
+            f"this {bits}-bit TIFF cannot be read without losing bits "
+            f"({type(exc).__name__}: {exc}); {instead}"
+        )
+        raise Problem("unsupported-media-type", msg[:500]) from None
+    array = np.asarray(array)
+    if array.dtype != np.uint16 or array.shape[:2] != (image.height, image.width):
+        msg = (
+            f"this {bits}-bit TIFF reads as {array.dtype} {array.shape}, not as "
+            f"{image.height} × {image.width} pixels of 16-bit samples; {instead}"
+        )
+        raise Problem("unsupported-media-type", msg)
+    if array.ndim == 3 and array.shape[2] > 4:  # extra samples beyond RGBA
+        array = array[:, :, :4]
+    return array.astype(np.uint16)  # native byte order, whatever the file's
 
 
 def _to_array(image: Image.Image) -> np.ndarray:

@@ -45,6 +45,7 @@ ANY_BUNDLE: list[tuple[str, Any]] = [
     *[("psnr", v) for v in (MISSING, "x", [1])],
     *[("max_error", v) for v in (MISSING, -1, None, "0")],
     *[("scale", v) for v in (True, 1.5, 5000, -5000, "3", None)],
+    *[("opaque", v) for v in (1, "yes", None, [True])],
 ]
 
 #: Rows that apply to some bundles only: (bundle, field, value, what the message names).
@@ -81,6 +82,8 @@ SPECIFIC: list[tuple[str, str, Any, str]] = [
     ("closed curve", "pads", [[0, 0], [0, 0]], "pads"),
     ("surface", "shape", [12], "shape"),
     ("surface", "fitted", [12, 10, 3], "fitted"),
+    ("lossy image", "opaque", True, "opaque"),  # a grey image has no alpha
+    ("surface", "opaque", True, "opaque"),
 ]
 
 #: Well-formed values a reader accepts: the bundle decodes exactly as before.

@@ -81,6 +81,10 @@ version may add some.
                 float64 (``±1.7e308`` down to subnormals) is coded without overflow.  ``peak``
                 is then in the coded units, ``max_error`` in the original's.  Bundles with this
                 key are labelled 1.2, every other bundle 1.1.
+``opaque``      optional, since 1.2: ``true`` for an image (2 or 4 channels) whose alpha channel
+                is fully opaque (the dtype's largest value, 1.0 for floats); the decoder sets
+                it so exactly.  A 1.1 reader ignores it and gives the alpha as coded (nearly
+                opaque), so it does not make a bundle 1.2 on its own.
 
 Limits and safety
 -----------------
@@ -465,6 +469,8 @@ def check_header(header: Any) -> None:
     if psnr is not None and not math.isfinite(psnr):
         msg = f"header field 'psnr' must be a finite number or null, not {psnr!r}"
         raise BundleError(msg)
+    if "opaque" in header:
+        _field(header, "opaque", bool)
     if "scale" in header:
         scale = _field(header, "scale", int)
         if not -MAX_SCALE <= scale <= MAX_SCALE:

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from .arguments import closed_flags
 from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import (
@@ -233,8 +234,9 @@ def decompose_curve(
     points: Any,
     level: int | None = None,
     *,
-    closed: bool = False,
+    closed: bool | None = None,
     wavelet: str | FilterBank = "bspline2",
+    boundary: str | None = None,
 ) -> CurveDecomposition:
     """Take a curve of any length apart into a coarse outline and details at every level.
 
@@ -246,10 +248,13 @@ def decompose_curve(
         Number of levels.  Default: as many as keep the coarsest outline at 8 points or more,
         without re-sampling the curve by more than an eighth of its length.
     closed : bool, keyword-only
-        Periodic (closed boundary) or endpoint interpolating (open boundary).
+        Periodic (closed boundary) or endpoint interpolating (open boundary, the default).
     wavelet : str, keyword-only
         ``"bspline2"`` (the paper's; alias ``"chaikin"``), ``"haar"`` or ``"cdf97"`` (alias
         ``"jpeg2000"``); see :func:`wavecore.wavelet_names`.
+    boundary : {"open", "closed"}, optional, keyword-only
+        The same choice as ``closed``, spelled as elsewhere in the library; give either (both
+        only when they agree).
 
     Returns
     -------
@@ -272,6 +277,7 @@ def decompose_curve(
     >>> bool(np.ptp(smooth[8:-8, 1]) < 0.01)           # the zigzag is gone
     True
     """
+    (closed,) = closed_flags(closed, boundary, 1)
     arr, flat = _as_points(points, "points")
     bank = get_wavelet(wavelet)
     boundary = "closed" if closed else "open"
@@ -365,10 +371,11 @@ def transfer_details(
     source: Any,
     base: Any,
     *,
-    closed: bool = False,
+    closed: bool | None = None,
     level: int | None = None,
     frame: str = "local",
     wavelet: str | FilterBank = "bspline2",
+    boundary: str | None = None,
 ) -> np.ndarray:
     """Put the details of ``source`` onto a new coarse curve ``base`` (the paper's figure 1 (d)).
 
@@ -399,6 +406,9 @@ def transfer_details(
         natural frame, and ``"local"`` falls back to plain displacements.
     wavelet : str, keyword-only
         The wavelet.
+    boundary : {"open", "closed"}, optional, keyword-only
+        The same choice as ``closed``, spelled as elsewhere in the library; give either (both
+        only when they agree).
 
     Returns
     -------
@@ -417,6 +427,7 @@ def transfer_details(
     >>> bool(np.ptp(new[5:-5, 0]) > 0.05 > 0.01 > np.ptp(plain[5:-5, 0]))  # across vs along
     True
     """
+    (closed,) = closed_flags(closed, boundary, 1)
     if frame not in ("local", "plain"):
         msg = f"frame must be 'local' or 'plain', not {frame!r}"
         raise InvalidParameter(msg)

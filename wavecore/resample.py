@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from .arguments import closed_flags
 from .errors import InvalidLength, InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import (
@@ -283,7 +284,9 @@ def crop_padding(
     return arr[tuple(index)]
 
 
-def resample_curve(points: Any, n: int, *, closed: bool = False) -> np.ndarray:
+def resample_curve(
+    points: Any, n: int, *, closed: bool | None = None, boundary: str | None = None
+) -> np.ndarray:
     """Re-sample a curve to ``n`` points spaced uniformly by arc length (the paper's section 4.5).
 
     Parameters
@@ -298,7 +301,10 @@ def resample_curve(points: Any, n: int, *, closed: bool = False) -> np.ndarray:
     closed : bool, keyword-only
         Whether the curve is closed: then the segment from the last point back to the first
         counts, a last point equal to the first (a written-out seam) is dropped, and the
-        result has no duplicated seam point either.
+        result has no duplicated seam point either.  Default: open.
+    boundary : {"open", "closed"}, optional, keyword-only
+        The same choice as ``closed``, spelled as elsewhere in the library; give either (both
+        only when they agree).
 
     Returns
     -------
@@ -320,6 +326,7 @@ def resample_curve(points: Any, n: int, *, closed: bool = False) -> np.ndarray:
     >>> resample_curve([[0.0, 0.0], [3.0, 4.0]], 3).tolist()
     [[0.0, 0.0], [1.5, 2.0], [3.0, 4.0]]
     """
+    (closed,) = closed_flags(closed, boundary, 1)
     arr = as_float_array(points)
     flat = arr.ndim == 1
     if flat:

@@ -30,13 +30,14 @@ _WAVEDEC2_KEYS = ("da", "ad", "dd")  # the order of (cH, cV, cD) in wavedec2's t
 
 def remove_smallest(
     coeffs: Sequence[Any],
-    fraction: float,
+    fraction: float | None = None,
     *,
     wavelet: str | FilterBank = "bspline2",
     boundary: str | Sequence[str] = "open",
     weighted: bool = True,
     axes: Sequence[int] | None = None,
     vector_axis: int | None = -1,
+    keep: float | None = None,
 ) -> list[Any]:
     """Zero the smallest ``fraction`` of all detail coefficients, over all levels.
 
@@ -49,6 +50,7 @@ def remove_smallest(
     fraction : float
         The share of the details to remove, in ``[0, 1]``: exactly ``round(fraction × count)``
         of them (halves round up).  0 changes nothing; 1 leaves only the coarse approximation.
+        Give this or ``keep``.
     wavelet, boundary : keyword-only
         As given to the decomposition; needed for the basis norms.
     weighted : bool, keyword-only
@@ -64,6 +66,9 @@ def remove_smallest(
         ``(n, d)``, surface points ``(U, V, 3)`` — and a detail's size is its vector norm; it is
         removed or kept whole.  It is ignored when every axis was transformed.  ``None`` ranks
         every number on its own (colour channels of an image).
+    keep : float, optional, keyword-only
+        The share of the details to *keep*, as ``keep=`` means everywhere else in the library
+        (``keep = 1 - fraction``).  Give this or ``fraction``, not both.
 
     Returns
     -------
@@ -93,8 +98,18 @@ def remove_smallest(
     (22, 56)
     >>> bool(np.array_equal(kept[0], coeffs[0]))
     True
+    >>> bool(all(np.array_equal(a, b) for a, b in zip(kept, remove_smallest(coeffs, keep=0.4))))
+    True
     """
-    fraction = check_share(fraction)
+    if (fraction is None) == (keep is None):
+        given = "both" if keep is not None else "neither"
+        msg = f"give one of fraction (details to remove) and keep (details to keep), not {given}"
+        raise InvalidParameter(msg)
+    fraction = (
+        check_share(fraction)
+        if keep is None
+        else 1.0 - check_share(keep, "keep", "details to keep")
+    )
     kind, coarse, levels = _as_bands(coeffs)
     if not levels:
         return [np.array(coarse, copy=True)]

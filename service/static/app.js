@@ -337,19 +337,30 @@
     }
   }
 
-  // PSNR over the RGB channels at peak 255; the server's figure for 8-bit images.
+  // PSNR at peak 255, counted as the server counts it (wavecore's codec): over the colour
+  // channels (one for a grey picture, which the canvas spreads over R, G and B), and over alpha
+  // too only when alpha did not come back exactly (an opaque alpha always does).
   function psnr(a, b) {
     if (!a || !b || a.width !== b.width || a.height !== b.height) return null;
     const x = a.data;
     const y = b.data;
-    let sum = 0;
+    let colour = 0;
+    let alpha = 0;
+    let grey = true;
     for (let i = 0; i < x.length; i += 4) {
       const d0 = x[i] - y[i];
       const d1 = x[i + 1] - y[i + 1];
       const d2 = x[i + 2] - y[i + 2];
-      sum += d0 * d0 + d1 * d1 + d2 * d2;
+      const d3 = x[i + 3] - y[i + 3];
+      colour += d0 * d0 + d1 * d1 + d2 * d2;
+      alpha += d3 * d3;
+      if (grey && (x[i] !== x[i + 1] || x[i] !== x[i + 2])) grey = false;
     }
-    const mse = sum / ((x.length / 4) * 3);
+    const pixels = x.length / 4;
+    // A grey original's three equal channels stand for one: its squared error, counted once.
+    const colours = grey ? 1 : 3;
+    const sum = (grey ? colour / 3 : colour) + alpha;
+    const mse = sum / (pixels * (alpha > 0 ? colours + 1 : colours));
     return mse === 0 ? Infinity : 10 * Math.log10((255 * 255) / mse);
   }
 
