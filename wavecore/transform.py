@@ -98,11 +98,13 @@ def _run_blocks(
     work: int,
     rows_even: bool = False,
     outer_only: bool = False,
+    min_rows: int = 1,
 ) -> None:
     """Call ``kernel(*args, outer_lo, outer_hi, row_lo, row_hi)`` over blocks, in threads if big.
 
     ``outer_only`` kernels take only ``(outer_lo, outer_hi)``; ``rows_even`` keeps row blocks
-    on even boundaries (a synthesis block then starts on a whole pair of fine rows).
+    on even boundaries (a synthesis block then starts on a whole pair of fine rows);
+    ``min_rows`` is the fewest rows worth a block of their own when splitting rows.
     """
     threads = _thread_count()
     if threads == 1 or work < _THREADED_MIN_ELEMENTS or (outer_only and outer == 1):
@@ -113,7 +115,7 @@ def _run_blocks(
         edges = np.linspace(0, outer, min(blocks, outer) + 1).astype(int)
         spans = [(lo, hi, 0, rows) for lo, hi in itertools.pairwise(edges) if hi > lo]
     else:
-        edges = np.linspace(0, rows, blocks + 1).astype(int)
+        edges = np.linspace(0, rows, max(1, min(blocks, rows // min_rows)) + 1).astype(int)
         if rows_even:
             edges = edges - edges % 2
             edges[-1] = rows
@@ -462,5 +464,8 @@ def synthesis_2d(
     ]
     f = np.empty((outer, m0, m1 * inner), dtype=dtype)
     args = (*views, mats0["P+"], mats0["Q+"], mats1["P+"], mats1["Q+"], f, inner, ring)
-    _run_blocks(_kernels.synthesis_2d, args, outer, m0, f.size, rows_even=True)
+    # Each block fills its ring buffers afresh (a few coarse rows' syntheses along axis 1), so
+    # a block of a handful of rows would mostly redo its neighbours' work: the 8 rows of a
+    # padded 1 × N image took 4 times the work in 8 blocks.
+    _run_blocks(_kernels.synthesis_2d, args, outer, m0, f.size, rows_even=True, min_rows=32)
     return f.reshape((*lead, m0, m1, *trail))
