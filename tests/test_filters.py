@@ -16,6 +16,7 @@ from wavecore.filters import (
     FilterBank,
     get_wavelet,
     register,
+    step_compact,
     step_regular,
     step_sparse,
 )
@@ -198,3 +199,39 @@ def test_a_new_family_is_one_definition() -> None:
         np.testing.assert_allclose(wavecore.waverec2(again, bank.name), image, atol=1e-12)
     finally:
         _REGISTRY.pop(bank.name)
+
+
+@pytest.mark.parametrize(("wavelet", "boundary", "lengths"), CASES)
+def test_compact_form_equals_the_dense_matrices_and_stays_small(
+    wavelet: str, boundary: str, lengths: range
+) -> None:
+    # What the kernels read: the regular interior as a pattern, every other row compressed.
+    for m in [*lengths, 1026]:
+        dense = wavecore.matrices(m, wavelet, boundary)
+        for matrix, (sparse, regular) in zip(
+            dense, step_compact(wavelet, boundary, m), strict=True
+        ):
+            rebuilt = np.zeros(matrix.shape)
+            skipped = regular.blocks * regular.p
+            for r in range(matrix.shape[0]):
+                if regular.blocks and regular.lo <= r < regular.hi:
+                    b, i = divmod(r - regular.lo, regular.p)
+                    col = regular.col + b * regular.step
+                    rebuilt[r, col : col + regular.pattern.shape[1]] = regular.pattern[i]
+                    continue
+                k = r if r < regular.lo else r - skipped
+                for j in range(sparse.indptr[k], sparse.indptr[k + 1]):
+                    rebuilt[r, sparse.indices[j]] += sparse.weights[j]
+            np.testing.assert_array_equal(rebuilt, matrix)
+    # Its size does not grow with the length.
+    sizes = [
+        sum(
+            s.indptr.nbytes + s.indices.nbytes + s.weights.nbytes
+            for s, _ in step_compact(wavelet, boundary, m)
+        )
+        for m in (
+            wavecore.valid_length(4096, 1, boundary, wavelet),
+            wavecore.valid_length(1 << 20, 1, boundary, wavelet),
+        )
+    ]
+    assert sizes[1] == sizes[0] < 4096

@@ -46,23 +46,84 @@ def analysis3(x, a_ptr, a_idx, a_w, b_ptr, b_idx, b_w, c, d, outer_lo, outer_hi,
                         out[i] += w * src[i]
 
 
+# --- The same along the middle axis, from the compact form of the matrices -------------------
+#
+# A matrix in compact form is the tuple ``(ptr, idx, w, reg, pat)`` described below for the row
+# kernels: rows ``[lo, lo + blocks * p)`` are the regular pattern, and the compressed rows hold
+# only the others (row ``r`` past the interior at ``ptr[r - blocks * p]``).  Its size does not
+# depend on the length, so no kernel needs an array as long as the data to describe a matrix.
+
+MAX_TAPS = 64  # the longest row any matrix may have (the callers check)
+
+
 @njit(nogil=True, cache=True)
-def synthesis3(c, d, p_ptr, p_idx, p_w, q_ptr, q_idx, q_w, f, outer_lo, outer_hi, row_lo, row_hi):
+def _taps(mat, r, p, step, cols, ws):
+    """Row ``r``'s columns and weights, in increasing column order, zeros left out."""
+    ptr, idx, w, reg, pat = mat
+    lo = reg[0]
+    hi = lo + reg[1] * p
+    n = 0
+    if lo <= r < hi:
+        b = (r - lo) // p
+        i = r - lo - b * p
+        c0 = reg[2] + b * step
+        for t in range(pat.shape[1]):
+            wt = pat[i, t]
+            if wt != 0:
+                cols[n] = c0 + t
+                ws[n] = wt
+                n += 1
+        return n
+    k = r if r < lo else r - (hi - lo)
+    for j in range(ptr[k], ptr[k + 1]):
+        cols[n] = idx[j]
+        ws[n] = w[j]
+        n += 1
+    return n
+
+
+@njit(nogil=True, cache=True)
+def analysis_mid(x, a_mat, b_mat, c, d, outer_lo, outer_hi, row_lo, row_hi):
+    """``c = A x`` and ``d = B x`` along the middle axis of ``(outer, n, inner)`` views."""
+    inner = x.shape[2]
+    nc = c.shape[1]
+    nd = d.shape[1]
+    cols = np.empty(MAX_TAPS, dtype=np.intp)
+    ws = np.empty(MAX_TAPS, dtype=c.dtype)
+    for r in range(row_lo, row_hi):
+        for half in range(2):
+            if r >= (nc if half == 0 else nd):
+                continue
+            count = _taps(a_mat if half == 0 else b_mat, r, 1, 2, cols, ws)
+            for o in range(outer_lo, outer_hi):
+                out = c[o, r] if half == 0 else d[o, r]
+                out[:] = 0
+                for k in range(count):
+                    w = ws[k]
+                    src = x[o, cols[k]]
+                    for i in range(inner):
+                        out[i] += w * src[i]
+
+
+@njit(nogil=True, cache=True)
+def synthesis_mid(c, d, p_mat, q_mat, f, outer_lo, outer_hi, row_lo, row_hi):
+    """``f = P c + Q d`` along the middle axis of ``(outer, n, inner)`` views."""
     inner = f.shape[2]
-    for o in range(outer_lo, outer_hi):
-        for r in range(row_lo, row_hi):
-            out = f[o, r]
-            out[:] = 0
-            for p in range(p_ptr[r], p_ptr[r + 1]):
-                w = p_w[p]
-                src = c[o, p_idx[p]]
-                for i in range(inner):
-                    out[i] += w * src[i]
-            for p in range(q_ptr[r], q_ptr[r + 1]):
-                w = q_w[p]
-                src = d[o, q_idx[p]]
-                for i in range(inner):
-                    out[i] += w * src[i]
+    cols = np.empty(MAX_TAPS, dtype=np.intp)
+    ws = np.empty(MAX_TAPS, dtype=f.dtype)
+    for r in range(row_lo, row_hi):
+        for half in range(2):
+            count = _taps(p_mat if half == 0 else q_mat, r, 2, 1, cols, ws)
+            for o in range(outer_lo, outer_hi):
+                out = f[o, r]
+                if half == 0:
+                    out[:] = 0
+                src_band = c if half == 0 else d
+                for k in range(count):
+                    w = ws[k]
+                    src = src_band[o, cols[k]]
+                    for i in range(inner):
+                        out[i] += w * src[i]
 
 
 # --- Rows along the last axis (contiguous), with the regular interior vectorised ---------------
@@ -76,11 +137,12 @@ def synthesis3(c, d, p_ptr, p_idx, p_w, q_ptr, q_idx, q_w, f, outer_lo, outer_hi
 
 
 @njit(nogil=True, cache=True)
-def _csr_rows(src, ptr, idx, w, out, lo, hi, add):
+def _csr_rows(src, ptr, idx, w, out, lo, hi, add, shift):
+    """Rows ``[lo, hi)`` from the compressed rows; row ``r`` is stored at ``r - shift``."""
     zero = out.dtype.type(0)
     for r in range(lo, hi):
         acc = zero
-        for k in range(ptr[r], ptr[r + 1]):
+        for k in range(ptr[r - shift], ptr[r - shift + 1]):
             acc += w[k] * src[idx[k]]
         if add:
             out[r] += acc
@@ -94,8 +156,8 @@ def _row_analysis(src, mat, out):
     lo = reg[0]
     blocks = reg[1]
     col = reg[2]
-    _csr_rows(src, ptr, idx, w, out, 0, lo, False)
-    _csr_rows(src, ptr, idx, w, out, lo + blocks, out.shape[0], False)
+    _csr_rows(src, ptr, idx, w, out, 0, lo, False, 0)
+    _csr_rows(src, ptr, idx, w, out, lo + blocks, out.shape[0], False, blocks)
     taps = pat.shape[1]
     # Slicing first makes every index below provably non-negative, so no wrap-around test is
     # compiled into the loops and they vectorise (several times faster, float32 most).
@@ -129,8 +191,8 @@ def _row_synthesis(c, d, p_mat, q_mat, out):
         lo = reg[0]
         blocks = reg[1]
         col = reg[2]
-        _csr_rows(src, ptr, idx, w, out, 0, lo, add)
-        _csr_rows(src, ptr, idx, w, out, lo + 2 * blocks, out.shape[0], add)
+        _csr_rows(src, ptr, idx, w, out, 0, lo, add, 0)
+        _csr_rows(src, ptr, idx, w, out, lo + 2 * blocks, out.shape[0], add, 2 * blocks)
         taps = pat.shape[1]
         s = src[col : col + blocks - 1 + taps]  # sliced for non-negative indices, as above
         o = out[lo : lo + 2 * blocks]
@@ -178,23 +240,21 @@ def synthesis_last(c, d, p_mat, q_mat, f, outer_lo, outer_hi):
 
 
 @njit(nogil=True, cache=True)
-def _combine(rows, mat, r, out):
-    """``out = sum_k w[k] * rows[idx[k]]`` over the taps of row ``r``."""
-    ptr, idx, w = mat
-    k0 = ptr[r]
-    k1 = ptr[r + 1]
+def _combine(rows, mat, r, out, cols, ws):
+    """``out = sum_k w[k] * rows[col[k]]`` over the taps of row ``r`` of an analysis matrix."""
+    count = _taps(mat, r, 1, 2, cols, ws)
     n = out.shape[0]
-    if k1 - k0 == 4:
-        s0, s1, s2, s3 = rows[idx[k0]], rows[idx[k0 + 1]], rows[idx[k0 + 2]], rows[idx[k0 + 3]]
-        w0, w1, w2, w3 = w[k0], w[k0 + 1], w[k0 + 2], w[k0 + 3]
+    if count == 4:
+        s0, s1, s2, s3 = rows[cols[0]], rows[cols[1]], rows[cols[2]], rows[cols[3]]
+        w0, w1, w2, w3 = ws[0], ws[1], ws[2], ws[3]
         for i in range(n):
             out[i] = w0 * s0[i] + w1 * s1[i] + w2 * s2[i] + w3 * s3[i]
         return
     for i in range(n):
         out[i] = 0
-    for k in range(k0, k1):
-        wk = w[k]
-        src = rows[idx[k]]
+    for k in range(count):
+        wk = ws[k]
+        src = rows[cols[k]]
         for i in range(n):
             out[i] += wk * src[i]
 
@@ -210,13 +270,15 @@ def analysis_2d(x, a0, b0, a1, b1, aa, ad, da, dd, inner, outer_lo, outer_hi, ro
     bufs = (np.empty(r1, dtype=x.dtype), np.empty(s1, dtype=x.dtype))
     r0 = aa.shape[1]
     s0 = da.shape[1]
+    cols = np.empty(MAX_TAPS, dtype=np.intp)
+    ws = np.empty(MAX_TAPS, dtype=x.dtype)
     for o in range(outer_lo, outer_hi):
         rows = x[o]
         for r in range(row_lo, row_hi):
             for half in range(2):
                 if r >= (r0 if half == 0 else s0):
                     continue
-                _combine(rows, a0 if half == 0 else b0, r, tmp)
+                _combine(rows, a0 if half == 0 else b0, r, tmp, cols, ws)
                 outs = (aa[o, r], ad[o, r]) if half == 0 else (da[o, r], dd[o, r])
                 for ch in range(inner):
                     if inner > 1:
@@ -249,16 +311,18 @@ def synthesis_2d(
     slots = np.empty((2, 32), dtype=np.intp)  # up to 32 taps per row and half (checked by callers)
     weights = np.empty((2, 32), dtype=f.dtype)
     counts = np.zeros(2, dtype=np.intp)
+    tap_cols = np.empty(MAX_TAPS, dtype=np.intp)
+    tap_ws = np.empty(MAX_TAPS, dtype=f.dtype)
     for o in range(outer_lo, outer_hi):
         tags[:] = -1
         for r in range(row_lo, row_hi):
             for half in range(2):
-                ptr, idx, w = p0 if half == 0 else q0
+                taps = _taps(p0 if half == 0 else q0, r, 2, 1, tap_cols, tap_ws)
                 coarse = aa[o] if half == 0 else da[o]
                 detail = ad[o] if half == 0 else dd[o]
                 n = 0
-                for k in range(ptr[r], ptr[r + 1]):
-                    i = idx[k]
+                for k in range(taps):
+                    i = tap_cols[k]
                     slot = i % ring_rows
                     if tags[half, slot] != i:
                         ring = rings[half, slot]
@@ -280,7 +344,7 @@ def synthesis_2d(
                                     ring[j * inner + ch] = f_buf[j]
                         tags[half, slot] = i
                     slots[half, n] = slot
-                    weights[half, n] = w[k]
+                    weights[half, n] = tap_ws[k]
                     n += 1
                 counts[half] = n
             out = f[o, r]

@@ -106,6 +106,23 @@ class Banded:
     def sparse(self, rows: int, cols: int, periodic: bool) -> Sparse:
         """The same matrix as :meth:`dense`, in compressed-row form, built without it."""
         blocks = self._check_rows(rows)
+        return self._rows(rows, cols, periodic, np.arange(blocks), 0, 0)
+
+    def _rows(
+        self,
+        rows: int,
+        cols: int,
+        periodic: bool,
+        placements: np.ndarray,
+        skip_lo: int,
+        skip_hi: int,
+    ) -> Sparse:
+        """Compressed rows from the start and end blocks and the given ``placements``.
+
+        Rows ``[skip_lo, skip_hi)`` are left out of the row pointers (they are the regular
+        interior, which the kernels compute from the pattern): row ``r >= skip_hi`` has its
+        entries at ``indptr[r - (skip_hi - skip_lo)]``.
+        """
         pattern = np.array(self.pattern, dtype=float)
         p, w = pattern.shape
         parts_r, parts_c, parts_v = [], [], []
@@ -119,19 +136,20 @@ class Banded:
                 parts_r.append(r + row0)
                 parts_c.append(c + col0)
                 parts_v.append(dense[r, c])
-        b = np.arange(blocks)[:, None, None]
+        count = len(placements)
+        b = placements[:, None, None]
         i = np.arange(p)[None, :, None]
         t = np.arange(w)[None, None, :]
-        r = np.broadcast_to(self.first[0] + b * self.step[0] + i, (blocks, p, w)).ravel()
-        c = np.broadcast_to(self.first[1] + b * self.step[1] + t, (blocks, p, w)).ravel()
+        r = np.broadcast_to(self.first[0] + b * self.step[0] + i, (count, p, w)).ravel()
+        c = np.broadcast_to(self.first[1] + b * self.step[1] + t, (count, p, w)).ravel()
         if periodic:
             c = c % cols
-        elif blocks and (c.min() < 0 or c.max() >= cols):
+        elif count and (c.min() < 0 or c.max() >= cols):
             msg = f"a regular row does not fit in {cols} columns"
             raise InvalidLength(msg)
         parts_r.append(r)
         parts_c.append(c)
-        parts_v.append(np.broadcast_to(pattern[None], (blocks, p, w)).ravel())
+        parts_v.append(np.broadcast_to(pattern[None], (count, p, w)).ravel())
         all_r, all_c, all_v = (np.concatenate(x) for x in (parts_r, parts_c, parts_v))
         # Taps that land on the same entry add up (start/end overlap, tiny periodic sizes).
         flat = all_r.astype(np.int64) * cols + all_c
@@ -141,7 +159,11 @@ class Banded:
         keep = values != 0
         keys, values = keys[keep], values[keep]
         out_r, out_c = np.divmod(keys, cols)
-        indptr = np.zeros(rows + 1, dtype=np.intp)
+        if np.any((out_r >= skip_lo) & (out_r < skip_hi)):
+            msg = "an entry outside the placements fell into the regular interior"
+            raise AssertionError(msg)
+        out_r = np.where(out_r >= skip_hi, out_r - (skip_hi - skip_lo), out_r)
+        indptr = np.zeros(rows - (skip_hi - skip_lo) + 1, dtype=np.intp)
         np.add.at(indptr, out_r + 1, 1)
         return Sparse(
             indptr=np.cumsum(indptr),
@@ -149,6 +171,26 @@ class Banded:
             weights=values,
             shape=(rows, cols),
         )
+
+    def compact(self, rows: int, cols: int, periodic: bool) -> tuple[Sparse, Regular]:
+        """The matrix as its regular interior plus compressed rows for every other row.
+
+        Takes memory and time independent of the size: the interior is the pattern, and only
+        the start rows, end rows and wrapped placements are stored (row pointers cover those
+        rows only; see :meth:`_rows`).  Without a regular interior (tiny sizes) every row is
+        stored.
+        """
+        blocks = self._check_rows(rows)
+        regular = self.regular(rows, cols)
+        if not regular.blocks:
+            return self.sparse(rows, cols, periodic), regular
+        p = regular.p
+        first_block = (regular.lo - self.first[0]) // p
+        outside = np.concatenate(
+            [np.arange(first_block), np.arange(first_block + regular.blocks, blocks)]
+        )
+        sparse = self._rows(rows, cols, periodic, outside, regular.lo, regular.hi)
+        return sparse, regular
 
     def regular(self, rows: int, cols: int) -> Regular:
         """The placements of ``pattern`` that neither wrap nor meet the start or end rows."""
@@ -435,12 +477,13 @@ def _rows_and_columns(rule: BoundaryRule, m: int) -> dict[str, tuple[int, int]]:
     return {"A": (r, m), "B": (s, m), "P": (m, r), "Q": (m, s)}
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=8)
 def step_sparse(bank_name: str, boundary: str, m: int) -> tuple[Sparse, Sparse, Sparse, Sparse]:
     """The four step matrices for fine length ``m`` in compressed-row form (cached).
 
     Built straight from the block form, without a dense matrix, so that large lengths cost
-    memory and time in proportion to ``m``.
+    memory and time in proportion to ``m``.  It stores every row, so only a few are kept; the
+    transform itself reads :func:`step_compact`.
     """
     bank = get_wavelet(bank_name)
     rule = bank.rule(boundary)
@@ -448,6 +491,27 @@ def step_sparse(bank_name: str, boundary: str, m: int) -> tuple[Sparse, Sparse, 
     sizes = _rows_and_columns(rule, m)
     A, B, P, Q = (
         getattr(rule, name).sparse(*sizes[name], rule.periodic) for name in ("A", "B", "P", "Q")
+    )
+    return A, B, P, Q
+
+
+@lru_cache(maxsize=1024)
+def step_compact(
+    bank_name: str, boundary: str, m: int
+) -> tuple[
+    tuple[Sparse, Regular], tuple[Sparse, Regular], tuple[Sparse, Regular], tuple[Sparse, Regular]
+]:
+    """``A, B, P, Q`` for fine length ``m`` as (boundary rows, regular interior) (cached).
+
+    What the transform's kernels read.  Its size does not grow with ``m``, so many lengths can
+    be cached; :func:`step_sparse` stores every row.
+    """
+    bank = get_wavelet(bank_name)
+    rule = bank.rule(boundary)
+    check_fine_length(rule, m, bank.name, boundary)
+    sizes = _rows_and_columns(rule, m)
+    A, B, P, Q = (
+        getattr(rule, name).compact(*sizes[name], rule.periodic) for name in ("A", "B", "P", "Q")
     )
     return A, B, P, Q
 
@@ -534,5 +598,10 @@ def _as_length(m: object) -> int:
 
 
 CACHE_CLEARERS.extend(
-    [_step_matrices.cache_clear, step_sparse.cache_clear, step_regular.cache_clear]
+    [
+        _step_matrices.cache_clear,
+        step_sparse.cache_clear,
+        step_regular.cache_clear,
+        step_compact.cache_clear,
+    ]
 )

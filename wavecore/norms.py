@@ -136,36 +136,41 @@ def _expand(values: np.ndarray, length: int) -> np.ndarray:
 
 def _squared_norms(
     rule: BoundaryRule, n: int, level: int, target: int
-) -> tuple[tuple[np.ndarray, int], ...]:
-    """Squared norms in compact form: per band, (stand-in values, true length), coarse first."""
+) -> tuple[tuple[tuple[np.ndarray, int], tuple[np.ndarray, int]], ...]:
+    """Squared norms in compact form, (stand-in values, true length), for every level.
+
+    Entry ``l`` (``0 <= l <= level``) is ``(coarse norms at level l, detail norms at level l)``;
+    level 0 has no details (an empty placeholder).
+    """
     gram: np.ndarray | None = None  # None: the identity (G_0), at any length
     true_m = n
     m = _stand_in(n, target)
-    details: list[tuple[np.ndarray, int]] = []
+    table = [((np.ones(m), true_m), (np.zeros(0), 0))]
     for _ in range(level):
         if gram is None:
             gram = np.eye(m)
         r, s = rule.coarse_length(m), rule.detail_length(m)
         P = rule.P.dense(m, r, rule.periodic)
         Q = rule.Q.dense(m, s, rule.periodic)
-        details.append((np.einsum("ij,ik,kj->j", Q, gram, Q), rule.detail_length(true_m)))
+        detail = (np.einsum("ij,ik,kj->j", Q, gram, Q), rule.detail_length(true_m))
         # einsum's own loops rather than BLAS: on matrices this small a threaded BLAS spends
         # far longer waking its threads (tens of ms on a busy machine) than multiplying.
         gram = np.einsum("ik,kl->il", np.einsum("ji,jk->ik", P, gram), P)
         true_m = rule.coarse_length(true_m)
         m = _stand_in(true_m, target)
         gram = _resize(gram, m, rule.periodic)
-    coarse = np.ones(m) if gram is None else np.diag(gram).copy()
-    return ((coarse, true_m), *reversed(details))
+        table.append(((np.diag(gram).copy(), true_m), detail))
+    return tuple(table)
 
 
 @lru_cache(maxsize=256)
-def _compact_norms(
+def _compact_table(
     n: int, wavelet: str, boundary: str, level: int
-) -> tuple[tuple[np.ndarray, int], ...]:
-    """Norms in compact form (each band: at most a few hundred values and its true length).
+) -> tuple[tuple[tuple[np.ndarray, int], tuple[np.ndarray, int]], ...]:
+    """Norms in compact form for levels 0 … ``level`` (see :func:`_squared_norms`).
 
-    Small whatever ``n`` is, so the cache may hold many of them.
+    Each band is at most a few hundred values and its true length: small whatever ``n`` is,
+    so the cache may hold many of them.
     """
     rule = get_wavelet(wavelet).rule(boundary)
     target = _PROXY_LENGTH
@@ -178,11 +183,22 @@ def _compact_norms(
             # length, which needs no stand-in at all).
             target *= 2
     out = []
-    for values, length in squared:
-        norms = np.sqrt(np.maximum(values, 0.0))
-        norms.setflags(write=False)
-        out.append((norms, length))
+    for (coarse, coarse_length), (detail, detail_length) in squared:
+        pair = []
+        for values, length in ((coarse, coarse_length), (detail, detail_length)):
+            norms = np.sqrt(np.maximum(values, 0.0))
+            norms.setflags(write=False)
+            pair.append((norms, length))
+        out.append((pair[0], pair[1]))
     return tuple(out)
+
+
+def _compact_norms(
+    n: int, wavelet: str, boundary: str, level: int, top: int | None = None
+) -> list[tuple[np.ndarray, int]]:
+    """``[cA_level, cD_level, …, cD_1]`` in compact form, read from the table up to ``top``."""
+    table = _compact_table(n, wavelet, boundary, level if top is None else top)
+    return [table[level][0], *(table[lvl][1] for lvl in range(level, 0, -1))]
 
 
 _expanded: OrderedDict[tuple[int, str, str, int], tuple[np.ndarray, ...]] = OrderedDict()
@@ -190,8 +206,13 @@ _expanded_bytes = 0
 _expanded_lock = threading.Lock()
 
 
-def _norms(n: int, wavelet: str, boundary: str, level: int) -> tuple[np.ndarray, ...]:
-    """Read-only norm vectors, ``[cA_L, cD_L, …, cD_1]``; small results are kept for reuse."""
+def _norms(
+    n: int, wavelet: str, boundary: str, level: int, top: int | None = None
+) -> tuple[np.ndarray, ...]:
+    """Read-only norm vectors, ``[cA_L, cD_L, …, cD_1]``; small results are kept for reuse.
+
+    ``top`` (at least ``level``) shares one table among the levels of one decomposition.
+    """
     global _expanded_bytes
     key = (n, wavelet, boundary, level)
     with _expanded_lock:
@@ -200,7 +221,7 @@ def _norms(n: int, wavelet: str, boundary: str, level: int) -> tuple[np.ndarray,
             _expanded.move_to_end(key)
             return hit
     vectors = []
-    for values, length in _compact_norms(n, wavelet, boundary, level):
+    for values, length in _compact_norms(n, wavelet, boundary, level, top):
         vector = _expand(values, length)
         if vector is values:
             vector = values.copy()
@@ -222,7 +243,7 @@ def _norms(n: int, wavelet: str, boundary: str, level: int) -> tuple[np.ndarray,
 
 def _forget() -> None:
     global _expanded_bytes
-    _compact_norms.cache_clear()
+    _compact_table.cache_clear()
     with _expanded_lock:
         _expanded.clear()
         _expanded_bytes = 0
@@ -302,10 +323,10 @@ def basis_norms_nd(
         return result
 
     def coarse(axis: int, lvl_: int) -> np.ndarray:
-        return _norms(shape[axis], bank.name, bounds[axis], lvl_)[0]
+        return _norms(shape[axis], bank.name, bounds[axis], lvl_, lvl)[0]
 
     def detail(axis: int, lvl_: int) -> np.ndarray:
-        return _norms(shape[axis], bank.name, bounds[axis], lvl_)[1]
+        return _norms(shape[axis], bank.name, bounds[axis], lvl_, lvl)[1]
 
     out: list[object] = [outer([coarse(i, lvl) for i in range(len(shape))])]
     for lvl_ in range(lvl, 0, -1):

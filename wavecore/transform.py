@@ -14,6 +14,7 @@ booleans and integers become float64.  Anything else is an
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import os
 from collections.abc import Callable
@@ -28,10 +29,11 @@ from .arguments import as_native
 from .errors import InvalidCoefficients, InvalidParameter
 from .filters import (
     FilterBank,
+    Regular,
     Sparse,
     check_fine_length,
     get_wavelet,
-    step_regular,
+    step_compact,
     step_sparse,
 )
 
@@ -97,11 +99,13 @@ def _run_blocks(
     work: int,
     rows_even: bool = False,
     outer_only: bool = False,
+    min_rows: int = 1,
 ) -> None:
     """Call ``kernel(*args, outer_lo, outer_hi, row_lo, row_hi)`` over blocks, in threads if big.
 
     ``outer_only`` kernels take only ``(outer_lo, outer_hi)``; ``rows_even`` keeps row blocks
-    on even boundaries (a synthesis block then starts on a whole pair of fine rows).
+    on even boundaries (a synthesis block then starts on a whole pair of fine rows);
+    ``min_rows`` is the fewest rows worth a block of their own when splitting rows.
     """
     threads = _thread_count()
     if threads == 1 or work < _THREADED_MIN_ELEMENTS or (outer_only and outer == 1):
@@ -112,7 +116,7 @@ def _run_blocks(
         edges = np.linspace(0, outer, min(blocks, outer) + 1).astype(int)
         spans = [(lo, hi, 0, rows) for lo, hi in itertools.pairwise(edges) if hi > lo]
     else:
-        edges = np.linspace(0, rows, blocks + 1).astype(int)
+        edges = np.linspace(0, rows, max(1, min(blocks, rows // min_rows)) + 1).astype(int)
         if rows_even:
             edges = edges - edges % 2
             edges[-1] = rows
@@ -151,31 +155,36 @@ def _csr(matrix: Sparse, dtype: np.dtype[Any]) -> tuple[np.ndarray, np.ndarray, 
     return matrix.indptr, matrix.indices, matrix.weights.astype(dtype, copy=False)
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=1024)
 def _kernel_args(
     bank_name: str, boundary: str, m: int, dtype: np.dtype[Any]
 ) -> dict[str, tuple[np.ndarray, ...]]:
     """Kernel arguments for the four matrices of fine length ``m``, in ``dtype`` (cached).
 
-    ``"A"`` … ``"Q"`` are the compressed rows; ``"A+"`` … ``"Q+"`` add the regular interior in
-    the form the last-axis kernels read (none when the pattern's strides are not the dyadic
-    ones those kernels are written for).
+    ``"A+"`` … ``"Q+"`` are the compact form the kernels read: the compressed rows of the
+    boundary rows only, plus the regular interior (see :mod:`wavecore._kernels`).  Nothing in
+    it grows with ``m``, so the cache stays small however long the data.
     """
-    sparse = dict(zip("ABPQ", step_sparse(bank_name, boundary, m), strict=True))
-    regular = dict(zip("ABPQ", step_regular(bank_name, boundary, m), strict=True))
+    compact = dict(zip("ABPQ", step_compact(bank_name, boundary, m), strict=True))
     out: dict[str, tuple[np.ndarray, ...]] = {}
     for name in "ABPQ":
-        csr = _csr(sparse[name], dtype)
-        reg = regular[name]
+        sparse, reg = compact[name]
         p, step = (1, 2) if name in "AB" else (2, 1)
-        if reg.p == p and reg.step == step and reg.blocks:
+        if reg.blocks and (reg.p != p or reg.step != step):
+            # Strides the kernels are not written for: every row from the compressed form.
+            sparse = step_sparse(bank_name, boundary, m)["ABPQ".index(name)]
+            reg = dataclasses.replace(reg, blocks=0)
+        if reg.blocks:
             interior = np.array([reg.lo, reg.blocks, reg.col], dtype=np.intp)
             pattern = reg.pattern.astype(dtype)
         else:
             interior = np.zeros(3, dtype=np.intp)
             pattern = np.zeros((p, 1), dtype=dtype)
-        out[name] = csr
-        out[name + "+"] = (*csr, interior, pattern)
+        longest = max(int(np.diff(sparse.indptr).max(initial=0)), pattern.shape[1])
+        if longest > _kernels.MAX_TAPS:
+            msg = f"a row of {longest} taps is longer than the {_kernels.MAX_TAPS} supported"
+            raise InvalidParameter(msg)
+        out[name + "+"] = (*_csr(sparse, dtype), interior, pattern)
     return out
 
 
@@ -250,8 +259,8 @@ def analysis_step(
         args: tuple[Any, ...] = (x[:, :, 0], mats["A+"], mats["B+"], c[:, :, 0], d[:, :, 0])
         _run_blocks(_kernels.analysis_last, args, x.shape[0], m, x.size, outer_only=True)
     else:
-        args = (x, *mats["A"], *mats["B"], c, d)
-        _run_blocks(_kernels.analysis3, args, x.shape[0], max(r, s), x.size)
+        args = (x, mats["A+"], mats["B+"], c, d)
+        _run_blocks(_kernels.analysis_mid, args, x.shape[0], max(r, s), x.size)
     shape_c = arr.shape[:axis] + (r,) + arr.shape[axis + 1 :]
     shape_d = arr.shape[:axis] + (s,) + arr.shape[axis + 1 :]
     return c.reshape(shape_c), d.reshape(shape_d)
@@ -330,8 +339,8 @@ def synthesis_step(
         args: tuple[Any, ...] = (cx[:, :, 0], dx[:, :, 0], mats["P+"], mats["Q+"], f[:, :, 0])
         _run_blocks(_kernels.synthesis_last, args, f.shape[0], m, f.size, outer_only=True)
     else:
-        args = (cx, dx, *mats["P"], *mats["Q"], f)
-        _run_blocks(_kernels.synthesis3, args, f.shape[0], m, f.size)
+        args = (cx, dx, mats["P+"], mats["Q+"], f)
+        _run_blocks(_kernels.synthesis_mid, args, f.shape[0], m, f.size)
     return f.reshape(c_arr.shape[:axis] + (m,) + c_arr.shape[axis + 1 :])
 
 
@@ -350,22 +359,31 @@ def fused_level_fits(shape: tuple[int, ...], axes: list[int], dtype: np.dtype[An
     )
 
 
-def _ring_fits(matrix: Sparse, ring: int) -> bool:
+def _ring_fits(matrix: tuple[Any, Regular], ring: int) -> bool:
     """Whether every row's taps land in distinct slots of a ring buffer of ``ring`` rows.
 
-    Periodic rows that wrap around (``c[n-1]`` and ``c[0]``) are fine unless two of their
-    indices are equal modulo the ring size; at most 32 taps per row are allowed.
+    ``matrix`` is the compact form (boundary rows, regular interior).  Periodic rows that wrap
+    around (``c[n-1]`` and ``c[0]``) are fine unless two of their indices are equal modulo the
+    ring size; at most 32 taps per row are allowed.  Every placement of the regular pattern is
+    the first one shifted, which moves all its slots alike, so the first one speaks for all.
     """
-    counts = np.diff(matrix.indptr)
+    sparse, reg = matrix
+    counts = np.diff(sparse.indptr)
     rows = np.repeat(np.arange(len(counts)), counts)
-    keys = rows * ring + matrix.indices % ring
-    return int(counts.max(initial=0)) <= 32 and len(np.unique(keys)) == len(keys)
+    keys = rows * ring + sparse.indices % ring
+    if int(counts.max(initial=0)) > 32 or len(np.unique(keys)) != len(keys):
+        return False
+    for phase in range(reg.p if reg.blocks else 0):
+        columns = reg.col + np.flatnonzero(reg.pattern[phase])
+        if len(columns) > 32 or len(np.unique(columns % ring)) != len(columns):
+            return False
+    return True
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=1024)
 def _synthesis_ring(bank_name: str, boundary: str, m: int) -> int:
     """Rows of axis-1 syntheses the fused kernel keeps per band (0: it cannot run fused)."""
-    _, _, P, Q = step_sparse(bank_name, boundary, m)
+    _, _, P, Q = step_compact(bank_name, boundary, m)
     for ring in range(8, 33):
         if _ring_fits(P, ring) and _ring_fits(Q, ring):
             return ring
@@ -398,7 +416,7 @@ def analysis_2d(
     r1, s1 = rule1.coarse_length(m1), rule1.detail_length(m1)
     sizes = ((r0, r1), (r0, s1), (s0, r1), (s0, s1))
     bands = [np.empty((outer, rows, cols * inner), dtype=arr.dtype) for rows, cols in sizes]
-    args = (x, mats0["A"], mats0["B"], mats1["A+"], mats1["B+"], *bands, inner)
+    args = (x, mats0["A+"], mats0["B+"], mats1["A+"], mats1["B+"], *bands, inner)
     _run_blocks(_kernels.analysis_2d, args, outer, max(r0, s0), x.size)
     lead, trail = arr.shape[:axis], arr.shape[axis + 2 :]
     aa, ad, da, dd = (
@@ -446,6 +464,9 @@ def synthesis_2d(
         for band in (aa, ad, da, dd)
     ]
     f = np.empty((outer, m0, m1 * inner), dtype=dtype)
-    args = (*views, mats0["P"], mats0["Q"], mats1["P+"], mats1["Q+"], f, inner, ring)
-    _run_blocks(_kernels.synthesis_2d, args, outer, m0, f.size, rows_even=True)
+    args = (*views, mats0["P+"], mats0["Q+"], mats1["P+"], mats1["Q+"], f, inner, ring)
+    # Each block fills its ring buffers afresh (a few coarse rows' syntheses along axis 1), so
+    # a block of a handful of rows would mostly redo its neighbours' work: the 8 rows of a
+    # padded 1 × N image took 4 times the work in 8 blocks.
+    _run_blocks(_kernels.synthesis_2d, args, outer, m0, f.size, rows_even=True, min_rows=32)
     return f.reshape((*lead, m0, m1, *trail))
