@@ -104,10 +104,14 @@ class Settings(BaseSettings):
     @classmethod
     def _old_keyword(cls, data: Any) -> Any:
         # ``Settings(threads=2)``: the keyword of the field's old name still works.
+        # It wins over the environment, as any keyword does: the sources are merged by now,
+        # under the field's first alias.
         if isinstance(data, dict) and "threads" in data:
             data = dict(data)
             threads = data.pop("threads")
-            data.setdefault("concurrency", threads)
+            if "concurrency" not in data:
+                data.pop("WAVECORE_THREADS", None)
+                data["WAVECORE_CONCURRENCY"] = threads
         return data
 
     @property

@@ -46,6 +46,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import CancelledError, Future
 from concurrent.futures import TimeoutError as FutureTimeout
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
 
 import numpy as np
@@ -287,6 +288,11 @@ class WorkPool:
                 f"the worker coding this request stopped (exit code {exc.exitcode}), "
                 "most likely out of memory; retry, or send less data"
             ) from None
+        except BrokenProcessPool:
+            # pebble gives up the whole pool when a worker dies with no job (an idle worker
+            # killed from outside); the next job gets a new pool.
+            log.warning("the work pool broke (a worker died while idle); starting a new one")
+            raise self._worker_lost("the work pool restarted during the request") from None
         except CancelledError:
             raise self._worker_lost("the work pool stopped during the request") from None
 

@@ -7,6 +7,8 @@ session); the body tests drive the app's ASGI interface directly, with a client 
 from __future__ import annotations
 
 import asyncio
+import os
+import signal
 import time
 from pathlib import Path
 from typing import Any
@@ -81,6 +83,25 @@ async def test_a_dead_worker_gives_a_503_and_is_replaced() -> None:
     assert isinstance(await pool.run(slot, pool_jobs.worker_pid), int)
     slot.release()
     await _wait_until(lambda: pool.in_use == 0, 1.0)
+
+
+async def test_an_idle_worker_killed_from_outside_breaks_nothing() -> None:
+    """pebble gives up a pool whose worker dies while idle; the next job gets a new pool."""
+    pool = WorkPool(Settings(concurrency=1))
+    slot = pool.admit()
+    assert slot is not None
+    victim = await pool.run(slot, pool_jobs.worker_pid)
+    os.kill(victim, signal.SIGKILL)  # as the kernel's OOM killer might
+    await _wait_until(lambda: not _alive(victim), 2.0)
+    await asyncio.sleep(0.5)  # pebble's manager notices within its 0.1 s loop
+    try:
+        pid = await pool.run(slot, pool_jobs.worker_pid)
+    except Problem as exc:  # a job caught in the breakage: a 503, then the pool is back
+        assert exc.kind == "worker-lost", exc
+        pid = await pool.run(slot, pool_jobs.worker_pid)
+    assert pid != victim and _alive(pid)
+    slot.release()
+    pool.processes.stop()
 
 
 async def test_memory_error_in_a_worker_gives_a_413() -> None:
