@@ -16,6 +16,7 @@ from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 
 import wavecore
 
@@ -50,7 +51,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         yield
         pool.shutdown()
 
-    app = FastAPI(
+    # FastAPI with /docs (Swagger UI) and /redoc whose scripts and styles are served from this
+    # server (fastapi-offline ships them), so that the docs work offline and fetch nothing from
+    # a CDN; the page's "API docs" link goes to /docs.
+    app = FastAPIOffline(
         title="wavecore",
         version=wavecore.__version__,
         description=DESCRIPTION,
