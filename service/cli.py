@@ -427,7 +427,10 @@ def cmd_serve(args: argparse.Namespace) -> int:
         # this process; extra worker processes load them from the cache this fills.
         logging.basicConfig(level=logging.INFO, format="%(levelname)s:     %(message)s")
         log = logging.getLogger("wavecore")
-        log.info("Warming up: compiling the numba kernels (loaded from the cache once compiled)")
+        log.info(
+            "Warming up: compiling the numba kernels (about a minute the first time; "
+            "loaded from numba's cache in seconds afterwards)"
+        )
         seconds = _warm_up()
         log.info("Warm-up done in %.1f s", seconds)
     uvicorn.run(
@@ -444,7 +447,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 def _warm_up() -> float:
     from wavecore.warmup import warm_up
 
-    return warm_up(stream=None)
+    return warm_up(stream=sys.stderr)
 
 
 # --------------------------------------------------------------------------------------------

@@ -25,7 +25,16 @@ def test_redoc_renders_the_api_from_this_server(
     open_tab: Callable[..., Any], page_server: str
 ) -> None:
     tab = open_tab(page_server, "/redoc", ready="h1:has-text('wavecore')")
-    tab.wait_for_selector("text=/v1/images/encode")
+    tab.wait_for_selector('text="/v1/images/encode"')
+    # ReDoc's menu always asks for Redocly's logo from their CDN: the server's policy blocks it
+    # in the browser, so no request leaves (`open_tab` would have recorded one). The refusal
+    # is logged; that one message is expected, nothing else may appear.
+    logo = "'https://cdn.redoc.ly/redoc/logo-mini.svg'"
+
+    def blocked_logo(problem: str) -> bool:
+        return problem.startswith("console error") and logo in problem and "Policy" in problem
+
+    tab.problems[:] = [p for p in tab.problems if not blocked_logo(p)]
     assert not tab.problems, tab.problems
 
 
