@@ -21,13 +21,14 @@ from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 
 import wavecore
 
 from . import errors
 from .imaging import set_pixel_limit
 from .middleware import BodyLimitMiddleware, Metrics, MetricsMiddleware
-from .routes import bundles, curves, health, images, pages, surfaces
+from .routes import bundles, curves, docs, health, images, pages, surfaces
 from .settings import Settings
 from .work import AdmissionMiddleware, WorkPool
 
@@ -66,7 +67,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             pool.shutdown()
 
-    app = FastAPI(
+    # FastAPI with /docs (Swagger UI) and /redoc whose scripts and styles are served from this
+    # server (fastapi-offline ships them), so that the docs work offline and fetch nothing from
+    # a CDN; the page's "API docs" link goes to /docs. /redoc is routes/docs.py's.
+    app = FastAPIOffline(
+        redoc_url=None,
         title="wavecore",
         version=wavecore.__version__,
         description=DESCRIPTION,
@@ -76,7 +81,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.pool = pool
     app.state.metrics = Metrics()
     errors.install(app)
-    for module in (images, curves, surfaces, bundles, health, pages):
+    for module in (images, curves, surfaces, bundles, health, pages, docs):
         app.include_router(module.router)
     if STATIC.is_dir():
         app.mount("/static", StaticFiles(directory=STATIC), name="static")

@@ -11,19 +11,26 @@
 inputs ``OUT`` is a folder, a progress bar runs on stderr and a summary table follows.
 Images are read with Pillow (anything it reads); ``.json`` inputs are curves
 (``{"points": [...], "closed": false}`` or a bare list of points) and ``.npy`` inputs are
-images, unless ``--kind`` says ``curve`` or ``surface``.  Bundles are written as ``.wcb``.
+images, unless ``--kind`` says ``curve`` or ``surface``.  Bundles are written as ``.wcb``
+(``.wvb``, the suffix of the test suite's golden bundles, is read too).
 Decoded images are written by ``OUT``'s extension (``.png``, ``.webp``, ``.tiff``, ``.npy``),
 curves and surfaces as ``.json`` or ``.npy``.
 
-It lives in ``service`` because it reads and writes image files with Pillow, which ``wavecore``
-itself never imports.
+It lives in ``service`` (installed as ``wavecore_service``) because it reads and writes image
+files with Pillow, which ``wavecore`` itself never imports.  With only the core install
+(``pip install wavecore``) every command works on ``.npy``, ``.json`` and bundle files: Pillow
+and the web stack are imported only when an image file is read or written, or by ``serve``, and
+their absence is one line naming the extra to install.
 """
 
 from __future__ import annotations
 
 import argparse
 import glob
+import importlib
+import io
 import json
+import logging
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -35,12 +42,10 @@ import numpy as np
 
 import wavecore
 
-from .deps import npy_bytes
-from .errors import Problem
-from .imaging import encode_array, read_image
-from .settings import Settings
-
+# The one suffix written; both are read (the golden bundles in tests/golden are ``.wvb``).
 BUNDLE_SUFFIX = ".wcb"
+BUNDLE_SUFFIXES = {".wcb", ".wvb"}
+SERVICE_EXTRA = "pip install 'wavecore[service]'"
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp", ".gif", ".ppm"}
 IMAGE_SUFFIXES |= {".pgm", ".pbm", ".tga", ".jp2", ".j2k", ".ico", ".pcx", ".sgi"}
 ENCODE_SUFFIXES = IMAGE_SUFFIXES | {".npy", ".json"}
@@ -48,6 +53,83 @@ ENCODE_SUFFIXES = IMAGE_SUFFIXES | {".npy", ".json"}
 
 class CLIError(Exception):
     """A user error: printed as ``wavecore: error: ...`` with exit status 1."""
+
+
+def _service_module(name: str, needed_for: str) -> Any:
+    """This package's module ``name``, or a one-line error naming the extra it needs."""
+    try:
+        return importlib.import_module(f"{__package__}.{name}")
+    except ModuleNotFoundError as exc:
+        if (exc.name or "").split(".")[0] in ("service", "wavecore_service"):
+            raise
+        msg = f"{needed_for} needs the service extra ({exc.name} is missing): {SERVICE_EXTRA}"
+        raise CLIError(msg) from None
+
+
+def _settings() -> Any:
+    """The ``WAVECORE_*`` settings; a bad value is one line that names its variable."""
+    settings = _service_module("settings", "reading the WAVECORE_* settings")
+    from pydantic import ValidationError  # present: the settings module imports it
+
+    try:
+        return settings.Settings()
+    except ValidationError as exc:
+        raise CLIError(_settings_message(exc)) from None
+
+
+def _settings_message(exc: Any) -> str:
+    """``WAVECORE_THREADS='zero': Input should be a valid integer`` for each bad variable."""
+    parts = []
+    for error in exc.errors():
+        loc = [str(part) for part in error.get("loc", ())]
+        message = str(error.get("msg", "invalid"))
+        if loc:
+            variable = "WAVECORE_" + loc[0].upper()
+            parts.append(f"{variable}={error.get('input')!r}: {message}")
+        else:
+            parts.append(f"WAVECORE_* settings: {message}")
+    return "bad setting: " + "; ".join(parts)
+
+
+def _read_image(path: Path) -> np.ndarray:
+    imaging = _service_module("imaging", f"reading the image file {path.name}")
+    errors = _service_module("errors", f"reading the image file {path.name}")
+    try:
+        image: np.ndarray = imaging.read_image(path.read_bytes(), max_pixels=_settings().max_pixels)
+    except errors.Problem as exc:
+        raise CLIError(f"{path}: {exc.detail}") from None
+    return image
+
+
+def _image_file_bytes(arr: np.ndarray, suffix: str) -> bytes:
+    imaging = _service_module("imaging", f"writing a {suffix} image")
+    errors = _service_module("errors", f"writing a {suffix} image")
+    try:
+        data: bytes = imaging.encode_array(arr, {".tif": "tiff"}.get(suffix, suffix[1:]))
+    except errors.Problem as exc:
+        raise CLIError(exc.detail) from None
+    return data
+
+
+def _npy_bytes(arr: np.ndarray) -> bytes:
+    out = io.BytesIO()
+    np.save(out, arr, allow_pickle=False)
+    return out.getvalue()
+
+
+def _jsonable(value: Any) -> Any:
+    """Plain JSON types (numpy scalars and arrays as numbers and lists, bytes as hex)."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return str(value)
+    if isinstance(value, bytes):
+        return value.hex()
+    return value
 
 
 @dataclass
@@ -155,7 +237,7 @@ def run_many(
     for i, path in enumerate(files, 1):
         try:
             rows.append(work(path))
-        except (CLIError, Problem, wavecore.WavecoreError, OSError, ValueError) as exc:
+        except (CLIError, wavecore.WavecoreError, OSError, ValueError) as exc:
             if not many:
                 raise
             rows.append(Row(path.name, error=f"error: {_message(exc)}"))
@@ -166,8 +248,6 @@ def run_many(
 
 
 def _message(exc: BaseException) -> str:
-    if isinstance(exc, Problem):
-        return exc.detail
     return str(exc)
 
 
@@ -184,7 +264,7 @@ def _size(n: float) -> str:
 # --------------------------------------------------------------------------------------------
 
 
-def _load_input(path: Path, kind: str | None, max_pixels: int) -> tuple[str, np.ndarray, bool]:
+def _load_input(path: Path, kind: str | None) -> tuple[str, np.ndarray, bool]:
     """(kind, array, closed) of an input file."""
     suffix = path.suffix.lower()
     if suffix == ".json":
@@ -200,12 +280,11 @@ def _load_input(path: Path, kind: str | None, max_pixels: int) -> tuple[str, np.
             raise CLIError(msg) from None
     if suffix == ".npy":
         return kind or "image", np.load(path, allow_pickle=False), False
-    return kind or "image", read_image(path.read_bytes(), max_pixels=max_pixels), False
+    return kind or "image", _read_image(path), False
 
 
 def cmd_encode(args: argparse.Namespace) -> int:
     files, many = expand(args.input, ENCODE_SUFFIXES)
-    max_pixels = Settings().max_pixels
     targets = {
         name: getattr(args, name)
         for name in ("keep", "quality", "bpp", "tolerance")
@@ -214,7 +293,7 @@ def cmd_encode(args: argparse.Namespace) -> int:
 
     def work(path: Path) -> Row:
         start = time.perf_counter()
-        kind, data, closed = _load_input(path, args.kind, max_pixels)
+        kind, data, closed = _load_input(path, args.kind)
         closed = closed or args.closed
         allowed = {"image": {"keep", "quality", "bpp"}, "curve": {"keep", "tolerance"}}
         extra = set(targets) - allowed.get(kind, {"keep", "quality"})
@@ -256,7 +335,7 @@ def cmd_encode(args: argparse.Namespace) -> int:
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
-    files, many = expand(args.bundle, {BUNDLE_SUFFIX})
+    files, many = expand(args.bundle, BUNDLE_SUFFIXES)
 
     def work(path: Path) -> Row:
         start = time.perf_counter()
@@ -267,9 +346,9 @@ def cmd_decode(args: argparse.Namespace) -> int:
         out = output_for(path, Path(args.output), many, args.format or default)
         suffix = out.suffix.lower()
         if suffix == ".npy":
-            data = npy_bytes(arr)
+            data = _npy_bytes(arr)
         elif kind == "image" and suffix in (".png", ".webp", ".tif", ".tiff"):
-            data = encode_array(arr, {".tif": "tiff"}.get(suffix, suffix[1:]))
+            data = _image_file_bytes(arr, suffix)
         elif kind != "image" and suffix == ".json":
             key = "points" if kind == "curve" else "grid"
             data = json.dumps({key: arr.tolist()}).encode()
@@ -290,13 +369,11 @@ def cmd_decode(args: argparse.Namespace) -> int:
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
-    files, many = expand(args.bundle, {BUNDLE_SUFFIX})
+    files, many = expand(args.bundle, BUNDLE_SUFFIXES)
     if not many:
         info = wavecore.inspect(files[0].read_bytes())
         if args.json:
-            from .deps import jsonable
-
-            print(json.dumps(jsonable(info), indent=2))
+            print(json.dumps(_jsonable(info), indent=2))
         else:
             _print_info(info)
         return 0
@@ -334,17 +411,43 @@ def _print_info(info: dict[str, Any]) -> None:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
+    _service_module("app", "wavecore serve")  # FastAPI and the rest of the service extra
+    try:
+        import uvicorn
+    except ModuleNotFoundError:
+        msg = f"wavecore serve needs the service extra (uvicorn is missing): {SERVICE_EXTRA}"
+        raise CLIError(msg) from None
+    defaults = _settings()
+    host = defaults.host if args.host is None else args.host
+    port = defaults.port if args.port is None else args.port
+    workers = defaults.workers if args.workers is None else args.workers
+    if not args.no_warm_up:
+        # Before uvicorn says it is ready: the first requests then never wait for numba to
+        # compile (or load from its cache) a kernel. With one worker the kernels stay loaded in
+        # this process; extra worker processes load them from the cache this fills.
+        logging.basicConfig(level=logging.INFO, format="%(levelname)s:     %(message)s")
+        log = logging.getLogger("wavecore")
+        log.info(
+            "Warming up: compiling the numba kernels (about a minute the first time; "
+            "loaded from numba's cache in seconds afterwards)"
+        )
+        seconds = _warm_up()
+        log.info("Warm-up done in %.1f s", seconds)
     uvicorn.run(
-        "service.app:create_app",
+        f"{__package__}.app:create_app",
         factory=True,
-        host=args.host,
-        port=args.port,
-        workers=args.workers,
+        host=host,
+        port=port,
+        workers=workers,
         log_level=args.log_level,
     )
     return 0
+
+
+def _warm_up() -> float:
+    from wavecore.warmup import warm_up
+
+    return warm_up(stream=sys.stderr)
 
 
 # --------------------------------------------------------------------------------------------
@@ -403,12 +506,20 @@ def build_parser() -> argparse.ArgumentParser:
     ins.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     ins.set_defaults(run=cmd_inspect)
 
-    defaults = Settings()
-    srv = sub.add_parser("serve", help="run the web service (uvicorn)")
-    srv.add_argument("--host", default=defaults.host, help=f"default {defaults.host}")
-    srv.add_argument("--port", type=int, default=defaults.port, help=f"default {defaults.port}")
-    srv.add_argument("--workers", type=int, default=defaults.workers, help="processes")
+    # The defaults come from the WAVECORE_* settings, read only when `serve` runs (so that the
+    # other commands work without the service extra and are not stopped by a bad setting).
+    srv = sub.add_parser(
+        "serve", help=f"run the web service (uvicorn; needs the service extra: {SERVICE_EXTRA})"
+    )
+    srv.add_argument("--host", help="default WAVECORE_HOST or 127.0.0.1")
+    srv.add_argument("--port", type=int, help="default WAVECORE_PORT or 8000")
+    srv.add_argument("--workers", type=int, help="processes (default WAVECORE_WORKERS or 1)")
     srv.add_argument("--log-level", default="info")
+    srv.add_argument(
+        "--no-warm-up",
+        action="store_true",
+        help="start without compiling the kernels first (the first requests then may wait)",
+    )
     srv.set_defaults(run=cmd_serve)
     return parser
 
@@ -418,7 +529,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         status: int = args.run(args)
-    except (CLIError, Problem, wavecore.WavecoreError, OSError, ValueError) as exc:
+    except (CLIError, wavecore.WavecoreError, OSError, ValueError) as exc:
         print(f"wavecore: error: {_message(exc)}", file=sys.stderr)
         return 1
     return status

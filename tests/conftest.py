@@ -21,6 +21,19 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+# Modules of a minute or more that are whole `long` runs (64 concurrent clients, a busy pool),
+# marked here so that the default run leaves them out without editing them.
+LONG_MODULES = {"test_service_concurrency.py"}
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Marks the tests of ``LONG_MODULES`` ``long`` (before ``-m`` selects)."""
+    for item in items:
+        if item.path.name in LONG_MODULES:
+            item.add_marker(pytest.mark.long)
+
+
 def free_port() -> int:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))

@@ -82,12 +82,12 @@ def artifacts() -> Path:
 
 
 @pytest.fixture
-def open_tab(browser_context: Any) -> Iterator[Callable[[str], Any]]:
-    """Opens a fresh tab on ``<url>/``; at the end, fails the test on any script error or any
-    request that went off that server."""
+def open_tab(browser_context: Any) -> Iterator[Callable[..., Any]]:
+    """Opens a fresh tab on ``<url><path>`` (the page by default) and waits for ``ready``; at
+    the end, fails the test on any script error or any request that went off that server."""
     opened: list[Any] = []
 
-    def open_(base: str) -> Any:
+    def open_(base: str, path: str = "/", ready: str = "body[data-ready='true']") -> Any:
         tab = browser_context.new_page()
         tab.set_viewport_size({"width": 1280, "height": 900})
         tab.set_default_timeout(60_000)  # the machine may be busy
@@ -109,8 +109,8 @@ def open_tab(browser_context: Any) -> Iterator[Callable[[str], Any]]:
                 route.abort()
 
         tab.route("**/*", only_this_server)
-        tab.goto(base + "/")
-        tab.wait_for_selector("body[data-ready='true']")
+        tab.goto(base + path)
+        tab.wait_for_selector(ready)
         tab.problems = problems
         opened.append(tab)
         return tab
@@ -125,6 +125,6 @@ def open_tab(browser_context: Any) -> Iterator[Callable[[str], Any]]:
 
 
 @pytest.fixture
-def page(open_tab: Callable[[str], Any], page_server: str) -> Any:
+def page(open_tab: Callable[..., Any], page_server: str) -> Any:
     """A fresh tab on the page served by the suite's server."""
     return open_tab(page_server)

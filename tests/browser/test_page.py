@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.browser
+# Long (about a minute): not in the default run; `pytest -m long` and CI's .ci/run run them.
+pytestmark = [pytest.mark.browser, pytest.mark.long]
 
 PHONE = {"width": 390, "height": 844}
 
