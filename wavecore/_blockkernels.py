@@ -37,7 +37,12 @@ MANTISSA_BASE = UNARY_BASE + UNARY_SIZE
 MANTISSA_SIZE = 2 * 2 * (MAX_CLASS + 1)
 SIGN_BASE = MANTISSA_BASE + MANTISSA_SIZE
 SIGN_SIZE = 4 * 9
-CONTEXTS = SIGN_BASE + SIGN_SIZE
+TILE_BASE = SIGN_BASE + SIGN_SIZE
+TILE_SIZE = 6
+CONTEXTS = TILE_BASE + TILE_SIZE
+#: Detail planes first say, per ``TILE × TILE`` tile of the block, whether it holds a nonzero
+#: value; the positions of empty tiles are neither coded nor visited.
+TILE = 8
 
 #: ``LOCAL_CLASS[s]``: the class of a weighted neighbour sum ``s`` (half-octave steps).
 _LOCAL_EDGES = np.array([0, 2, 4, 6, 9, 13, 19, 27, 39, 55, 79, 111, 160], dtype=np.int64)
@@ -183,6 +188,14 @@ def _sign_of(x):
 def _neighbours(values, at, width, i, j, r0, c0, c1):
     """``4 (|W| + |N|) + 2 (|NW| + |NE|) + |WW| + |NN|`` over the causal neighbours inside the
     block; ``values[at]`` is position ``(i, j)`` and rows are ``width`` apart."""
+    if i > r0 + 1 and c0 + 1 < j < c1 - 1:  # the common case, without a branch per neighbour
+        up = at - width
+        return (
+            4 * (abs(np.int64(values[at - 1])) + abs(np.int64(values[up])))
+            + 2 * (abs(np.int64(values[up - 1])) + abs(np.int64(values[up + 1])))
+            + abs(np.int64(values[at - 2]))
+            + abs(np.int64(values[up - width]))
+        )
     s = np.int64(0)
     if j > c0:
         s += 4 * abs(np.int64(values[at - 1]))
@@ -201,12 +214,21 @@ def _neighbours(values, at, width, i, j, r0, c0, c1):
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _other_band(flat, plane_info, i, j):
-    """``|value|`` at ``(i, j)`` of another plane of the block (0 outside it, or no plane)."""
+def _row_of(plane_info, i):
+    """Where row ``i`` of another plane of the block starts in ``flat`` (-1: no such row), and
+    that plane's width."""
     offset, rows, cols = plane_info
-    if offset < 0 or i >= rows or j >= cols:
+    if offset < 0 or i >= rows:
+        return np.int64(-1), cols
+    return offset + i * cols, cols
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _other_band(flat, start, cols, j):
+    """``|value|`` at column ``j`` of a row found by ``_row_of`` (0 outside it)."""
+    if start < 0 or j >= cols:
         return np.int64(0)
-    return abs(np.int64(flat[offset + i * cols + j]))
+    return abs(np.int64(flat[start + j]))
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -236,14 +258,42 @@ def _plane_info(planes, p):
     return (planes[p, P_OFFSET], planes[p, P_ROWS], planes[p, P_COLS])
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _tile_grid(block):
+    """Tiles per row of the block's tile grid, and tiles per plane (anchored at its corner)."""
+    grid_rows = (block[B_ROW1] - block[B_ROW0] + TILE - 1) // TILE
+    grid_cols = (block[B_COL1] - block[B_COL0] + TILE - 1) // TILE
+    return grid_cols, grid_rows * grid_cols
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _tile_context(flags, base, tr, tc, grid_cols, per_plane, block, planes, p):
+    """A tile flag's context: how many of its left and upper tiles hold a value (0-2), and
+    whether the same tile of an earlier orientation or of the first channel does."""
+    at = base + tr * grid_cols + tc
+    near = 0
+    if tc > 0:
+        near += flags[at - 1]
+    if tr > 0:
+        near += flags[at - grid_cols]
+    other = 0
+    for slot in (P_SIB1, P_SIB2, P_LUMA):
+        q = planes[p, slot]
+        if q >= 0 and flags[(q - block[B_PLANE_LO]) * per_plane + tr * grid_cols + tc]:
+            other = 1
+    return TILE_BASE + near * 2 + other
+
+
 @njit(nogil=True, cache=True)
-def _encode_block(flat, planes, block, out, pos, models, scratch):
+def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
     """Code one block (a region of every plane of one level) into ``out`` from ``pos``.
 
     Returns the position after its last byte (past ``out``'s end when it did not fit).
     """
     low, rng, cache, pending = np.int64(0), np.int64(MASK32), np.int64(0), np.int64(1)
     r0, c0 = block[B_ROW0], block[B_COL0]
+    grid_cols, tiles_per_plane = _tile_grid(block)
+    flags[:] = 0
     for p in range(block[B_PLANE_LO], block[B_PLANE_HI]):
         offset, rows, cols = planes[p, P_OFFSET], planes[p, P_ROWS], planes[p, P_COLS]
         r1, c1 = min(block[B_ROW1], rows), min(block[B_COL1], cols)
@@ -259,35 +309,106 @@ def _encode_block(flat, planes, block, out, pos, models, scratch):
         zero_base = ZERO_BASE + kind * LOCAL_CLASSES * EXTERNAL_CLASSES
         unary_base = UNARY_BASE + kind * (LOCAL_CLASSES + 1) * UNARY_INDICES
         mantissa = MANTISSA_BASE + kind * 2 * (MAX_CLASS + 1)
+        base = (p - block[B_PLANE_LO]) * tiles_per_plane
+        tile_rows = (r1 - r0 + TILE - 1) // TILE
+        tile_cols = (c1 - c0 + TILE - 1) // TILE
+        if not approx:
+            for tr in range(tile_rows):
+                for tc in range(tile_cols):
+                    ctx = _tile_context(
+                        flags, base, tr, tc, grid_cols, tiles_per_plane, block, planes, p
+                    )
+                    flag = 0
+                    for i in range(r0 + tr * TILE, min(r0 + (tr + 1) * TILE, r1)):
+                        for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
+                            if flat[offset + i * cols + j] != 0:
+                                flag = 1
+                    low, rng, cache, pending, pos = _encode_bit(
+                        low, rng, cache, pending, pos, out, models, ctx, flag
+                    )
+                    flags[base + tr * grid_cols + tc] = flag
         for i in range(r0, r1):
             row = offset + i * cols
             srow = (i - r0) * width - c0
-            for j in range(c0, c1):
-                at = row + j
-                if approx:
-                    s = _neighbours(scratch, srow + j, width, i, j, r0, c0, c1)
-                    e = np.int64(0)
-                    value = np.int64(flat[at]) - _predict(flat, at, cols, i, j, r0, c0)
-                else:
-                    s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
-                    e = 2 * (_other_band(flat, sib1, i, j) + _other_band(flat, sib2, i, j))
-                    e += 4 * _other_band(flat, luma, i, j)
-                    value = np.int64(flat[at])
-                magnitude = abs(value)
-                ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
-                low, rng, cache, pending, pos = _encode_bit(
-                    low, rng, cache, pending, pos, out, models, ctx, 1 if magnitude else 0
-                )
-                if approx:
-                    scratch[srow + j] = magnitude
-                if magnitude == 0:
+            tile_row = base + ((i - r0) // TILE) * grid_cols
+            s1, s1c = _row_of(sib1, i)
+            s2, s2c = _row_of(sib2, i)
+            y0, y0c = _row_of(luma, i)
+            for tc in range(tile_cols):
+                if not approx and flags[tile_row + tc] == 0:
                     continue
-                # The bit length in unary, then the bits below the leading one: the top two
-                # under adaptive models, the rest raw.
-                unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
-                klass = _bit_length(magnitude)
-                for k in range(1, klass + 1):
-                    more = 1 if klass > k else 0
+                for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
+                    at = row + j
+                    if approx:
+                        s = _neighbours(scratch, srow + j, width, i, j, r0, c0, c1)
+                        e = np.int64(0)
+                        value = np.int64(flat[at]) - _predict(flat, at, cols, i, j, r0, c0)
+                    else:
+                        s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
+                        e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
+                        e += 4 * _other_band(flat, y0, y0c, j)
+                        value = np.int64(flat[at])
+                    magnitude = abs(value)
+                    ctx = (
+                        zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
+                    )
+                    low, rng, cache, pending, pos = _encode_bit(
+                        low, rng, cache, pending, pos, out, models, ctx, 1 if magnitude else 0
+                    )
+                    if approx:
+                        scratch[srow + j] = magnitude
+                    if magnitude == 0:
+                        continue
+                    # The bit length in unary, then the bits below the leading one: the top two
+                    # under adaptive models, the rest raw.
+                    unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
+                    klass = _bit_length(magnitude)
+                    for k in range(1, klass + 1):
+                        more = 1 if klass > k else 0
+                        low, rng, cache, pending, pos = _encode_bit(
+                            low,
+                            rng,
+                            cache,
+                            pending,
+                            pos,
+                            out,
+                            models,
+                            unary + min(k - 1, UNARY_INDICES - 1),
+                            more,
+                        )
+                    below = klass - 1
+                    top = min(below, 2)
+                    for position in range(top):
+                        bit = (magnitude >> (below - 1 - position)) & 1
+                        low, rng, cache, pending, pos = _encode_bit(
+                            low,
+                            rng,
+                            cache,
+                            pending,
+                            pos,
+                            out,
+                            models,
+                            mantissa + position * (MAX_CLASS + 1) + klass,
+                            bit,
+                        )
+                    if below > top:
+                        rest = below - top
+                        low, rng, cache, pending, pos = _encode_raw(
+                            low,
+                            rng,
+                            cache,
+                            pending,
+                            pos,
+                            out,
+                            magnitude & ((np.int64(1) << rest) - 1),
+                            rest,
+                        )
+                    sw = sn = np.int64(0)  # residual signs: one context
+                    if not approx:
+                        if j > c0:
+                            sw = _sign_of(flat[at - 1])
+                        if i > r0:
+                            sn = _sign_of(flat[at - cols])
                     low, rng, cache, pending, pos = _encode_bit(
                         low,
                         rng,
@@ -296,53 +417,9 @@ def _encode_block(flat, planes, block, out, pos, models, scratch):
                         pos,
                         out,
                         models,
-                        unary + min(k - 1, UNARY_INDICES - 1),
-                        more,
+                        sign_base + (sw + 1) * 3 + sn + 1,
+                        1 if value < 0 else 0,
                     )
-                below = klass - 1
-                top = min(below, 2)
-                for position in range(top):
-                    bit = (magnitude >> (below - 1 - position)) & 1
-                    low, rng, cache, pending, pos = _encode_bit(
-                        low,
-                        rng,
-                        cache,
-                        pending,
-                        pos,
-                        out,
-                        models,
-                        mantissa + position * (MAX_CLASS + 1) + klass,
-                        bit,
-                    )
-                if below > top:
-                    rest = below - top
-                    low, rng, cache, pending, pos = _encode_raw(
-                        low,
-                        rng,
-                        cache,
-                        pending,
-                        pos,
-                        out,
-                        magnitude & ((np.int64(1) << rest) - 1),
-                        rest,
-                    )
-                sw = sn = np.int64(0)  # residual signs: one context
-                if not approx:
-                    if j > c0:
-                        sw = _sign_of(flat[at - 1])
-                    if i > r0:
-                        sn = _sign_of(flat[at - cols])
-                low, rng, cache, pending, pos = _encode_bit(
-                    low,
-                    rng,
-                    cache,
-                    pending,
-                    pos,
-                    out,
-                    models,
-                    sign_base + (sw + 1) * 3 + sn + 1,
-                    1 if value < 0 else 0,
-                )
     # End at the value in [low, low + range) with the most trailing zero bytes, and flush: the
     # decoder reads zeros beyond a block's end, so the caller trims them.
     for keep in range(1, 5):
@@ -357,7 +434,7 @@ def _encode_block(flat, planes, block, out, pos, models, scratch):
 
 
 @njit(nogil=True, cache=True)
-def _decode_block(data, start, end, flat, planes, block, models, scratch):
+def _decode_block(data, start, end, flat, planes, block, models, scratch, flags):
     """Decode one block from ``data[start:end]`` into ``flat``; 0, or 1 if it is corrupt."""
     rng, pos = np.int64(MASK32), start
     code = np.int64(0)
@@ -366,6 +443,8 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch):
         pos += 1
         code = (code << 8) | byte
     r0, c0 = block[B_ROW0], block[B_COL0]
+    grid_cols, tiles_per_plane = _tile_grid(block)
+    flags[:] = 0
     for p in range(block[B_PLANE_LO], block[B_PLANE_HI]):
         offset, rows, cols = planes[p, P_OFFSET], planes[p, P_ROWS], planes[p, P_COLS]
         r1, c1 = min(block[B_ROW1], rows), min(block[B_COL1], cols)
@@ -381,76 +460,98 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch):
         zero_base = ZERO_BASE + kind * LOCAL_CLASSES * EXTERNAL_CLASSES
         unary_base = UNARY_BASE + kind * (LOCAL_CLASSES + 1) * UNARY_INDICES
         mantissa = MANTISSA_BASE + kind * 2 * (MAX_CLASS + 1)
+        base = (p - block[B_PLANE_LO]) * tiles_per_plane
+        tile_rows = (r1 - r0 + TILE - 1) // TILE
+        tile_cols = (c1 - c0 + TILE - 1) // TILE
+        if not approx:
+            for tr in range(tile_rows):
+                for tc in range(tile_cols):
+                    ctx = _tile_context(
+                        flags, base, tr, tc, grid_cols, tiles_per_plane, block, planes, p
+                    )
+                    code, rng, pos, flag = _decode_bit(code, rng, pos, end, data, models, ctx)
+                    flags[base + tr * grid_cols + tc] = flag
         for i in range(r0, r1):
             row = offset + i * cols
             srow = (i - r0) * width - c0
-            for j in range(c0, c1):
-                at = row + j
-                prediction = np.int64(0)
-                if approx:
-                    s = _neighbours(scratch, srow + j, width, i, j, r0, c0, c1)
-                    e = np.int64(0)
-                    prediction = _predict(flat, at, cols, i, j, r0, c0)
-                else:
-                    s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
-                    e = 2 * (_other_band(flat, sib1, i, j) + _other_band(flat, sib2, i, j))
-                    e += 4 * _other_band(flat, luma, i, j)
-                ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
-                code, rng, pos, nonzero = _decode_bit(code, rng, pos, end, data, models, ctx)
-                if nonzero == 0:
-                    if approx:
-                        scratch[srow + j] = 0
-                    flat[at] = prediction
+            tile_row = base + ((i - r0) // TILE) * grid_cols
+            s1, s1c = _row_of(sib1, i)
+            s2, s2c = _row_of(sib2, i)
+            y0, y0c = _row_of(luma, i)
+            for tc in range(tile_cols):
+                if not approx and flags[tile_row + tc] == 0:
                     continue
-                unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
-                klass = np.int64(1)
-                while True:
-                    code, rng, pos, more = _decode_bit(
-                        code,
-                        rng,
-                        pos,
-                        end,
-                        data,
-                        models,
-                        unary + min(klass - 1, UNARY_INDICES - 1),
+                for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
+                    at = row + j
+                    prediction = np.int64(0)
+                    if approx:
+                        s = _neighbours(scratch, srow + j, width, i, j, r0, c0, c1)
+                        e = np.int64(0)
+                        prediction = _predict(flat, at, cols, i, j, r0, c0)
+                    else:
+                        s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
+                        e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
+                        e += 4 * _other_band(flat, y0, y0c, j)
+                    ctx = (
+                        zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
                     )
-                    if more == 0:
-                        break
-                    klass += 1
-                    if klass > MAX_CLASS:
+                    code, rng, pos, nonzero = _decode_bit(code, rng, pos, end, data, models, ctx)
+                    if nonzero == 0:
+                        if approx:
+                            scratch[srow + j] = 0
+                        flat[at] = prediction
+                        continue
+                    unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
+                    klass = np.int64(1)
+                    while True:
+                        code, rng, pos, more = _decode_bit(
+                            code,
+                            rng,
+                            pos,
+                            end,
+                            data,
+                            models,
+                            unary + min(klass - 1, UNARY_INDICES - 1),
+                        )
+                        if more == 0:
+                            break
+                        klass += 1
+                        if klass > MAX_CLASS:
+                            return 1
+                    below = klass - 1
+                    top = 2 if below > 2 else below
+                    magnitude = np.int64(1)
+                    for position in range(top):
+                        code, rng, pos, bit = _decode_bit(
+                            code,
+                            rng,
+                            pos,
+                            end,
+                            data,
+                            models,
+                            mantissa + position * (MAX_CLASS + 1) + klass,
+                        )
+                        magnitude = (magnitude << 1) | bit
+                    if below > top:
+                        code, rng, pos, low_bits = _decode_raw(
+                            code, rng, pos, end, data, below - top
+                        )
+                        magnitude = (magnitude << (below - top)) | low_bits
+                    sw = sn = np.int64(0)
+                    if not approx:
+                        if j > c0:
+                            sw = _sign_of(flat[at - 1])
+                        if i > r0:
+                            sn = _sign_of(flat[at - cols])
+                    code, rng, pos, negative = _decode_bit(
+                        code, rng, pos, end, data, models, sign_base + (sw + 1) * 3 + sn + 1
+                    )
+                    if approx:
+                        scratch[srow + j] = magnitude
+                    result = prediction + (-magnitude if negative else magnitude)
+                    if result > 2147483647 or result < -2147483648:
                         return 1
-                below = klass - 1
-                top = 2 if below > 2 else below
-                magnitude = np.int64(1)
-                for position in range(top):
-                    code, rng, pos, bit = _decode_bit(
-                        code,
-                        rng,
-                        pos,
-                        end,
-                        data,
-                        models,
-                        mantissa + position * (MAX_CLASS + 1) + klass,
-                    )
-                    magnitude = (magnitude << 1) | bit
-                if below > top:
-                    code, rng, pos, low_bits = _decode_raw(code, rng, pos, end, data, below - top)
-                    magnitude = (magnitude << (below - top)) | low_bits
-                sw = sn = np.int64(0)
-                if not approx:
-                    if j > c0:
-                        sw = _sign_of(flat[at - 1])
-                    if i > r0:
-                        sn = _sign_of(flat[at - cols])
-                code, rng, pos, negative = _decode_bit(
-                    code, rng, pos, end, data, models, sign_base + (sw + 1) * 3 + sn + 1
-                )
-                if approx:
-                    scratch[srow + j] = magnitude
-                result = prediction + (-magnitude if negative else magnitude)
-                if result > 2147483647 or result < -2147483648:
-                    return 1
-                flat[at] = result
+                    flat[at] = result
     return 0
 
 
@@ -498,6 +599,16 @@ INITIAL_MODELS = _initial_models()
 
 
 @njit(nogil=True, cache=True)
+def _flags_size(blocks, lo, hi):
+    largest = 1
+    for b in range(lo, hi):
+        largest = max(
+            largest, _tile_grid(blocks[b])[1] * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO])
+        )
+    return largest
+
+
+@njit(nogil=True, cache=True)
 def _fresh_models(models):
     models[:] = INITIAL_MODELS
 
@@ -508,17 +619,23 @@ def encode_span(flat, planes, blocks, lo, hi):
 
     An all-zero block has length 0; any other block at least 1 byte.
     """
-    out = np.empty(max(1024, (hi - lo) * 64), dtype=np.uint8)
+    # Room for 2 bits per position to begin with (it grows when a block does not fit).
+    room = 0
+    for b in range(lo, hi):
+        area = (blocks[b, B_ROW1] - blocks[b, B_ROW0]) * (blocks[b, B_COL1] - blocks[b, B_COL0])
+        room += area * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO]) // 4
+    out = np.empty(max(1024, room), dtype=np.uint8)
     lengths = np.zeros(hi - lo, dtype=np.int64)
     models = np.empty(CONTEXTS, dtype=np.int32)
     scratch = np.empty(_scratch_size(blocks, lo, hi), dtype=np.int64)
+    flags = np.zeros(_flags_size(blocks, lo, hi), dtype=np.int64)
     pos = 0
     for b in range(lo, hi):
         if _block_is_empty(flat, planes, blocks[b]):
             continue
         while True:
             _fresh_models(models)
-            end = _encode_block(flat, planes, blocks[b], out, pos, models, scratch)
+            end = _encode_block(flat, planes, blocks[b], out, pos, models, scratch, flags)
             if end <= out.size:
                 break
             bigger = np.empty(2 * out.size + 2 * (end - pos), dtype=np.uint8)
@@ -546,13 +663,14 @@ def decode_span(data, starts, lengths, planes, blocks, flat, lo, hi):
     """
     models = np.empty(CONTEXTS, dtype=np.int32)
     scratch = np.empty(_scratch_size(blocks, lo, hi), dtype=np.int64)
+    flags = np.zeros(_flags_size(blocks, lo, hi), dtype=np.int64)
     bad = 0
     for b in range(lo, hi):
         if lengths[b] == 0:
             continue
         _fresh_models(models)
         bad += _decode_block(
-            data, starts[b], starts[b] + lengths[b], flat, planes, blocks[b], models, scratch
+            data, starts[b], starts[b] + lengths[b], flat, planes, blocks[b], models, scratch, flags
         )
     return bad
 
