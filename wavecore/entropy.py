@@ -32,6 +32,7 @@ import constriction
 import numpy as np
 from numba import njit
 
+from .blockcoder import BLOCK_SIZE, decode_blocks, encode_blocks
 from .errors import BundleError, InvalidParameter
 
 __all__ = ["CODERS", "decode_levels", "encode_levels"]
@@ -272,9 +273,10 @@ _W_DIRECT, _W_DIAGONAL, _W_PARENT, _W_SIBLING, _W_LUMA = 4, 2, 2, 1, 6
 #: The parent term is (9 · parent + sum of its 3 × 3 neighbourhood) / 18: everything is scaled
 #: by 18.
 _PARENT_SCALE = 18
-#: Version 3 adds the tile flags; version 2 bundles (no tiles) still decode.
-CONTEXT_VERSION = 3
-CONTEXT_VERSIONS = (2, 3)
+#: Version 3 adds the tile flags; version 4 codes independent code-blocks with a compiled
+#: binary range coder (:mod:`wavecore.blockcoder`).  Versions 2 and 3 still decode.
+CONTEXT_VERSION = 4
+CONTEXT_VERSIONS = (2, 3, 4)
 #: Tiles of ``_TILE × _TILE`` detail coefficients: each is flagged as holding a nonzero value
 #: or not, and an all-zero tile costs nothing more (most of the finest levels, at most rates).
 _TILE = 8
@@ -1066,6 +1068,9 @@ def _encode_context(
     entries: list[list[np.ndarray]], version: int = CONTEXT_VERSION
 ) -> tuple[list[bytes], dict[str, Any]]:
     two_d = len(entries) > 1 and len(entries[1]) == 3
+    if version >= 4:
+        chunks = encode_blocks(entries, two_d, BLOCK_SIZE)
+        return chunks, {"coder": "context", "version": version, "two_d": two_d, "block": BLOCK_SIZE}
     layout = [[band.shape for band in bands] for bands in entries]
     writer = _Writer()
     _code_levels(writer, entries, layout, two_d, version)
@@ -1079,12 +1084,17 @@ def _decode_context(
     if version not in CONTEXT_VERSIONS or not isinstance(params.get("two_d"), bool):
         msg = f"context coder parameters {params!r} are not of a version in {CONTEXT_VERSIONS}"
         raise BundleError(msg)
-    readers = []
     for chunk in chunks:
         if not isinstance(chunk, bytes | bytearray | memoryview):
             msg = "each chunk must be bytes"
             raise BundleError(msg)
-        readers.append(_Reader(bytes(chunk)))
+    if version >= 4:
+        block = params.get("block")
+        if isinstance(block, bool) or not isinstance(block, int):
+            msg = f"context coder parameter 'block' must be an integer, not {block!r}"
+            raise BundleError(msg)
+        return decode_blocks([bytes(c) for c in chunks], layout, params["two_d"], block)
+    readers = [_Reader(bytes(chunk)) for chunk in chunks]
     decoded = _code_levels(lambda index: readers[index], None, layout, params["two_d"], version)
     levels = []
     for bands, band_shapes in zip(decoded, layout, strict=True):

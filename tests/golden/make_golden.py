@@ -50,6 +50,9 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
     surface = np.stack([radius * np.cos(uu), radius * np.sin(uu), vv], axis=-1)
     y, x = np.mgrid[0:96, 0:130]
     sparse = 60 + x + 0.5 * y + 120 * ((x - 70) ** 2 + (y - 40) ** 2 < 200)
+    y, x = np.mgrid[0:300, 0:270] / 300.0
+    waves = 128 + 60 * np.sin(23 * x * (1 + y)) + 40 * np.cos(17 * y) * (x > 0.5)
+    blocks_picture = (waves + rng.normal(0, 4, x.shape)).clip(0, 255).astype(np.uint8)
     return {
         "image_grey_u8_lossy": (
             "image",
@@ -82,6 +85,18 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             "surface",
             surface,
             {"closed": (True, False), "quality": 40.0},
+        ),
+        # Context coder version 4 (independent code-blocks, the compiled binary range coder): a
+        # grey picture whose finest bands span several 128 × 128 blocks, colour at a set rate,
+        # lossless 16-bit RGBA, a curve (the 1-D layout) and a closed surface.
+        "image_grey_u8_blocks_ctx4": ("image", blocks_picture, {"quality": 36.0}),
+        "image_rgb_u8_bpp_ctx4": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 8.0}),
+        "image_rgba_u16_lossless_ctx4": ("image", rgba16, {"lossless": True}),
+        "curve_open_tolerance_ctx4": ("curve", open_curve, {"tolerance": 1e-4}),
+        "surface_closed_open_ctx4": (
+            "surface",
+            surface,
+            {"closed": (True, False), "quality": 42.0},
         ),
     }
 

@@ -1,0 +1,718 @@
+"""Compiled loops of the code-block coder (context coder version 4): see ``blockcoder.py``.
+
+One binary range coder (LZMA's, with 15-bit adaptive probabilities) codes every block from
+start to end inside one compiled call that releases the GIL; a call codes a whole span of
+blocks, so the Python side runs one call per thread, never one per block or per symbol.  All
+arithmetic is on integers, so every machine writes and reads the same bits.
+
+Encoder and decoder run the same function (``_code_block``), so their contexts cannot drift
+apart: when decoding, ``flat`` is filled as the block is read and the bit functions return the
+decoded bit instead of coding the given one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# Probabilities of a 0 bit, in units of 2**-PROB_BITS, adapted after every bit with a rate
+# that starts fast (a count-based estimate) and settles at 2**-RATE_LIMIT.
+PROB_BITS = 15
+PROB_ONE = 1 << PROB_BITS
+RATE_LIMIT = 6
+COUNT_CAP = 1 << RATE_LIMIT
+TOP = 1 << 24
+MASK32 = (1 << 32) - 1
+
+# Context layout of the model arrays (one set per block, reset at its start).
+LOCAL_CLASSES = 14
+EXTERNAL_CLASSES = 4
+UNARY_INDICES = 8
+MAX_CLASS = 34  # bit length of a magnitude; int32 values and approximation residuals fit
+ZERO_BASE = 0
+ZERO_SIZE = 2 * LOCAL_CLASSES * EXTERNAL_CLASSES
+UNARY_BASE = ZERO_BASE + ZERO_SIZE
+UNARY_SIZE = 2 * (LOCAL_CLASSES + 1) * UNARY_INDICES
+MANTISSA_BASE = UNARY_BASE + UNARY_SIZE
+MANTISSA_SIZE = 2 * 2 * (MAX_CLASS + 1)
+SIGN_BASE = MANTISSA_BASE + MANTISSA_SIZE
+SIGN_SIZE = 4 * 9
+TILE_BASE = SIGN_BASE + SIGN_SIZE
+TILE_SIZE = 6
+CONTEXTS = TILE_BASE + TILE_SIZE
+#: Detail planes first say, per ``TILE × TILE`` tile of the block, whether it holds a nonzero
+#: value; the positions of empty tiles are neither coded nor visited.
+TILE = 8
+
+#: ``LOCAL_CLASS[s]``: the class of a weighted neighbour sum ``s`` (half-octave steps).
+_LOCAL_EDGES = np.array([0, 2, 4, 6, 9, 13, 19, 27, 39, 55, 79, 111, 160], dtype=np.int64)
+LOCAL_CLASS = np.searchsorted(_LOCAL_EDGES, np.arange(256), side="left").astype(np.int64)
+#: ``RATE[n]``: the adaptation shift after ``n`` observations of a context (1, 2, 2, 3, ...).
+RATE = np.minimum(
+    np.array([int(n + 1).bit_length() for n in range(COUNT_CAP + 1)], dtype=np.int64), RATE_LIMIT
+)
+
+# Plane descriptor columns (``planes``): where the plane lives in ``flat`` and its context.
+P_OFFSET, P_ROWS, P_COLS, P_KIND, P_SIB1, P_SIB2, P_LUMA, P_ORIENT = range(8)
+PLANE_FIELDS = 8
+# Block descriptor columns (``blocks``): planes [lo, hi) of its level, and its region.
+B_PLANE_LO, B_PLANE_HI, B_ROW0, B_COL0, B_ROW1, B_COL1 = range(6)
+BLOCK_FIELDS = 6
+
+
+# The range coder.  Its state lives in local variables of the block loops (helpers take it and
+# return it, and are inlined): kept in an array it cost five times as much per bit.
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _shift_low(low, cache, pending, pos, out):
+    """LZMA's carry-propagating output of the top byte of ``low``; ``pos`` counts on past the
+    end of ``out`` (the caller then grows ``out`` and codes the block again)."""
+    if low < 0xFF000000 or low > MASK32:
+        carry = low >> 32
+        byte = cache
+        while True:
+            if pos < out.size:
+                out[pos] = (byte + carry) & 0xFF
+            pos += 1
+            byte = 0xFF
+            pending -= 1
+            if pending == 0:
+                break
+        cache = (low >> 24) & 0xFF
+    pending += 1
+    low = (low & 0x00FFFFFF) << 8
+    return low, cache, pending, pos
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _adapt(models, ctx, p, n, bit):
+    """The probability of a 0 moves towards the bit seen, by ``2**-RATE[n]``."""
+    shift = RATE[n]
+    if bit == 0:
+        p += (PROB_ONE - p) >> shift
+    else:
+        p -= p >> shift
+    if n < COUNT_CAP:
+        n += 1
+    models[ctx] = (p << 8) | n
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _encode_bit(low, rng, cache, pending, pos, out, models, ctx, bit):
+    model = models[ctx]
+    p = model >> 8
+    bound = (rng >> PROB_BITS) * p
+    if bit == 0:
+        rng = bound
+    else:
+        low += bound
+        rng -= bound
+    _adapt(models, ctx, p, model & 0xFF, bit)
+    while rng < TOP:
+        rng <<= 8
+        low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
+    return low, rng, cache, pending, pos
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _decode_bit(code, rng, pos, end, data, models, ctx):
+    model = models[ctx]
+    p = model >> 8
+    bound = (rng >> PROB_BITS) * p
+    if code < bound:
+        rng = bound
+        bit = 0
+    else:
+        code -= bound
+        rng -= bound
+        bit = 1
+    _adapt(models, ctx, p, model & 0xFF, bit)
+    while rng < TOP:
+        rng <<= 8
+        byte = np.int64(data[pos]) if pos < end else np.int64(0)
+        pos += 1
+        code = ((code << 8) | byte) & MASK32
+    return code, rng, pos, bit
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _encode_raw(low, rng, cache, pending, pos, out, value, count):
+    """``count`` equiprobable bits of ``value``, most significant first."""
+    for k in range(count - 1, -1, -1):
+        rng >>= 1
+        if (value >> k) & 1:
+            low += rng
+        while rng < TOP:
+            rng <<= 8
+            low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
+    return low, rng, cache, pending, pos
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _decode_raw(code, rng, pos, end, data, count):
+    value = np.int64(0)
+    for _ in range(count):
+        rng >>= 1
+        bit = 0
+        if code >= rng:
+            code -= rng
+            bit = 1
+        value = (value << 1) | bit
+        while rng < TOP:
+            rng <<= 8
+            byte = np.int64(data[pos]) if pos < end else np.int64(0)
+            pos += 1
+            code = ((code << 8) | byte) & MASK32
+    return code, rng, pos, value
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _bit_length(value):
+    n = np.int64(0)
+    while value:
+        value >>= 1
+        n += 1
+    return n
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _sign_of(x):
+    return np.int64((x > 0) - (x < 0))
+
+
+# The contexts, shared by the encoder and the decoder (so that they cannot drift apart).
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _neighbours(values, at, width, i, j, r0, c0, c1):
+    """``4 (|W| + |N|) + 2 (|NW| + |NE|) + |WW| + |NN|`` over the causal neighbours inside the
+    block; ``values[at]`` is position ``(i, j)`` and rows are ``width`` apart."""
+    if i > r0 + 1 and c0 + 1 < j < c1 - 1:  # the common case, without a branch per neighbour
+        up = at - width
+        return (
+            4 * (abs(np.int64(values[at - 1])) + abs(np.int64(values[up])))
+            + 2 * (abs(np.int64(values[up - 1])) + abs(np.int64(values[up + 1])))
+            + abs(np.int64(values[at - 2]))
+            + abs(np.int64(values[up - width]))
+        )
+    s = np.int64(0)
+    if j > c0:
+        s += 4 * abs(np.int64(values[at - 1]))
+        if j > c0 + 1:
+            s += abs(np.int64(values[at - 2]))
+    if i > r0:
+        up = at - width
+        s += 4 * abs(np.int64(values[up]))
+        if i > r0 + 1:
+            s += abs(np.int64(values[up - width]))
+        if j > c0:
+            s += 2 * abs(np.int64(values[up - 1]))
+        if j + 1 < c1:
+            s += 2 * abs(np.int64(values[up + 1]))
+    return s
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _row_of(plane_info, i):
+    """Where row ``i`` of another plane of the block starts in ``flat`` (-1: no such row), and
+    that plane's width."""
+    offset, rows, cols = plane_info
+    if offset < 0 or i >= rows:
+        return np.int64(-1), cols
+    return offset + i * cols, cols
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _other_band(flat, start, cols, j):
+    """``|value|`` at column ``j`` of a row found by ``_row_of`` (0 outside it)."""
+    if start < 0 or j >= cols:
+        return np.int64(0)
+    return abs(np.int64(flat[start + j]))
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _external_class(e):
+    return 0 if e == 0 else (1 if e < 4 else (2 if e < 12 else 3))
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _predict(flat, at, cols, i, j, r0, c0):
+    """The approximation's prediction (LOCO-I's median edge detector) from decoded values."""
+    a = np.int64(flat[at - 1]) if j > c0 else np.int64(0)
+    b = np.int64(flat[at - cols]) if i > r0 else np.int64(0)
+    if i > r0 and j > c0:
+        c = np.int64(flat[at - cols - 1])
+        if c >= max(a, b):
+            return min(a, b)
+        if c <= min(a, b):
+            return max(a, b)
+        return a + b - c
+    return a + b  # one of them is zero (or both, at the block's corner)
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _plane_info(planes, p):
+    if p < 0:
+        return (np.int64(-1), np.int64(0), np.int64(0))
+    return (planes[p, P_OFFSET], planes[p, P_ROWS], planes[p, P_COLS])
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _tile_grid(block):
+    """Tiles per row of the block's tile grid, and tiles per plane (anchored at its corner)."""
+    grid_rows = (block[B_ROW1] - block[B_ROW0] + TILE - 1) // TILE
+    grid_cols = (block[B_COL1] - block[B_COL0] + TILE - 1) // TILE
+    return grid_cols, grid_rows * grid_cols
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _tile_context(flags, base, tr, tc, grid_cols, per_plane, block, planes, p):
+    """A tile flag's context: how many of its left and upper tiles hold a value (0-2), and
+    whether the same tile of an earlier orientation or of the first channel does."""
+    at = base + tr * grid_cols + tc
+    near = 0
+    if tc > 0:
+        near += flags[at - 1]
+    if tr > 0:
+        near += flags[at - grid_cols]
+    other = 0
+    for slot in (P_SIB1, P_SIB2, P_LUMA):
+        q = planes[p, slot]
+        if q >= 0 and flags[(q - block[B_PLANE_LO]) * per_plane + tr * grid_cols + tc]:
+            other = 1
+    return TILE_BASE + near * 2 + other
+
+
+@njit(nogil=True, cache=True)
+def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
+    """Code one block (a region of every plane of one level) into ``out`` from ``pos``.
+
+    Returns the position after its last byte (past ``out``'s end when it did not fit).
+    """
+    low, rng, cache, pending = np.int64(0), np.int64(MASK32), np.int64(0), np.int64(1)
+    r0, c0 = block[B_ROW0], block[B_COL0]
+    grid_cols, tiles_per_plane = _tile_grid(block)
+    flags[:] = 0
+    for p in range(block[B_PLANE_LO], block[B_PLANE_HI]):
+        offset, rows, cols = planes[p, P_OFFSET], planes[p, P_ROWS], planes[p, P_COLS]
+        r1, c1 = min(block[B_ROW1], rows), min(block[B_COL1], cols)
+        if r1 <= r0 or c1 <= c0:
+            continue
+        approx = planes[p, P_KIND] == 0
+        kind = 0 if approx else 1
+        width = c1 - c0
+        sib1 = _plane_info(planes, planes[p, P_SIB1])
+        sib2 = _plane_info(planes, planes[p, P_SIB2])
+        luma = _plane_info(planes, planes[p, P_LUMA])
+        sign_base = SIGN_BASE + (3 if approx else planes[p, P_ORIENT]) * 9
+        zero_base = ZERO_BASE + kind * LOCAL_CLASSES * EXTERNAL_CLASSES
+        unary_base = UNARY_BASE + kind * (LOCAL_CLASSES + 1) * UNARY_INDICES
+        mantissa = MANTISSA_BASE + kind * 2 * (MAX_CLASS + 1)
+        base = (p - block[B_PLANE_LO]) * tiles_per_plane
+        tile_rows = (r1 - r0 + TILE - 1) // TILE
+        tile_cols = (c1 - c0 + TILE - 1) // TILE
+        if not approx:
+            for tr in range(tile_rows):
+                for tc in range(tile_cols):
+                    ctx = _tile_context(
+                        flags, base, tr, tc, grid_cols, tiles_per_plane, block, planes, p
+                    )
+                    flag = 0
+                    for i in range(r0 + tr * TILE, min(r0 + (tr + 1) * TILE, r1)):
+                        for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
+                            if flat[offset + i * cols + j] != 0:
+                                flag = 1
+                    low, rng, cache, pending, pos = _encode_bit(
+                        low, rng, cache, pending, pos, out, models, ctx, flag
+                    )
+                    flags[base + tr * grid_cols + tc] = flag
+        for i in range(r0, r1):
+            row = offset + i * cols
+            srow = (i - r0) * width - c0
+            tile_row = base + ((i - r0) // TILE) * grid_cols
+            s1, s1c = _row_of(sib1, i)
+            s2, s2c = _row_of(sib2, i)
+            y0, y0c = _row_of(luma, i)
+            for tc in range(tile_cols):
+                if not approx and flags[tile_row + tc] == 0:
+                    continue
+                for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
+                    at = row + j
+                    if approx:
+                        s = _neighbours(scratch, srow + j, width, i, j, r0, c0, c1)
+                        e = np.int64(0)
+                        value = np.int64(flat[at]) - _predict(flat, at, cols, i, j, r0, c0)
+                    else:
+                        s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
+                        e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
+                        e += 4 * _other_band(flat, y0, y0c, j)
+                        value = np.int64(flat[at])
+                    magnitude = abs(value)
+                    ctx = (
+                        zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
+                    )
+                    low, rng, cache, pending, pos = _encode_bit(
+                        low, rng, cache, pending, pos, out, models, ctx, 1 if magnitude else 0
+                    )
+                    if approx:
+                        scratch[srow + j] = magnitude
+                    if magnitude == 0:
+                        continue
+                    # The bit length in unary, then the bits below the leading one: the top two
+                    # under adaptive models, the rest raw.
+                    unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
+                    klass = _bit_length(magnitude)
+                    for k in range(1, klass + 1):
+                        more = 1 if klass > k else 0
+                        low, rng, cache, pending, pos = _encode_bit(
+                            low,
+                            rng,
+                            cache,
+                            pending,
+                            pos,
+                            out,
+                            models,
+                            unary + min(k - 1, UNARY_INDICES - 1),
+                            more,
+                        )
+                    below = klass - 1
+                    top = min(below, 2)
+                    for position in range(top):
+                        bit = (magnitude >> (below - 1 - position)) & 1
+                        low, rng, cache, pending, pos = _encode_bit(
+                            low,
+                            rng,
+                            cache,
+                            pending,
+                            pos,
+                            out,
+                            models,
+                            mantissa + position * (MAX_CLASS + 1) + klass,
+                            bit,
+                        )
+                    if below > top:
+                        rest = below - top
+                        low, rng, cache, pending, pos = _encode_raw(
+                            low,
+                            rng,
+                            cache,
+                            pending,
+                            pos,
+                            out,
+                            magnitude & ((np.int64(1) << rest) - 1),
+                            rest,
+                        )
+                    sw = sn = np.int64(0)  # residual signs: one context
+                    if not approx:
+                        if j > c0:
+                            sw = _sign_of(flat[at - 1])
+                        if i > r0:
+                            sn = _sign_of(flat[at - cols])
+                    low, rng, cache, pending, pos = _encode_bit(
+                        low,
+                        rng,
+                        cache,
+                        pending,
+                        pos,
+                        out,
+                        models,
+                        sign_base + (sw + 1) * 3 + sn + 1,
+                        1 if value < 0 else 0,
+                    )
+    # End at the value in [low, low + range) with the most trailing zero bytes, and flush: the
+    # decoder reads zeros beyond a block's end, so the caller trims them.
+    for keep in range(1, 5):
+        mask = (np.int64(1) << (32 - 8 * keep)) - 1
+        end_value = (low + mask) & ~mask
+        if end_value - low < rng:
+            low = end_value
+            break
+    for _ in range(5):
+        low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
+    return pos
+
+
+@njit(nogil=True, cache=True)
+def _decode_block(data, start, end, flat, planes, block, models, scratch, flags):
+    """Decode one block from ``data[start:end]`` into ``flat``; 0, or 1 if it is corrupt."""
+    rng, pos = np.int64(MASK32), start
+    code = np.int64(0)
+    for _ in range(4):  # the encoder's first byte, always 0, is not stored
+        byte = np.int64(data[pos]) if pos < end else np.int64(0)
+        pos += 1
+        code = (code << 8) | byte
+    r0, c0 = block[B_ROW0], block[B_COL0]
+    grid_cols, tiles_per_plane = _tile_grid(block)
+    flags[:] = 0
+    for p in range(block[B_PLANE_LO], block[B_PLANE_HI]):
+        offset, rows, cols = planes[p, P_OFFSET], planes[p, P_ROWS], planes[p, P_COLS]
+        r1, c1 = min(block[B_ROW1], rows), min(block[B_COL1], cols)
+        if r1 <= r0 or c1 <= c0:
+            continue
+        approx = planes[p, P_KIND] == 0
+        kind = 0 if approx else 1
+        width = c1 - c0
+        sib1 = _plane_info(planes, planes[p, P_SIB1])
+        sib2 = _plane_info(planes, planes[p, P_SIB2])
+        luma = _plane_info(planes, planes[p, P_LUMA])
+        sign_base = SIGN_BASE + (3 if approx else planes[p, P_ORIENT]) * 9
+        zero_base = ZERO_BASE + kind * LOCAL_CLASSES * EXTERNAL_CLASSES
+        unary_base = UNARY_BASE + kind * (LOCAL_CLASSES + 1) * UNARY_INDICES
+        mantissa = MANTISSA_BASE + kind * 2 * (MAX_CLASS + 1)
+        base = (p - block[B_PLANE_LO]) * tiles_per_plane
+        tile_rows = (r1 - r0 + TILE - 1) // TILE
+        tile_cols = (c1 - c0 + TILE - 1) // TILE
+        if not approx:
+            for tr in range(tile_rows):
+                for tc in range(tile_cols):
+                    ctx = _tile_context(
+                        flags, base, tr, tc, grid_cols, tiles_per_plane, block, planes, p
+                    )
+                    code, rng, pos, flag = _decode_bit(code, rng, pos, end, data, models, ctx)
+                    flags[base + tr * grid_cols + tc] = flag
+        for i in range(r0, r1):
+            row = offset + i * cols
+            srow = (i - r0) * width - c0
+            tile_row = base + ((i - r0) // TILE) * grid_cols
+            s1, s1c = _row_of(sib1, i)
+            s2, s2c = _row_of(sib2, i)
+            y0, y0c = _row_of(luma, i)
+            for tc in range(tile_cols):
+                if not approx and flags[tile_row + tc] == 0:
+                    continue
+                for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
+                    at = row + j
+                    prediction = np.int64(0)
+                    if approx:
+                        s = _neighbours(scratch, srow + j, width, i, j, r0, c0, c1)
+                        e = np.int64(0)
+                        prediction = _predict(flat, at, cols, i, j, r0, c0)
+                    else:
+                        s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
+                        e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
+                        e += 4 * _other_band(flat, y0, y0c, j)
+                    ctx = (
+                        zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
+                    )
+                    code, rng, pos, nonzero = _decode_bit(code, rng, pos, end, data, models, ctx)
+                    if nonzero == 0:
+                        if approx:
+                            scratch[srow + j] = 0
+                        flat[at] = prediction
+                        continue
+                    unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
+                    klass = np.int64(1)
+                    while True:
+                        code, rng, pos, more = _decode_bit(
+                            code,
+                            rng,
+                            pos,
+                            end,
+                            data,
+                            models,
+                            unary + min(klass - 1, UNARY_INDICES - 1),
+                        )
+                        if more == 0:
+                            break
+                        klass += 1
+                        if klass > MAX_CLASS:
+                            return 1
+                    below = klass - 1
+                    top = 2 if below > 2 else below
+                    magnitude = np.int64(1)
+                    for position in range(top):
+                        code, rng, pos, bit = _decode_bit(
+                            code,
+                            rng,
+                            pos,
+                            end,
+                            data,
+                            models,
+                            mantissa + position * (MAX_CLASS + 1) + klass,
+                        )
+                        magnitude = (magnitude << 1) | bit
+                    if below > top:
+                        code, rng, pos, low_bits = _decode_raw(
+                            code, rng, pos, end, data, below - top
+                        )
+                        magnitude = (magnitude << (below - top)) | low_bits
+                    sw = sn = np.int64(0)
+                    if not approx:
+                        if j > c0:
+                            sw = _sign_of(flat[at - 1])
+                        if i > r0:
+                            sn = _sign_of(flat[at - cols])
+                    code, rng, pos, negative = _decode_bit(
+                        code, rng, pos, end, data, models, sign_base + (sw + 1) * 3 + sn + 1
+                    )
+                    if approx:
+                        scratch[srow + j] = magnitude
+                    result = prediction + (-magnitude if negative else magnitude)
+                    if result > 2147483647 or result < -2147483648:
+                        return 1
+                    flat[at] = result
+    return 0
+
+
+@njit(nogil=True, cache=True)
+def _block_is_empty(flat, planes, block):
+    r0, c0 = block[B_ROW0], block[B_COL0]
+    for p in range(block[B_PLANE_LO], block[B_PLANE_HI]):
+        offset, rows, cols = planes[p, P_OFFSET], planes[p, P_ROWS], planes[p, P_COLS]
+        for i in range(r0, min(block[B_ROW1], rows)):
+            for j in range(c0, min(block[B_COL1], cols)):
+                if flat[offset + i * cols + j] != 0:
+                    return False
+    return True
+
+
+@njit(nogil=True, cache=True)
+def _scratch_size(blocks, lo, hi):
+    largest = 1
+    for b in range(lo, hi):
+        area = (blocks[b, B_ROW1] - blocks[b, B_ROW0]) * (blocks[b, B_COL1] - blocks[b, B_COL0])
+        largest = max(largest, area)
+    return largest
+
+
+def _initial_models() -> np.ndarray:
+    """Every block's models start here: a zero is likely where the neighbours are quiet.
+
+    The probability of a zero starts at ``(15 - class) / 16`` for the zero flags of the
+    quiet local classes (and one half elsewhere), with a count of 2, so the first few bits
+    still move it quickly.
+    """
+    p = np.full(CONTEXTS, PROB_ONE // 2, dtype=np.int64)
+    n = np.zeros(CONTEXTS, dtype=np.int64)
+    for kind in range(2):
+        for local in range(LOCAL_CLASSES):
+            for external in range(EXTERNAL_CLASSES):
+                ctx = ZERO_BASE + (kind * LOCAL_CLASSES + local) * EXTERNAL_CLASSES + external
+                level = max(8, 15 - local - external)
+                p[ctx] = level * PROB_ONE // 16
+                n[ctx] = 2
+    return ((p << 8) | n).astype(np.int32)
+
+
+INITIAL_MODELS = _initial_models()
+
+
+@njit(nogil=True, cache=True)
+def _flags_size(blocks, lo, hi):
+    largest = 1
+    for b in range(lo, hi):
+        largest = max(
+            largest, _tile_grid(blocks[b])[1] * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO])
+        )
+    return largest
+
+
+@njit(nogil=True, cache=True)
+def _fresh_models(models):
+    models[:] = INITIAL_MODELS
+
+
+@njit(nogil=True, cache=True)
+def encode_span(flat, planes, blocks, lo, hi):
+    """Code blocks ``lo .. hi - 1``; return their bytes, concatenated, and each one's length.
+
+    An all-zero block has length 0; any other block at least 1 byte.
+    """
+    # Room for 2 bits per position to begin with (it grows when a block does not fit).
+    room = 0
+    for b in range(lo, hi):
+        area = (blocks[b, B_ROW1] - blocks[b, B_ROW0]) * (blocks[b, B_COL1] - blocks[b, B_COL0])
+        room += area * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO]) // 4
+    out = np.empty(max(1024, room), dtype=np.uint8)
+    lengths = np.zeros(hi - lo, dtype=np.int64)
+    models = np.empty(CONTEXTS, dtype=np.int32)
+    scratch = np.empty(_scratch_size(blocks, lo, hi), dtype=np.int64)
+    flags = np.zeros(_flags_size(blocks, lo, hi), dtype=np.int64)
+    pos = 0
+    for b in range(lo, hi):
+        if _block_is_empty(flat, planes, blocks[b]):
+            continue
+        while True:
+            _fresh_models(models)
+            end = _encode_block(flat, planes, blocks[b], out, pos, models, scratch, flags)
+            if end <= out.size:
+                break
+            bigger = np.empty(2 * out.size + 2 * (end - pos), dtype=np.uint8)
+            bigger[:pos] = out[:pos]
+            out = bigger
+        # The first byte LZMA's encoder writes is always 0: dropped (the decoder knows it).
+        out[pos : end - 1] = out[pos + 1 : end].copy()
+        end -= 1
+        while end > pos and out[end - 1] == 0:
+            end -= 1  # the decoder reads zeros beyond a block's end
+        if end == pos:
+            out[pos] = 0
+            end = pos + 1
+        lengths[b - lo] = end - pos
+        pos = end
+    return out[:pos].copy(), lengths
+
+
+@njit(nogil=True, cache=True)
+def decode_span(data, starts, lengths, planes, blocks, flat, lo, hi):
+    """Decode blocks ``lo .. hi - 1`` into ``flat`` (zeros where a block's length is 0).
+
+    ``data[starts[b] : starts[b] + lengths[b]]`` holds block ``b``.  Returns the number of
+    blocks found corrupt.
+    """
+    models = np.empty(CONTEXTS, dtype=np.int32)
+    scratch = np.empty(_scratch_size(blocks, lo, hi), dtype=np.int64)
+    flags = np.zeros(_flags_size(blocks, lo, hi), dtype=np.int64)
+    bad = 0
+    for b in range(lo, hi):
+        if lengths[b] == 0:
+            continue
+        _fresh_models(models)
+        bad += _decode_block(
+            data, starts[b], starts[b] + lengths[b], flat, planes, blocks[b], models, scratch, flags
+        )
+    return bad
+
+
+@njit(nogil=True, cache=True)
+def write_varints(values):
+    """Unsigned LEB128 of each value (7 bits a byte, low first), concatenated."""
+    out = np.empty(values.size * 10, dtype=np.uint8)
+    pos = 0
+    for k in range(values.size):
+        v = values[k]
+        while v >= 0x80:
+            out[pos] = (v & 0x7F) | 0x80
+            v >>= 7
+            pos += 1
+        out[pos] = v
+        pos += 1
+    return out[:pos].copy()
+
+
+@njit(nogil=True, cache=True)
+def read_varints(data, count, limit):
+    """``count`` LEB128 values from the start of ``data``; each below ``limit``.
+
+    Returns ``(values, bytes read)``, or bytes read ``-1`` when the table is cut short, a value
+    has more than 5 bytes, or is ``limit`` or more.
+    """
+    values = np.zeros(count, dtype=np.int64)
+    pos = 0
+    for k in range(count):
+        v = np.int64(0)
+        shift = 0
+        while True:
+            if pos >= data.size or shift > 28:
+                return values, -1
+            byte = np.int64(data[pos])
+            pos += 1
+            v |= (byte & 0x7F) << shift
+            shift += 7
+            if byte < 0x80:
+                break
+        if v >= limit:
+            return values, -1
+        values[k] = v
+    return values, pos
