@@ -904,7 +904,10 @@ def encode_image(
     ----------
     image : array_like
         ``(H, W)`` grey or ``(H, W, C)`` with ``C`` from 1 to 4 (grey, grey + alpha, RGB, RGBA);
-        ``uint8``, ``uint16`` or float.
+        ``uint8``, ``uint16`` or float, any byte order and layout.  Any finite float works,
+        subnormals to ``±1.7e308`` (coded in an exactly scaled domain, the header's
+        ``scale``).  An alpha channel that decodes exactly, as an opaque one always does, is
+        left out of ``quality`` and of the recorded PSNR, which are then the colour channels'.
     wavelet : str
         The wavelet for lossy coding (``"bspline2"``, the paper's, by default).
     level : int, optional
@@ -1054,7 +1057,8 @@ def encode_curve(
     Parameters
     ----------
     points : array_like
-        The points in order, any ``n >= 1`` and ``d >= 1``.  The curve is extended at its end to
+        The points in order, any ``n >= 1`` and ``d >= 1``, any finite values (huge or tiny
+        floats are coded in an exactly scaled domain).  The curve is extended at its end to
         a length that fits (``wavecore.pad_to_fit``: repeated last point when open, a straight
         blend back to the first point when closed); the decoder gives back exactly ``n`` points.
     closed : bool, optional
@@ -1137,6 +1141,7 @@ def encode_surface(
     ----------
     grid : array_like
         The grid; each of the two grid axes is padded to a length that fits and cropped again.
+        Any finite values (huge or tiny floats are coded in an exactly scaled domain).
     closed : pair of bool, optional
         Per grid axis, periodic (``True``, e.g. the circles of a surface of revolution) or open
         (the default).

@@ -158,3 +158,30 @@ async def test_an_opaque_rgba_upload_reports_its_colour_psnr(
     header = float(r.headers["x-wavecore-psnr"])
     assert rgb_psnr >= 35 and header == pytest.approx(rgb_psnr, abs=5e-3)
     assert wavecore.inspect(r.content)["psnr"] == pytest.approx(header, abs=5e-3)
+
+
+@pytest.mark.parametrize(
+    ("dtype", "magnitude"), [(">f8", 1.0), (">f8", 1e300), (">i2", 1000.0), (">u2", 1000.0)]
+)
+async def test_a_big_endian_or_huge_npy_surface_is_encoded(
+    make_client: Callable[..., httpx.AsyncClient], dtype: str, magnitude: float
+) -> None:
+    """Issue 10: a big-endian ``.npy`` upload was a numba TypingError (500), values from 1e155
+    an OverflowError (500)."""
+    u, v = np.meshgrid(np.linspace(0, 1, 20), np.linspace(0, 1, 18), indexing="ij")
+    grid = (np.abs(np.sin(3 * u) * np.cos(2 * v)) * magnitude).astype(dtype)
+    out = io.BytesIO()
+    np.save(out, grid)
+    async with make_client() as client:
+        r = await client.post(
+            "/v1/surfaces/encode",
+            files={"file": ("s.npy", out.getvalue(), "application/x-npy")},
+            data={"quality": "40"},
+        )
+    assert r.status_code == 200, r.text
+    decoded = wavecore.decode(r.content)
+    assert decoded.shape == grid.shape and decoded.dtype.isnative
+    scale = float(np.max(np.abs(grid.astype(np.float64))))
+    error = (decoded.astype(np.float64) - grid.astype(np.float64)) / scale
+    assert np.all(np.isfinite(decoded.astype(np.float64)))
+    assert float(np.max(np.abs(error))) < 0.1
