@@ -118,7 +118,7 @@ def _check_declared_size(info: dict[str, Any], settings: Settings) -> None:
         raise Problem("bundle-too-large", msg)
 
 
-def _reconstruct(
+def reconstruct_job(
     bundle: bytes,
     keep: float | None,
     level: int,
@@ -194,12 +194,12 @@ async def reconstruct(
         keep, level, format = params.keep, params.level, params.format
     accept = request.headers.get("accept", "")
     body, media_type, headers = await run_work(
-        request, _reconstruct, bundle, keep, level, format, accept, settings_of(request)
+        request, reconstruct_job, bundle, keep, level, format, accept, settings_of(request)
     )
     return Response(body, media_type=media_type, headers=headers)
 
 
-def _inspect(bundle: bytes) -> Any:
+def inspect_job(bundle: bytes) -> Any:
     return jsonable(wavecore.inspect(bundle))
 
 
@@ -214,5 +214,5 @@ async def inspect(request: Request) -> JSONResponse:
     largest error, total and header bytes, and per chunk (coarse to fine) its level, subband
     shapes and bytes.  Non-finite numbers are given as strings (`"inf"`)."""
     bundle, _ = await _read_bundle(request)
-    info = await run_work(request, _inspect, bundle)
+    info = await run_work(request, inspect_job, bundle)
     return JSONResponse(info)
