@@ -34,6 +34,8 @@ from __future__ import annotations
 import asyncio
 import atexit
 import contextlib
+import ctypes
+import gc
 import io
 import logging
 import multiprocessing
@@ -100,6 +102,17 @@ def _worker_pid(pause: float) -> int:
     return os.getpid()
 
 
+def _give_back_memory() -> None:
+    """Return the failed job's freed memory to the system, so the worker idles small again.
+
+    After large frees glibc raises its mmap threshold, so the job's last big arrays came from
+    the heap, which ``malloc_trim`` gives back.
+    """
+    gc.collect()
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+
+
 class JobProblem(Exception):
     """A :class:`~service.errors.Problem` raised in a worker, in a form that pickles."""
 
@@ -111,19 +124,32 @@ class JobProblem(Exception):
 
 
 def _run_job(fn: Callable[..., T], args: tuple[Any, ...], kwargs: dict[str, Any]) -> T:
-    """Run ``fn`` in a worker; exceptions come back as ones that survive the pickle."""
+    """Run ``fn`` in a worker; exceptions come back as ones that survive the pickle.
+
+    The exception is raised again outside the ``except`` block, stripped of its traceback
+    and context: pebble keeps the last result until the next job, and a traceback would keep
+    the failed job's frames, and so its arrays, alive in the idle worker.
+    """
     try:
         return fn(*args, **kwargs)
-    except Problem as exc:
-        raise JobProblem(exc.kind, exc.detail, exc.headers, exc.errors) from None
-    except MemoryError:
-        raise MemoryError("the job ran out of memory") from None
     except Exception as exc:
-        try:  # an exception whose __init__ takes other arguments cannot be re-created
-            pickle.loads(pickle.dumps(exc))
-        except Exception:
-            raise RuntimeError(f"{type(exc).__name__}: {exc}") from None
-        raise
+        error = _sendable_error(exc)
+    if isinstance(error, MemoryError):
+        _give_back_memory()
+    raise error
+
+
+def _sendable_error(exc: Exception) -> Exception:
+    if isinstance(exc, Problem):
+        return JobProblem(exc.kind, exc.detail, exc.headers, exc.errors)
+    if isinstance(exc, MemoryError):
+        return MemoryError("the job ran out of memory")
+    try:  # an exception whose __init__ takes other arguments cannot be re-created
+        pickle.loads(pickle.dumps(exc))
+    except Exception:
+        return RuntimeError(f"{type(exc).__name__}: {exc}")
+    exc.__traceback__ = exc.__context__ = exc.__cause__ = None
+    return exc
 
 
 # --- in the server process ----------------------------------------------------------------

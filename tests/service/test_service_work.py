@@ -114,6 +114,33 @@ async def test_memory_error_in_a_worker_gives_a_413() -> None:
     slot.release()
 
 
+def _rss_mib(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
+
+
+@pytest.mark.slow
+async def test_a_worker_over_its_memory_cap_gives_a_413_and_shrinks_back(
+    tmp_path: Path,
+) -> None:
+    """``WAVECORE_WORKER_MEMORY_BYTES`` caps each worker's address space (RLIMIT_AS)."""
+    pool = WorkPool(Settings(concurrency=1, worker_memory_bytes=1 << 30))
+    slot = pool.admit()
+    assert slot is not None
+    pid_file = tmp_path / "pid"
+    assert await pool.run(slot, pool_jobs.allocate, str(pid_file), 128 << 20) == 2  # fits
+    with pytest.raises(Problem) as caught:
+        await pool.run(slot, pool_jobs.allocate, str(pid_file), 2 << 30)
+    assert caught.value.status == 413 and caught.value.kind == "out-of-memory"
+    assert "WAVECORE_WORKER_MEMORY_BYTES" in caught.value.detail
+    pid = int(pid_file.read_text())
+    assert _alive(pid) and _rss_mib(pid) < 512  # the same worker, its memory given back
+    slot.release()
+    pool.processes.stop()
+
+
 async def test_exceptions_cross_back_from_the_workers() -> None:
     pool = WorkPool(Settings())
     slot = pool.admit()
