@@ -15,8 +15,8 @@ within about 0.1 s (SIGTERM, then SIGKILL), so its CPU and memory are freed, and
 starts a fresh worker.  A worker that dies (the kernel's OOM killer, a crash) answers its
 request with a 503 ``worker-lost`` problem; a ``MemoryError`` (a worker's address space is
 capped by ``worker_memory_bytes``) with a 413 ``out-of-memory`` problem.  Workers start warm:
-each imports wavecore and codes a tiny input of every kind, so numba's on-disk cache is loaded
-before the pool reports ready.
+they are forked from a fork server that has imported the service and coded a tiny input of
+every kind (numba's on-disk cache loaded), and the pool reports ready once each has answered.
 
 Why processes rather than cooperative checks in threads: the codec holds the GIL in its
 entropy stage, so threads code on about one core; and a check between stages can stop a job
@@ -71,8 +71,12 @@ WARM_TIMEOUT = 300.0
 # --- in the worker processes --------------------------------------------------------------
 
 
+_warm = False  # set by warm_up; a worker forked from a warm fork server inherits it
+
+
 def warm_up() -> None:
     """Code a tiny input of each kind, so that every compiled kernel is loaded from the cache."""
+    global _warm
     rng = np.random.default_rng(0)
     rgb = rng.integers(0, 256, (64, 64, 3), dtype=np.uint8)
     grey = rgb[:, :, 0]
@@ -88,13 +92,15 @@ def warm_up() -> None:
         wavecore.decode(bundle)
         wavecore.decode(bundle, keep=0.5)
         wavecore.inspect(bundle)
+    _warm = True
 
 
 def _start_worker(memory_bytes: int) -> None:
-    """A worker's initializer: cap its address space, then warm up."""
+    """A worker's initializer: cap its address space, then warm up (unless forked warm)."""
     if memory_bytes > 0:
         resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
-    warm_up()
+    if not _warm:
+        warm_up()
 
 
 def _worker_pid(pause: float) -> int:
@@ -205,10 +211,10 @@ class _SharedPools:
 
 def _context() -> Any:
     # forkserver: workers are forked from a clean single-threaded server process (forking
-    # uvicorn itself, with its threads, is unsafe), which has already imported the service,
-    # so a replacement worker starts in well under a second of import time.
+    # uvicorn itself, with its threads, is unsafe), which has imported the service and warmed
+    # the kernels (service.forkserver_warm), so every worker, a replacement too, starts warm.
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["wavecore", "service.app"])
+    ctx.set_forkserver_preload(["service.app", "service.forkserver_warm"])
     return ctx
 
 
