@@ -2,8 +2,8 @@
 
 Intake.  A ``/v1/`` request's body is read in full first, within ``body_timeout`` seconds of
 its arrival (else a 408 ``body-timeout`` problem), without holding a work slot: slow bodies
-cannot starve the server.  The bytes of bodies being read are bounded in all by
-``capacity × max_upload_bytes`` (past that: 503 at once).
+cannot starve the server.  Bodies over 1 MiB are spooled to disk.  The bytes of bodies read
+and not yet answered are bounded in all by ``capacity × max_upload_bytes`` (past that: 503).
 
 Admission.  With its body in, the request takes one of ``concurrency + queue_size`` slots, or
 gets an immediate 503 with ``Retry-After``.  The slot is held until the response is sent and
@@ -49,7 +49,7 @@ from collections.abc import Callable
 from concurrent.futures import CancelledError, Future
 from concurrent.futures import TimeoutError as FutureTimeout
 from concurrent.futures.process import BrokenProcessPool
-from typing import Any, TypeVar
+from typing import IO, Any, TypeVar
 
 import numpy as np
 from pebble import ProcessExpired, ProcessPool
@@ -66,6 +66,9 @@ log = logging.getLogger("service")
 
 # How long start-up waits for every worker to report warm before it goes on regardless.
 WARM_TIMEOUT = 300.0
+# A body is kept in memory up to this size while it arrives and waits, then on disk (/tmp),
+# as Starlette does with uploads; it is replayed to the route in pieces of this size.
+SPOOL_BYTES = 1 << 20
 
 
 # --- in the worker processes --------------------------------------------------------------
@@ -390,61 +393,64 @@ class AdmissionMiddleware:
             await self.app(scope, receive, send)
             return
         settings = self.pool.settings
-        reserved = 0
-        try:
+        size = 0
+        with tempfile.SpooledTemporaryFile(max_size=SPOOL_BYTES) as body:
             try:
-                async with asyncio.timeout(settings.body_timeout):
-                    body, reserved = await self._read_body(receive)
-            except TimeoutError:
-                detail = (
-                    f"the request body did not arrive in full within {settings.body_timeout:g} s "
-                    "(WAVECORE_BODY_TIMEOUT)"
-                )
-                headers = {"Connection": "close"}
-                await send_problem(scope, send, Problem("body-timeout", detail, headers=headers))
-                return
-            except BodyTooLarge as exc:
-                detail = f"{exc.detail} (WAVECORE_MAX_UPLOAD_BYTES)"
-                await send_problem(scope, send, Problem("body-too-large", detail))
-                return
-            except _ClientGone:
-                log.info("the client left before sending its whole body: %s", scope["path"])
-                return
-            except _IntakeFull:
-                detail = "too many request bodies are arriving at once; retry shortly"
-                headers = {"Retry-After": str(settings.retry_after)}
-                await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
-                return
-            slot = self.pool.admit()
-            if slot is None:
-                detail = (
-                    f"all {self.pool.capacity} request slots are taken "
-                    "(WAVECORE_CONCURRENCY + WAVECORE_QUEUE_SIZE); retry shortly"
-                )
-                headers = {"Retry-After": str(settings.retry_after)}
-                await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
-                return
-            scope.setdefault("state", {})["work_slot"] = slot
-            replayed = False
+                try:
+                    async with asyncio.timeout(settings.body_timeout):
+                        size = await self._read_body(receive, body)
+                except TimeoutError:
+                    detail = (
+                        "the request body did not arrive in full within "
+                        f"{settings.body_timeout:g} s (WAVECORE_BODY_TIMEOUT)"
+                    )
+                    late = Problem("body-timeout", detail, headers={"Connection": "close"})
+                    await send_problem(scope, send, late)
+                    return
+                except BodyTooLarge as exc:
+                    detail = f"{exc.detail} (WAVECORE_MAX_UPLOAD_BYTES)"
+                    await send_problem(scope, send, Problem("body-too-large", detail))
+                    return
+                except _ClientGone:
+                    log.info("the client left before sending its whole body: %s", scope["path"])
+                    return
+                except _IntakeFull:
+                    detail = "too many request bodies are arriving at once; retry shortly"
+                    headers = {"Retry-After": str(settings.retry_after)}
+                    await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
+                    return
+                slot = self.pool.admit()
+                if slot is None:
+                    detail = (
+                        f"all {self.pool.capacity} request slots are taken "
+                        "(WAVECORE_CONCURRENCY + WAVECORE_QUEUE_SIZE); retry shortly"
+                    )
+                    headers = {"Retry-After": str(settings.retry_after)}
+                    await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
+                    return
+                scope.setdefault("state", {})["work_slot"] = slot
+                body.seek(0)
+                replayed = False
 
-            async def replay() -> Message:
-                nonlocal replayed
-                if not replayed:
-                    replayed = True
-                    return {"type": "http.request", "body": body, "more_body": False}
-                return await receive()  # after the body: only the disconnect is left
+                async def replay() -> Message:
+                    # The body again, in pieces of at most SPOOL_BYTES, as a client would send it.
+                    nonlocal replayed
+                    if not replayed:
+                        chunk = body.read(SPOOL_BYTES)
+                        replayed = body.tell() >= size
+                        return {"type": "http.request", "body": chunk, "more_body": not replayed}
+                    return await receive()  # after the body: only the disconnect is left
 
-            try:
-                await self.app(scope, replay, send)
+                try:
+                    await self.app(scope, replay, send)
+                finally:
+                    slot.release()
             finally:
-                slot.release()
-        finally:
-            self.pool.intake_bytes -= reserved
+                self.pool.intake_bytes -= size
 
-    async def _read_body(self, receive: Receive) -> tuple[bytes, int]:
-        """The whole body, and the bytes it reserved of the intake budget."""
-        chunks: list[bytes] = []
-        reserved = 0
+    async def _read_body(self, receive: Receive, body: IO[bytes]) -> int:
+        """Read the whole body into ``body``; its size, reserved of the intake budget."""
+        size = 0
         try:
             while True:
                 message = await receive()
@@ -455,12 +461,12 @@ class AdmissionMiddleware:
                     if self.pool.intake_bytes + len(chunk) > self.pool.intake_budget:
                         raise _IntakeFull
                     self.pool.intake_bytes += len(chunk)
-                    reserved += len(chunk)
-                    chunks.append(chunk)
+                    size += len(chunk)
+                    body.write(chunk)
                 if not message.get("more_body", False):
-                    return b"".join(chunks), reserved
+                    return size
         except BaseException:
-            self.pool.intake_bytes -= reserved
+            self.pool.intake_bytes -= size
             raise
 
 

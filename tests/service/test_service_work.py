@@ -229,6 +229,24 @@ async def test_slow_bodies_hold_no_slot() -> None:
     await asyncio.gather(*stalled, return_exceptions=True)
 
 
+async def test_a_body_over_the_spool_size_arrives_whole() -> None:
+    """Bodies over 1 MiB wait on disk and are replayed in pieces: the route sees all of it."""
+    import httpx
+    import numpy as np
+
+    noise = np.random.default_rng(5).integers(0, 256, (600, 800, 3), dtype=np.uint8)
+    png = image_file(noise)
+    assert len(png) > 1 << 20
+    app = create_app(Settings())
+    transport = httpx.ASGITransport(app=app)
+    async with httpx.AsyncClient(transport=transport, base_url="http://testserver") as client:
+        files = {"file": ("noise.png", png, "image/png")}
+        r = await client.post("/v1/images/encode", files=files, data={"keep": "0.05"})
+    assert r.status_code == 200, r.text
+    assert r.headers["x-wavecore-shape"] == "600x800x3"
+    assert app.state.pool.in_use == 0 and app.state.pool.intake_bytes == 0
+
+
 def test_concurrency_reads_the_new_variable_and_the_old_spelling(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
