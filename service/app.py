@@ -57,7 +57,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
-        log = logging.getLogger("service")
+        # uvicorn's own lifecycle logger, so that the lines appear beside "Waiting for
+        # application startup." with uvicorn's log configuration.
+        log = logging.getLogger("uvicorn.error")
         log.info("starting %d warm worker processes", settings.concurrency)
         began = time.monotonic()
         await asyncio.to_thread(pool.start)

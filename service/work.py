@@ -2,8 +2,8 @@
 
 Intake.  A ``/v1/`` request's body is read in full first, within ``body_timeout`` seconds of
 its arrival (else a 408 ``body-timeout`` problem), without holding a work slot: slow bodies
-cannot starve the server.  The bytes of bodies being read are bounded in all by
-``capacity × max_upload_bytes`` (past that: 503 at once).
+cannot starve the server.  Bodies over 1 MiB are spooled to disk.  The bytes of bodies read
+and not yet answered are bounded in all by ``capacity × max_upload_bytes`` (past that: 503).
 
 Admission.  With its body in, the request takes one of ``concurrency + queue_size`` slots, or
 gets an immediate 503 with ``Retry-After``.  The slot is held until the response is sent and
@@ -15,8 +15,8 @@ within about 0.1 s (SIGTERM, then SIGKILL), so its CPU and memory are freed, and
 starts a fresh worker.  A worker that dies (the kernel's OOM killer, a crash) answers its
 request with a 503 ``worker-lost`` problem; a ``MemoryError`` (a worker's address space is
 capped by ``worker_memory_bytes``) with a 413 ``out-of-memory`` problem.  Workers start warm:
-each imports wavecore and codes a tiny input of every kind, so numba's on-disk cache is loaded
-before the pool reports ready.
+they are forked from a fork server that has imported the service and coded a tiny input of
+every kind (numba's on-disk cache loaded), and the pool reports ready once each has answered.
 
 Why processes rather than cooperative checks in threads: the codec holds the GIL in its
 entropy stage, so threads code on about one core; and a check between stages can stop a job
@@ -34,6 +34,8 @@ from __future__ import annotations
 import asyncio
 import atexit
 import contextlib
+import ctypes
+import gc
 import io
 import logging
 import multiprocessing
@@ -47,7 +49,7 @@ from collections.abc import Callable
 from concurrent.futures import CancelledError, Future
 from concurrent.futures import TimeoutError as FutureTimeout
 from concurrent.futures.process import BrokenProcessPool
-from typing import Any, TypeVar
+from typing import IO, Any, TypeVar
 
 import numpy as np
 from pebble import ProcessExpired, ProcessPool
@@ -64,13 +66,20 @@ log = logging.getLogger("service")
 
 # How long start-up waits for every worker to report warm before it goes on regardless.
 WARM_TIMEOUT = 300.0
+# A body is kept in memory up to this size while it arrives and waits, then on disk (/tmp),
+# as Starlette does with uploads; it is replayed to the route in pieces of this size.
+SPOOL_BYTES = 1 << 20
 
 
 # --- in the worker processes --------------------------------------------------------------
 
 
+_warm = False  # set by warm_up; a worker forked from a warm fork server inherits it
+
+
 def warm_up() -> None:
     """Code a tiny input of each kind, so that every compiled kernel is loaded from the cache."""
+    global _warm
     rng = np.random.default_rng(0)
     rgb = rng.integers(0, 256, (64, 64, 3), dtype=np.uint8)
     grey = rgb[:, :, 0]
@@ -86,18 +95,31 @@ def warm_up() -> None:
         wavecore.decode(bundle)
         wavecore.decode(bundle, keep=0.5)
         wavecore.inspect(bundle)
+    _warm = True
 
 
 def _start_worker(memory_bytes: int) -> None:
-    """A worker's initializer: cap its address space, then warm up."""
+    """A worker's initializer: cap its address space, then warm up (unless forked warm)."""
     if memory_bytes > 0:
         resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
-    warm_up()
+    if not _warm:
+        warm_up()
 
 
 def _worker_pid(pause: float) -> int:
     time.sleep(pause)
     return os.getpid()
+
+
+def _give_back_memory() -> None:
+    """Return the failed job's freed memory to the system, so the worker idles small again.
+
+    After large frees glibc raises its mmap threshold, so the job's last big arrays came from
+    the heap, which ``malloc_trim`` gives back.
+    """
+    gc.collect()
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
 
 
 class JobProblem(Exception):
@@ -111,19 +133,32 @@ class JobProblem(Exception):
 
 
 def _run_job(fn: Callable[..., T], args: tuple[Any, ...], kwargs: dict[str, Any]) -> T:
-    """Run ``fn`` in a worker; exceptions come back as ones that survive the pickle."""
+    """Run ``fn`` in a worker; exceptions come back as ones that survive the pickle.
+
+    The exception is raised again outside the ``except`` block, stripped of its traceback
+    and context: pebble keeps the last result until the next job, and a traceback would keep
+    the failed job's frames, and so its arrays, alive in the idle worker.
+    """
     try:
         return fn(*args, **kwargs)
-    except Problem as exc:
-        raise JobProblem(exc.kind, exc.detail, exc.headers, exc.errors) from None
-    except MemoryError:
-        raise MemoryError("the job ran out of memory") from None
     except Exception as exc:
-        try:  # an exception whose __init__ takes other arguments cannot be re-created
-            pickle.loads(pickle.dumps(exc))
-        except Exception:
-            raise RuntimeError(f"{type(exc).__name__}: {exc}") from None
-        raise
+        error = _sendable_error(exc)
+    if isinstance(error, MemoryError):
+        _give_back_memory()
+    raise error
+
+
+def _sendable_error(exc: Exception) -> Exception:
+    if isinstance(exc, Problem):
+        return JobProblem(exc.kind, exc.detail, exc.headers, exc.errors)
+    if isinstance(exc, MemoryError):
+        return MemoryError("the job ran out of memory")
+    try:  # an exception whose __init__ takes other arguments cannot be re-created
+        pickle.loads(pickle.dumps(exc))
+    except Exception:
+        return RuntimeError(f"{type(exc).__name__}: {exc}")
+    exc.__traceback__ = exc.__context__ = exc.__cause__ = None
+    return exc
 
 
 # --- in the server process ----------------------------------------------------------------
@@ -179,10 +214,10 @@ class _SharedPools:
 
 def _context() -> Any:
     # forkserver: workers are forked from a clean single-threaded server process (forking
-    # uvicorn itself, with its threads, is unsafe), which has already imported the service,
-    # so a replacement worker starts in well under a second of import time.
+    # uvicorn itself, with its threads, is unsafe), which has imported the service and warmed
+    # the kernels (service.forkserver_warm), so every worker, a replacement too, starts warm.
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["wavecore", "service.app"])
+    ctx.set_forkserver_preload(["service.app", "service.forkserver_warm"])
     return ctx
 
 
@@ -358,61 +393,64 @@ class AdmissionMiddleware:
             await self.app(scope, receive, send)
             return
         settings = self.pool.settings
-        reserved = 0
-        try:
+        size = 0
+        with tempfile.SpooledTemporaryFile(max_size=SPOOL_BYTES) as body:
             try:
-                async with asyncio.timeout(settings.body_timeout):
-                    body, reserved = await self._read_body(receive)
-            except TimeoutError:
-                detail = (
-                    f"the request body did not arrive in full within {settings.body_timeout:g} s "
-                    "(WAVECORE_BODY_TIMEOUT)"
-                )
-                headers = {"Connection": "close"}
-                await send_problem(scope, send, Problem("body-timeout", detail, headers=headers))
-                return
-            except BodyTooLarge as exc:
-                detail = f"{exc.detail} (WAVECORE_MAX_UPLOAD_BYTES)"
-                await send_problem(scope, send, Problem("body-too-large", detail))
-                return
-            except _ClientGone:
-                log.info("the client left before sending its whole body: %s", scope["path"])
-                return
-            except _IntakeFull:
-                detail = "too many request bodies are arriving at once; retry shortly"
-                headers = {"Retry-After": str(settings.retry_after)}
-                await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
-                return
-            slot = self.pool.admit()
-            if slot is None:
-                detail = (
-                    f"all {self.pool.capacity} request slots are taken "
-                    "(WAVECORE_CONCURRENCY + WAVECORE_QUEUE_SIZE); retry shortly"
-                )
-                headers = {"Retry-After": str(settings.retry_after)}
-                await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
-                return
-            scope.setdefault("state", {})["work_slot"] = slot
-            replayed = False
+                try:
+                    async with asyncio.timeout(settings.body_timeout):
+                        size = await self._read_body(receive, body)
+                except TimeoutError:
+                    detail = (
+                        "the request body did not arrive in full within "
+                        f"{settings.body_timeout:g} s (WAVECORE_BODY_TIMEOUT)"
+                    )
+                    late = Problem("body-timeout", detail, headers={"Connection": "close"})
+                    await send_problem(scope, send, late)
+                    return
+                except BodyTooLarge as exc:
+                    detail = f"{exc.detail} (WAVECORE_MAX_UPLOAD_BYTES)"
+                    await send_problem(scope, send, Problem("body-too-large", detail))
+                    return
+                except _ClientGone:
+                    log.info("the client left before sending its whole body: %s", scope["path"])
+                    return
+                except _IntakeFull:
+                    detail = "too many request bodies are arriving at once; retry shortly"
+                    headers = {"Retry-After": str(settings.retry_after)}
+                    await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
+                    return
+                slot = self.pool.admit()
+                if slot is None:
+                    detail = (
+                        f"all {self.pool.capacity} request slots are taken "
+                        "(WAVECORE_CONCURRENCY + WAVECORE_QUEUE_SIZE); retry shortly"
+                    )
+                    headers = {"Retry-After": str(settings.retry_after)}
+                    await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
+                    return
+                scope.setdefault("state", {})["work_slot"] = slot
+                body.seek(0)
+                replayed = False
 
-            async def replay() -> Message:
-                nonlocal replayed
-                if not replayed:
-                    replayed = True
-                    return {"type": "http.request", "body": body, "more_body": False}
-                return await receive()  # after the body: only the disconnect is left
+                async def replay() -> Message:
+                    # The body again, in pieces of at most SPOOL_BYTES, as a client would send it.
+                    nonlocal replayed
+                    if not replayed:
+                        chunk = body.read(SPOOL_BYTES)
+                        replayed = body.tell() >= size
+                        return {"type": "http.request", "body": chunk, "more_body": not replayed}
+                    return await receive()  # after the body: only the disconnect is left
 
-            try:
-                await self.app(scope, replay, send)
+                try:
+                    await self.app(scope, replay, send)
+                finally:
+                    slot.release()
             finally:
-                slot.release()
-        finally:
-            self.pool.intake_bytes -= reserved
+                self.pool.intake_bytes -= size
 
-    async def _read_body(self, receive: Receive) -> tuple[bytes, int]:
-        """The whole body, and the bytes it reserved of the intake budget."""
-        chunks: list[bytes] = []
-        reserved = 0
+    async def _read_body(self, receive: Receive, body: IO[bytes]) -> int:
+        """Read the whole body into ``body``; its size, reserved of the intake budget."""
+        size = 0
         try:
             while True:
                 message = await receive()
@@ -423,12 +461,12 @@ class AdmissionMiddleware:
                     if self.pool.intake_bytes + len(chunk) > self.pool.intake_budget:
                         raise _IntakeFull
                     self.pool.intake_bytes += len(chunk)
-                    reserved += len(chunk)
-                    chunks.append(chunk)
+                    size += len(chunk)
+                    body.write(chunk)
                 if not message.get("more_body", False):
-                    return b"".join(chunks), reserved
+                    return size
         except BaseException:
-            self.pool.intake_bytes -= reserved
+            self.pool.intake_bytes -= size
             raise
 
 

@@ -114,6 +114,33 @@ async def test_memory_error_in_a_worker_gives_a_413() -> None:
     slot.release()
 
 
+def _rss_mib(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
+
+
+@pytest.mark.slow
+async def test_a_worker_over_its_memory_cap_gives_a_413_and_shrinks_back(
+    tmp_path: Path,
+) -> None:
+    """``WAVECORE_WORKER_MEMORY_BYTES`` caps each worker's address space (RLIMIT_AS)."""
+    pool = WorkPool(Settings(concurrency=1, worker_memory_bytes=1 << 30))
+    slot = pool.admit()
+    assert slot is not None
+    pid_file = tmp_path / "pid"
+    assert await pool.run(slot, pool_jobs.allocate, str(pid_file), 128 << 20) == 2  # fits
+    with pytest.raises(Problem) as caught:
+        await pool.run(slot, pool_jobs.allocate, str(pid_file), 2 << 30)
+    assert caught.value.status == 413 and caught.value.kind == "out-of-memory"
+    assert "WAVECORE_WORKER_MEMORY_BYTES" in caught.value.detail
+    pid = int(pid_file.read_text())
+    assert _alive(pid) and _rss_mib(pid) < 512  # the same worker, its memory given back
+    slot.release()
+    pool.processes.stop()
+
+
 async def test_exceptions_cross_back_from_the_workers() -> None:
     pool = WorkPool(Settings())
     slot = pool.admit()
@@ -200,6 +227,24 @@ async def test_slow_bodies_hold_no_slot() -> None:
     for task in stalled:
         task.cancel()
     await asyncio.gather(*stalled, return_exceptions=True)
+
+
+async def test_a_body_over_the_spool_size_arrives_whole() -> None:
+    """Bodies over 1 MiB wait on disk and are replayed in pieces: the route sees all of it."""
+    import httpx
+    import numpy as np
+
+    noise = np.random.default_rng(5).integers(0, 256, (600, 800, 3), dtype=np.uint8)
+    png = image_file(noise)
+    assert len(png) > 1 << 20
+    app = create_app(Settings())
+    transport = httpx.ASGITransport(app=app)
+    async with httpx.AsyncClient(transport=transport, base_url="http://testserver") as client:
+        files = {"file": ("noise.png", png, "image/png")}
+        r = await client.post("/v1/images/encode", files=files, data={"keep": "0.05"})
+    assert r.status_code == 200, r.text
+    assert r.headers["x-wavecore-shape"] == "600x800x3"
+    assert app.state.pool.in_use == 0 and app.state.pool.intake_bytes == 0
 
 
 def test_concurrency_reads_the_new_variable_and_the_old_spelling(
