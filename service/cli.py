@@ -428,7 +428,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         logging.basicConfig(level=logging.INFO, format="%(levelname)s:     %(message)s")
         log = logging.getLogger("wavecore")
         log.info(
-            "Warming up: compiling the numba kernels (about a minute the first time; "
+            "Warming up: compiling the numba kernels (a minute or two the first time; "
             "loaded from numba's cache in seconds afterwards)"
         )
         seconds = _warm_up()

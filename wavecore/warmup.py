@@ -6,9 +6,9 @@ bundle allows: images in ``uint8``, ``uint16``, ``int16``, ``float32`` and ``flo
 RGB and RGBA, coded lossy (each wavelet; at a quality, a rate and a kept fraction) and
 lossless, curves and surfaces, each decoded whole, with ``keep`` and at a coarser ``level``.
 The kernels are compiled with ``cache=True``, so the machine code lands in numba's on-disk
-cache (next to the sources, or in ``NUMBA_CACHE_DIR``): on a fresh clone this takes about a
-minute on a shared 2-core machine; once cached, a new process loads every kernel in a second
-or two.
+cache (next to the sources, or in ``NUMBA_CACHE_DIR``): on a fresh clone this took 48–87 s on
+a shared 2-core machine (load average 4–6); once cached, the same run takes 8–20 s, most of it
+the codec's own work on the small inputs, not loading (benchmarks/first_run.py measures both).
 """
 
 from __future__ import annotations
@@ -140,7 +140,7 @@ def main() -> None:
     """``python -m wavecore.warmup``: warm up with progress lines on stderr."""
     print(
         "wavecore: compiling the numba kernels into the on-disk cache "
-        "(about a minute the first time, a second or two afterwards)",
+        "(a minute or two the first time, seconds once cached)",
         file=sys.stderr,
         flush=True,
     )

@@ -76,12 +76,16 @@ def test_the_warm_up_fills_a_generic_cpu_cache(tmp_path: Path) -> None:
     assert "warm-up [1/" in run.stderr and "warm-up done" in run.stderr
     assert any(tmp_path.rglob("*.nbc")), "nothing was cached"
     check = (
-        "import time, numpy as np, wavecore; t = time.perf_counter(); "
-        "rgb = np.random.default_rng(0).integers(0, 256, (200, 300, 3), dtype=np.uint8); "
-        "wavecore.decode(wavecore.encode_image(rgb, bpp=1.0)); print(time.perf_counter() - t)"
+        "import time, numpy as np, wavecore\n"
+        "rgb = np.random.default_rng(0).integers(0, 256, (200, 300, 3), dtype=np.uint8)\n"
+        "for _ in range(2):\n"
+        "    t = time.perf_counter()\n"
+        "    wavecore.decode(wavecore.encode_image(rgb, bpp=1.0))\n"
+        "    print(time.perf_counter() - t)\n"
     )
-    first = subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True)
-    assert first.returncode == 0, first.stderr
-    # compiling the codec's kernels takes tens of seconds; loading them from the cache, well
-    # under the 2 s target for the first request even on a busy machine
-    assert float(first.stdout) < 2.0
+    run = subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    first, again = (float(v) for v in run.stdout.split())
+    # Compiling the codec's kernels would add tens of seconds to the first call; loading them
+    # from the cache adds a fraction of one (the bound is loose: the machine may be busy).
+    assert first - again < 1.5, (first, again)
