@@ -90,6 +90,13 @@ def test_the_largest_accepted_level_is_accepted() -> None:
     assert len(padded) <= 2 * 20 + 64
 
 
+def test_dense_matrices_are_refused_beyond_their_bound() -> None:
+    peak, result = _peak_bytes(lambda: wavecore.matrices(10**6))
+    assert isinstance(result, InvalidParameter) and "at most 2048, not 1000000" in str(result)
+    assert peak < 256 << 10
+    assert wavecore.matrices(2048, boundary="closed")[0].shape == (1024, 2048)
+
+
 def test_a_pywavelets_style_positional_level_names_boundary() -> None:
     x = np.zeros(34)
     with pytest.raises(InvalidParameter, match=r"boundary=.*not 3.*level=3"):
@@ -174,7 +181,8 @@ def test_hostile_shapes_succeed_or_raise_a_library_error(
 def test_peak_memory_grows_linearly(name: str, call: Callable[[int], Any]) -> None:
     # 16 times the samples may cost at most about 16 times the memory (20× allows for the
     # fixed part); the old impulse norms took 256 × n floats, the old matrices n log n.
-    call(256)  # warm caches, compile
-    small, _ = _peak_bytes(lambda: call(2048))
-    large, _ = _peak_bytes(lambda: call(16 * 2048))
+    for n in (1024, 16 * 1024):
+        call(n)  # compile, and fill the (small) caches as a second call finds them
+    small, _ = _peak_bytes(lambda: call(1024))
+    large, _ = _peak_bytes(lambda: call(16 * 1024))
     assert large <= 20 * max(small, 1), (name, small, large)

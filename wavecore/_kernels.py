@@ -82,48 +82,73 @@ def _taps(mat, r, p, step, cols, ws):
     return n
 
 
+# The two kernels below unpack the matrices once and spell out the two kinds of rows: a
+# helper taking the matrix tuple per row made them ten times slower (curves, ``inner == 2``).
+
+
 @njit(nogil=True, cache=True)
 def analysis_mid(x, a_mat, b_mat, c, d, outer_lo, outer_hi, row_lo, row_hi):
     """``c = A x`` and ``d = B x`` along the middle axis of ``(outer, n, inner)`` views."""
     inner = x.shape[2]
-    nc = c.shape[1]
-    nd = d.shape[1]
-    cols = np.empty(MAX_TAPS, dtype=np.intp)
-    ws = np.empty(MAX_TAPS, dtype=c.dtype)
-    for r in range(row_lo, row_hi):
-        for half in range(2):
-            if r >= (nc if half == 0 else nd):
-                continue
-            count = _taps(a_mat if half == 0 else b_mat, r, 1, 2, cols, ws)
-            for o in range(outer_lo, outer_hi):
-                out = c[o, r] if half == 0 else d[o, r]
+    for half in range(2):
+        out_band = c if half == 0 else d
+        ptr, idx, w, reg, pat = a_mat if half == 0 else b_mat
+        lo = reg[0]
+        hi = lo + reg[1]
+        col = reg[2]
+        rows = out_band.shape[1]
+        for o in range(outer_lo, outer_hi):
+            for r in range(row_lo, min(row_hi, rows)):
+                out = out_band[o, r]
                 out[:] = 0
-                for k in range(count):
-                    w = ws[k]
-                    src = x[o, cols[k]]
-                    for i in range(inner):
-                        out[i] += w * src[i]
+                if lo <= r < hi:
+                    c0 = col + 2 * (r - lo)
+                    for t in range(pat.shape[1]):
+                        wt = pat[0, t]
+                        if wt != 0:
+                            src = x[o, c0 + t]
+                            for j in range(inner):
+                                out[j] += wt * src[j]
+                else:
+                    k = r if r < lo else r - (hi - lo)
+                    for q in range(ptr[k], ptr[k + 1]):
+                        wt = w[q]
+                        src = x[o, idx[q]]
+                        for j in range(inner):
+                            out[j] += wt * src[j]
 
 
 @njit(nogil=True, cache=True)
 def synthesis_mid(c, d, p_mat, q_mat, f, outer_lo, outer_hi, row_lo, row_hi):
     """``f = P c + Q d`` along the middle axis of ``(outer, n, inner)`` views."""
     inner = f.shape[2]
-    cols = np.empty(MAX_TAPS, dtype=np.intp)
-    ws = np.empty(MAX_TAPS, dtype=f.dtype)
-    for r in range(row_lo, row_hi):
-        for half in range(2):
-            count = _taps(p_mat if half == 0 else q_mat, r, 2, 1, cols, ws)
-            for o in range(outer_lo, outer_hi):
+    for half in range(2):
+        src_band = c if half == 0 else d
+        ptr, idx, w, reg, pat = p_mat if half == 0 else q_mat
+        lo = reg[0]
+        hi = lo + 2 * reg[1]
+        col = reg[2]
+        for o in range(outer_lo, outer_hi):
+            for r in range(row_lo, row_hi):
                 out = f[o, r]
                 if half == 0:
                     out[:] = 0
-                src_band = c if half == 0 else d
-                for k in range(count):
-                    w = ws[k]
-                    src = src_band[o, cols[k]]
-                    for i in range(inner):
-                        out[i] += w * src[i]
+                if lo <= r < hi:
+                    b = (r - lo) >> 1
+                    i = r - lo - 2 * b
+                    for t in range(pat.shape[1]):
+                        wt = pat[i, t]
+                        if wt != 0:
+                            src = src_band[o, col + b + t]
+                            for j in range(inner):
+                                out[j] += wt * src[j]
+                else:
+                    k = r if r < lo else r - (hi - lo)
+                    for q in range(ptr[k], ptr[k + 1]):
+                        wt = w[q]
+                        src = src_band[o, idx[q]]
+                        for j in range(inner):
+                            out[j] += wt * src[j]
 
 
 # --- Rows along the last axis (contiguous), with the regular interior vectorised ---------------

@@ -455,7 +455,11 @@ def check_fine_length(rule: BoundaryRule, m: int, wavelet: str, boundary: str) -
         raise InvalidLength(msg)
 
 
-@lru_cache(maxsize=16)
+#: The longest length :func:`matrices` builds: dense matrices cost m² (2048: 64 MiB for all four).
+MAX_DENSE_LENGTH = 2048
+
+
+@lru_cache(maxsize=4)
 def _step_matrices(bank_name: str, boundary: str, m: int) -> tuple[np.ndarray, ...]:
     bank = get_wavelet(bank_name)
     rule = bank.rule(boundary)
@@ -563,7 +567,7 @@ def matrices(
     ----------
     m : int
         The fine length.  Open ``bspline2`` needs an even ``m >= 8``; closed and Haar any even
-        ``m >= 2``.
+        ``m >= 2``.  At most 2048: the matrices are dense.
     wavelet : str
         A name from :func:`wavelet_names`.
     boundary : {"open", "closed"}
@@ -586,6 +590,12 @@ def matrices(
     bank = get_wavelet(wavelet)
     bank.rule(boundary)
     m = _as_length(m)
+    if m > MAX_DENSE_LENGTH:
+        msg = (
+            f"matrices() builds dense m × m matrices, for checks and teaching: m must be at most "
+            f"{MAX_DENSE_LENGTH}, not {m} (the transform itself takes any length)"
+        )
+        raise InvalidParameter(msg)
     A, B, P, Q = _step_matrices(bank.name, boundary, m)
     return A.copy(), B.copy(), P.copy(), Q.copy()
 

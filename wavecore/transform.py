@@ -39,6 +39,10 @@ from .filters import (
 
 __all__ = ["analysis_step", "as_float_array", "normalize_axis", "synthesis_step", "work_dtype"]
 
+# Up to this many trailing values per sample (a curve's coordinates) a step along a middle axis
+# runs as contiguous rows, one per trailing value, through the vectorised row kernels.
+_FEW_TRAILING = 4
+
 # Below this many output elements a step runs on the calling thread: the hand-off costs more.
 _THREADED_MIN_ELEMENTS = 1 << 18
 
@@ -258,6 +262,16 @@ def analysis_step(
     if x.shape[2] == 1:
         args: tuple[Any, ...] = (x[:, :, 0], mats["A+"], mats["B+"], c[:, :, 0], d[:, :, 0])
         _run_blocks(_kernels.analysis_last, args, x.shape[0], m, x.size, outer_only=True)
+    elif x.shape[2] <= _FEW_TRAILING:
+        # A curve's few coordinates: one contiguous row per coordinate for the vectorised
+        # row kernel (the transposes cost far less than a short inner loop per sample).
+        rows = np.ascontiguousarray(x.transpose(0, 2, 1)).reshape(-1, m)
+        c_rows = np.empty((rows.shape[0], r), dtype=arr.dtype)
+        d_rows = np.empty((rows.shape[0], s), dtype=arr.dtype)
+        args = (rows, mats["A+"], mats["B+"], c_rows, d_rows)
+        _run_blocks(_kernels.analysis_last, args, rows.shape[0], m, x.size, outer_only=True)
+        c[...] = c_rows.reshape(x.shape[0], x.shape[2], r).transpose(0, 2, 1)
+        d[...] = d_rows.reshape(x.shape[0], x.shape[2], s).transpose(0, 2, 1)
     else:
         args = (x, mats["A+"], mats["B+"], c, d)
         _run_blocks(_kernels.analysis_mid, args, x.shape[0], max(r, s), x.size)
@@ -338,6 +352,13 @@ def synthesis_step(
     if f.shape[2] == 1:
         args: tuple[Any, ...] = (cx[:, :, 0], dx[:, :, 0], mats["P+"], mats["Q+"], f[:, :, 0])
         _run_blocks(_kernels.synthesis_last, args, f.shape[0], m, f.size, outer_only=True)
+    elif f.shape[2] <= _FEW_TRAILING:
+        c_rows = np.ascontiguousarray(cx.transpose(0, 2, 1)).reshape(-1, r)
+        d_rows = np.ascontiguousarray(dx.transpose(0, 2, 1)).reshape(-1, s)
+        f_rows = np.empty((c_rows.shape[0], m), dtype=dtype)
+        args = (c_rows, d_rows, mats["P+"], mats["Q+"], f_rows)
+        _run_blocks(_kernels.synthesis_last, args, f_rows.shape[0], m, f.size, outer_only=True)
+        f[...] = f_rows.reshape(f.shape[0], f.shape[2], m).transpose(0, 2, 1)
     else:
         args = (cx, dx, mats["P+"], mats["Q+"], f)
         _run_blocks(_kernels.synthesis_mid, args, f.shape[0], m, f.size)
