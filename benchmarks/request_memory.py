@@ -148,6 +148,7 @@ def _cases() -> dict[str, Case]:
         "curve 10000x3": ("curves/encode", curve_case(10_000, 3), pad(10_000, 8) * 3),
         "curve 10000x1": ("curves/encode", curve_case(10_000, 1), pad(10_000, 8)),
         "transfer 10000x2": ("curves/transfer", transfer_case(10_000, None), 20_000),
+        "transfer 200000x2": ("curves/transfer", transfer_case(200_000, None), 400_000),
         "transfer 10000x2 level 11": (
             "curves/transfer",
             transfer_case(10_000, 11),
