@@ -78,26 +78,6 @@ def parse_model(model: type[BaseModel], data: bytes | dict[str, Any]) -> Any:
         raise validation_problem(exc.errors(include_url=False), prefix=("body",)) from None
 
 
-def as_points(
-    nested: Sequence[Any],
-    name: str,
-    *,
-    ndim: Sequence[int],
-    max_count: int,
-    max_dim: int,
-    point_axes: int = 1,
-) -> np.ndarray:
-    """A rectangular float64 array from nested lists, or a 422 naming what is wrong."""
-    try:
-        arr = np.array(nested, dtype=np.float64)
-    except (ValueError, TypeError):
-        msg = f"{name} is ragged: every row must have the same number of values"
-        raise Problem("invalid-parameter", msg, errors=_err(name, msg)) from None
-    return check_array(
-        arr, name, ndim=ndim, max_count=max_count, max_dim=max_dim, point_axes=point_axes
-    )
-
-
 def check_array(
     arr: np.ndarray,
     name: str,
@@ -169,15 +149,6 @@ def npy_bytes(arr: np.ndarray) -> bytes:
     out = io.BytesIO()
     np.save(out, arr, allow_pickle=False)
     return out.getvalue()
-
-
-def finite_list(arr: np.ndarray) -> list[Any]:
-    """``arr.tolist()``, refusing NaN/inf (a crafted bundle could decode to them)."""
-    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-        msg = "the bundle decodes to NaN or infinite values; ask for format=npy to get them"
-        raise Problem("invalid-bundle", msg)
-    out: list[Any] = arr.tolist()
-    return out
 
 
 def array_answer(kind: str, arr: np.ndarray, field: str, *, origin: str = "the bundle") -> bytes:
