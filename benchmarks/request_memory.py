@@ -5,10 +5,11 @@ the same kind once (so that the compiled kernels are loaded), notes its resident
 the kernel's peak mark (``/proc/self/clear_refs``), then runs the endpoint's job function (what
 the server runs on a worker: parse, cost check, decode, code, answer) and reads the peak
 (``VmHWM``).  It prints the growth in MiB, the samples the cost check counts for that request
-(``service.cost``: the values after padding, times channels or coordinates), and the growth
-per counted sample.  The shapes are the worst kinds (thin images and grids, long curves,
-deep levels) at sizes that finish in minutes on a small machine; the bytes per sample do not
-depend on the size once the basis norms are linear (issue 10).  docs/deploy.md, "Memory per
+(``service.cost``: the values after padding, times channels or coordinates, times 4 for a
+detail transfer), and the growth per counted sample.  The shapes are the worst kinds (thin
+images and grids, long curves, deep levels) at sizes that finish in minutes on a small
+machine; the bytes per sample do not depend on the size once the basis norms are linear
+(issue 10).  docs/deploy.md, "Memory per
 request", is this script's output::
 
     .venv/bin/python benchmarks/request_memory.py            # every case, one process each
@@ -147,11 +148,12 @@ def _cases() -> dict[str, Case]:
         "image 16384x2 (thin)": ("images/encode", image_case(1 << 14, 2, 0), 8 * (1 << 14)),
         "curve 10000x3": ("curves/encode", curve_case(10_000, 3), pad(10_000, 8) * 3),
         "curve 10000x1": ("curves/encode", curve_case(10_000, 1), pad(10_000, 8)),
-        "transfer 10000x2": ("curves/transfer", transfer_case(10_000, None), 20_000),
+        "transfer 10000x2": ("curves/transfer", transfer_case(10_000, None), 4 * 20_000),
+        "transfer 200000x2": ("curves/transfer", transfer_case(200_000, None), 4 * 400_000),
         "transfer 10000x2 level 11": (
             "curves/transfer",
             transfer_case(10_000, 11),
-            wavecore.fitting_length(10_000, 11) * 2,
+            4 * wavecore.fitting_length(10_000, 11) * 2,
         ),
         "surface JSON 1000x1000": ("surfaces/encode", surface_json_case(1000, 1000, 1), 0),
         "surface JSON 2x10000 (thin)": ("surfaces/encode", surface_json_case(2, 10_000, 1), 0),

@@ -31,6 +31,11 @@ from .settings import Settings
 #: for the padding of a large image to a length that fits its levels.
 SAMPLES_PER_PIXEL = 5
 
+#: Working values per coordinate of a detail transfer: the local frames (``d × d`` per point)
+#: and the three reconstructions per level hold about 4 times what a codec pass holds
+#: (benchmarks/request_memory.py: 284 B per coordinate against the codec's 47–63 B).
+TRANSFER_FACTOR = 4
+
 #: The codec's deepest default levels (``codec._MAX_IMAGE_LEVELS`` / ``_MAX_CURVE_LEVELS``).
 DEFAULT_MOST_LEVELS = {"image": 5, "surface": 5, "curve": 8}
 
@@ -139,7 +144,7 @@ def check_transfer(n: int, dims: int, closed: bool, level: int | None, settings:
     be at most ``2 n + 64``.
     """
     if level is None:
-        check(n * dims, f"a curve of {n} points", settings)
+        check(TRANSFER_FACTOR * n * dims, f"transferring the details of {n} points", settings)
         return
     boundary = "closed" if closed else "open"
     bound = 2 * n + 64
@@ -155,7 +160,8 @@ def check_transfer(n: int, dims: int, closed: bool, level: int | None, settings:
         errors = [{"loc": ["body", "level"], "msg": msg, "type": "less_than_equal"}]
         raise Problem("invalid-parameter", msg, errors=errors)
     m = wavecore.fitting_length(n, level, boundary)
-    check(m * dims, f"a curve of {n} points re-sampled to {m} for {level} levels", settings)
+    what = f"transferring the details of {n} points re-sampled to {m} for {level} levels"
+    check(TRANSFER_FACTOR * m * dims, what, settings)
 
 
 def check_bundle(info: dict[str, Any], settings: Settings) -> None:

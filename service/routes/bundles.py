@@ -19,7 +19,7 @@ from .. import cost
 from ..deps import (
     BUNDLE_MEDIA_TYPE,
     NPY_MEDIA_TYPE,
-    finite_list,
+    array_answer,
     jsonable,
     npy_bytes,
     parse_model,
@@ -28,7 +28,7 @@ from ..deps import (
 )
 from ..errors import Problem
 from ..imaging import IMAGE_FORMATS, encode_array
-from ..schemas import GridResult, PointsResult, ReconstructParams
+from ..schemas import PointsResult, ReconstructParams
 from ..settings import Settings
 from ..work import run_work
 
@@ -141,12 +141,8 @@ def reconstruct_job(
         return npy_bytes(arr), NPY_MEDIA_TYPE, headers
     if kind == "image":
         return encode_array(arr, fmt), IMAGE_FORMATS[fmt], headers
-    result: PointsResult | GridResult
-    if kind == "curve":
-        result = PointsResult(shape=list(arr.shape), dtype=str(arr.dtype), points=finite_list(arr))
-    else:
-        result = GridResult(shape=list(arr.shape), dtype=str(arr.dtype), grid=finite_list(arr))
-    return result.model_dump_json().encode(), "application/json", headers
+    field = "points" if kind == "curve" else "grid"  # PointsResult / GridResult
+    return array_answer(kind, arr, field), "application/json", headers
 
 
 @router.post(

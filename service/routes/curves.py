@@ -17,13 +17,14 @@ import wavecore
 from .. import cost
 from ..deps import (
     BUNDLE_MEDIA_TYPE,
+    array_answer,
     check_array,
-    finite_list,
     json_body_openapi,
     problem_responses,
     read_json_bytes,
     settings_of,
 )
+from ..errors import Problem
 from ..intake import parse_json_body
 from ..schemas import (
     CurveEncodeRequest,
@@ -86,10 +87,10 @@ def transfer_job(body: bytes | bytearray, settings: Settings) -> bytes:
     result = np.asarray(
         wavecore.transfer_details(source, base, closed=options.closed, level=options.level)
     )
-    answer = PointsResult(
-        shape=list(result.shape), dtype=str(result.dtype), points=finite_list(result)
-    )
-    return answer.model_dump_json().encode()
+    if result.dtype.kind == "f" and not np.all(np.isfinite(result)):
+        msg = "the transfer gives NaN or infinite values; scale the curves to smaller numbers"
+        raise Problem("invalid-parameter", msg)
+    return array_answer("curve", result, "points")
 
 
 @router.post(
