@@ -1,4 +1,5 @@
-"""64 concurrent clients, in process and against the live server: every one succeeds."""
+"""64 concurrent clients, in process and against the live server: every one succeeds; and
+(slow) 70 clients trickling their bodies do not stop a normal request."""
 
 from __future__ import annotations
 
