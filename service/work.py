@@ -314,8 +314,11 @@ class WorkPool:
             raise Problem(exc.kind, exc.detail, headers=exc.headers, errors=exc.errors) from None
         except MemoryError:
             limit = self.settings.worker_memory_bytes
-            cap = f" of {limit} bytes (WAVECORE_WORKER_MEMORY_BYTES)" if limit else ""
-            msg = f"the request needs more memory than a worker's limit{cap}; send less data"
+            if limit:
+                where = f"a worker's limit of {limit} bytes (WAVECORE_WORKER_MEMORY_BYTES)"
+            else:
+                where = "the worker could get"
+            msg = f"the request needs more memory than {where}; send less data"
             raise Problem("out-of-memory", msg) from None
         except ProcessExpired as exc:
             log.warning("a worker ended during a job (exit code %s)", exc.exitcode)

@@ -229,6 +229,25 @@ async def test_slow_bodies_hold_no_slot() -> None:
     await asyncio.gather(*stalled, return_exceptions=True)
 
 
+async def test_bodies_arriving_at_once_are_bounded_in_bytes() -> None:
+    """Bodies being read hold at most capacity × max_upload_bytes; past that, a quick 503."""
+    import httpx
+
+    app = create_app(Settings(concurrency=1, queue_size=0, max_upload_bytes=100))
+    first = asyncio.create_task(_call_stalling(app, "/v1/curves/encode", b"x" * 70, 100))
+    await asyncio.sleep(0.1)
+    assert app.state.pool.intake_bytes == 70
+    transport = httpx.ASGITransport(app=app)
+    async with httpx.AsyncClient(transport=transport, base_url="http://testserver") as client:
+        r = await client.post("/v1/curves/encode", content=b"y" * 40)
+    assert r.status_code == 503 and "retry-after" in r.headers
+    assert r.json()["type"] == "urn:wavecore:problem:overloaded"
+    assert app.state.pool.intake_bytes == 70  # the refused body gave its bytes back
+    first.cancel()
+    await asyncio.gather(first, return_exceptions=True)
+    assert app.state.pool.intake_bytes == 0
+
+
 async def test_a_body_over_the_spool_size_arrives_whole() -> None:
     """Bodies over 1 MiB wait on disk and are replayed in pieces: the route sees all of it."""
     import httpx
