@@ -431,8 +431,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
             "Warming up: compiling the numba kernels (a minute or two the first time; "
             "loaded from numba's cache in seconds afterwards)"
         )
-        seconds = _warm_up()
-        log.info("Warm-up done in %.1f s", seconds)
+        _warm_up()  # its last line says how long it took
     uvicorn.run(
         f"{__package__}.app:create_app",
         factory=True,
@@ -444,10 +443,10 @@ def cmd_serve(args: argparse.Namespace) -> int:
     return 0
 
 
-def _warm_up() -> float:
+def _warm_up() -> None:
     from wavecore.warmup import warm_up
 
-    return warm_up(stream=sys.stderr)
+    warm_up(stream=sys.stderr)
 
 
 # --------------------------------------------------------------------------------------------

@@ -198,8 +198,8 @@ def test_serve_warms_up_before_it_is_ready_and_answers_the_first_request_quickly
             assert time.monotonic() < deadline, log.read_text()
             time.sleep(0.2)
         text = log.read_text()
-        assert "Warming up" in text and "warm-up [1/" in text and "Warm-up done" in text
-        assert text.index("Warm-up done") < text.index("Application startup complete")
+        assert "Warming up" in text and "warm-up [1/" in text and "warm-up done" in text
+        assert text.index("warm-up done") < text.index("Application startup complete")
         picture = image_file(test_image((512, 512, 3), seed=3))
         start = time.perf_counter()
         r = httpx.post(
