@@ -10,11 +10,12 @@ Coders:
 ``"zlib"``
     The generic baseline: the level's integers as little-endian ``int32``, deflated.
 ``"context"``
-    The default: a context-modelling range coder (``constriction``'s), version 3. Each detail
-    plane starts with a flag per 8 × 8 tile (holds a nonzero value or not); then the flagged
-    tiles' coefficients are coded in three interlaced passes, each magnitude under adaptive
-    counts chosen by its context class (parent, sibling bands, luma, known neighbours), and the
-    signs under their neighbours' signs.  Version 2 (no tile flags) still decodes.
+    The default: context modelling and range coding, version 4 (:mod:`wavecore.blockcoder`):
+    each level is cut into independent 128 × 128 code-blocks (every band and channel of the
+    level in each), coded by a compiled binary range coder with adaptive probabilities, in
+    threads with the GIL released.  Versions 2 and 3 (constriction's range coder, adaptive
+    counts per context class driven from Python; version 3 with a flag per 8 × 8 tile) still
+    decode, by the code below.
 
 The decoder treats its input as hostile: every chunk is checked against the sizes the caller
 declares (``shapes``), decompression is bounded by those sizes, and anything wrong raises
