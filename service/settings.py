@@ -30,9 +30,10 @@ class Settings(BaseSettings):
     The defaults let 64 concurrent clients all succeed on one process: ``concurrency`` jobs
     are worked on at once, each in its own worker process, and up to ``queue_size`` more wait
     for a worker; past that, requests get an immediate 503 with ``Retry-After``.  A request
-    takes its slot only once its whole body has arrived (within ``body_timeout``).  The
-    worst-case memory is about ``(concurrency + queue_size) × max_upload_bytes`` for bodies
-    plus ``concurrency ×`` the working memory of the largest allowed image (docs/deploy.md).
+    takes its slot only once its whole body has arrived (within ``body_timeout``).  Bodies
+    read and not yet answered total at most ``(concurrency + queue_size) × max_upload_bytes``
+    (up to 1 MiB each in memory, the rest on disk); the workers need ``concurrency ×`` the
+    working memory of the largest allowed image (docs/deploy.md).
 
     ``concurrency`` is read from ``WAVECORE_CONCURRENCY``, or from its old spelling
     ``WAVECORE_THREADS`` when that is the only one set (``WAVECORE_THREADS`` is also the
