@@ -7,7 +7,7 @@ import time
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from .errors import BodyTooLarge, Problem, send_problem
+from .errors import CLIENT_CLOSED, BodyTooLarge, Problem, send_problem
 
 #: The methods that get their own label; any other is counted as "other", so that made-up
 #: methods cannot create one time series each (series are never freed).
@@ -110,6 +110,23 @@ class Metrics:
         )
 
 
+def route_label(scope: Scope) -> str:
+    """The path template of the route that served (or would have served) this request.
+
+    A request refused before routing (a client that left while its body was read) is counted
+    under its path when that path is one of the app's documented operations; the label is never
+    the client's raw, unbounded path.
+    """
+    route = getattr(scope.get("route"), "path", None)
+    if route is not None:
+        return str(route)
+    app = scope.get("app")
+    openapi = getattr(app, "openapi", None)
+    if openapi is not None and scope.get("path") in openapi().get("paths", {}):
+        return str(scope["path"])
+    return "unmatched"
+
+
 class MetricsMiddleware:
     """Count every request: route, status, duration, bytes in and out, problems by kind."""
 
@@ -144,7 +161,10 @@ class MetricsMiddleware:
         try:
             await self.app(scope, counting_receive, counting_send)
         finally:
-            route = getattr(scope.get("route"), "path", None) or "unmatched"
+            state = scope.get("state", {})
+            if state.get("client_left") and bytes_out == 0:
+                status = CLIENT_CLOSED
+            route = route_label(scope)
             m = self.metrics
             m.requests.labels(route, method_label(scope["method"]), str(status)).inc()
             m.duration.labels(route).observe(time.perf_counter() - start)

@@ -416,6 +416,7 @@ class AdmissionMiddleware:
                     return
                 except _ClientGone:
                     log.info("the client left before sending its whole body: %s", scope["path"])
+                    scope.setdefault("state", {})["client_left"] = True  # metrics: 499, not 500
                     return
                 except _IntakeFull:
                     detail = "too many request bodies are arriving at once; retry shortly"
