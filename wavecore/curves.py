@@ -417,7 +417,8 @@ def transfer_details(
         curve, so that it closes up).  For ``d = 1`` (a time series) and ``d > 3`` there is no
         natural frame, and ``"local"`` falls back to plain displacements.
     wavelet : str, keyword-only
-        The wavelet.
+        As in :func:`decompose_curve`: ``"bspline2"`` (alias ``"chaikin"``), ``"haar"`` or
+        ``"cdf97"`` (alias ``"jpeg2000"``).
     boundary : {"open", "closed"}, optional, keyword-only
         The same choice as ``closed``, spelled as elsewhere in the library; give either (both
         only when they agree).

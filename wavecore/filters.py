@@ -485,18 +485,48 @@ def _rows_and_columns(rule: BoundaryRule, m: int) -> dict[str, tuple[int, int]]:
 def step_sparse(bank_name: str, boundary: str, m: int) -> tuple[Sparse, Sparse, Sparse, Sparse]:
     """The four step matrices for fine length ``m`` in compressed-row form (cached).
 
-    Built straight from the block form, without a dense matrix, so that large lengths cost
-    memory and time in proportion to ``m``.  It stores every row, so only a few are kept; the
-    transform itself reads :func:`step_compact`.
+    Built from the compact form (:func:`step_compact`) by writing the regular interior out,
+    without a dense matrix and without sorting, so that large lengths cost memory and time in
+    proportion to ``m``.  It stores every row, so only a few are kept; the transform itself
+    reads :func:`step_compact`.
     """
-    bank = get_wavelet(bank_name)
-    rule = bank.rule(boundary)
-    check_fine_length(rule, m, bank.name, boundary)
-    sizes = _rows_and_columns(rule, m)
-    A, B, P, Q = (
-        getattr(rule, name).sparse(*sizes[name], rule.periodic) for name in ("A", "B", "P", "Q")
+    compact = step_compact(bank_name, boundary, m)
+    return tuple(_full_rows(sparse, regular) for sparse, regular in compact)  # type: ignore[return-value]
+
+
+def _full_rows(sparse: Sparse, regular: Regular) -> Sparse:
+    """Every row of a matrix in compact form, in compressed-row form."""
+    if not regular.blocks:
+        return sparse
+    lo = regular.lo
+    head_end = int(sparse.indptr[lo])
+    phase_columns = [np.flatnonzero(regular.pattern[i]) for i in range(regular.p)]
+    per_block = sum(len(c) for c in phase_columns)
+    starts = regular.col + regular.step * np.arange(regular.blocks)
+    columns = np.concatenate([starts[:, None] + c[None, :] for c in phase_columns], axis=1)
+    weights = np.concatenate(
+        [
+            np.broadcast_to(regular.pattern[i, c], (regular.blocks, len(c)))
+            for i, c in enumerate(phase_columns)
+        ],
+        axis=1,
     )
-    return A, B, P, Q
+    counts = np.tile([len(c) for c in phase_columns], regular.blocks)
+    tail_ptr = sparse.indptr[lo:] - head_end
+    middle_end = head_end + regular.blocks * per_block
+    indptr = np.concatenate(
+        [sparse.indptr[: lo + 1], head_end + np.cumsum(counts), middle_end + tail_ptr[1:]]
+    )
+    return Sparse(
+        indptr=indptr.astype(np.intp),
+        indices=np.concatenate(
+            [sparse.indices[:head_end], columns.ravel(), sparse.indices[head_end:]]
+        ).astype(np.intp),
+        weights=np.concatenate(
+            [sparse.weights[:head_end], weights.ravel(), sparse.weights[head_end:]]
+        ),
+        shape=sparse.shape,
+    )
 
 
 @lru_cache(maxsize=1024)
