@@ -148,14 +148,21 @@ def check_transfer(n: int, dims: int, closed: bool, level: int | None, settings:
         return
     boundary = "closed" if closed else "open"
     bound = 2 * n + 64
-    if wavecore.fitting_length(n, level, boundary) > bound:
+
+    def fits(lvl: int) -> bool:
+        # The library refuses a level whose fitting length would pass its own growth limit.
+        try:
+            return wavecore.fitting_length(n, lvl, boundary) <= bound
+        except wavecore.InvalidParameter:
+            return False
+
+    if not fits(level):
         deepest = 0
-        while deepest < 30 and wavecore.fitting_length(n, deepest + 1, boundary) <= bound:
+        while deepest < 30 and fits(deepest + 1):
             deepest += 1
         msg = (
-            f"level {level} is too deep for a source of {n} points: it would re-sample it to "
-            f"{wavecore.fitting_length(n, level, boundary)} points; give a level from 0 to "
-            f"{deepest}"
+            f"level {level} is too deep for a source of {n} points: it would re-sample it past "
+            f"{bound} points; give a level from 0 to {deepest}"
         )
         errors = [{"loc": ["body", "level"], "msg": msg, "type": "less_than_equal"}]
         raise Problem("invalid-parameter", msg, errors=errors)

@@ -14,6 +14,7 @@ import pytest
 from service_helpers import bomb_png, image_file, test_image
 
 import wavecore
+from service.routes import curves as curves_route
 
 pytestmark = pytest.mark.anyio
 
@@ -269,10 +270,12 @@ async def test_made_up_methods_share_one_metrics_label(
 async def test_memory_error_is_a_503_problem(
     make_client: Callable[..., httpx.AsyncClient], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    def out_of_memory(*args: Any, **kwargs: Any) -> bytes:
+    # Jobs run in worker processes (a MemoryError there is the pool's 413 'out-of-memory',
+    # tested in test_service_work.py); this is the server process's own handler.
+    async def out_of_memory(*args: Any, **kwargs: Any) -> bytes:
         raise MemoryError
 
-    monkeypatch.setattr(wavecore, "encode_curve", out_of_memory)
+    monkeypatch.setattr(curves_route, "run_work", out_of_memory)
     async with make_client() as c:
         r = await c.post("/v1/curves/encode", json={"points": [[0.0, 1.0]] * 20})
         body = _check_problem(r, 503, "insufficient-memory")
