@@ -751,7 +751,8 @@ class _Search:
         s, v = self.last
         if self.guide is not None:
             step = min(max(self.guide(s, v), self.low), self.high)
-            return None if step == s else step
+            if step != s:
+                return step  # else the guide is stuck: extrapolate as without it
         exponent = (math.log(self.aim) - math.log(v)) / self.slope
         step = s * math.exp(min(max(exponent, -math.log(16)), math.log(16)))
         step = min(max(step, self.low), self.high)
