@@ -509,6 +509,7 @@ class _LossyEncoder:
         self._coded: tuple[tuple[float, float], list[bytes], dict[str, Any]] | None = None
         self._estimates: dict[tuple[float, float], float] = {}
         self._open_loop: dict[tuple[float, float], float] = {}
+        self._errors_at: dict[tuple[float, float], tuple[float | None, float]] = {}
         self._histogram_cache: tuple[float, list[tuple[np.ndarray, np.ndarray, float]]] | None = (
             None
         )
@@ -592,15 +593,22 @@ class _LossyEncoder:
 
     def quality(self, step: float) -> tuple[float, float]:
         """(PSNR, max error) at ``step``; an exact result counts as infinite PSNR."""
-        q, params = self.quantize(step)
-        psnr, max_error = _errors(self.plan, self.original, self.reconstruct(q, params))
+        psnr, max_error = self._measured(step)
         return (math.inf if psnr is None else psnr), max_error
 
+    def _measured(self, step: float) -> tuple[float | None, float]:
+        """The errors at ``step``, kept for the final bundle's header (no second synthesis)."""
+        key = (step, self.kept_fraction)
+        if key not in self._errors_at:
+            q, params = self.quantize(step)
+            self._errors_at[key] = _errors(self.plan, self.original, self.reconstruct(q, params))
+        return self._errors_at[key]
+
     def _assemble(self, step: float, errors: tuple[float | None, float] | None) -> bytes:
-        q, qparams = self.quantize(step)
+        qparams = self.quantize(step)[1]
         chunks, cparams = self.code(step)
         if errors is None:
-            errors = _errors(self.plan, self.original, self.reconstruct(q, qparams))
+            errors = self._measured(step)
         header = self.plan.header()
         header.update(
             quantizer=str(qparams.get("name", "deadzone")),
