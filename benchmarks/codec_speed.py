@@ -272,6 +272,7 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--wavelets", default="bspline2,cdf97")
     parser.add_argument("--skip-grey", action="store_true", help="only the RGB picture")
+    parser.add_argument("--skip-rgb", action="store_true", help="only the grey picture")
     parser.add_argument("--profile", action="store_true")
     parser.add_argument("--write", action="store_true", help="put the table in docs/benchmarks.md")
     args = parser.parse_args()
@@ -285,14 +286,15 @@ def main() -> None:
     wavecore.decode(wavecore.encode_image(image[:64, :64], bpp=2.0))  # compile and warm up
     wavecore.decode(wavecore.encode_image(image[:64, :64, 0]))
     say(f"threads: {os.cpu_count()} cores, numba {numba.get_num_threads()} threads")
-    run_case(
-        f"{args.size}x{args.size} RGB at {args.rate} bpp",
-        image,
-        {w: {"wavelet": w, "bpp": args.rate} for w in args.wavelets.split(",")},
-        args.repeat,
-        say,
-        args.profile,
-    )
+    if not args.skip_rgb:
+        run_case(
+            f"{args.size}x{args.size} RGB at {args.rate} bpp",
+            image,
+            {w: {"wavelet": w, "bpp": args.rate} for w in args.wavelets.split(",")},
+            args.repeat,
+            say,
+            args.profile,
+        )
     if not args.skip_grey:
         camera = data.camera()
         run_case(
