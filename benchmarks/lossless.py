@@ -77,6 +77,7 @@ def measure(name: str) -> dict[str, Any]:
     others = peer_sizes(image)
     return {
         "peers": others,
+        "colour": image.ndim == 3,
         "j2k": others["OpenJPEG lossless"],
         "name": name,
         "shape": "×".join(str(s) for s in image.shape),
@@ -130,8 +131,8 @@ def peer_table(rows: list[dict[str, Any]]) -> str:
         cells = [f"{r['peers'][n]:,}" if n in r["peers"] else "—" for n in names]
         lines.append(f"| {r['name']} | {r['ours']:,} | " + " | ".join(cells) + " |")
     for group, members in (
-        ("grey", [r for r in rows if "×3" not in r["shape"]]),
-        ("colour", [r for r in rows if "×3" in r["shape"]]),
+        ("grey", [r for r in rows if not r["colour"]]),
+        ("colour", [r for r in rows if r["colour"]]),
     ):
         if not members:
             continue

@@ -102,7 +102,7 @@ Lossy = tuple[tuple[float, ...], Callable[[np.ndarray, float], bytes], Callable[
 
 def lossy_peers(colour: bool) -> dict[str, Lossy]:
     """The lossy peers for a grey or a colour picture (4:4:4 variants only for colour)."""
-    qualities = tuple(float(q) for q in range(2, 99, 4))
+    qualities = (*(float(q) for q in range(2, 99, 4)), 100.0)
     channels = 3 if colour else 1
     # OpenJPEG's knob is the compression ratio against the raw 8-bit samples.
     ratios = tuple(8 * channels / r for r in np.geomspace(0.18, 2.8, 18))
@@ -140,7 +140,8 @@ def lossy_peers(colour: bool) -> dict[str, Lossy]:
                 _decode,
             )
     if jxl_available():
-        distances = tuple(float(d) for d in np.geomspace(0.15, 12.0, 18))
+        # libjxl accepts distances up to 25; 0.05 is close to lossless.
+        distances = tuple(float(d) for d in np.geomspace(0.05, 25.0, 22))
         peers["JPEG XL e7"] = (distances, _jxl_encode, _jxl_decode)
     return peers
 
