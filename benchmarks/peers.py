@@ -168,6 +168,8 @@ def at_rates(
     """
     kept: list[tuple[float, float, float]] = []
     for point in points:
+        if not math.isfinite(point[1]):  # a knob at its top may be lossless: no PSNR to fit
+            continue
         if kept and (point[0] <= kept[-1][0] or point[1] <= kept[-1][1]):
             continue
         kept.append(point)
