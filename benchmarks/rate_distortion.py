@@ -503,6 +503,9 @@ def peer_plot(curves: dict[str, dict[str, list[tuple[float, float]]]]) -> None:
     import matplotlib.pyplot as plt
 
     names = list(curves)
+    # One colour per codec across all panels (grey panels have fewer peers than colour ones).
+    every = list(dict.fromkeys(c for n in names for c in curves[n]))
+    colours = {c: plt.get_cmap("tab10")(i % 10) for i, c in enumerate(every)}
     fig, axes = plt.subplots(1, len(names), figsize=(3.8 * len(names), 3.6), squeeze=False)
     for ax, name in zip(axes[0], names, strict=True):
         for codec, values in curves[name].items():
@@ -511,6 +514,7 @@ def peer_plot(curves: dict[str, dict[str, list[tuple[float, float]]]]) -> None:
                 peers.EXACT_RATES,
                 [q for q, _ in values],
                 "o-" if ours else ".--",
+                color=colours[codec],
                 linewidth=2 if ours else 1,
                 markersize=4,
                 label=codec,
