@@ -411,7 +411,7 @@ def test_drop_an_image_on_the_drop_zone(page: Any):
     )
     wait_for_bundle(page, 1)
     assert "dropped.png" in page.inner_text("#image-name")
-    assert page.get_attribute("#download", "download") == "dropped-bspline2.wcb"
+    assert page.get_attribute("#download", "download") == "dropped-cdf97.wcb"  # the default
 
 
 def test_levels_out_of_range_are_caught_before_any_upload(page: Any, astronaut_png: Path):
