@@ -45,7 +45,8 @@ def render() -> str:
     keys = ", ".join(f'"{k}"' for k in SUMMARY_KEYS)
     lines = [
         "```python",
-        ">>> info = wavecore.inspect(wavecore.encode_image(data.camera(), wavelet=\"bspline2\", bpp=0.5))",
+        ">>> info = wavecore.inspect("
+        'wavecore.encode_image(data.camera(), wavelet="bspline2", bpp=0.5))',
         f">>> {{k: info[k] for k in ({keys})}}",
         summary,
         '>>> info["chunks"][:2]',
