@@ -291,6 +291,10 @@ def cmd_encode(args: argparse.Namespace) -> int:
         if getattr(args, name) is not None
     }
 
+    # No --wavelet: each kind keeps the library's own default (cdf97 for images, bspline2 for
+    # curves), the one its measurement picks.
+    chosen = {} if args.wavelet is None else {"wavelet": args.wavelet}
+
     def work(path: Path) -> Row:
         start = time.perf_counter()
         kind, data, closed = _load_input(path, args.kind)
@@ -302,11 +306,11 @@ def cmd_encode(args: argparse.Namespace) -> int:
             raise CLIError(msg)
         if kind == "image":
             bundle = wavecore.encode_image(
-                data, wavelet=args.wavelet, level=args.level, lossless=args.lossless, **targets
+                data, level=args.level, lossless=args.lossless, **chosen, **targets
             )
         elif kind == "curve":
             bundle = wavecore.encode_curve(
-                data, closed=closed, level=args.level, wavelet=args.wavelet, **targets
+                data, closed=closed, level=args.level, **chosen, **targets
             )
         else:
             bundle = wavecore.encode_surface(
@@ -480,7 +484,9 @@ def build_parser() -> argparse.ArgumentParser:
     target.add_argument("--tolerance", type=float, help="largest point deviation (curves)")
     target.add_argument("--lossless", action="store_true", help="bit-exact (8/16-bit images)")
     enc.add_argument(
-        "--wavelet", default="bspline2", help="bspline2 (default), cdf97, haar (images, curves)"
+        "--wavelet",
+        default=None,
+        help="images: cdf97 (default), bspline2, haar; curves: bspline2 (default), cdf97, haar",
     )
     enc.add_argument("--level", type=int, help="levels (default: automatic)")
     enc.add_argument("--kind", choices=["image", "curve", "surface"], help="override by suffix")

@@ -38,14 +38,15 @@ def render() -> str:
     """The example, from the code: camera at 0.5 bpp, then the bytes each level needs."""
     data = pytest.importorskip("skimage.data", reason="the example codes scikit-image's camera")
     camera = data.camera()
-    info = wavecore.inspect(wavecore.encode_image(camera, bpp=0.5))
+    info = wavecore.inspect(wavecore.encode_image(camera, wavelet="bspline2", bpp=0.5))
     summary = repr({k: info[k] for k in SUMMARY_KEYS})
     summary = summary.replace(", 'psnr'", ",\n 'psnr'")
     chunks = repr(info["chunks"][:2]).replace("}, {", "},\n {")
     keys = ", ".join(f'"{k}"' for k in SUMMARY_KEYS)
     lines = [
         "```python",
-        ">>> info = wavecore.inspect(wavecore.encode_image(data.camera(), bpp=0.5))",
+        ">>> info = wavecore.inspect("
+        'wavecore.encode_image(data.camera(), wavelet="bspline2", bpp=0.5))',
         f">>> {{k: info[k] for k in ({keys})}}",
         summary,
         '>>> info["chunks"][:2]',

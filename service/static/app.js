@@ -26,7 +26,8 @@
     curve: null, // {points, closed} (y up) of the encoded curve
     drawn: [], // points drawn on the pad (pad coordinates, y down)
     base: [], // the second curve for the figure-1 transfer
-    compare: null, // {bspline2: Blob, haar: Blob}
+    compare: null, // {bspline2: Blob, haar: Blob, cdf97: Blob (images only)}
+    waveletChosen: false, // the user picked a wavelet: mode switches keep it
     urls: {}, // object URLs per <img>, revoked when replaced
     seq: { recon: 0, coarse: 0, compare: 0, encode: 0, transfer: 0 },
     xhr: {}, // in-flight requests per purpose, aborted when superseded
@@ -203,6 +204,11 @@
       document.querySelector('input[name="target"][value="tolerance"]').checked = true;
     } else if (mode === "image" && target() === "tolerance") {
       document.querySelector('input[name="target"][value="quality"]').checked = true;
+    }
+    // Each kind starts on its own default wavelet (cdf97 for images, the paper's bspline2 for
+    // curves) until the user picks one.
+    if (!state.waveletChosen && (mode === "image" || mode === "curve")) {
+      $("wavelet").value = mode === "curve" ? "bspline2" : "cdf97";
     }
     state.mode = mode;
     document.body.dataset.mode = mode;
@@ -682,15 +688,22 @@
     $("curve-views").hidden = imageMode;
     $("compare").hidden = Boolean(info.lossless) || (!imageMode && !from.curve);
     $("compare-views").hidden = true;
+    $("compare-views").classList.toggle("two", !imageMode);
+    $("cmp-cdf97-view").hidden = !imageMode;
     $("compare-help").textContent = imageMode
-      ? "The same image, both wavelets, the same fraction of details kept: smooth versus blocky."
+      ? "The same image, the paper’s B-spline, Haar and the default CDF 9/7, the same fraction of details kept: smooth versus blocky versus fewest bytes."
       : "The same curve, both wavelets, the same fraction of details kept: smooth versus angular (Haar repeats points, so only a coarse polygon is left).";
     for (const name of ["bspline2", "haar"]) {
       $(`cmp-${name}`).closest(".frame").hidden = !imageMode;
       $(`cmp-${name}-plot`).toggleAttribute("hidden", imageMode); // an SVG element has no .hidden
     }
     $("transfer").hidden = imageMode || !from.curve;
-    $("compare-run").textContent = info.wavelet === "haar" ? "Compare with B-spline" : "Compare with Haar";
+    $("compare-run").textContent = imageMode
+      ? "Compare B-spline, Haar and CDF 9/7"
+      : info.wavelet === "haar"
+        ? "Compare with B-spline"
+        : "Compare with Haar";
+    $("compare-title").textContent = imageMode ? "B-spline versus Haar versus the default" : "B-spline versus Haar";
 
     if (imageMode) {
       clearImage("img-recon");
@@ -907,6 +920,9 @@
 
   // ---------------------------------------------------------------- B-spline versus Haar
 
+  // Images compare the paper's filter with Haar and with the default (cdf97); curves the first two.
+  const COMPARE_IMAGE = ["bspline2", "haar", "cdf97"];
+
   async function runCompare() {
     clearErrors("compare-error");
     const saved = state.compareSettings;
@@ -923,13 +939,22 @@
     const label = button.textContent;
     button.textContent = "Compressing…";
     try {
-      const other = state.info.wavelet === "haar" ? "bspline2" : "haar";
-      const response = saved.curve
-        ? await request("compare-encode", "POST", "/v1/curves/encode", JSON.stringify(curveBody(saved.curve.points, saved.curve.closed, saved.settings, other)), {
-            headers: { "Content-Type": "application/json" },
-          })
-        : await request("compare-encode", "POST", "/v1/images/encode", imageForm(saved.file, saved.settings, other));
-      state.compare = { [state.info.wavelet]: state.bundle, [other]: new Blob([response.blob], { type: BUNDLE_TYPE }) };
+      if (saved.curve) {
+        const other = state.info.wavelet === "haar" ? "bspline2" : "haar";
+        const response = await request("compare-encode", "POST", "/v1/curves/encode", JSON.stringify(curveBody(saved.curve.points, saved.curve.closed, saved.settings, other)), {
+          headers: { "Content-Type": "application/json" },
+        });
+        state.compare = { [state.info.wavelet]: state.bundle, [other]: new Blob([response.blob], { type: BUNDLE_TYPE }) };
+      } else {
+        // The paper's filter, Haar and the default: encode the ones not on the page already.
+        const compare = { [state.info.wavelet]: state.bundle };
+        for (const name of COMPARE_IMAGE) {
+          if (compare[name]) continue;
+          const response = await request(`compare-encode-${name}`, "POST", "/v1/images/encode", imageForm(saved.file, saved.settings, name));
+          compare[name] = new Blob([response.blob], { type: BUNDLE_TYPE });
+        }
+        state.compare = compare;
+      }
       $("compare-views").hidden = false;
       await updateCompare();
     } catch (err) {
@@ -947,7 +972,7 @@
     const keep = sliderToKeep($("keep-slider").value);
     const params = keep < 1 ? { keep, format: "png" } : { format: "png" };
     try {
-      const names = ["bspline2", "haar"];
+      const names = COMPARE_IMAGE;
       names.forEach((name) => setLoading(`cmp-${name}`, true));
       const responses = await Promise.all(names.map((name) => reconstruct(`compare-${name}`, state.compare[name], params)));
       if (seq !== state.seq.compare) return;
@@ -967,7 +992,7 @@
     } catch (err) {
       if (!isAbort(err)) showError("compare-error", err);
     } finally {
-      if (seq === state.seq.compare) ["bspline2", "haar"].forEach((name) => setLoading(`cmp-${name}`, false));
+      if (seq === state.seq.compare) COMPARE_IMAGE.forEach((name) => setLoading(`cmp-${name}`, false));
     }
   }
 
@@ -1247,6 +1272,9 @@
     encode();
   });
   // A changed setting re-encodes what is on the page (number fields on change, i.e. blur/Enter).
+  $("wavelet").addEventListener("change", () => {
+    state.waveletChosen = true;
+  });
   for (const id of ["wavelet", "level", "keep", "quality", "bpp", "tolerance"]) {
     $(id).addEventListener("change", () => {
       if (state.bundle && state.mode !== "bundle" && (state.source || state.drawn.length)) encode();

@@ -155,6 +155,9 @@ def test_haar_against_bspline_at_the_same_keep(page: Any, astronaut_png: Path, a
     page.click("#compare-run")
     page.wait_for_selector(f"#cmp-haar[data-keep='{keep}']")
     page.wait_for_selector(f"#cmp-bspline2[data-keep='{keep}']")
+    # Photographs are coded with the default, cdf97, which the comparison shows as well.
+    assert figure(page, "wavelet") == "cdf97"
+    page.wait_for_selector(f"#cmp-cdf97[data-keep='{keep}']")
     smooth = png_pixels(image_bytes(page, "#cmp-bspline2"))
     blocky = png_pixels(image_bytes(page, "#cmp-haar"))
 
@@ -213,6 +216,7 @@ def path_points(page: Any, selector: str) -> np.ndarray:
 
 def test_haar_against_bspline_on_a_drawn_curve(page: Any, artifacts: Path):
     page.click("label:has(input[name=mode][value=curve])")
+    assert page.input_value("#wavelet") == "bspline2", "curves keep the paper's filter"
     draw(page, "#curve-pad", wiggle)
     page.wait_for_selector("#curve-plot[data-keep]")
     keep = float(page.evaluate("(v) => window.wavecore.sliderToKeep(v)", 20))
@@ -407,7 +411,7 @@ def test_drop_an_image_on_the_drop_zone(page: Any):
     )
     wait_for_bundle(page, 1)
     assert "dropped.png" in page.inner_text("#image-name")
-    assert page.get_attribute("#download", "download") == "dropped-bspline2.wcb"
+    assert page.get_attribute("#download", "download") == "dropped-cdf97.wcb"  # the default
 
 
 def test_levels_out_of_range_are_caught_before_any_upload(page: Any, astronaut_png: Path):

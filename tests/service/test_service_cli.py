@@ -258,3 +258,16 @@ def test_core_install_runs_the_library_commands_and_names_the_extra(tmp_path: Pa
         assert result.returncode == 1
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and "pip install 'wavecore[service]'" in lines[0], result.stderr
+
+
+def test_wavelet_defaults_per_kind(tmp_path: Path, images: Path) -> None:
+    # Images default to cdf97 (issue 12), curves keep bspline2; --wavelet overrides either.
+    bundle = tmp_path / "a.wcb"
+    assert main(["encode", str(images / "img0.png"), str(bundle), "-q"]) == 0
+    assert wavecore.inspect(bundle.read_bytes())["wavelet"] == "cdf97"
+    cmd = ["encode", str(images / "img0.png"), str(bundle), "-q", "--wavelet", "bspline2"]
+    assert main(cmd) == 0
+    assert wavecore.inspect(bundle.read_bytes())["wavelet"] == "bspline2"
+    (tmp_path / "c.json").write_text(json.dumps({"points": circle(48), "closed": True}))
+    assert main(["encode", str(tmp_path / "c.json"), str(tmp_path / "c.wcb"), "-q"]) == 0
+    assert wavecore.inspect((tmp_path / "c.wcb").read_bytes())["wavelet"] == "bspline2"

@@ -57,6 +57,8 @@ async def test_image_round_trip(client: httpx.AsyncClient, shape: tuple[int, ...
     assert bpp == pytest.approx(8 * len(bundle) / (shape[0] * shape[1]), rel=1e-3)
     assert float(r.headers["x-wavecore-ratio"]) == pytest.approx(image.nbytes / len(bundle), 1e-3)
     assert float(r.headers["x-wavecore-psnr"]) >= 38
+    # No wavelet field: photographs get cdf97, the measured rate–distortion winner (issue 12).
+    assert wavecore.inspect(bundle)["wavelet"] == "cdf97"
 
     info = (await client.post("/v1/bundles/inspect", content=bundle)).json()
     assert info["kind"] == "image" and info["shape"] == list(shape)
