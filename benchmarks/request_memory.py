@@ -6,11 +6,10 @@ the kernel's peak mark (``/proc/self/clear_refs``), then runs the endpoint's job
 the server runs on a worker: parse, cost check, decode, code, answer) and reads the peak
 (``VmHWM``).  It prints the growth in MiB, the samples the cost check counts for that request
 (``service.cost``: the values after padding, times channels or coordinates, times 4 for a
-detail transfer), and the growth per counted sample.  The shapes are the worst kinds (thin
-images and grids, long curves, deep levels) at sizes that finish in minutes on a small
-machine; the bytes per sample do not depend on the size once the basis norms are linear
-(issue 10).  docs/deploy.md, "Memory per
-request", is this script's output::
+detail transfer, ``4 (d + 1)`` per point of a curve of ``d`` coordinates), and the growth per
+counted sample.  The shapes are the worst kinds (thin images and grids, long curves, deep
+levels), up to the service's default limits (pixels, points, grid points).  docs/deploy.md,
+"Memory per request", is this script's output::
 
     .venv/bin/python benchmarks/request_memory.py            # every case, one process each
     .venv/bin/python benchmarks/request_memory.py --case NAME
@@ -74,9 +73,10 @@ Case = tuple[str, Callable[[bool], tuple[Callable[..., Any], tuple[Any, ...]]], 
 
 
 def _cases() -> dict[str, Case]:
+    from wavecore_service.routes import bundles, curves, images, surfaces
+    from wavecore_service.settings import Settings
+
     import wavecore
-    from service.routes import bundles, curves, images, surfaces
-    from service.settings import Settings
 
     settings = Settings()
 
@@ -146,8 +146,23 @@ def _cases() -> dict[str, Case]:
         ),
         "image 2x16384 (thin)": ("images/encode", image_case(2, 1 << 14, 0), 8 * (1 << 14)),
         "image 16384x2 (thin)": ("images/encode", image_case(1 << 14, 2, 0), 8 * (1 << 14)),
-        "curve 10000x3": ("curves/encode", curve_case(10_000, 3), pad(10_000, 8) * 3),
-        "curve 10000x1": ("curves/encode", curve_case(10_000, 1), pad(10_000, 8)),
+        "image 2x2097152 (thin, the pixel limit)": (
+            "images/encode",
+            image_case(2, 1 << 21, 0),
+            8 * (1 << 21),
+        ),
+        "curve 10000x3": ("curves/encode", curve_case(10_000, 3), 4 * pad(10_000, 8) * 4),
+        "curve 200000x3 (the point limit)": (
+            "curves/encode",
+            curve_case(200_000, 3),
+            4 * pad(200_000, 8) * 4,
+        ),
+        "curve 10000x1": ("curves/encode", curve_case(10_000, 1), 4 * pad(10_000, 8) * 2),
+        "curve 200000x1 (the point limit)": (
+            "curves/encode",
+            curve_case(200_000, 1),
+            4 * pad(200_000, 8) * 2,
+        ),
         "transfer 10000x2": ("curves/transfer", transfer_case(10_000, None), 4 * 20_000),
         "transfer 200000x2": ("curves/transfer", transfer_case(200_000, None), 4 * 400_000),
         "transfer 10000x2 level 11": (
@@ -157,6 +172,11 @@ def _cases() -> dict[str, Case]:
         ),
         "surface JSON 1000x1000": ("surfaces/encode", surface_json_case(1000, 1000, 1), 0),
         "surface JSON 2x10000 (thin)": ("surfaces/encode", surface_json_case(2, 10_000, 1), 0),
+        "surface JSON 2x500000 (thin, the grid limit)": (
+            "surfaces/encode",
+            surface_json_case(2, 500_000, 1),
+            0,
+        ),
         "surface .npy 600x600x3": ("surfaces/encode", surface_npy_case(600, 600, 3), 0),
         "reconstruct 1448x1448 RGB": (
             "bundles/reconstruct",

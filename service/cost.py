@@ -36,6 +36,11 @@ SAMPLES_PER_PIXEL = 5
 #: (benchmarks/request_memory.py: 284 B per coordinate against the codec's 47–63 B).
 TRANSFER_FACTOR = 4
 
+#: Working values per curve point and coordinate: the quantizer's closed loop keeps per-point
+#: state beside the coordinates (benchmarks/request_memory.py at 200 000 points: 577 B per point
+#: in 1-D, 909 B in 3-D), so a point of ``d`` coordinates counts ``4 (d + 1)`` samples.
+CURVE_FACTOR = 4
+
 #: The codec's deepest default levels (``codec._MAX_IMAGE_LEVELS`` / ``_MAX_CURVE_LEVELS``).
 DEFAULT_MOST_LEVELS = {"image": 5, "surface": 5, "curve": 8}
 
@@ -132,7 +137,7 @@ def check_curve(
     """The cost of encoding a curve of ``n`` points of ``dims`` coordinates."""
     boundary = "closed" if closed else "open"
     fitted, _ = padded_lengths([n], level, [boundary], wavelet, "curve")
-    check(fitted[0] * dims, f"a curve of {n} points", settings)
+    check(CURVE_FACTOR * fitted[0] * (dims + 1), f"a curve of {n} points", settings)
 
 
 def check_transfer(n: int, dims: int, closed: bool, level: int | None, settings: Settings) -> None:
