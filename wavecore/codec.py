@@ -527,16 +527,20 @@ class _LossyEncoder:
             vector_axis=self.vector_axis,
         )
 
+    def _quantize_bands(self, step: float, **options: Any) -> tuple[list[Any], dict[str, Any]]:
+        return quantize_bands(
+            self.kept,
+            step,
+            wavelet=self.plan.wavelet,
+            boundary=list(self.plan.boundary),
+            axes=self.plan.axes,
+            **options,
+        )
+
     def quantize(self, step: float) -> tuple[list[Any], dict[str, Any]]:
         key = (step, self.kept_fraction)
         if self._quantized is None or self._quantized[0] != key:
-            q, params = quantize_bands(
-                self.kept,
-                step,
-                wavelet=self.plan.wavelet,
-                boundary=list(self.plan.boundary),
-                axes=self.plan.axes,
-            )
+            q, params = self._quantize_bands(step)
             self._quantized = (key, q, params)
         return self._quantized[1], self._quantized[2]
 
@@ -578,14 +582,7 @@ class _LossyEncoder:
         """
         key = (step, self.kept_fraction)
         if key not in self._open_loop:
-            q, params = quantize_bands(
-                self.kept,
-                step,
-                wavelet=self.plan.wavelet,
-                boundary=list(self.plan.boundary),
-                axes=self.plan.axes,
-                refine=0,
-            )
+            q, params = self._quantize_bands(step, refine=0)
             psnr = _errors(self.plan, self.original, self.reconstruct(q, params))[0]
             peak2 = self.plan.peak**2
             self._open_loop[key] = 0.0 if psnr is None else peak2 * 10.0 ** (-psnr / 10.0)
