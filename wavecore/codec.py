@@ -42,8 +42,10 @@ from . import lossless as _lossless
 from ._kernels import (
     colour_to_floats,
     colour_to_integers,
-    log_histogram,
+    largest_scaled,
+    log_histogram_counts,
     squared_and_largest_error,
+    top_octave,
 )
 from .arguments import as_native, closed_flags
 from .bundle import DTYPES, MAX_ELEMENTS, Bundle, read_bundle, write_bundle
@@ -670,7 +672,7 @@ class _LossyEncoder:
                 rounding = APPROX_ROUNDING if index == 0 else DEFAULT_ROUNDING
                 for band, weight in zip(bands, weights, strict=True):
                     values = np.ascontiguousarray(band, dtype=np.float64).reshape(-1)
-                    counts, top = log_histogram(values, 1.0 / weight, _OCTAVE_BINS, _OCTAVES)
+                    counts, top = _log_histogram(values, 1.0 / weight)
                     octave, step = np.divmod(np.arange(counts.size), _OCTAVE_BINS)
                     centres = 2.0 ** (top - _OCTAVES + octave - 1) * (
                         2.0 + (2 * step + 1) / _OCTAVE_BINS
@@ -680,6 +682,26 @@ class _LossyEncoder:
                     out.append((counts[used].astype(np.float64), centres[used], rounding))
             self._histogram_cache = (self.kept_fraction, out)
         return self._histogram_cache[1]
+
+
+def _log_histogram(values: np.ndarray, scale: float) -> tuple[np.ndarray, int]:
+    """``_kernels.log_histogram(values, scale, _OCTAVE_BINS, _OCTAVES)`` in slices over the
+    threads: a largest value, then counts, both exact whatever the slicing (a maximum, and
+    integer counts added up)."""
+    parts: list[Any] = []
+    run_rows(
+        lambda lo, hi: parts.append(largest_scaled(values[lo:hi], scale)), values.size, values.size
+    )
+    top = int(top_octave(max(parts, default=0.0)))
+    parts.clear()
+    run_rows(
+        lambda lo, hi: parts.append(
+            log_histogram_counts(values[lo:hi], scale, _OCTAVE_BINS, _OCTAVES, top)
+        ),
+        values.size,
+        values.size,
+    )
+    return np.sum(parts, axis=0), top
 
 
 class _Search:
