@@ -145,9 +145,12 @@ def encode_blocks(
     layout = [[band.shape for band in bands] for bands in entries]
     planes, blocks, per_chunk, total = _structure(layout, two_d, block)
     flat = np.empty(total, dtype=np.int32)
-    for p, plane in enumerate(_plane_views(entries, two_d)):
-        start = planes[p, kernels.P_OFFSET]
-        flat[start : start + plane.size] = plane.ravel()
+    views = _plane_views(entries, two_d)
+    targets = [
+        flat[start : start + view.size].reshape(view.shape)
+        for start, view in zip(planes[:, kernels.P_OFFSET], views, strict=True)
+    ]
+    _copy_planes(views, targets, int(total))
     sizes = _block_sizes(planes, blocks)
     cuts = _cuts(sizes)
     results: list[Any] = [None] * _SPANS
@@ -239,6 +242,7 @@ def decode_blocks(
         msg = f"{sum(bad)} code-block(s) of the context-coded chunks are corrupt"
         raise BundleError(msg)
     levels = []
+    sources, targets = [], []
     p = 0
     for band_shapes in layout:
         dims = [_plane_dims(shape, two_d) for shape in band_shapes]
@@ -249,7 +253,33 @@ def decode_blocks(
             if channel >= count:
                 continue
             start = planes[p, kernels.P_OFFSET]
-            arrays[k][:, :, channel] = flat[start : start + rows * cols].reshape(rows, cols)
+            sources.append(flat[start : start + rows * cols].reshape(rows, cols))
+            targets.append(arrays[k][:, :, channel])
             p += 1
         levels.append([a.reshape(shape) for a, shape in zip(arrays, band_shapes, strict=True)])
+    _copy_planes(sources, targets, int(total))
     return levels
+
+
+#: Rows of planes per copy task: about this many values, so that the tasks balance.
+_COPY_TASK = 1 << 16
+
+
+def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: int) -> None:
+    """``targets[k][...] = sources[k]`` for 2-D planes, in row slices over the thread pool.
+
+    The planes of a colour picture are strided channel views; NumPy's strided copies release
+    the GIL, so slices of rows copy on every core (the largest planes would not balance as
+    whole planes).
+    """
+    tasks = []
+    for k, source in enumerate(sources):
+        rows, cols = source.shape
+        step = max(1, _COPY_TASK // max(cols, 1))
+        tasks.extend((k, lo, min(lo + step, rows)) for lo in range(0, rows, step))
+
+    def run(lo: int, hi: int) -> None:
+        for k, row_lo, row_hi in tasks[lo:hi]:
+            targets[k][row_lo:row_hi] = sources[k][row_lo:row_hi]
+
+    run_rows(run, len(tasks), total)
