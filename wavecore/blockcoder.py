@@ -272,7 +272,7 @@ def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: in
     the GIL, so slices of rows copy on every core (the largest planes would not balance as
     whole planes).
     """
-    tasks = []
+    tasks: list[tuple[int, int, int]] = []
     for k, source in enumerate(sources):
         rows, cols = source.shape
         step = max(1, _COPY_TASK // max(cols, 1))
