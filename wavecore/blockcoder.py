@@ -42,8 +42,11 @@ __all__ = ["BLOCK_SIZE", "BLOCK_SIZES", "decode_blocks", "encode_blocks"]
 BLOCK_SIZE = 128
 #: The sides a reader accepts.
 BLOCK_SIZES = (16, 32, 64, 128, 256)
-#: Runs of blocks per encode or decode: enough for the thread pool to balance uneven blocks.
-_SPANS = 16
+#: Runs of blocks per encode or decode, each its own task for the thread pool: blocks cost
+#: very unequal time (dense coarse blocks, nearly empty fine ones), so many small tasks handed
+#: to whichever thread is free keep both cores busy to the end (a few large tasks can leave
+#: one core waiting for the other).
+_SPANS = 64
 
 
 def _plane_dims(band_shape: tuple[int, ...], two_d: bool) -> tuple[int, int, int]:
@@ -159,7 +162,7 @@ def encode_blocks(
         for span in range(lo, hi):
             results[span] = kernels.encode_span(flat, planes, blocks, cuts[span], cuts[span + 1])
 
-    run_rows(run, _SPANS, int(total))
+    run_rows(run, _SPANS, int(total), pieces=_SPANS)
     payload = np.concatenate([r[0] for r in results])
     lengths = np.concatenate([r[1] for r in results])
     ends = np.cumsum(lengths)
@@ -237,7 +240,7 @@ def decode_blocks(
                 data, block_starts, block_lengths, planes, blocks, flat, cuts[span], cuts[span + 1]
             )
 
-    run_rows(run, _SPANS, int(np.count_nonzero(block_lengths)) * block * block)
+    run_rows(run, _SPANS, int(np.count_nonzero(block_lengths)) * block * block, pieces=_SPANS)
     if sum(bad):
         msg = f"{sum(bad)} code-block(s) of the context-coded chunks are corrupt"
         raise BundleError(msg)

@@ -131,17 +131,25 @@ def _run_blocks(
         future.result()
 
 
-def run_rows(call: Callable[[int, int], None], rows: int, work: int | None = None) -> None:
+def run_rows(
+    call: Callable[[int, int], None],
+    rows: int,
+    work: int | None = None,
+    pieces: int | None = None,
+) -> None:
     """Call ``call(row_lo, row_hi)`` over blocks of ``rows`` rows, in threads if the work is big.
 
     For the codec's compiled per-pixel passes (which release the GIL).  ``work``, the number of
     elements processed, keeps small jobs on the calling thread; without it a job counts as big.
+    ``pieces`` (default: two per thread) is how many blocks the rows are cut into: uneven work
+    balances better over more, smaller blocks, which the pool hands to whichever thread is free.
     """
     threads = _thread_count()
     if threads == 1 or rows < 2 or (work is not None and work < _THREADED_MIN_ELEMENTS):
         call(0, rows)
         return
-    edges = np.linspace(0, rows, min(rows, threads * 2) + 1).astype(int)
+    count = threads * 2 if pieces is None else max(1, pieces)
+    edges = np.linspace(0, rows, min(rows, count) + 1).astype(int)
     futures = [_pool().submit(call, lo, hi) for lo, hi in itertools.pairwise(edges) if hi > lo]
     for future in futures:
         future.result()
