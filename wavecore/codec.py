@@ -460,13 +460,45 @@ def _errors(plan: _Plan, original: np.ndarray, decoded: np.ndarray) -> tuple[flo
     per_point = plan.kind == "curve" and decoded.ndim == 2
     if not per_point and {decoded.dtype, original.dtype}.isdisjoint(_UNCOMPILED_DTYPES):
         # One compiled pass: pictures are large, and the rate searches measure them often.
-        total, largest = squared_and_largest_error(
+        total, largest = _squared_and_largest_error(
             np.ascontiguousarray(decoded).ravel(), np.ascontiguousarray(original).ravel()
         )
         return _psnr(plan, float(total) / decoded.size), float(largest)
     diff = decoded.astype(np.float64) - original.astype(np.float64)
     magnitude = np.linalg.norm(diff, axis=1) if per_point else np.abs(diff)
     return _psnr(plan, float(np.mean(diff * diff))), float(np.max(magnitude))
+
+
+def _squared_and_largest_error(decoded: np.ndarray, original: np.ndarray) -> tuple[float, float]:
+    """``squared_and_largest_error``, in slices over the threads when that gives the same bits.
+
+    Integer samples have integer squared errors; while their total stays below 2**53 every
+    partial sum is exact, so any slicing adds up to the one-pass total, bit for bit (the PSNR
+    written in the header must not depend on the thread count).  Floats keep one pass.
+    """
+    if decoded.dtype.kind in "iub" and original.dtype.kind in "iub":
+        spans = [_integer_span(decoded.dtype), _integer_span(original.dtype)]
+        widest = float(max(spans))
+        if widest * widest * max(decoded.size, 1) < 2.0**53:
+            parts: list[tuple[float, float]] = []
+            run_rows(
+                lambda lo, hi: parts.append(
+                    squared_and_largest_error(decoded[lo:hi], original[lo:hi])
+                ),
+                decoded.size,
+                decoded.size,
+            )
+            return sum(p[0] for p in parts), max(p[1] for p in parts)
+    total, largest = squared_and_largest_error(decoded, original)
+    return float(total), float(largest)
+
+
+def _integer_span(dtype: np.dtype[Any]) -> int:
+    """The largest difference of two values of an integer (or boolean) dtype."""
+    if dtype.kind == "b":
+        return 1
+    info = np.iinfo(dtype)
+    return int(info.max) - int(info.min)
 
 
 def _psnr(plan: _Plan, mse: float) -> float | None:
