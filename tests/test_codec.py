@@ -449,3 +449,20 @@ def test_haar_curves_are_staircases_where_bspline_curves_are_smooth() -> None:
 def test_curves_refuse_an_unknown_wavelet() -> None:
     with pytest.raises(InvalidParameter, match="accepted wavelets"):
         encode_curve(np.zeros((10, 2)), wavelet="db4")
+
+
+@pytest.mark.parametrize("wavelet", ["bspline2", "cdf97"])
+def test_bundles_do_not_depend_on_the_thread_count(
+    monkeypatch: pytest.MonkeyPatch, wavelet: str
+) -> None:
+    """Every stage cut into slices for the threads (colour, transform, quantizer, histograms of
+    the rate search, block coder) must give the same bytes as one thread, and decode alike."""
+    rng = np.random.default_rng(17)
+    smooth = np.cumsum(np.cumsum(rng.normal(size=(600, 520, 3)), axis=0), axis=1)
+    image = np.clip(smooth - smooth.min(axis=(0, 1)), 0, 255).astype(np.uint8)
+    monkeypatch.setenv("WAVECORE_THREADS", "2")
+    threaded = wavecore.encode_image(image, wavelet=wavelet, bpp=1.0)
+    decoded = wavecore.decode(threaded)
+    monkeypatch.setenv("WAVECORE_THREADS", "1")
+    assert wavecore.encode_image(image, wavelet=wavelet, bpp=1.0) == threaded
+    np.testing.assert_array_equal(wavecore.decode(threaded), decoded)

@@ -488,17 +488,19 @@ def count_ones_and_more(q):
 
 
 @njit(nogil=True, cache=True)
-def log_histogram(values, scale, per_octave, octaves):
-    """Counts of ``|v| · scale`` in ``per_octave`` bins to an octave (equal steps of the
-    mantissa), over the ``octaves`` octaves below the largest; bin 0 also holds everything
-    smaller (zeros included).  Returns the counts and the top octave's exponent ``top``: bin
-    ``b = per_octave · o + k`` starts at ``2 ** (top - octaves + o) · (1 + k / per_octave)``.
-    Exponents come from ``frexp``: no logarithm per value.
-    """
+def largest_scaled(values, scale):
+    """The largest ``|v| · scale`` (0 for no values): the first pass of :func:`log_histogram`."""
     largest = 0.0
     for k in range(values.size):
         largest = max(largest, abs(values[k]) * scale)
-    top = math.frexp(largest)[1] if largest > 0 else 0
+    return largest
+
+
+@njit(nogil=True, cache=True)
+def log_histogram_counts(values, scale, per_octave, octaves, top):
+    """The counts of :func:`log_histogram` for a given top octave ``top``: its second pass.
+
+    Counts of slices add up to the counts of the whole (so slices can run in threads)."""
     bins = per_octave * octaves
     counts = np.zeros(bins, dtype=np.int64)
     for k in range(values.size):
@@ -512,4 +514,22 @@ def log_histogram(values, scale, per_octave, octaves):
             counts[0] += 1
         else:
             counts[octave * per_octave + int((2.0 * mantissa - 1.0) * per_octave)] += 1
-    return counts, top
+    return counts
+
+
+@njit(nogil=True, cache=True)
+def top_octave(largest):
+    """The exponent ``frexp`` gives the largest scaled magnitude (0 when it is 0)."""
+    return math.frexp(largest)[1] if largest > 0 else 0
+
+
+@njit(nogil=True, cache=True)
+def log_histogram(values, scale, per_octave, octaves):
+    """Counts of ``|v| · scale`` in ``per_octave`` bins to an octave (equal steps of the
+    mantissa), over the ``octaves`` octaves below the largest; bin 0 also holds everything
+    smaller (zeros included).  Returns the counts and the top octave's exponent ``top``: bin
+    ``b = per_octave · o + k`` starts at ``2 ** (top - octaves + o) · (1 + k / per_octave)``.
+    Exponents come from ``frexp``: no logarithm per value.
+    """
+    top = top_octave(largest_scaled(values, scale))
+    return log_histogram_counts(values, scale, per_octave, octaves, top), top

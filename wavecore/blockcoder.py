@@ -42,8 +42,11 @@ __all__ = ["BLOCK_SIZE", "BLOCK_SIZES", "decode_blocks", "encode_blocks"]
 BLOCK_SIZE = 128
 #: The sides a reader accepts.
 BLOCK_SIZES = (16, 32, 64, 128, 256)
-#: Runs of blocks per encode or decode: enough for the thread pool to balance uneven blocks.
-_SPANS = 16
+#: Runs of blocks per encode or decode, each its own task for the thread pool: blocks cost
+#: very unequal time (dense coarse blocks, nearly empty fine ones), so many small tasks handed
+#: to whichever thread is free keep both cores busy to the end (a few large tasks can leave
+#: one core waiting for the other).
+_SPANS = 64
 
 
 def _plane_dims(band_shape: tuple[int, ...], two_d: bool) -> tuple[int, int, int]:
@@ -145,9 +148,12 @@ def encode_blocks(
     layout = [[band.shape for band in bands] for bands in entries]
     planes, blocks, per_chunk, total = _structure(layout, two_d, block)
     flat = np.empty(total, dtype=np.int32)
-    for p, plane in enumerate(_plane_views(entries, two_d)):
-        start = planes[p, kernels.P_OFFSET]
-        flat[start : start + plane.size] = plane.ravel()
+    views = _plane_views(entries, two_d)
+    targets = [
+        flat[start : start + view.size].reshape(view.shape)
+        for start, view in zip(planes[:, kernels.P_OFFSET], views, strict=True)
+    ]
+    _copy_planes(views, targets, int(total))
     sizes = _block_sizes(planes, blocks)
     cuts = _cuts(sizes)
     results: list[Any] = [None] * _SPANS
@@ -156,7 +162,7 @@ def encode_blocks(
         for span in range(lo, hi):
             results[span] = kernels.encode_span(flat, planes, blocks, cuts[span], cuts[span + 1])
 
-    run_rows(run, _SPANS, int(total))
+    run_rows(run, _SPANS, int(total), pieces=_SPANS)
     payload = np.concatenate([r[0] for r in results])
     lengths = np.concatenate([r[1] for r in results])
     ends = np.cumsum(lengths)
@@ -234,11 +240,12 @@ def decode_blocks(
                 data, block_starts, block_lengths, planes, blocks, flat, cuts[span], cuts[span + 1]
             )
 
-    run_rows(run, _SPANS, int(np.count_nonzero(block_lengths)) * block * block)
+    run_rows(run, _SPANS, int(np.count_nonzero(block_lengths)) * block * block, pieces=_SPANS)
     if sum(bad):
         msg = f"{sum(bad)} code-block(s) of the context-coded chunks are corrupt"
         raise BundleError(msg)
     levels = []
+    sources, targets = [], []
     p = 0
     for band_shapes in layout:
         dims = [_plane_dims(shape, two_d) for shape in band_shapes]
@@ -249,7 +256,33 @@ def decode_blocks(
             if channel >= count:
                 continue
             start = planes[p, kernels.P_OFFSET]
-            arrays[k][:, :, channel] = flat[start : start + rows * cols].reshape(rows, cols)
+            sources.append(flat[start : start + rows * cols].reshape(rows, cols))
+            targets.append(arrays[k][:, :, channel])
             p += 1
         levels.append([a.reshape(shape) for a, shape in zip(arrays, band_shapes, strict=True)])
+    _copy_planes(sources, targets, int(total))
     return levels
+
+
+#: Rows of planes per copy task: about this many values, so that the tasks balance.
+_COPY_TASK = 1 << 16
+
+
+def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: int) -> None:
+    """``targets[k][...] = sources[k]`` for 2-D planes, in row slices over the thread pool.
+
+    The planes of a colour picture are strided channel views; NumPy's strided copies release
+    the GIL, so slices of rows copy on every core (the largest planes would not balance as
+    whole planes).
+    """
+    tasks: list[tuple[int, int, int]] = []
+    for k, source in enumerate(sources):
+        rows, cols = source.shape
+        step = max(1, _COPY_TASK // max(cols, 1))
+        tasks.extend((k, lo, min(lo + step, rows)) for lo in range(0, rows, step))
+
+    def run(lo: int, hi: int) -> None:
+        for k, row_lo, row_hi in tasks[lo:hi]:
+            targets[k][row_lo:row_hi] = sources[k][row_lo:row_hi]
+
+    run_rows(run, len(tasks), total)

@@ -42,8 +42,10 @@ from . import lossless as _lossless
 from ._kernels import (
     colour_to_floats,
     colour_to_integers,
-    log_histogram,
+    largest_scaled,
+    log_histogram_counts,
     squared_and_largest_error,
+    top_octave,
 )
 from .arguments import as_native, closed_flags
 from .bundle import DTYPES, MAX_ELEMENTS, Bundle, read_bundle, write_bundle
@@ -458,13 +460,45 @@ def _errors(plan: _Plan, original: np.ndarray, decoded: np.ndarray) -> tuple[flo
     per_point = plan.kind == "curve" and decoded.ndim == 2
     if not per_point and {decoded.dtype, original.dtype}.isdisjoint(_UNCOMPILED_DTYPES):
         # One compiled pass: pictures are large, and the rate searches measure them often.
-        total, largest = squared_and_largest_error(
+        total, largest = _squared_and_largest_error(
             np.ascontiguousarray(decoded).ravel(), np.ascontiguousarray(original).ravel()
         )
         return _psnr(plan, float(total) / decoded.size), float(largest)
     diff = decoded.astype(np.float64) - original.astype(np.float64)
     magnitude = np.linalg.norm(diff, axis=1) if per_point else np.abs(diff)
     return _psnr(plan, float(np.mean(diff * diff))), float(np.max(magnitude))
+
+
+def _squared_and_largest_error(decoded: np.ndarray, original: np.ndarray) -> tuple[float, float]:
+    """``squared_and_largest_error``, in slices over the threads when that gives the same bits.
+
+    Integer samples have integer squared errors; while their total stays below 2**53 every
+    partial sum is exact, so any slicing adds up to the one-pass total, bit for bit (the PSNR
+    written in the header must not depend on the thread count).  Floats keep one pass.
+    """
+    if decoded.dtype.kind in "iub" and original.dtype.kind in "iub":
+        spans = [_integer_span(decoded.dtype), _integer_span(original.dtype)]
+        widest = float(max(spans))
+        if widest * widest * max(decoded.size, 1) < 2.0**53:
+            parts: list[tuple[float, float]] = []
+            run_rows(
+                lambda lo, hi: parts.append(
+                    squared_and_largest_error(decoded[lo:hi], original[lo:hi])
+                ),
+                decoded.size,
+                decoded.size,
+            )
+            return sum(p[0] for p in parts), max(p[1] for p in parts)
+    total, largest = squared_and_largest_error(decoded, original)
+    return float(total), float(largest)
+
+
+def _integer_span(dtype: np.dtype[Any]) -> int:
+    """The largest difference of two values of an integer (or boolean) dtype."""
+    if dtype.kind == "b":
+        return 1
+    info = np.iinfo(dtype)
+    return int(info.max) - int(info.min)
 
 
 def _psnr(plan: _Plan, mse: float) -> float | None:
@@ -667,7 +701,7 @@ class _LossyEncoder:
                 rounding = APPROX_ROUNDING if index == 0 else DEFAULT_ROUNDING
                 for band, weight in zip(bands, weights, strict=True):
                     values = np.ascontiguousarray(band, dtype=np.float64).reshape(-1)
-                    counts, top = log_histogram(values, 1.0 / weight, _OCTAVE_BINS, _OCTAVES)
+                    counts, top = _log_histogram(values, 1.0 / weight)
                     octave, step = np.divmod(np.arange(counts.size), _OCTAVE_BINS)
                     centres = 2.0 ** (top - _OCTAVES + octave - 1) * (
                         2.0 + (2 * step + 1) / _OCTAVE_BINS
@@ -677,6 +711,26 @@ class _LossyEncoder:
                     out.append((counts[used].astype(np.float64), centres[used], rounding))
             self._histogram_cache = (self.kept_fraction, out)
         return self._histogram_cache[1]
+
+
+def _log_histogram(values: np.ndarray, scale: float) -> tuple[np.ndarray, int]:
+    """``_kernels.log_histogram(values, scale, _OCTAVE_BINS, _OCTAVES)`` in slices over the
+    threads: a largest value, then counts, both exact whatever the slicing (a maximum, and
+    integer counts added up)."""
+    parts: list[Any] = []
+    run_rows(
+        lambda lo, hi: parts.append(largest_scaled(values[lo:hi], scale)), values.size, values.size
+    )
+    top = int(top_octave(max(parts, default=0.0)))
+    parts.clear()
+    run_rows(
+        lambda lo, hi: parts.append(
+            log_histogram_counts(values[lo:hi], scale, _OCTAVE_BINS, _OCTAVES, top)
+        ),
+        values.size,
+        values.size,
+    )
+    return np.sum(parts, axis=0), top
 
 
 class _Search:

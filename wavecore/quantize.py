@@ -35,7 +35,7 @@ from .errors import InvalidCoefficients, InvalidLength, InvalidParameter
 from .filters import get_wavelet, step_sparse
 from .multilevel import waverec, waverec2
 from .norms import basis_norms
-from .transform import _run_blocks, _view3
+from .transform import _run_blocks, _view3, run_rows
 
 __all__ = ["dequantize_bands", "quantize_bands", "reconstruction_offset"]
 
@@ -217,9 +217,7 @@ def quantize_bands(
         for band, weight in zip(bands, level_weights, strict=True):
             values = np.ascontiguousarray(band, dtype=np.float64)
             q = np.empty(values.shape, dtype=np.int32)
-            _kernels.deadzone_quantize(
-                values.reshape(-1), 1.0 / (step * weight), band_rounding, MAX_INDEX, q.reshape(-1)
-            )
+            _quantize_flat(values.reshape(-1), 1.0 / (step * weight), band_rounding, q.reshape(-1))
             level_q.append(q)
         out_levels.append(level_q)
     params = {
@@ -314,7 +312,7 @@ def dequantize_bands(
                 raise InvalidParameter(msg)
             offset = 0.0 if index == 0 else reconstruction_offset(q, rounding)
             values = np.empty(q.shape, dtype=np.float64)
-            _kernels.dequantize(np.ravel(q), offset, band_step, values.reshape(-1))
+            _dequantize_flat(np.ravel(q), offset, band_step, values.reshape(-1))
             restored.append(values)
         out_levels.append(restored)
     return _unlayout(qcoeffs, out_levels)
@@ -492,3 +490,24 @@ def _refine(
         np.minimum(magnitude, MAX_INDEX, out=magnitude)
         refined.append(np.where(k, np.copysign(magnitude, value), 0.0).astype(np.int32))
     return nest(refined)
+
+
+def _quantize_flat(
+    values: np.ndarray, inverse_step: float, rounding: float, out: np.ndarray
+) -> None:
+    """The dead-zone quantizer's compiled pass over a flat band, in slices over the threads.
+
+    Elementwise, so the result does not depend on how it is sliced (or on the thread count).
+    """
+    run_rows(
+        lambda lo, hi: _kernels.deadzone_quantize(
+            values[lo:hi], inverse_step, rounding, MAX_INDEX, out[lo:hi]
+        ),
+        values.size,
+        values.size,
+    )
+
+
+def _dequantize_flat(q: np.ndarray, offset: float, step: float, out: np.ndarray) -> None:
+    """The compiled dequantizer over a flat band, in slices over the threads (elementwise)."""
+    run_rows(lambda lo, hi: _kernels.dequantize(q[lo:hi], offset, step, out[lo:hi]), q.size, q.size)

@@ -45,7 +45,7 @@ from .multilevel import (
     max_level,
     valid_length,
 )
-from .transform import as_float_array
+from .transform import as_float_array, run_rows
 
 __all__ = [
     "GridFit",
@@ -123,15 +123,45 @@ def pad_to_fit(
         )
         after = valid_length(n, level, b, bank) - n
         pads.append((0, after))
-        if after:
-            arr = _extend(arr, a, after, closed=b == "closed")
+    extensions = [
+        (a, after, b == "closed") for a, (_, after), b in zip(ax, pads, bounds, strict=True)
+    ]
+    if any(after for _, after, _ in extensions):
+        arr = _padded(arr, extensions)
     return arr, tuple(pads)
 
 
-def _extend(arr: np.ndarray, axis: int, count: int, *, closed: bool) -> np.ndarray:
+def _padded(arr: np.ndarray, extensions: list[tuple[int, int, bool]]) -> np.ndarray:
+    """``arr`` extended by ``count`` samples after the end of each ``(axis, count, closed)``, in
+    that order, written into one new array: the original is copied once (in row slices over the
+    thread pool, as NumPy's copies release the GIL), not once per padded axis."""
+    shape = list(arr.shape)
+    for axis, count, _ in extensions:
+        shape[axis] += count
+    out = np.empty(shape, dtype=arr.dtype)
+    inner = out[tuple(slice(0, n) for n in arr.shape)]
+
+    def copy(lo: int, hi: int) -> None:
+        inner[lo:hi] = arr[lo:hi]
+
+    run_rows(copy, arr.shape[0], arr.size)
+    filled = list(arr.shape)
+    for axis, count, closed in extensions:
+        if count:
+            current = out[tuple(slice(0, n) for n in filled)]
+            target = [slice(0, n) for n in filled]
+            target[axis] = slice(filled[axis], filled[axis] + count)
+            out[tuple(target)] = _extension(current, axis, count, closed=closed)
+            filled[axis] += count
+    return out
+
+
+def _extension(arr: np.ndarray, axis: int, count: int, *, closed: bool) -> np.ndarray:
+    """The ``count`` samples that extend ``arr`` along ``axis``: its last one repeated (open),
+    or steps from the last back to the first (closed)."""
     last = np.take(arr, [-1], axis=axis)
     if not closed:
-        return np.concatenate([arr, np.repeat(last, count, axis=axis)], axis=axis)
+        return last  # broadcast along the axis
     first = np.take(arr, [0], axis=axis)
     shape = [1] * arr.ndim
     shape[axis] = count
@@ -143,7 +173,7 @@ def _extend(arr: np.ndarray, axis: int, count: int, *, closed: bool) -> np.ndarr
         blend = np.rint(blend)
         if info is not None:
             blend = np.clip(blend, info.min, info.max)
-    return np.concatenate([arr, blend.astype(arr.dtype)], axis=axis)
+    return blend.astype(arr.dtype)
 
 
 def coarse_extent(
