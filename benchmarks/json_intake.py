@@ -67,9 +67,22 @@ def _bodies() -> dict[str, bytes]:
     }
 
 
+def _tree(pid: int) -> list[int]:
+    """The server and every process under it (the worker pool parses the bodies)."""
+    pids, i = [pid], 0
+    while i < len(pids):
+        for task in Path(f"/proc/{pids[i]}/task").iterdir():
+            pids += [int(c) for c in (task / "children").read_text().split()]
+        i += 1
+    return pids
+
+
 def _measure(url: str, pid: int, path: str, body: bytes) -> str:
-    Path(f"/proc/{pid}/clear_refs").write_text("5")  # reset VmHWM to the current RSS
-    before = _status(pid, "VmRSS")
+    pids = _tree(pid)
+    for p in pids:
+        Path(f"/proc/{p}/clear_refs").write_text("5")  # reset VmHWM to the current RSS
+    # Each process's own peak, summed: an upper bound of the whole server's growth.
+    before = sum(_status(p, "VmRSS") for p in pids)
     # The prober is its own process, so that this one's upload does not delay its timing.
     prober = subprocess.Popen(
         [sys.executable, "-c", PROBE, url], stdin=subprocess.PIPE, stdout=subprocess.PIPE
@@ -81,7 +94,7 @@ def _measure(url: str, pid: int, path: str, body: bytes) -> str:
     elapsed = time.perf_counter() - start
     out, _ = prober.communicate(b"stop\n", timeout=30)
     latencies = [float(x) for x in out.split()]
-    growth = _status(pid, "VmHWM") - before
+    growth = sum(_status(p, "VmHWM") for p in pids) - before
     q = statistics.quantiles(latencies, n=100, method="inclusive")
     return (
         f"{len(body) / 1e6:.1f} MB -> {r.status_code} in {elapsed:.2f} s; /healthz "
