@@ -217,7 +217,9 @@ def _context() -> Any:
     # uvicorn itself, with its threads, is unsafe), which has imported the service and warmed
     # the kernels (service.forkserver_warm), so every worker, a replacement too, starts warm.
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["service.app", "service.forkserver_warm"])
+    # Under this package's own name: ``service`` in a checkout, ``wavecore_service`` when
+    # installed. The jobs are pickled under that name, so the workers must have it imported.
+    ctx.set_forkserver_preload([f"{__package__}.app", f"{__package__}.forkserver_warm"])
     return ctx
 
 
