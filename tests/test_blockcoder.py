@@ -149,7 +149,9 @@ def test_version_four_is_the_default_and_versions_three_and_two_still_decode() -
 def test_no_bigger_than_version_three(name: str) -> None:
     """The issue's bound: the code-blocks cost at most 1 % more than version 3 at equal quality
     (the same quantized values), at a fine and a coarse step."""
-    skimage_data = pytest.importorskip("skimage.data")
+    skimage_data = pytest.importorskip(
+        "skimage.data", reason="scikit-image (the figures extra) provides the pictures"
+    )
     image = getattr(skimage_data, name)().astype(np.float64)
     padded, _ = wavecore.pad_to_fit(image, 5, axes=(0, 1), boundary="open")
     coeffs = wavecore.wavedec2(padded, "bspline2", "open", 5)
