@@ -9,7 +9,8 @@ in colour) and each target rate (0.25, 0.5, 1.0 bits per pixel) it codes:
   included, and PSNR is measured on ``wavecore.decode`` of those bytes;
 * Pillow's JPEG (``optimize=True``), the highest ``quality`` whose file fits the byte budget;
 * JPEG 2000 by Pillow's OpenJPEG (``quality_mode="rates"``, ``irreversible=True``, 6
-  resolutions, the colour transform on for RGB), the smallest compression ratio whose file fits;
+  resolutions, the colour transform on for RGB, a raw codestream: `no_jp2=True`), the smallest
+  compression ratio whose file fits;
 * Pillow's WebP (``method=6``), the highest ``quality`` that fits.
 
 Every peer gets at most the bytes we are allowed (``rate × pixels / 8``), so a peer's PSNR
@@ -112,6 +113,7 @@ def jpeg2000(image: np.ndarray, budget: int) -> tuple[int, float]:
             irreversible=True,
             num_resolutions=6,
             mct=int(channels == 3),  # the colour transform, as ours uses YCbCr
+            no_jp2=True,  # a raw codestream, as its best users store it: no JP2 boxes
         )
         if len(blob) <= budget:
             return len(blob), psnr(_decode_pillow(blob, image), image)
