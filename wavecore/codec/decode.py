@@ -11,6 +11,7 @@ from .. import lossless as _lossless
 from ..bundle import Bundle, read_bundle
 from ..entropy import decode_levels
 from ..errors import BundleError, InvalidParameter
+from ..layout import band_names
 from ..quantize import dequantize_bands
 from ..threshold import check_share, remove_smallest
 from .plan import LOSSLESS_WAVELET, Plan, _band_shapes, _plan_from_header
@@ -205,9 +206,7 @@ def inspect(bundle: Any) -> dict[str, Any]:
         chunks.append(
             {
                 "level": plan.levels - index,
-                "bands": ["cA"]
-                if index == 0
-                else (["cD"] if len(plan.axes) == 1 else ["cH", "cV", "cD"]),
+                "bands": band_names(index, len(plan.axes)),
                 "shapes": band_shapes,
                 "bytes": len(chunk) if chunk is not None else None,
                 "present": chunk is not None,

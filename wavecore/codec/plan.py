@@ -16,6 +16,7 @@ from ..arguments import as_native
 from ..bundle import DTYPES, MAX_ELEMENTS
 from ..errors import BundleError, InvalidLength, InvalidParameter
 from ..filters import get_wavelet
+from ..layout import band_shapes
 from ..multilevel import valid_length
 from ..resample import pad_to_fit
 
@@ -137,21 +138,12 @@ def _band_shapes(plan: Plan) -> list[Any]:
         return _lossless.band_shapes(plan.fitted, plan.levels, plan.axes)
     bank = get_wavelet(plan.wavelet)
     rules = [bank.rule(b) for b in plan.boundary]
-    current = list(plan.fitted)
-    details: list[Any] = []
-    for _ in range(plan.levels):
-        coarse, fine = list(current), list(current)
-        for a, rule in zip(plan.axes, rules, strict=True):
-            coarse[a] = rule.coarse_length(current[a])
-            fine[a] = rule.detail_length(current[a])
-        if len(plan.axes) == 1:
-            details.append(tuple(fine))
-        else:
-            cH, cV = list(coarse), list(coarse)
-            cH[0], cV[1] = fine[0], fine[1]
-            details.append((tuple(cH), tuple(cV), tuple(fine)))
-        current = coarse
-    return [tuple(current), *reversed(details)]
+    return band_shapes(
+        plan.fitted,
+        plan.levels,
+        plan.axes,
+        lambda i, n: (rules[i].coarse_length(n), rules[i].detail_length(n)),
+    )
 
 
 def _default_level(sizes: Sequence[int], most: int) -> int:
