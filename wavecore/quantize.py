@@ -25,18 +25,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
 from . import _kernels
+from .adjoint import synthesis_adjoint
 from .errors import InvalidLength, InvalidParameter
-from .filters import get_wavelet, step_sparse
+from .filters import get_wavelet
 from .layout import as_levels, from_levels
 from .multilevel import waverec, waverec2
 from .norms import basis_norms
-from .transform import _run_blocks, _view3, run_rows
+from .transform import run_rows
 
 __all__ = ["dequantize_bands", "quantize_bands", "reconstruction_offset"]
 
@@ -327,63 +327,11 @@ def reconstruction_offset(q: np.ndarray, rounding: float) -> float:
 # --------------------------------------------------------------------------------------------
 
 
-@lru_cache(maxsize=128)
-def _transposed(bank_name: str, boundary: str, m: int) -> tuple[tuple[np.ndarray, ...], ...]:
-    """``P.T`` and ``Q.T`` of one step of fine length ``m``, in compressed-row form (cached)."""
-    _, _, P, Q = step_sparse(bank_name, boundary, m)
-    out = []
-    for matrix in (P, Q):
-        rows = np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))
-        order = np.argsort(matrix.indices, kind="stable")
-        indptr = np.zeros(matrix.shape[1] + 1, dtype=np.intp)
-        np.add.at(indptr, matrix.indices + 1, 1)
-        out.append(
-            (np.cumsum(indptr), rows[order].astype(np.intp), matrix.weights[order].astype(float))
-        )
-    return out[0], out[1]
-
-
-def _adjoint_step(
-    data: np.ndarray, bank_name: str, boundary: str, axis: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(P.T @ data, Q.T @ data)`` along ``axis``, with the transform's compiled kernel.
-
-    The axis is moved to the front first, so that the kernel's inner loop runs along whole rows
-    (contiguous and long) whatever the axis: the same sums in the same order, several times
-    faster than along the last axis of an image.
-    """
-    p_t, q_t = _transposed(bank_name, boundary, data.shape[axis])
-    arr = np.ascontiguousarray(np.moveaxis(np.asarray(data, dtype=np.float64), axis, 0))
-    x = _view3(arr, 0)
-    r, s = len(p_t[0]) - 1, len(q_t[0]) - 1
-    coarse = np.empty((x.shape[0], r, x.shape[2]))
-    detail = np.empty((x.shape[0], s, x.shape[2]))
-    args = (x, *p_t, *q_t, coarse, detail)
-    _run_blocks(_kernels.analysis3, args, x.shape[0], max(r, s), x.size)
-    rest = arr.shape[1:]
-    return (
-        np.moveaxis(coarse.reshape((r, *rest)), 0, axis),
-        np.moveaxis(detail.reshape((s, *rest)), 0, axis),
-    )
-
-
 def _adjoint(
     residual: np.ndarray, bank_name: str, bounds: list[str], axes: tuple[int, ...], count: int
 ) -> list[list[np.ndarray]]:
     """``S.T @ residual`` for the synthesis ``S`` of ``count`` levels, in ``levels`` layout."""
-    details: list[list[np.ndarray]] = []
-    coarse = residual
-    for _ in range(count):
-        if len(axes) == 1:
-            coarse, high = _adjoint_step(coarse, bank_name, bounds[0], axes[0])
-            details.append([high])
-            continue
-        (a0, a1), (b0, b1) = axes, bounds
-        low, high = _adjoint_step(coarse, bank_name, b0, a0)
-        cH, cD = _adjoint_step(high, bank_name, b1, a1)
-        coarse, cV = _adjoint_step(low, bank_name, b1, a1)
-        details.append([cH, cV, cD])
-    return [[coarse], *reversed(details)]
+    return as_levels(synthesis_adjoint(residual, bank_name, bounds, count, axes))
 
 
 def _synthesis(
