@@ -38,7 +38,7 @@ import numpy as np
 from .arguments import as_native
 from .errors import InvalidCoefficients, InvalidParameter
 from .filters import FilterBank, get_wavelet
-from .multilevel import _as_int, wavedec2, waverec2
+from .multilevel import as_int, wavedec2, waverec2
 from .resample import GridFit, fit_grid
 from .threshold import keep_largest
 from .transform import normalize_axis
@@ -115,7 +115,7 @@ class ImageDecomposition:
         Float64 in the input's value range; about ``1/2**level`` of the input's size per side
         (padding cropped away).  ``level=0`` gives the full-size image as float.
         """
-        level = self.level if level is None else _as_int(level, "level")
+        level = self.level if level is None else as_int(level, "level")
         if level > self.level:
             msg = f"level {level} is deeper than the decomposition's {self.level} levels"
             raise InvalidParameter(msg)
@@ -236,7 +236,7 @@ level of the open boundary of 'bspline2' needs at least 8 samples per axis
     sizes = work.shape[:2]
     if level is None:
         level = _default_level(sizes)
-    level = _as_int(level, "level", minimum=1)
+    level = as_int(level, "level", minimum=1)
     fitted, grid_fit = fit_grid(
         work.astype(np.float64), level, axes=(0, 1), boundary=boundary, wavelet=bank, method=fit
     )

@@ -53,7 +53,8 @@ def _rule(wavelet: str | FilterBank, boundary: str) -> tuple[FilterBank, Boundar
     return bank, bank.rule(boundary)
 
 
-def _as_int(value: Any, name: str, minimum: int = 0) -> int:
+def as_int(value: Any, name: str, minimum: int = 0) -> int:
+    """``value`` as an ``int`` of at least ``minimum``, or an error that names ``name``."""
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         msg = f"{name} must be an integer, not {value!r}"
         raise InvalidParameter(msg)
@@ -138,7 +139,7 @@ def max_level(n: int, boundary: str = "open", wavelet: str | FilterBank = "bspli
     (7, 9, 0)
     """
     _, rule = _rule(wavelet, boundary)
-    return _level_count(rule, _as_int(n, "length"))
+    return _level_count(rule, as_int(n, "length"))
 
 
 def valid_length(
@@ -157,8 +158,8 @@ def valid_length(
     (514, 512, 14)
     """
     _, rule = _rule(wavelet, boundary)
-    n = _as_int(n, "length")
-    level = _as_int(level, "level")
+    n = as_int(n, "length")
+    level = as_int(level, "level")
     check_level_bound(
         level,
         rule,
@@ -210,26 +211,29 @@ def _check_length(bank: FilterBank, boundary: str, n: int, level: int, axis: int
     raise InvalidLength(msg)
 
 
-def _resolve_level(
+def resolve_level(
     level: Any,
     bank: FilterBank,
     boundaries: Sequence[str],
     sizes: Sequence[int],
     axes: Sequence[int],
 ) -> int:
+    """The level to use: the deepest that every axis fits when ``None``, else ``level``
+    checked against every axis (the error names the nearest lengths that fit)."""
     if level is None:
         level = min(_level_count(bank.rule(b), n) for b, n in zip(boundaries, sizes, strict=True))
         if level == 0:
             for b, n, ax in zip(boundaries, sizes, axes, strict=True):
                 _check_length(bank, b, n, 1, ax)
         return level
-    level = _as_int(level, "level")
+    level = as_int(level, "level")
     for b, n, ax in zip(boundaries, sizes, axes, strict=True):
         _check_length(bank, b, n, level, ax)
     return level
 
 
-def _boundaries(boundary: str | Sequence[str], count: int, bank: FilterBank) -> list[str]:
+def resolve_boundaries(boundary: str | Sequence[str], count: int, bank: FilterBank) -> list[str]:
+    """One boundary per axis (``count``), each one ``bank`` has a rule for."""
     if isinstance(boundary, str):
         result = [boundary] * count
     elif not isinstance(boundary, Sequence) or isinstance(boundary, bytes):
@@ -255,7 +259,8 @@ def _boundaries(boundary: str | Sequence[str], count: int, bank: FilterBank) -> 
     return result
 
 
-def _axes(axes: Sequence[int] | None, ndim: int) -> list[int]:
+def resolve_axes(axes: Sequence[int] | None, ndim: int) -> list[int]:
+    """``axes`` (all when ``None``, one int accepted) as distinct non-negative axes of ``ndim``."""
     if axes is None:
         return list(range(ndim))
     if isinstance(axes, int | np.integer):
@@ -316,8 +321,8 @@ def wavedec(
         msg = "cannot decompose a scalar; pass an array with at least one dimension"
         raise InvalidParameter(msg)
     axis = normalize_axis(axis, arr.ndim)
-    (b,) = _boundaries(boundary, 1, bank)
-    level = _resolve_level(level, bank, [b], [arr.shape[axis]], [axis])
+    (b,) = resolve_boundaries(boundary, 1, bank)
+    level = resolve_level(level, bank, [b], [arr.shape[axis]], [axis])
     details: list[np.ndarray] = []
     coarse = arr
     for _ in range(level):
@@ -356,7 +361,7 @@ def waverec(
     True
     """
     bank = get_wavelet(wavelet)
-    (b,) = _boundaries(boundary, 1, bank)
+    (b,) = resolve_boundaries(boundary, 1, bank)
     if isinstance(coeffs, np.ndarray) or not len(coeffs):
         msg = "coeffs must be a non-empty list [cA_L, cD_L, ..., cD_1]"
         raise InvalidCoefficients(msg)
@@ -416,9 +421,9 @@ def wavedecn(
     if arr.ndim == 0:
         msg = "cannot decompose a scalar; pass an array with at least one dimension"
         raise InvalidParameter(msg)
-    ax = _axes(axes, arr.ndim)
-    bounds = _boundaries(boundary, len(ax), bank)
-    level = _resolve_level(level, bank, bounds, [arr.shape[a] for a in ax], ax)
+    ax = resolve_axes(axes, arr.ndim)
+    bounds = resolve_boundaries(boundary, len(ax), bank)
+    level = resolve_level(level, bank, bounds, [arr.shape[a] for a in ax], ax)
     coarse = arr
     details: list[dict[str, np.ndarray]] = []
     for _ in range(level):
@@ -470,8 +475,8 @@ def waverecn(
     if coarse.ndim == 0:
         msg = "cA must have at least one dimension"
         raise InvalidCoefficients(msg)
-    ax = _axes(axes, coarse.ndim)
-    bounds = _boundaries(boundary, len(ax), bank)
+    ax = resolve_axes(axes, coarse.ndim)
+    bounds = resolve_boundaries(boundary, len(ax), bank)
     keys = set(_keys(len(ax)))
     for level_details in coeffs[1:]:
         if not isinstance(level_details, dict):
@@ -592,3 +597,13 @@ def waverec2(
             {k: v for k, v in zip(("da", "ad", "dd"), bands, strict=True) if v is not None}
         )
     return waverecn([coeffs[0], *levels], wavelet, boundary, axes)
+
+
+# The private spellings these helpers had before they were shared, for code written against
+# them on other branches; new code imports the public names (tests/test_private_imports.py).
+_as_int, _axes, _boundaries, _resolve_level = (
+    as_int,
+    resolve_axes,
+    resolve_boundaries,
+    resolve_level,
+)

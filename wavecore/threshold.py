@@ -19,7 +19,7 @@ import numpy as np
 from .errors import InvalidCoefficients, InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .layout import as_keyed, from_keyed
-from .multilevel import _boundaries
+from .multilevel import resolve_boundaries
 from .norms import basis_norms_nd
 from .transform import normalize_axis
 
@@ -124,7 +124,7 @@ def remove_smallest(
         # Only the weights need the wavelet's size rule: plain ranking works on any bands
         # (the codec ranks integer 5/3 lifting bands, whose lengths follow no rule here).
         bank = get_wavelet(wavelet)
-        bounds = _boundaries(boundary, len(ax), bank)
+        bounds = resolve_boundaries(boundary, len(ax), bank)
         norms = _band_norms(_fine_lengths(coarse, levels, ax, bank, bounds), levels, bank, bounds)
 
     sizes: list[np.ndarray] = []

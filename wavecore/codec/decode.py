@@ -14,7 +14,7 @@ from ..errors import BundleError, InvalidParameter
 from ..layout import band_names
 from ..quantize import dequantize_bands
 from ..threshold import check_share, remove_smallest
-from .plan import LOSSLESS_WAVELET, Plan, _band_shapes, _plan_from_header
+from .plan import LOSSLESS_WAVELET, Plan, plan_from_header
 from .samples import finish, reconstruct, unscaled
 
 
@@ -24,7 +24,7 @@ def _open(bundle: Any) -> tuple[Bundle, Plan]:
         raise BundleError(msg)
     parsed = read_bundle(bundle)
     try:
-        return parsed, _plan_from_header(parsed.header)
+        return parsed, plan_from_header(parsed.header)
     except BundleError:
         raise
     except Exception as exc:
@@ -120,7 +120,7 @@ def _decode(parsed: Bundle, plan: Plan, keep: float | None, level: int) -> np.nd
         if not chunk:  # every coder writes a few bytes even for all-zero bands
             msg = f"chunk {index} is empty; no encoder writes an empty chunk"
             raise BundleError(msg)
-    shapes = _band_shapes(plan)[:count]
+    shapes = plan.band_shapes()[:count]
     header = parsed.header
     with np.errstate(all="ignore"):
         qcoeffs = decode_levels(chunks, shapes, header["cparams"])
@@ -194,7 +194,7 @@ def inspect(bundle: Any) -> dict[str, Any]:
     parsed, plan = _open(bundle)
     header = parsed.header
     try:
-        shapes = _band_shapes(plan)
+        shapes = plan.band_shapes()
     except Exception as exc:  # a crafted header that passed every check; see decode
         msg = f"corrupt bundle: {type(exc).__name__}: {exc}"
         raise BundleError(msg) from exc
