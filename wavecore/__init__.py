@@ -19,6 +19,7 @@ from .errors import (
 from .filters import matrices, wavelet_names
 from .images import ImageDecomposition, decompose_image, subband_mosaic
 from .multilevel import (
+    default_level,
     max_level,
     valid_length,
     wavedec,
@@ -65,6 +66,7 @@ __all__ = [
     "decompose_curve",
     "decompose_image",
     "decompose_surface",
+    "default_level",
     "encode_curve",
     "encode_image",
     "encode_surface",

@@ -16,6 +16,7 @@ from ..colour import rct_forward
 from ..entropy import encode_levels
 from ..errors import BundleError, InvalidParameter
 from ..filters import get_wavelet
+from ..multilevel import default_level
 from ..threshold import check_share
 from .plan import (
     DEFAULT_CODER,
@@ -24,7 +25,6 @@ from .plan import (
     MAX_IMAGE_LEVELS,
     Plan,
     as_array,
-    default_level,
     dtype_name,
     fit,
     level_arg,

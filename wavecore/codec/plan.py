@@ -17,13 +17,19 @@ from ..bundle import DTYPES, MAX_ELEMENTS
 from ..errors import BundleError, InvalidLength, InvalidParameter
 from ..filters import get_wavelet
 from ..layout import band_shapes
-from ..multilevel import valid_length
+from ..multilevel import (
+    DEFAULT_MOST_CURVE_LEVELS,
+    DEFAULT_MOST_LEVELS,
+    default_level,
+    valid_length,
+)
 from ..resample import pad_to_fit
 
 DEFAULT_CODER = "context"
 LOSSLESS_WAVELET = "reversible"
-MAX_IMAGE_LEVELS = 5
-MAX_CURVE_LEVELS = 8
+# The default depths are the library's one rule (multilevel.default_level), not the codec's own.
+MAX_IMAGE_LEVELS = DEFAULT_MOST_LEVELS
+MAX_CURVE_LEVELS = DEFAULT_MOST_CURVE_LEVELS
 _PAD_ALLOWANCE = 64  # padded length <= 2 × length + this (the default levels stay far below)
 
 
@@ -143,11 +149,6 @@ class Plan:
             self.axes,
             lambda i, n: (rules[i].coarse_length(n), rules[i].detail_length(n)),
         )
-
-
-def default_level(sizes: Sequence[int], most: int) -> int:
-    smallest = min(sizes)
-    return max(1, min(most, math.floor(math.log2(max(smallest, 8) / 4))))
 
 
 def fit(
