@@ -74,6 +74,8 @@ WEIGHT_CODE_LIMIT = 7 * 9000  # seven decades, 1e-6 … 9.999
 MAX_VARINT_BYTES = 10
 _MAX_SIZE = 2**40  # any size, length or count a header may declare (the bundle checks less)
 _MAX_EXTENSION = 65535
+#: The largest number-form varint (ten varint bytes hold 70 bits).
+_MAX_NUMBER_HEAD = 2**70 - 1
 
 # The number form: a varint ``V``; ``V & 15`` says how to read it.
 _NUM_DECIMAL_MIN, _NUM_DECIMAL_MAX = -8, 3  # codes 0 … 11: ``k · 10**(code - 8)``
@@ -155,6 +157,9 @@ def _number(value: Any, field: str, *, upper_float32: bool = False) -> bytes:
         msg = f"header field {field!r} must be a number, not {str(value)[:40]!r}"
         raise BundleError(msg)
     if isinstance(value, int):
+        if _zigzag(value) * 16 + _NUM_INT > _MAX_NUMBER_HEAD:
+            msg = f"header field {field!r} is an integer too large for the binary header"
+            raise BundleError(msg)
         return _varint(_zigzag(value) * 16 + _NUM_INT)
     value = float(value)
     best = bytes([_NUM_FLOAT64]) + _F64.pack(value)
@@ -521,7 +526,7 @@ class _Reader:
         return table[value]
 
     def number(self, field: str) -> Any:
-        head = self.varint(field, 2**63)
+        head = self.varint(field, _MAX_NUMBER_HEAD)
         form, rest = head & 15, head >> 4
         if form <= _NUM_DECIMAL_MAX - _NUM_DECIMAL_MIN:
             k = _unzigzag(rest)
@@ -679,7 +684,7 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
         if byte >> 5:
             cparams["block"] = 2 ** ((byte >> 5) + 3)
         header["cparams"] = cparams
-    psnr_head = reader.varint("psnr", 2**63)
+    psnr_head = reader.varint("psnr", _MAX_NUMBER_HEAD)
     if psnr_head == 0:
         header["psnr"] = None
     elif psnr_head == 1:
