@@ -319,9 +319,9 @@ def pack(header: dict[str, Any]) -> bytes:
     ...           "boundary": ["open"], "levels": 0, "colour": "none", "quantizer": "none",
     ...           "qparams": {}, "coder": "zlib", "cparams": {"coder": "zlib"}, "peak": 1.0,
     ...           "psnr": None, "max_error": 0.0}
-    >>> data = pack(header)
+    >>> data = pack(header)  # 4 flag bytes; levels, 8, 2; peak, psnr, max_error: 1 byte each
     >>> len(data), unpack(data) == header
-    (12, True)
+    (10, True)
     """
     if not isinstance(header, dict):
         msg = f"the header must be a dict, not {type(header).__name__}"

@@ -1,30 +1,33 @@
 """The coefficient bundle: a versioned binary container, coarse to fine.
 
-This docstring is the specification of format version 1.2; ``docs/bundle-format.md`` says the
-same in more words.  Like NumPy's ``.npy`` format, a bundle is a fixed preamble, a bounded
-self-describing header, then the payload.  All integers are little-endian.
+This docstring summarises format version 2.0, and 1.x, which is still read;
+``docs/bundle-format.md`` is the specification.  Like NumPy's ``.npy`` format, a bundle is a
+fixed preamble, a bounded self-describing header, then the payload.  All integers are
+little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
 
-Layout
-------
-========  ===========  ==========================================================================
-offset    size         field
-========  ===========  ==========================================================================
-0         8            magic ``b"\\x89WVB\\r\\n\\x1a\\n"`` (PNG-style: catches 7-bit and newline
-                       mangling, stops ``type`` on DOS)
-8         1            major version (``1``); a reader refuses any other major version
-9         1            minor version (``1``, or ``2`` with ``scale``); a reader accepts any minor
-                       version of its major,
-                       because minor versions only add optional header keys or new values
-10        2            header length ``H`` (``uint16``), ``2 <= H <= MAX_HEADER_SIZE``
-12        H            header: a UTF-8 JSON object (see *Header*), compressed with raw
-                       DEFLATE (RFC 1951, ``zlib`` with ``wbits=-15``); it inflates to at most
-                       ``MAX_HEADER_SIZE`` bytes
-12+H      1            chunk count ``N`` (``uint8``), ``1 <= N <= MAX_CHUNKS``
-13+H      8·N          chunk table: for each chunk its byte length (``uint32``) and CRC-32
-                       (``uint32``, ``zlib.crc32``)
-13+H+8N   4            CRC-32 of every byte before it (magic, versions, header, table)
-17+H+8N   ...          the chunks, concatenated in table order; nothing may follow the last one
-========  ===========  ==========================================================================
+Layout (2.0)
+------------
+==========  ===========  ========================================================================
+offset      size         field
+==========  ===========  ========================================================================
+0           8            magic ``b"\\x89WVB\\r\\n\\x1a\\n"`` (PNG-style: catches 7-bit and newline
+                         mangling, stops ``type`` on DOS)
+8           1            major version (``2``); a reader refuses a major version it does not know
+9           1            minor version (``0``); a reader accepts any minor version of its majors
+10          v            header length ``H``, a varint, at most ``MAX_HEADER_SIZE``
+…           H            the binary header of :mod:`wavecore.binheader` (the same dict as 1.x)
+…           v · N        each chunk's byte length, a varint; ``N = levels + 1``
+…           2 · (N - 1)  CRC-16/XMODEM (``binascii.crc_hqx(chunk, 0)``) of chunks 1 … N - 1
+…           4            CRC-32 of every byte before it *and then chunk 0*
+…           ...          the chunks, concatenated; nothing may follow the last one
+==========  ===========  ========================================================================
+
+Layout (1.x)
+------------
+The magic; major ``1``; minor ``0``, ``1`` or ``2`` (with ``scale``); a ``uint16`` header length
+``H``; the header as UTF-8 JSON, raw DEFLATE (``wbits=-15``), inflating to at most
+``MAX_HEADER_SIZE``; a ``uint8`` chunk count ``N``; per chunk its ``uint32`` length and
+``uint32`` CRC-32; the CRC-32 of every byte before it; the chunks.
 
 Chunk ``0`` holds the coarsest approximation ``cA_L``; chunk ``i`` (``1 <= i <= L``) holds all
 detail subbands of level ``L + 1 - i`` (every channel, every orientation), so chunks run
@@ -35,20 +38,19 @@ a clear error.  What a chunk's bytes mean is the business of the coder named in 
 
 Versions
 --------
-A reader refuses any other major version and accepts any minor version of its own: minor
-versions only add optional header keys (ignored by older readers) or new values of an enumerated
-field (refused clearly by older readers, naming the field; 1.1 added six ``dtype`` values).
-Anything else — a new meaning for a field, a new layout, an entropy coder whose old
-bitstreams no longer decode — is a new major version, or a new coder
-*name* (which older readers refuse clearly).  The golden bundles in ``tests/golden`` are decoded
-in every test run to hold this promise.
+A reader refuses any major version it does not know and accepts any minor version of those it
+does: minor versions only add optional header keys (ignored by older readers) or new values
+of an enumerated field (refused clearly by older readers, naming the field; 1.1 added six
+``dtype`` values, 1.2 ``scale`` and ``opaque``).  Anything else — a new meaning for a field, a
+new layout, an entropy coder whose old bitstreams no longer decode — is a new major version, or
+a new coder *name* (which older readers refuse clearly).  2.0 is such a new layout.  The golden
+bundles in ``tests/golden`` are decoded in every test run to hold this promise.
 
 Header
 ------
-A JSON object (stored deflated, see *Layout*: the parameters of the quantizer hold many similar
-numbers, and at 0.25 bpp a 512 × 512 bundle has only 8 KiB) with these keys; readers ignore
-unknown keys, so a minor
-version may add some.
+A dict (1.x: a JSON object, stored deflated; 2.0: the binary header, whose extension holds keys
+it has no field for) with these keys; readers ignore unknown keys, so a minor version may add
+some.
 
 ``kind``        ``"image"``, ``"curve"`` or ``"surface"``
 ``shape``       the original array's shape (list of positive ints)
@@ -89,10 +91,11 @@ version may add some.
 Limits and safety
 -----------------
 A reader checks, in this order and before it allocates anything sized by the bundle: the magic,
-the major version, the header length (at most ``MAX_HEADER_SIZE`` bytes, compressed and
-inflated: inflation stops at that size, so no "deflate bomb" gets through), the JSON, every header
-field's type and range (the declared element count is at most ``MAX_ELEMENTS``), the header and
-table CRC, and that the chunk table's lengths fit in the bytes that are actually present.  Every
+the major version, the header length (at most ``MAX_HEADER_SIZE`` bytes; 1.x: compressed and
+inflated, inflation stops at that size, so no "deflate bomb" gets through), the binary header's
+fields or the JSON, every header field's type and range (the declared element count is at
+most ``MAX_ELEMENTS``), the header and table CRC (2.0: with chunk 0), and that the chunk
+table's lengths fit in the bytes that are actually present.  Every
 failure is a :class:`~wavecore.errors.BundleError` whose message names the field being read.
 The codec then checks the kind-specific consistency (``fitted`` = ``shape`` + ``pads``, each
 padded length at most ``2 × length + 64``, the lengths fit ``levels`` of the wavelet and boundary,
