@@ -81,6 +81,7 @@ _MAX_NUMBER_HEAD = 2**70 - 1
 _NUM_DECIMAL_MIN, _NUM_DECIMAL_MAX = -8, 3  # codes 0 … 11: ``k · 10**(code - 8)``
 _NUM_NULL, _NUM_FLOAT32, _NUM_FLOAT64, _NUM_INT = 12, 13, 14, 15
 
+_FLOAT32_NORMAL = 2.0**-126  # the smallest normal float32
 _F64 = struct.Struct("<d")
 _F32 = struct.Struct("<f")
 _U16 = struct.Struct("<H")
@@ -172,8 +173,9 @@ def _number(value: Any, field: str, *, upper_float32: bool = False) -> bytes:
             short = _varint(_zigzag(k) * 16 + (e - _NUM_DECIMAL_MIN))
             if len(short) < len(best):
                 best = short
-    if upper_float32 and len(best) > 5 and abs(value) < 3.0e38:
-        # The float32 at or above the value: a diagnostic that stays an upper bound.
+    if upper_float32 and len(best) > 5 and _FLOAT32_NORMAL <= abs(value) < 3.0e38:
+        # The float32 at or above the value: a diagnostic that stays an upper bound, within
+        # 2**-23 of it (in float32's normal range; beyond it, the float64).
         single = np.float32(value)
         if float(single) < value:
             single = np.nextafter(single, np.float32(np.inf))
