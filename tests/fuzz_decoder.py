@@ -9,11 +9,13 @@ Every kind of bundle (grey, colour, RGBA, lossless 8/16-bit, curves open and clo
 huge floats in the scaled domain, and every golden bundle in ``tests/golden``) is mutated in a
 seeded loop: byte flips (CRCs left as they are, or recomputed as an attacker would),
 truncations, inserted and deleted bytes, chunk damage behind valid CRCs, and header edits
-(values replaced, removed, nudged, chunk tables reshuffled).  Each mutant is decoded at a
-random level, with and without ``keep``, and inspected.  Acceptable outcomes: an array, a
-``BundleError``, or an ``InvalidParameter`` for a level deeper than the (crafted) bundle says
-it has.  A ``BundleError`` that wraps an ``IndexError`` (an out-of-bounds access the checks
-missed, caught only by the decoder's last line of defence) counts as a failure too.
+(values replaced, removed, nudged, chunk tables reshuffled), written as format 1.1 JSON or
+2.0 binary headers, and binary header bytes damaged behind valid CRCs (huge varints, cut
+fields).  Each mutant is decoded at a random level, with and without ``keep``, and inspected.
+Acceptable outcomes: an array, a ``BundleError``, or an ``InvalidParameter`` for a level
+deeper than the (crafted) bundle says it has.  A ``BundleError`` that wraps an ``IndexError``
+(an out-of-bounds access the checks missed, caught only by the decoder's last line of
+defence) counts as a failure too.
 
 It prints one JSON line: the counts of each outcome, and the first failures.
 """
@@ -21,6 +23,7 @@ It prints one JSON line: the counts of each outcome, and the first failures.
 from __future__ import annotations
 
 import argparse
+import binascii
 import json
 import random
 import struct
@@ -33,7 +36,7 @@ from typing import Any
 import numpy as np
 
 import wavecore
-from wavecore import BundleError, InvalidParameter
+from wavecore import BundleError, InvalidParameter, binheader
 from wavecore.bundle import MAGIC, deflate_header, read_bundle
 
 GOLDEN = Path(__file__).parent / "golden"
@@ -85,6 +88,33 @@ def assemble(header: bytes, chunks: list[bytes], minor: int = 1) -> bytes:
     for chunk in chunks:
         head += struct.pack("<II", len(chunk), zlib.crc32(chunk))
     return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while value >= 0x80:
+        out.append(value & 0x7F | 0x80)
+        value >>= 7
+    return bytes(out + bytes([value]))
+
+
+def assemble2(packed: bytes, chunks: list[bytes]) -> bytes:
+    """A format 2.0 bundle with correct CRCs around whatever binary header it is given."""
+    head = MAGIC + bytes([2, 0]) + _varint(len(packed)) + packed
+    head += b"".join(_varint(len(c)) for c in chunks)
+    head += b"".join(struct.pack("<H", binascii.crc_hqx(c, 0)) for c in chunks[1:])
+    crc = zlib.crc32(chunks[0] if chunks else b"", zlib.crc32(head))
+    return head + struct.pack("<I", crc) + b"".join(chunks)
+
+
+def either(header: dict[str, Any], chunks: list[bytes], rng: random.Random) -> bytes:
+    """The crafted bundle in format 2.0 (binary header) or 1.1 (JSON), with valid CRCs."""
+    if rng.random() < 0.5:
+        try:
+            return assemble2(binheader.pack(header), chunks)
+        except BundleError:  # a value the binary header cannot say
+            pass
+    return assemble(json.dumps(header).encode(), chunks)
 
 
 JSON_VALUES: list[Any] = [
@@ -143,7 +173,7 @@ def mutate_bytes(raw: bytes, rng: random.Random) -> bytes:
 
 def mutant(data: bytes, rng: random.Random) -> tuple[str, bytes]:
     header, chunks = split(data)
-    kind = rng.randrange(7)
+    kind = rng.randrange(9)
     if kind == 0:  # raw damage, CRCs as they were: the CRCs must catch it
         return "flip", mutate_bytes(data, rng)
     if kind == 1:  # cut anywhere
@@ -151,7 +181,7 @@ def mutant(data: bytes, rng: random.Random) -> tuple[str, bytes]:
     if kind == 2:  # a damaged chunk behind a valid CRC: the entropy decoder must cope
         index = rng.randrange(len(chunks))
         chunks[index] = mutate_bytes(chunks[index], rng)
-        return "chunk", assemble(json.dumps(header).encode(), chunks)
+        return "chunk", either(header, chunks, rng)
     if kind in (3, 4):  # a crafted header behind valid CRCs
         for _ in range(rng.randint(1, 3)):
             key = rng.choice(sorted(header))
@@ -159,6 +189,11 @@ def mutant(data: bytes, rng: random.Random) -> tuple[str, bytes]:
                 del header[key]
             else:
                 header[key] = mutate_value(header[key], rng)
+        if rng.random() < 0.5:
+            try:
+                return "binary header", assemble2(binheader.pack(header), chunks)
+            except BundleError:  # a value the binary header cannot say
+                pass
         return "header", assemble(json.dumps(header).encode(), chunks, minor=rng.choice([1, 2]))
     if kind == 5:  # chunks dropped, duplicated, swapped or emptied, levels left as they were
         action = rng.randrange(4)
@@ -171,7 +206,13 @@ def mutant(data: bytes, rng: random.Random) -> tuple[str, bytes]:
             chunks[i], chunks[j] = chunks[j], chunks[i]
         else:
             chunks[i] = b""
-        return "table", assemble(json.dumps(header).encode(), chunks)
+        return "table", either(header, chunks, rng)
+    if kind in (7, 8):  # binary header bytes damaged behind valid CRCs
+        packed = binheader.pack(header)
+        if rng.random() < 0.2:  # a huge varint, or a field cut short
+            at = rng.randrange(len(packed))
+            packed = packed[:at] + rng.choice([b"\xff" * 11, b"\x80\x00", b""]) + packed[at:]
+        return "binary bytes", assemble2(mutate_bytes(packed, rng), chunks)
     # header bytes that are not JSON, or JSON that is not an object
     text = json.dumps(header).encode()
     return "header bytes", assemble(mutate_bytes(text, rng), chunks)

@@ -6,6 +6,7 @@ BundleError naming what was wrong.
 
 from __future__ import annotations
 
+import binascii
 import json
 import struct
 import zlib
@@ -13,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from wavecore import BundleError
+from wavecore import BundleError, binheader
 from wavecore.bundle import (
     FORMAT_VERSION,
     MAGIC,
@@ -64,30 +65,104 @@ def raw_bundle(header_bytes: bytes, chunks: list[bytes], major: int = 1, minor: 
     return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
 
 
-def test_round_trip_keeps_header_and_chunks() -> None:
+@pytest.mark.parametrize("version", [FORMAT_VERSION, (1, 1)])
+def test_round_trip_keeps_header_and_chunks(version: tuple[int, int]) -> None:
     header = make_header()
-    parsed = read_bundle(write_bundle(header, CHUNKS))
+    parsed = read_bundle(write_bundle(header, CHUNKS, version=version))
     assert parsed.header == header
-    # Without a "scale" key a bundle is labelled 1.1, so that every 1.x reader reads it right.
-    assert parsed.version == (FORMAT_VERSION[0], 1)
+    # 2.0 is what the writer writes; 1.1 on request (no "scale" key: every 1.x reader reads it).
+    assert parsed.version == version
     assert [parsed.chunk(i) for i in range(3)] == CHUNKS
     assert parsed.available == 3
 
 
 def test_a_scaled_header_is_labelled_1_2_and_checked() -> None:
     header = {**make_header(), "scale": -1070}
-    parsed = read_bundle(write_bundle(header, CHUNKS))
-    assert parsed.version == (1, 2) == FORMAT_VERSION
+    parsed = read_bundle(write_bundle(header, CHUNKS, version=(1, 1)))
+    assert parsed.version == (1, 2)
     assert parsed.header["scale"] == -1070
+    parsed = read_bundle(write_bundle(header, CHUNKS))
+    assert parsed.version == FORMAT_VERSION == (2, 0) and parsed.header == header
     for bad in (True, 1.5, "3", None, 5000, -5000):
         with pytest.raises(BundleError, match="'scale'"):
             write_bundle({**make_header(), "scale": bad}, CHUNKS)
 
 
-def test_layout_matches_the_spec() -> None:
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while value >= 0x80:
+        out.append(value & 0x7F | 0x80)
+        value >>= 7
+    return bytes(out + bytes([value]))
+
+
+def test_layout_2_0_matches_the_spec() -> None:
+    """docs/bundle-format.md, byte by byte: preamble, header, lengths, CRC-16s, CRC-32, chunks."""
+    header = make_header()
+    data = write_bundle(header, CHUNKS)
+    packed = binheader.pack(header)
+    assert data[:10] == MAGIC + bytes([2, 0])
+    assert data[10] == len(packed) < 128  # a one-byte varint
+    assert data[11 : 11 + len(packed)] == packed
+    at = 11 + len(packed)
+    assert data[at : at + 3] == bytes(len(c) for c in CHUNKS)  # all below 128
+    at += 3
+    crc16 = [struct.unpack_from("<H", data, at + 2 * i)[0] for i in range(2)]
+    assert crc16 == [binascii.crc_hqx(c, 0) for c in CHUNKS[1:]]  # CRC-16/XMODEM
+    at += 4
+    (crc,) = struct.unpack_from("<I", data, at)
+    assert crc == zlib.crc32(data[:at] + CHUNKS[0])  # the header's CRC covers chunk 0
+    assert data[at + 4 :] == b"".join(CHUNKS)
+    # The flag bytes and the first fields of make_header(): an image, uint8, padded.
+    assert packed[0] == 0 | 0 << 2 | 1 << 4 | 1 << 6  # image, no colour, rank 2, fit pad
+    assert packed[1] == 0 | 1 << 4 | 1 << 5 | 1 << 6  # uint8, 2 axes, fitted derived, after
+    assert packed[4:].startswith(_varint(2) + _varint(30) + _varint(20) + bytes([4, 2]))
+
+
+def test_a_bundle_cut_inside_chunk_0_or_with_a_bad_chunk_fails_cleanly() -> None:
     data = write_bundle(make_header(), CHUNKS)
+    start = len(data) - sum(map(len, CHUNKS))
+    with pytest.raises(BundleError, match="truncated inside chunk 0"):
+        read_bundle(data[: start + 3])
+    damaged = bytearray(data)
+    damaged[start + 1] ^= 0x40  # chunk 0: the header's CRC-32 catches it
+    with pytest.raises(BundleError, match="header CRC-32 does not match"):
+        read_bundle(bytes(damaged))
+    damaged = bytearray(data)
+    damaged[-1] ^= 0xFF  # the last chunk: its CRC-16, when it is used
+    parsed = read_bundle(bytes(damaged))
+    assert parsed.chunk(1) == CHUNKS[1]
+    with pytest.raises(BundleError, match="chunk 2 is corrupt"):
+        parsed.chunk(2)
+
+
+@pytest.mark.parametrize(
+    ("tail", "message"),
+    [
+        (b"", "truncated while reading the header length"),
+        (b"\x80" * 11, "the header length is a varint longer than 10 bytes"),
+        (b"\x80\x00", "the header length is a varint with a needless trailing zero"),
+        (_varint(70000), "the header length is 70000, more than the largest, 65535"),
+        (b"\x05\x00\x00", "truncated while reading the header"),
+        (b"\x00", "'flags'"),
+    ],
+)
+def test_malformed_2_0_preambles_fail_cleanly(tail: bytes, message: str) -> None:
+    with pytest.raises(BundleError, match=message):
+        read_bundle(MAGIC + bytes([2, 0]) + tail)
+
+
+def test_a_huge_chunk_length_is_refused() -> None:
+    packed = binheader.pack(make_header())
+    head = MAGIC + bytes([2, 0]) + _varint(len(packed)) + packed
+    with pytest.raises(BundleError, match="the length of chunk 0 is 2199023255552, more than"):
+        read_bundle(head + _varint(2**41))
+
+
+def test_layout_matches_the_spec() -> None:
+    data = write_bundle(make_header(), CHUNKS, version=(1, 1))
     magic, major, minor, size = struct.unpack_from("<8sBBH", data)
-    assert (magic, (major, minor)) == (MAGIC, (FORMAT_VERSION[0], 1))
+    assert (magic, (major, minor)) == (MAGIC, (1, 1))
     assert json.loads(inflate_header(data[12 : 12 + size])) == make_header()
     assert data[12 + size] == len(CHUNKS)
     table = 13 + size
@@ -120,8 +195,8 @@ def test_a_corrupt_chunk_fails_only_when_it_is_used() -> None:
 
 def test_unknown_major_version_is_refused_clearly() -> None:
     data = bytearray(write_bundle(make_header(), CHUNKS))
-    data[8], data[9] = 2, 0
-    with pytest.raises(BundleError, match=r"unsupported bundle format version 2\.0"):
+    data[8], data[9] = 3, 0
+    with pytest.raises(BundleError, match=r"unsupported bundle format version 3\.0"):
         read_bundle(bytes(data))
 
 
@@ -230,13 +305,14 @@ def test_chunk_count_must_match_levels() -> None:
         write_bundle(make_header(), CHUNKS[:2])
 
 
-def test_trailing_bytes_are_refused() -> None:
+@pytest.mark.parametrize("version", [FORMAT_VERSION, (1, 1)])
+def test_trailing_bytes_are_refused(version: tuple[int, int]) -> None:
     with pytest.raises(BundleError, match="3 unexpected byte"):
-        read_bundle(write_bundle(make_header(), CHUNKS) + b"abc")
+        read_bundle(write_bundle(make_header(), CHUNKS, version=version) + b"abc")
 
 
 def test_header_crc_catches_a_changed_table() -> None:
-    data = bytearray(write_bundle(make_header(), CHUNKS))
+    data = bytearray(write_bundle(make_header(), CHUNKS, version=(1, 1)))
     size = struct.unpack_from("<H", data, 10)[0]
     data[13 + size] ^= 1  # the first chunk's length
     with pytest.raises(BundleError, match="header CRC-32 does not match"):
@@ -247,7 +323,9 @@ def test_header_size_is_bounded() -> None:
     header = make_header(qparams={"steps": list(range(20000))})
     with pytest.raises(BundleError, match="MAX_HEADER_SIZE"):
         write_bundle(header, CHUNKS)
-    assert MAX_HEADER_SIZE == 65535  # the uint16 length field cannot say more
+    assert MAX_HEADER_SIZE == 65535  # the uint16 length field of 1.x cannot say more
+    with pytest.raises(BundleError, match="MAX_HEADER_SIZE"):
+        write_bundle(header, CHUNKS, version=(1, 1))
 
 
 def test_chunk_views_do_not_copy_the_input() -> None:

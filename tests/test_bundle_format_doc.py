@@ -53,8 +53,8 @@ def render() -> str:
         chunks,
         "```",
         "",
-        "`header_bytes` counts everything but the chunks (preamble, deflated header, table, "
-        "CRC). How",
+        "`header_bytes` counts everything but the chunks (preamble, header, chunk table, CRCs). "
+        "How",
         "much of a bundle each resolution needs, for camera coded at 1 bpp and losslessly:",
         "",
         "| `decode(level=k)` | shape | bytes needed (1 bpp) | bytes needed (lossless) |",

@@ -8,6 +8,7 @@ The default run is fast; ``-m slow`` runs more than 10 000 cases.
 
 from __future__ import annotations
 
+import binascii
 import contextlib
 import json
 import struct
@@ -21,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import wavecore
-from wavecore import BundleError, decode, inspect
+from wavecore import BundleError, binheader, decode, inspect
 from wavecore.bundle import MAGIC, deflate_header, read_bundle
 
 FAST = settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
@@ -72,6 +73,64 @@ def assemble(header: bytes, chunks: list[bytes], major: int = 1, minor: int = 0)
     for chunk in chunks:
         head += struct.pack("<II", len(chunk), zlib.crc32(chunk))
     return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while value >= 0x80:
+        out.append(value & 0x7F | 0x80)
+        value >>= 7
+    return bytes(out + bytes([value]))
+
+
+def assemble2(packed: bytes, chunks: list[bytes], minor: int = 0) -> bytes:
+    """A format 2.0 bundle with correct CRCs around whatever binary header bytes it is given."""
+    head = MAGIC + bytes([2, minor]) + _varint(len(packed)) + packed
+    head += b"".join(_varint(len(c)) for c in chunks)
+    head += b"".join(struct.pack("<H", binascii.crc_hqx(c, 0)) for c in chunks[1:])
+    crc = zlib.crc32(chunks[0] if chunks else b"", zlib.crc32(head))
+    return head + struct.pack("<I", crc) + b"".join(chunks)
+
+
+def packed_header(data: bytes) -> bytes:
+    """The binary header of a 2.0 bundle, as stored."""
+    assert data[8] == 2 and data[10] < 128
+    return data[11 : 11 + data[10]]
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_assemble2_rebuilds_the_writers_bytes(name: str) -> None:
+    _, chunks = split(BUNDLES[name])
+    assert assemble2(packed_header(BUNDLES[name]), chunks) == BUNDLES[name]
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_a_binary_header_cut_at_every_length_names_a_field(name: str) -> None:
+    packed = packed_header(BUNDLES[name])
+    _, chunks = split(BUNDLES[name])
+    for length in range(len(packed)):
+        with pytest.raises(BundleError, match="binary header field '"):
+            binheader.unpack(packed[:length])
+        assert decodes_or_fails_cleanly(assemble2(packed[:length], chunks)) is None
+    with pytest.raises(BundleError, match=r"'end'.*1 unexpected byte"):
+        binheader.unpack(packed + b"\x00")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_flipped_header_byte_with_fixed_crcs(name: str) -> None:
+    """Each byte of the binary header changed, behind valid CRCs: an array or a BundleError."""
+    packed = packed_header(BUNDLES[name])
+    _, chunks = split(BUNDLES[name])
+    for position in range(len(packed)):
+        for flip in (0x01, 0x10, 0x80, 0xFF):
+            damaged = bytearray(packed)
+            damaged[position] ^= flip
+            bundle = assemble2(bytes(damaged), chunks)
+            for level in (0, 1):
+                with contextlib.suppress(wavecore.InvalidParameter):  # a level too deep
+                    decodes_or_fails_cleanly(bundle, level=level)
+            with contextlib.suppress(BundleError):
+                inspect(bundle)
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -172,7 +231,7 @@ def mutate_bytes(raw: bytes, data: st.DataObject) -> bytes:
 def fuzz_case(data: st.DataObject) -> None:
     name = data.draw(st.sampled_from(NAMES))
     header, chunks = split(BUNDLES[name])
-    mode = data.draw(st.integers(0, 3))
+    mode = data.draw(st.integers(0, 5))
     if mode == 0:  # raw damage, CRCs left as they are
         bundle = mutate_bytes(BUNDLES[name], data)
     elif mode == 1:  # damaged chunks with valid CRCs
@@ -181,8 +240,17 @@ def fuzz_case(data: st.DataObject) -> None:
         bundle = assemble(json.dumps(header).encode(), chunks)
     elif mode == 2:  # a crafted header with valid CRCs
         bundle = assemble(json.dumps(mutate_header(header, data)).encode(), chunks)
-    else:  # arbitrary bytes behind a valid preamble
-        bundle = MAGIC + bytes([1, 0]) + data.draw(st.binary(max_size=300))
+    elif mode == 3:  # arbitrary bytes behind a valid preamble
+        bundle = MAGIC + bytes([data.draw(st.sampled_from([1, 2])), 0])
+        bundle += data.draw(st.binary(max_size=300))
+    elif mode == 4:  # a crafted binary header (from a crafted dict) with valid CRCs
+        try:
+            packed = binheader.pack(mutate_header(header, data))
+        except BundleError:  # a value the binary header cannot hold
+            return
+        bundle = assemble2(packed, chunks)
+    else:  # damaged binary header bytes with valid CRCs
+        bundle = assemble2(mutate_bytes(packed_header(BUNDLES[name]), data), chunks)
     level = data.draw(st.integers(0, 2))
     try:
         decodes_or_fails_cleanly(bundle, level=level)

@@ -11,15 +11,23 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
+import struct
 from typing import Any
 
 import numpy as np
 import pytest
-from test_bundle_fuzz import BUNDLES, assemble, split  # the same real bundles as the fuzz
+from test_bundle_fuzz import (  # the same real bundles as the fuzz
+    BUNDLES,
+    assemble,
+    assemble2,
+    packed_header,
+    split,
+)
 
 import wavecore
-from wavecore import BundleError, decode, inspect
-from wavecore.bundle import read_bundle
+from wavecore import BundleError, binheader, decode, inspect
+from wavecore.bundle import deflate_header, read_bundle
 
 MISSING = object()  # the row deletes the field
 
@@ -172,3 +180,177 @@ def test_the_table_covers_every_field_an_encoder_writes() -> None:
     assert written <= covered, written - covered
     huge = wavecore.encode_surface(np.full((6, 6), 1e300))
     assert set(read_bundle(huge).header) <= covered
+
+
+# --------------------------------------------------------------------------------------------
+# Format 2.0: the same table through the binary header, then its bytes one field at a time
+# --------------------------------------------------------------------------------------------
+
+
+def _packed_with(name: str, field: str, value: Any) -> bytes | None:
+    """The bundle with one field changed, as a crafted 2.0 bundle; None if the binary header
+    has no way to say the value (its codes cannot name a bad kind, say)."""
+    header, chunks = split(BUNDLES[name])
+    if value is MISSING:
+        del header[field]
+    else:
+        header[field] = value
+    try:
+        return assemble2(binheader.pack(header), chunks)
+    except BundleError:
+        return None
+
+
+@pytest.mark.parametrize("name", sorted(BUNDLES))
+@pytest.mark.parametrize(("field", "value"), ANY_BUNDLE, ids=repr)
+def test_a_bad_field_in_a_binary_header_is_named(name: str, field: str, value: Any) -> None:
+    data = _packed_with(name, field, value)
+    if data is not None:
+        _refused(data, field, inspect(BUNDLES[name])["levels"])
+
+
+@pytest.mark.parametrize(("name", "field", "value", "names"), SPECIFIC, ids=repr)
+def test_an_inconsistent_field_in_a_binary_header_is_refused(
+    name: str, field: str, value: Any, names: str
+) -> None:
+    data = _packed_with(name, field, value)
+    if data is None:  # the binary header has one pads pair per boundary, by construction
+        assert (name, field) in UNSAYABLE_IN_BINARY
+        return
+    # In 2.0 the chunk count is levels + 1 by construction: a wrong ``levels`` reads the chunk
+    # table wrongly, and the table's varints or the CRC-32 say so.
+    names = "chunk|CRC" if field == "levels" else names
+    levels = inspect(BUNDLES[name])["levels"]
+    _refused(data, names, levels, inspect_too=field not in DECODER_FIELDS or value == {})
+
+
+UNSAYABLE_IN_BINARY = {("closed curve", "boundary"), ("closed curve", "pads")}
+
+
+@pytest.mark.parametrize(("name", "field", "value"), HARMLESS, ids=repr)
+def test_a_well_formed_value_in_a_binary_header_decodes_as_before(
+    name: str, field: str, value: Any
+) -> None:
+    data = _packed_with(name, field, value)
+    assert data is not None
+    assert np.array_equal(decode(data), decode(BUNDLES[name]))
+
+
+def _first_difference(a: bytes, b: bytes) -> int:
+    return next(i for i, (x, y) in enumerate(zip(a, b, strict=False)) if x != y)
+
+
+def _with_bytes(packed: bytes, at: int, old_size: int, new: bytes) -> bytes:
+    return packed[:at] + new + packed[at + old_size :]
+
+
+def _flags(name: str, byte: int, mask: int, bits: int) -> bytes:
+    packed = bytearray(packed_header(BUNDLES[name]))
+    packed[byte] = packed[byte] & ~mask | bits
+    return bytes(packed)
+
+
+#: (bundle, flag byte, mask, new bits, the field the error names): codes no table holds.
+UNKNOWN_CODES = [
+    ("lossy image", 0, 0x03, 0x03, "'kind'.*unknown code 3"),
+    ("lossy image", 0, 0x0C, 0x0C, "'colour'.*unknown code 3"),
+    *[("surface", 1, 0x0F, code, f"'dtype'.*unknown code {code}") for code in range(10, 16)],
+    ("closed curve", 1, 0xC0, 0xC0, "'pads'.*unknown pads form 3"),
+    *[("lossy image", 2, 0x07, code, "'wavelet'.*unknown code") for code in (5, 6, 7)],
+    ("lossy image", 2, 0x18, 0x18, "'boundary'.*unknown code 3"),
+    ("lossy image", 2, 0x60, 0x60, "'boundary'.*unknown code 3"),
+    ("closed curve", 2, 0x60, 0x20, "'boundary'.*a second boundary code"),
+    ("lossy image", 3, 0x03, 0x03, "'quantizer'.*unknown code 3"),
+    ("lossy image", 3, 0x0C, 0x0C, "'coder'.*unknown code 3"),
+    ("lossless rgb", 3, 0x80, 0x80, "'flags'.*default-rounding"),
+    ("lossy image", 3, 0x03, 0x02, "'flags'.*compact parameters"),
+]
+
+
+@pytest.mark.parametrize(("name", "byte", "mask", "bits", "message"), UNKNOWN_CODES, ids=repr)
+def test_an_unknown_code_is_named(name: str, byte: int, mask: int, bits: int, message: str) -> None:
+    packed = _flags(name, byte, mask, bits)
+    with pytest.raises(BundleError, match=message):
+        binheader.unpack(packed)
+    with pytest.raises(BundleError, match=message):
+        decode(assemble2(packed, split(BUNDLES[name])[1]))
+
+
+def _offset_of(name: str, field: str, value: Any) -> tuple[bytes, int]:
+    """The packed header and the offset where ``field`` starts (found by changing it)."""
+    header, _ = split(BUNDLES[name])
+    packed = binheader.pack(header)
+    return packed, _first_difference(packed, binheader.pack({**header, field: value}))
+
+
+def test_huge_and_malformed_varints_are_named() -> None:
+    packed = packed_header(BUNDLES["lossy image"])
+    levels_at = 4  # after the four flag bytes
+    for varint, message in [
+        (b"\x80" * 10 + b"\x01", "'levels'.*longer than 10 bytes"),
+        (b"\x82\x00", "'levels'.*needless trailing zero"),
+        (b"\x80\x80\x04", "'levels'.*65536 is more than the largest, 255"),
+    ]:
+        with pytest.raises(BundleError, match=message):
+            binheader.unpack(_with_bytes(packed, levels_at, 1, varint))
+    shape_at = levels_at + 1
+    huge = bytes([0xFF] * 9 + [0x01])  # 2**64 - 1
+    with pytest.raises(BundleError, match=r"'shape'.*more than the largest"):
+        binheader.unpack(_with_bytes(packed, shape_at, 1, huge))
+
+
+def test_a_bad_number_is_named() -> None:
+    _, at = _offset_of("lossy image", "peak", 1e300)
+    header, _ = split(BUNDLES["lossy image"])
+    wide = binheader.pack({**header, "peak": 1e300})  # now a float64: form 14, 8 bytes
+    nan = _with_bytes(wide, at + 1, 8, struct.pack("<d", math.nan))
+    with pytest.raises(BundleError, match=r"'peak'.*not a finite number"):
+        binheader.unpack(nan)
+    with pytest.raises(BundleError, match=r"'peak'.*takes no value bits"):
+        binheader.unpack(_with_bytes(wide, at, 9, bytes([0x1C])))  # null form, value bits 1
+
+
+def test_a_bad_weight_code_is_named() -> None:
+    header, chunks = split(BUNDLES["lossy image"])
+    packed = binheader.pack(header)
+    step_at = packed.index(struct.pack("<d", header["qparams"]["step"]))
+    first_weight = step_at + 8 + 1  # the default rounding, then the cH = cV mask (one byte)
+    bad = _with_bytes(packed, first_weight, 2, struct.pack("<H", 63000))
+    with pytest.raises(BundleError, match=r"'qparams.weights'.*weight code 63000"):
+        decode(assemble2(bad, chunks))
+
+
+def test_a_bad_lifting_code_is_named() -> None:
+    header, chunks = split(BUNDLES["lossless rgb"])
+    packed = binheader.pack(header)
+    at = _first_difference(packed, binheader.pack({**header, "lifting": ["haar", "haar"]}))
+    with pytest.raises(BundleError, match=r"'lifting'.*unknown code 3"):
+        decode(assemble2(_with_bytes(packed, at, 1, bytes([packed[at] | 0x03])), chunks))
+    with pytest.raises(BundleError, match=r"'lifting'.*bits set beyond"):
+        decode(assemble2(_with_bytes(packed, at, 1, bytes([packed[at] | 0x30])), chunks))
+
+
+@pytest.mark.parametrize(
+    ("extension", "message"),
+    [
+        (b"\x05" + b"\xff" * 5, "'extension'.*not valid DEFLATE"),
+        (b"\x02" + deflate_header(b"[1]")[:1], "'extension'"),
+        (len(deflate_header(b"[1]")).to_bytes(1, "little") + deflate_header(b"[1]"), "object"),
+        (len(deflate_header(b"{}")).to_bytes(1, "little") + deflate_header(b"{}"), "non-empty"),
+        (
+            len(deflate_header(b'{"kind":"image"}')).to_bytes(1, "little")
+            + deflate_header(b'{"kind":"image"}'),
+            "repeats the field 'kind'",
+        ),
+        (
+            len(deflate_header(b'{"a":NaN}')).to_bytes(1, "little") + deflate_header(b'{"a":NaN}'),
+            "NaN",
+        ),
+        (b"\x80\x80\x04", "'extension'.*more than the largest"),
+    ],
+)
+def test_a_bad_extension_is_named(extension: bytes, message: str) -> None:
+    packed = bytearray(packed_header(BUNDLES["closed curve"]))
+    packed[3] |= 1 << 6  # an extension follows the last field
+    with pytest.raises(BundleError, match=message):
+        binheader.unpack(bytes(packed) + extension)

@@ -243,7 +243,7 @@ def test_inspect_describes_every_chunk() -> None:
     assert info["chunks"][1]["bands"] == ["cH", "cV", "cD"]
     assert info["header_bytes"] + sum(c["bytes"] for c in info["chunks"]) == len(bundle)
     assert info["psnr"] >= 33 and info["max_error"] > 0
-    assert info["version"] == f"{FORMAT_VERSION[0]}.1"  # 1.2 only for scaled (huge) data
+    assert info["version"] == f"{FORMAT_VERSION[0]}.{FORMAT_VERSION[1]}"  # 2.0: scaled or not
     coarse_shape = info["chunks"][0]["shapes"][0]
     assert coarse_shape[2] == 3
 

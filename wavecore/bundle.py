@@ -1,30 +1,33 @@
 """The coefficient bundle: a versioned binary container, coarse to fine.
 
-This docstring is the specification of format version 1.2; ``docs/bundle-format.md`` says the
-same in more words.  Like NumPy's ``.npy`` format, a bundle is a fixed preamble, a bounded
-self-describing header, then the payload.  All integers are little-endian.
+This docstring summarises format version 2.0, and 1.x, which is still read;
+``docs/bundle-format.md`` is the specification.  Like NumPy's ``.npy`` format, a bundle is a
+fixed preamble, a bounded self-describing header, then the payload.  All integers are
+little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
 
-Layout
-------
-========  ===========  ==========================================================================
-offset    size         field
-========  ===========  ==========================================================================
-0         8            magic ``b"\\x89WVB\\r\\n\\x1a\\n"`` (PNG-style: catches 7-bit and newline
-                       mangling, stops ``type`` on DOS)
-8         1            major version (``1``); a reader refuses any other major version
-9         1            minor version (``1``, or ``2`` with ``scale``); a reader accepts any minor
-                       version of its major,
-                       because minor versions only add optional header keys or new values
-10        2            header length ``H`` (``uint16``), ``2 <= H <= MAX_HEADER_SIZE``
-12        H            header: a UTF-8 JSON object (see *Header*), compressed with raw
-                       DEFLATE (RFC 1951, ``zlib`` with ``wbits=-15``); it inflates to at most
-                       ``MAX_HEADER_SIZE`` bytes
-12+H      1            chunk count ``N`` (``uint8``), ``1 <= N <= MAX_CHUNKS``
-13+H      8·N          chunk table: for each chunk its byte length (``uint32``) and CRC-32
-                       (``uint32``, ``zlib.crc32``)
-13+H+8N   4            CRC-32 of every byte before it (magic, versions, header, table)
-17+H+8N   ...          the chunks, concatenated in table order; nothing may follow the last one
-========  ===========  ==========================================================================
+Layout (2.0)
+------------
+==========  ===========  ========================================================================
+offset      size         field
+==========  ===========  ========================================================================
+0           8            magic ``b"\\x89WVB\\r\\n\\x1a\\n"`` (PNG-style: catches 7-bit and newline
+                         mangling, stops ``type`` on DOS)
+8           1            major version (``2``); a reader refuses a major version it does not know
+9           1            minor version (``0``); a reader accepts any minor version of its majors
+10          v            header length ``H``, a varint, at most ``MAX_HEADER_SIZE``
+…           H            the binary header of :mod:`wavecore.binheader` (the same dict as 1.x)
+…           v · N        each chunk's byte length, a varint; ``N = levels + 1``
+…           2 · (N - 1)  CRC-16/XMODEM (``binascii.crc_hqx(chunk, 0)``) of chunks 1 … N - 1
+…           4            CRC-32 of every byte before it *and then chunk 0*
+…           ...          the chunks, concatenated; nothing may follow the last one
+==========  ===========  ========================================================================
+
+Layout (1.x)
+------------
+The magic; major ``1``; minor ``0``, ``1`` or ``2`` (with ``scale``); a ``uint16`` header length
+``H``; the header as UTF-8 JSON, raw DEFLATE (``wbits=-15``), inflating to at most
+``MAX_HEADER_SIZE``; a ``uint8`` chunk count ``N``; per chunk its ``uint32`` length and
+``uint32`` CRC-32; the CRC-32 of every byte before it; the chunks.
 
 Chunk ``0`` holds the coarsest approximation ``cA_L``; chunk ``i`` (``1 <= i <= L``) holds all
 detail subbands of level ``L + 1 - i`` (every channel, every orientation), so chunks run
@@ -35,20 +38,19 @@ a clear error.  What a chunk's bytes mean is the business of the coder named in 
 
 Versions
 --------
-A reader refuses any other major version and accepts any minor version of its own: minor
-versions only add optional header keys (ignored by older readers) or new values of an enumerated
-field (refused clearly by older readers, naming the field; 1.1 added six ``dtype`` values).
-Anything else — a new meaning for a field, a new layout, an entropy coder whose old
-bitstreams no longer decode — is a new major version, or a new coder
-*name* (which older readers refuse clearly).  The golden bundles in ``tests/golden`` are decoded
-in every test run to hold this promise.
+A reader refuses any major version it does not know and accepts any minor version of those it
+does: minor versions only add optional header keys (ignored by older readers) or new values
+of an enumerated field (refused clearly by older readers, naming the field; 1.1 added six
+``dtype`` values, 1.2 ``scale`` and ``opaque``).  Anything else — a new meaning for a field, a
+new layout, an entropy coder whose old bitstreams no longer decode — is a new major version, or
+a new coder *name* (which older readers refuse clearly).  2.0 is such a new layout.  The golden
+bundles in ``tests/golden`` are decoded in every test run to hold this promise.
 
 Header
 ------
-A JSON object (stored deflated, see *Layout*: the parameters of the quantizer hold many similar
-numbers, and at 0.25 bpp a 512 × 512 bundle has only 8 KiB) with these keys; readers ignore
-unknown keys, so a minor
-version may add some.
+A dict (1.x: a JSON object, stored deflated; 2.0: the binary header, whose extension holds keys
+it has no field for) with these keys; readers ignore unknown keys, so a minor version may add
+some.
 
 ``kind``        ``"image"``, ``"curve"`` or ``"surface"``
 ``shape``       the original array's shape (list of positive ints)
@@ -89,10 +91,11 @@ version may add some.
 Limits and safety
 -----------------
 A reader checks, in this order and before it allocates anything sized by the bundle: the magic,
-the major version, the header length (at most ``MAX_HEADER_SIZE`` bytes, compressed and
-inflated: inflation stops at that size, so no "deflate bomb" gets through), the JSON, every header
-field's type and range (the declared element count is at most ``MAX_ELEMENTS``), the header and
-table CRC, and that the chunk table's lengths fit in the bytes that are actually present.  Every
+the major version, the header length (at most ``MAX_HEADER_SIZE`` bytes; 1.x: compressed and
+inflated, inflation stops at that size, so no "deflate bomb" gets through), the binary header's
+fields or the JSON, every header field's type and range (the declared element count is at
+most ``MAX_ELEMENTS``), the header and table CRC (2.0: with chunk 0), and that the chunk
+table's lengths fit in the bytes that are actually present.  Every
 failure is a :class:`~wavecore.errors.BundleError` whose message names the field being read.
 The codec then checks the kind-specific consistency (``fitted`` = ``shape`` + ``pads``, each
 padded length at most ``2 × length + 64``, the lengths fit ``levels`` of the wavelet and boundary,
@@ -102,6 +105,7 @@ the entropy decoder never produces more values than the subband shapes that foll
 
 from __future__ import annotations
 
+import binascii
 import json
 import math
 import struct
@@ -110,6 +114,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from . import binheader
 from .errors import BundleError
 
 __all__ = [
@@ -126,13 +131,13 @@ __all__ = [
 ]
 
 MAGIC = b"\x89WVB\r\n\x1a\n"
-#: The newest version this module reads and writes.  1.1 added the dtypes float16, int8–int64
-#: and uint32; 1.2 the optional ``scale`` key.  A writer labels each bundle with the oldest
-#: minor version that holds it (1.2 only when the header has ``scale``), so that 1.1 readers,
-#: which would ignore that key, never get a bundle they would decode wrongly… by a power of two.
-FORMAT_VERSION = (1, 2)
-#: The minor version of a bundle whose header has no ``scale`` key.
-_UNSCALED_MINOR = 1
+#: The version this module writes, and the newest it reads.  2.0 (a new major version: the
+#: header's encoding and the chunk table's layout changed) has the binary header of
+#: :mod:`wavecore.binheader`; every 1.x version is still read.  In 1.x, 1.1 added the dtypes
+#: float16, int8–int64 and uint32, and 1.2 the optional ``scale`` key.
+FORMAT_VERSION = (2, 0)
+#: The major versions this module reads.
+READ_MAJORS = (1, 2)
 MAX_HEADER_SIZE = 65535
 MAX_CHUNKS = 64
 #: Largest element count (samples × channels) a bundle may declare: 2**27, about a 6700 × 6700
@@ -143,6 +148,8 @@ MAX_LEVELS = 30
 MAX_SCALE = 1100
 
 _PREAMBLE = struct.Struct("<8sBBH")
+_MAGIC_AND_VERSION = struct.Struct("<8sBB")
+_U16 = struct.Struct("<H")
 _TABLE_ENTRY = struct.Struct("<II")
 _CRC = struct.Struct("<I")
 
@@ -178,6 +185,9 @@ class Bundle:
     header: dict[str, Any]
     chunks: tuple[memoryview | None, ...]
     crcs: tuple[int, ...]
+    #: How ``crcs`` check the chunks: ``"crc32"`` (1.x) or ``"crc16"`` (2.0: CRC-16/XMODEM,
+    #: ``binascii.crc_hqx``; chunk 0 is checked with the header by its CRC-32 instead).
+    checksum: str = "crc32"
 
     @property
     def available(self) -> int:
@@ -199,10 +209,16 @@ class Bundle:
                 "level or supply the whole bundle"
             )
             raise BundleError(msg)
-        if zlib.crc32(data) != self.crcs[index]:
+        if _chunk_check(data, self.checksum) != self.crcs[index]:
             msg = f"chunk {index} is corrupt: its CRC-32 does not match the chunk table"
             raise BundleError(msg)
         return bytes(data)
+
+
+def _chunk_check(data: bytes | memoryview, checksum: str) -> int:
+    if checksum == "crc16":
+        return binascii.crc_hqx(data, 0)
+    return zlib.crc32(data)
 
 
 class _Reader:
@@ -227,12 +243,34 @@ class _Reader:
     def unpack(self, fmt: struct.Struct, field: str) -> tuple[Any, ...]:
         return fmt.unpack(self.take(fmt.size, field))
 
+    def varint(self, field: str, maximum: int) -> int:
+        """An unsigned LEB128 number of at most 10 bytes, canonical, and at most ``maximum``."""
+        value = shift = 0
+        for count in range(binheader.MAX_VARINT_BYTES):
+            (byte,) = self.take(1, field)
+            value |= (byte & 0x7F) << shift
+            shift += 7
+            if not byte & 0x80:
+                if byte == 0 and count:
+                    msg = f"{field} is a varint with a needless trailing zero byte"
+                    raise BundleError(msg)
+                if value > maximum:
+                    msg = f"{field} is {value}, more than the largest, {maximum}"
+                    raise BundleError(msg)
+                return value
+        msg = f"{field} is a varint longer than {binheader.MAX_VARINT_BYTES} bytes"
+        raise BundleError(msg)
 
-def write_bundle(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
+
+def write_bundle(
+    header: dict[str, Any], chunks: Sequence[bytes], *, version: tuple[int, int] = FORMAT_VERSION
+) -> bytes:
     """Serialise a header and its chunks (coarse to fine) into bundle bytes.
 
     The header is validated exactly as a reader would, so a writer can never produce a bundle
-    that its own reader refuses.
+    that its own reader refuses.  ``version`` is :data:`FORMAT_VERSION` (2.0, the binary
+    header), or ``(1, 1)`` for the JSON header that wavecore releases before 2.0 read (labelled
+    1.2 when the header has ``scale``).
 
     Examples
     --------
@@ -246,6 +284,28 @@ def write_bundle(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
     (b'\\x89WVB\\r\\n\\x1a\\n', b'abc')
     """
     check_header(header)
+    if not 1 <= len(chunks) <= MAX_CHUNKS or len(chunks) != header["levels"] + 1:
+        msg = f"a bundle of {header['levels']} levels needs {header['levels'] + 1} chunks"
+        raise BundleError(msg)
+    if version[0] == 1:
+        return _write_json(header, chunks)
+    if version != FORMAT_VERSION:
+        msg = f"cannot write bundle format version {version}; use {FORMAT_VERSION} or (1, 1)"
+        raise BundleError(msg)
+    packed = binheader.pack(header)
+    if len(packed) > MAX_HEADER_SIZE:
+        msg = f"header is {len(packed)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
+        raise BundleError(msg)
+    parts = [MAGIC, bytes(FORMAT_VERSION), _varint(len(packed)), packed]
+    parts += [_varint(len(chunk)) for chunk in chunks]
+    parts += [_U16.pack(binascii.crc_hqx(chunk, 0)) for chunk in chunks[1:]]
+    head = b"".join(parts)
+    crc = zlib.crc32(chunks[0], zlib.crc32(head))
+    return b"".join([head, _CRC.pack(crc), *chunks])
+
+
+def _write_json(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
+    """Format 1.1 (1.2 with ``scale``): the deflated JSON header."""
     text = json.dumps(header, separators=(",", ":"), allow_nan=False).encode("utf-8")
     if len(text) > MAX_HEADER_SIZE:
         msg = f"header is {len(text)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
@@ -254,19 +314,25 @@ def write_bundle(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
     if len(text) > MAX_HEADER_SIZE:  # incompressible and at the limit
         msg = f"header is {len(text)} bytes compressed, more than {MAX_HEADER_SIZE}"
         raise BundleError(msg)
-    if not 1 <= len(chunks) <= MAX_CHUNKS or len(chunks) != header["levels"] + 1:
-        msg = f"a bundle of {header['levels']} levels needs {header['levels'] + 1} chunks"
-        raise BundleError(msg)
-    minor = FORMAT_VERSION[1] if "scale" in header else _UNSCALED_MINOR
-    parts = [_PREAMBLE.pack(MAGIC, FORMAT_VERSION[0], minor, len(text)), text, bytes([len(chunks)])]
+    minor = 2 if "scale" in header else 1
+    parts = [_PREAMBLE.pack(MAGIC, 1, minor, len(text)), text, bytes([len(chunks)])]
     for chunk in chunks:
         parts.append(_TABLE_ENTRY.pack(len(chunk), zlib.crc32(chunk)))
     head = b"".join(parts)
     return b"".join([head, _CRC.pack(zlib.crc32(head)), *chunks])
 
 
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while value >= 0x80:
+        out.append(value & 0x7F | 0x80)
+        value >>= 7
+    out.append(value)
+    return bytes(out)
+
+
 def read_bundle(data: Any) -> Bundle:
-    """Parse and validate a bundle's preamble, header and chunk table.
+    """Parse and validate a bundle's preamble, header and chunk table (any version it knows).
 
     Never raises anything but :class:`BundleError` and never allocates more than the input's
     own size: chunks are views into ``data``.
@@ -275,24 +341,76 @@ def read_bundle(data: Any) -> Bundle:
     ----------
     data : bytes-like
         The bundle.  It may be truncated inside the chunks (the missing chunks come back as
-        ``None``); a bundle truncated before the end of its chunk table is an error.
+        ``None``); a bundle truncated before the end of its chunk table is an error, and so
+        (from version 2.0 on, whose header CRC covers chunk 0) is one cut inside chunk 0.
     """
     try:
         reader = _Reader(data)
     except TypeError as exc:
         msg = f"a bundle must be bytes, not {type(data).__name__}"
         raise BundleError(msg) from exc
-    magic, major, minor, header_size = reader.unpack(_PREAMBLE, "the preamble")
+    magic, major, minor = reader.unpack(_MAGIC_AND_VERSION, "the preamble")
     if magic != MAGIC:
         msg = f"not a wavecore bundle: the magic bytes are {bytes(magic)!r}, expected {MAGIC!r}"
         raise BundleError(msg)
-    if major != FORMAT_VERSION[0]:
+    if major not in READ_MAJORS:
         msg = (
             f"unsupported bundle format version {major}.{minor}: this wavecore reads major "
-            f"version {FORMAT_VERSION[0]} (up to {FORMAT_VERSION[0]}.{FORMAT_VERSION[1]} "
-            "fully); use a wavecore release that knows this version"
+            f"versions {', '.join(map(str, READ_MAJORS))} (up to "
+            f"{FORMAT_VERSION[0]}.{FORMAT_VERSION[1]} fully); use a wavecore release that "
+            "knows this version"
         )
         raise BundleError(msg)
+    if major == 1:
+        return _read_json(reader, minor)
+    return _read_binary(reader, minor)
+
+
+def _read_binary(reader: _Reader, minor: int) -> Bundle:
+    """Format 2.x: the binary header, varint chunk lengths, CRC-16s, then one CRC-32."""
+    header_size = reader.varint("the header length", MAX_HEADER_SIZE)
+    header = binheader.unpack(reader.take(header_size, "the header"))
+    check_header(header)
+    count = header["levels"] + 1
+    lengths = [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
+    crcs = [0] + [reader.unpack(_U16, f"the CRC-16 of chunk {i}")[0] for i in range(1, count)]
+    head_end = reader.offset
+    (crc,) = reader.unpack(_CRC, "the header CRC-32")
+    remaining = len(reader.view) - reader.offset
+    if lengths[0] > remaining:
+        msg = (
+            f"bundle is truncated inside chunk 0 (it needs {lengths[0]} bytes, {remaining} "
+            "remain): the header's CRC-32 covers chunk 0, and every level needs it"
+        )
+        raise BundleError(msg)
+    first = reader.view[reader.offset : reader.offset + lengths[0]]
+    if zlib.crc32(first, zlib.crc32(reader.view[:head_end])) != crc:
+        msg = "the header, chunk table or chunk 0 is corrupt: the header CRC-32 does not match"
+        raise BundleError(msg)
+    crcs[0] = binascii.crc_hqx(first, 0)
+    chunks = _take_chunks(reader, lengths)
+    return Bundle((2, minor), header, chunks, tuple(crcs), "crc16")
+
+
+def _take_chunks(reader: _Reader, lengths: Sequence[int]) -> tuple[memoryview | None, ...]:
+    chunks: list[memoryview | None] = []
+    remaining = len(reader.view) - reader.offset
+    for length in lengths:
+        if length <= remaining:
+            chunks.append(reader.take(length, "a chunk"))
+            remaining -= length
+        else:
+            remaining = -1  # every chunk after a missing one is missing too
+            chunks.append(None)
+    if remaining > 0:
+        msg = f"{remaining} unexpected byte(s) after the last chunk"
+        raise BundleError(msg)
+    return tuple(chunks)
+
+
+def _read_json(reader: _Reader, minor: int) -> Bundle:
+    """Format 1.x: the deflated JSON header and a table of uint32 lengths and CRC-32s."""
+    (header_size,) = reader.unpack(_U16, "the header length")
     if header_size < 2:
         msg = f"header length {header_size} is too short for a JSON object"
         raise BundleError(msg)
@@ -311,19 +429,8 @@ def read_bundle(data: Any) -> Bundle:
     if zlib.crc32(reader.view[:head_end]) != crc:
         msg = "the header or chunk table is corrupt: the header CRC-32 does not match"
         raise BundleError(msg)
-    chunks: list[memoryview | None] = []
-    remaining = len(reader.view) - reader.offset
-    for length, _ in table:
-        if length <= remaining:
-            chunks.append(reader.take(length, "a chunk"))
-            remaining -= length
-        else:
-            remaining = -1  # every chunk after a missing one is missing too
-            chunks.append(None)
-    if remaining > 0:
-        msg = f"{remaining} unexpected byte(s) after the last chunk"
-        raise BundleError(msg)
-    return Bundle((major, minor), header, tuple(chunks), tuple(c for _, c in table))
+    chunks = _take_chunks(reader, [length for length, _ in table])
+    return Bundle((1, minor), header, chunks, tuple(c for _, c in table))
 
 
 def deflate_header(text: bytes) -> bytes:

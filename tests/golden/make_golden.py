@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 import wavecore
+from wavecore.bundle import read_bundle, write_bundle
 
 HERE = Path(__file__).resolve().parent
 
@@ -98,6 +99,22 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             surface,
             {"closed": (True, False), "quality": 42.0},
         ),
+        # Format 2.0 (the binary header): a curve, grey and colour pictures at their default
+        # quality, lossless 16-bit RGBA (with its lifting list), a surface and huge floats
+        # (the ``scale`` field).
+        "v2_curve_default": ("curve", open_curve, {}),
+        "v2_image_grey_u8_default": ("image", blocks_picture, {}),
+        "v2_image_rgb_u8_default": ("image", rgb.clip(0, 255).astype(np.uint8), {}),
+        "v2_image_rgba_u16_lossless": ("image", rgba16, {"lossless": True}),
+        "v2_surface_closed_open": ("surface", surface, {"closed": (True, False)}),
+        "v2_surface_scaled": ("surface", surface * 1e300, {"quality": 40.0}),
+        # Format 1.2 (the JSON header with ``scale``), written by the 1.x writer that
+        # ``write_bundle(..., version=(1, 1))`` keeps: no earlier golden bundle had it.
+        "surface_scaled_v1_2": (
+            "surface",
+            surface * 1e300,
+            {"quality": 40.0, "format_version": (1, 1)},
+        ),
     }
 
 
@@ -113,7 +130,12 @@ def main() -> None:
     for name, (kind, data, kwargs) in inputs().items():
         if name in manifest and name not in replace:
             continue
-        bundle = encoders[kind](data, **kwargs)
+        options = {k: v for k, v in kwargs.items() if k != "format_version"}
+        bundle = encoders[kind](data, **options)
+        if "format_version" in kwargs:  # the same bundle in an older format
+            parsed = read_bundle(bundle)
+            chunks = [parsed.chunk(i) for i in range(len(parsed.chunks))]
+            bundle = write_bundle(parsed.header, chunks, version=kwargs["format_version"])
         decoded = wavecore.decode(bundle)
         (HERE / f"{name}.wvb").write_bytes(bundle)
         np.save(HERE / f"{name}.npy", decoded, allow_pickle=False)

@@ -1,0 +1,62 @@
+"""Header sizes of typical bundles in format 2.0 (binary header) against 1.1 (JSON header).
+
+    .venv/bin/python benchmarks/header_sizes.py
+
+Each bundle is encoded once; the same header and chunks are then written in both formats
+(``write_bundle(..., version=(1, 1))`` is the writer of releases before 2.0), so the payload is
+identical and only the overhead differs.  ``header`` is ``inspect(...)["header_bytes"]``:
+everything but the chunks (preamble, header, chunk table and checks).  Prints a Markdown table
+(docs/bundle-format.md quotes it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+import wavecore
+from wavecore.bundle import read_bundle, write_bundle
+
+
+def cases() -> dict[str, bytes]:
+    from skimage import data  # scikit-image's pictures: the figures' usual test set
+
+    t8 = np.linspace(0, 1, 8)
+    made = {"curve, 8 points": wavecore.encode_curve(np.stack([t8, np.sin(3 * t8)], 1))}
+    for n in (50, 200, 1000):
+        t = np.linspace(0, 1, n)
+        made[f"curve, {n} points"] = wavecore.encode_curve(np.stack([t, np.sin(6 * t) * t], 1))
+    made["image 512² grey (camera), default"] = wavecore.encode_image(data.camera())
+    made["image 512² RGB (astronaut), default"] = wavecore.encode_image(data.astronaut())
+    made["image 512² grey (camera), lossless"] = wavecore.encode_image(data.camera(), lossless=True)
+    made["image 512² RGB (astronaut), lossless"] = wavecore.encode_image(
+        data.astronaut(), lossless=True
+    )
+    u = np.linspace(0, 2 * np.pi, 64)
+    uu, vv = np.meshgrid(u, np.linspace(-1, 1, 48), indexing="ij")
+    grid = np.stack([np.cos(uu) * (1 + vv**2), np.sin(uu), vv], -1)
+    made["surface 64 × 48 × 3, default"] = wavecore.encode_surface(grid)
+    made["height field 256², default"] = wavecore.encode_surface(
+        np.add.outer(np.sin(np.linspace(0, 6, 256)), np.cos(np.linspace(0, 4, 256)))
+    )
+    return made
+
+
+def main() -> None:
+    print("| bundle | levels | payload | header 1.1 | header 2.0 | bundle 1.1 | bundle 2.0 |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for name, bundle in cases().items():
+        parsed = read_bundle(bundle)
+        chunks = [parsed.chunk(i) for i in range(len(parsed.chunks))]
+        old = write_bundle(parsed.header, chunks, version=(1, 1))
+        payload = sum(map(len, chunks))
+        new_header = wavecore.inspect(bundle)["header_bytes"]
+        old_header = wavecore.inspect(old)["header_bytes"]
+        assert new_header == len(bundle) - payload and old_header == len(old) - payload
+        print(
+            f"| {name} | {parsed.header['levels']} | {payload} | {old_header} | {new_header} "
+            f"| {len(old)} | {len(bundle)} |"
+        )
+
+
+if __name__ == "__main__":
+    main()

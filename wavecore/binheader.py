@@ -1,0 +1,727 @@
+"""The binary header of bundle format 2.0: the header dict the codec builds, in a few dozen bytes.
+
+:func:`pack` maps the header dict that the codec builds (``_Plan.header()`` plus the quantizer,
+coder and error keys) to bytes, and :func:`unpack` maps the bytes back to an equal dict, so the
+codec never sees the difference between format 1.x (JSON) and 2.0.  ``docs/bundle-format.md``
+specifies the bytes; in short, in this order:
+
+* four flag bytes: the enumerated fields (``kind``, ``colour``, ``dtype``, ``wavelet``,
+  ``boundary``, the quantizer and the coder) as small codes, and flags saying which optional
+  fields follow and which fields take their implied value (``fitted`` = ``shape`` + ``pads``,
+  ``pads`` all zero or zero before, ``rounding`` = 0.27);
+* unsigned LEB128 varints for ``levels``, ``shape``, ``fitted`` and ``pads``;
+* numbers in one *number* form (a varint whose low four bits say how to read it: a short
+  decimal, an integer, a float32 or a float64, or null) — every value comes back bit for bit,
+  except ``max_error``, which may be stored as the float32 at or above it (a diagnostic that
+  decoding never reads; it stays an upper bound);
+* each stage's configuration once: the quantizer's ``step`` as a float64, its per-band
+  ``weights`` (four significant digits, see :func:`quantize.band_weights`) as one 16-bit code
+  each, the coder's ``version``, ``two_d`` and ``block`` in one byte;
+* an optional *extension*: a raw-DEFLATE JSON object holding whatever the compact fields cannot
+  say (unknown keys, parameters of another shape, wavelet names not in the table).  So every
+  header that :func:`wavecore.bundle.check_header` accepts packs, and unpacks to an equal dict.
+
+Every read goes through one reader whose errors (:class:`~wavecore.errors.BundleError`) name
+the field being read, as NumPy's ``.npy`` reader does; no input makes :func:`unpack` raise
+anything else, read past the end, or allocate more than a small multiple of its input.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import zlib
+from decimal import Decimal, InvalidOperation
+from typing import Any
+
+import numpy as np
+
+from .errors import BundleError
+
+__all__ = ["MAX_VARINT_BYTES", "pack", "unpack"]
+
+# The format's code tables.  A code is an index into its table: never reorder them, only append
+# (a new value is a new minor version; an older reader refuses the unknown code by name).
+KIND_CODES = ("image", "curve", "surface")
+COLOUR_CODES = ("none", "ycbcr", "rct")
+DTYPE_CODES = (
+    "uint8",
+    "uint16",
+    "float32",
+    "float64",
+    "float16",
+    "int8",
+    "int16",
+    "int32",
+    "int64",
+    "uint32",
+)
+#: Code 0 means "the name is in the extension"; code 4 is ``reversible`` with its ``lifting``.
+WAVELET_CODES = ("", "bspline2", "haar", "cdf97", "reversible")
+BOUNDARY_CODES = ("open", "closed", "symmetric")
+LIFTING_CODES = ("legall53", "haar", "bspline2")
+#: Code 2 means "the name is in the extension".
+QUANTIZER_CODES = ("none", "deadzone")
+CODER_CODES = ("context", "zlib")
+IN_EXTENSION = 2
+
+#: The rounding the codec uses today; a flag stands for it.
+DEFAULT_ROUNDING = 0.27
+#: Weight codes: ``(e - WEIGHT_EXPONENT_MIN) * 9000 + (m - 1000)`` for ``m · 10**e``.
+WEIGHT_EXPONENT_MIN = -9
+WEIGHT_CODE_LIMIT = 7 * 9000  # seven decades, 1e-6 … 9.999
+MAX_VARINT_BYTES = 10
+_MAX_SIZE = 2**40  # any size, length or count a header may declare (the bundle checks less)
+_MAX_EXTENSION = 65535
+#: The largest number-form varint (ten varint bytes hold 70 bits).
+_MAX_NUMBER_HEAD = 2**70 - 1
+
+# The number form: a varint ``V``; ``V & 15`` says how to read it.
+_NUM_DECIMAL_MIN, _NUM_DECIMAL_MAX = -8, 3  # codes 0 … 11: ``k · 10**(code - 8)``
+_NUM_NULL, _NUM_FLOAT32, _NUM_FLOAT64, _NUM_INT = 12, 13, 14, 15
+
+_FLOAT32_NORMAL = 2.0**-126  # the smallest normal float32
+_F64 = struct.Struct("<d")
+_F32 = struct.Struct("<f")
+_U16 = struct.Struct("<H")
+
+# Keys the compact form writes; anything else goes to the extension.
+_CORE_KEYS = (
+    "kind",
+    "shape",
+    "dtype",
+    "fit",
+    "pads",
+    "fitted",
+    "wavelet",
+    "boundary",
+    "levels",
+    "colour",
+    "peak",
+    "quantizer",
+    "qparams",
+    "coder",
+    "cparams",
+    "psnr",
+    "max_error",
+)
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------------------------
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while True:
+        byte = value & 0x7F
+        value >>= 7
+        if value:
+            out.append(byte | 0x80)
+        else:
+            out.append(byte)
+            return bytes(out)
+
+
+def _zigzag(value: int) -> int:
+    return value * 2 if value >= 0 else -value * 2 - 1
+
+
+def _same_float(a: float, b: float) -> bool:
+    return _F64.pack(a) == _F64.pack(b)
+
+
+def _decimal(value: float) -> tuple[int, int] | None:
+    """``(k, e)`` with ``value == k · 10**e`` exactly as parsed, or None."""
+    if not math.isfinite(value):
+        return None
+    try:
+        sign, digits, exponent = Decimal(repr(value)).as_tuple()
+    except InvalidOperation:  # pragma: no cover - repr of a finite float always parses
+        return None
+    assert isinstance(exponent, int)
+    k = int("".join(map(str, digits)) or "0") * (-1 if sign else 1)
+    if k == 0:
+        return 0, 0
+    while k % 10 == 0:  # 1.0 is 1e0, not 10e-1
+        k, exponent = k // 10, exponent + 1
+    return k, exponent
+
+
+def _number(value: Any, field: str, *, upper_float32: bool = False) -> bytes:
+    """The number form of ``value`` (int, float or None), shortest exact encoding."""
+    if value is None:
+        return _varint(_NUM_NULL)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        msg = f"header field {field!r} must be a number, not {str(value)[:40]!r}"
+        raise BundleError(msg)
+    if isinstance(value, int):
+        if _zigzag(value) * 16 + _NUM_INT > _MAX_NUMBER_HEAD:
+            msg = f"header field {field!r} is an integer too large for the binary header"
+            raise BundleError(msg)
+        return _varint(_zigzag(value) * 16 + _NUM_INT)
+    value = float(value)
+    best = bytes([_NUM_FLOAT64]) + _F64.pack(value)
+    decimal = _decimal(value)
+    if decimal is not None:
+        k, e = decimal
+        if e > _NUM_DECIMAL_MAX:
+            k, e = k * 10 ** (e - _NUM_DECIMAL_MAX), _NUM_DECIMAL_MAX
+        if e >= _NUM_DECIMAL_MIN and _same_float(float(f"{k}e{e}"), value):
+            short = _varint(_zigzag(k) * 16 + (e - _NUM_DECIMAL_MIN))
+            if len(short) < len(best):
+                best = short
+    if upper_float32 and len(best) > 5 and _FLOAT32_NORMAL <= abs(value) < 3.0e38:
+        # The float32 at or above the value: a diagnostic that stays an upper bound, within
+        # 2**-23 of it (in float32's normal range; beyond it, the float64).
+        single = np.float32(value)
+        if float(single) < value:
+            single = np.nextafter(single, np.float32(np.inf))
+        best = bytes([_NUM_FLOAT32]) + _F32.pack(float(single))
+    return best
+
+
+def _weight_code(weight: Any) -> int | None:
+    """The 16-bit code of a four-significant-digit weight, or None if it has none."""
+    if isinstance(weight, bool) or not isinstance(weight, float):
+        return None
+    decimal = _decimal(weight)
+    if decimal is None or decimal[0] <= 0:
+        return None
+    k, e = decimal
+    while k < 1000:  # four digits: 0.5 is 5000e-4
+        k, e = k * 10, e - 1
+    if k > 9999 or not _same_float(float(f"{k}e{e}"), weight):
+        return None
+    code = (e - WEIGHT_EXPONENT_MIN) * 9000 + (k - 1000)
+    return code if 0 <= code < WEIGHT_CODE_LIMIT else None
+
+
+def _pack_weights(weights: Any, levels: int, two_d: bool) -> bytes | None:
+    """The weights in the standard layout ``[[cA], [bands of level L], …]``, or None."""
+    bands = 3 if two_d else 1
+    if not isinstance(weights, list) or len(weights) != levels + 1:
+        return None
+    codes: list[list[int]] = []
+    for index, entry in enumerate(weights):
+        if not isinstance(entry, list) or len(entry) != (1 if index == 0 else bands):
+            return None
+        entry_codes = [_weight_code(w) for w in entry]
+        if any(c is None for c in entry_codes):
+            return None
+        codes.append([c for c in entry_codes if c is not None])
+    out = bytearray()
+    same_hv = 0
+    if two_d:
+        for index, entry in enumerate(codes[1:]):
+            if entry[0] == entry[1]:
+                same_hv |= 1 << index
+        out += _varint(same_hv)
+    for index, entry in enumerate(codes):
+        for band, code in enumerate(entry):
+            if two_d and band == 1 and same_hv >> (index - 1) & 1:
+                continue
+            out += _U16.pack(code)
+    return bytes(out)
+
+
+def _compact_qparams(header: dict[str, Any]) -> tuple[bytes, bool] | None:
+    """(bytes, rounding is the default) of the quantizer's parameters, or None."""
+    quantizer, qparams = header.get("quantizer"), header.get("qparams")
+    if not isinstance(qparams, dict):
+        return None
+    if quantizer == "none":
+        return (b"", False) if qparams == {} else None
+    if quantizer != "deadzone" or set(qparams) != {"name", "step", "weights", "rounding"}:
+        return None
+    step, rounding = qparams["step"], qparams["rounding"]
+    if qparams["name"] != quantizer or isinstance(step, bool) or not isinstance(step, float):
+        return None
+    if isinstance(rounding, bool) or not isinstance(rounding, int | float):
+        return None
+    levels, boundary = header.get("levels"), header.get("boundary")
+    if not isinstance(levels, int) or not isinstance(boundary, list):
+        return None
+    weights = _pack_weights(qparams["weights"], levels, len(boundary) == 2)
+    if weights is None:
+        return None
+    is_default = isinstance(rounding, float) and _same_float(rounding, DEFAULT_ROUNDING)
+    middle = b"" if is_default else _number(rounding, "qparams.rounding")
+    return _F64.pack(step) + middle + weights, is_default
+
+
+def _compact_cparams(header: dict[str, Any]) -> bytes | None:
+    coder, cparams = header.get("coder"), header.get("cparams")
+    if not isinstance(cparams, dict) or cparams.get("coder") != coder:
+        return None
+    if coder == "zlib":
+        return b"" if set(cparams) == {"coder"} else None
+    if coder != "context" or not {"version", "two_d"} <= set(cparams) <= {
+        "coder",
+        "version",
+        "two_d",
+        "block",
+    }:
+        return None
+    version, two_d = cparams["version"], cparams["two_d"]
+    if isinstance(version, bool) or not isinstance(version, int) or not 0 <= version <= 15:
+        return None
+    if not isinstance(two_d, bool):
+        return None
+    block_code = 0
+    if "block" in cparams:
+        block = cparams["block"]
+        if isinstance(block, bool) or not isinstance(block, int):
+            return None
+        if block not in [2 ** (k + 3) for k in range(1, 8)]:
+            return None
+        block_code = block.bit_length() - 4
+    return bytes([version | two_d << 4 | block_code << 5])
+
+
+def _index(table: tuple[str, ...], value: Any, field: str) -> int:
+    if isinstance(value, str) and value in table:
+        return table.index(value)
+    msg = f"header field {field!r} is {str(value)[:40]!r}; the binary header holds {list(table)}"
+    raise BundleError(msg)
+
+
+def _sizes(value: Any, field: str) -> list[int]:
+    if not isinstance(value, list) or not all(
+        isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= _MAX_SIZE for v in value
+    ):
+        msg = f"header field {field!r} must list sizes from 0 to {_MAX_SIZE}, not {value!r}"
+        raise BundleError(msg[:200])
+    return value
+
+
+def _derived_fitted(shape: list[int], pads: list[list[int]]) -> list[int]:
+    fitted = list(shape) if len(shape) > 1 else [shape[0], 1]
+    for axis, (before, after) in enumerate(pads):
+        if axis < len(fitted):
+            fitted[axis] += before + after
+    return fitted
+
+
+def pack(header: dict[str, Any]) -> bytes:
+    """The binary form of a header dict (one that :func:`bundle.check_header` accepts).
+
+    Raises
+    ------
+    BundleError
+        For a field the binary header has no room for (an unknown kind, dtype, colour, fit or
+        boundary, sizes beyond ``2**40``); :func:`bundle.check_header` refuses those too.
+
+    Examples
+    --------
+    >>> header = {"kind": "curve", "shape": [8, 2], "dtype": "float64", "fit": "none",
+    ...           "pads": [[0, 0]], "fitted": [8, 2], "wavelet": "bspline2",
+    ...           "boundary": ["open"], "levels": 0, "colour": "none", "quantizer": "none",
+    ...           "qparams": {}, "coder": "zlib", "cparams": {"coder": "zlib"}, "peak": 1.0,
+    ...           "psnr": None, "max_error": 0.0}
+    >>> data = pack(header)  # 4 flag bytes; levels, 8, 2; peak, psnr, max_error: 1 byte each
+    >>> len(data), unpack(data) == header
+    (10, True)
+    """
+    if not isinstance(header, dict):
+        msg = f"the header must be a dict, not {type(header).__name__}"
+        raise BundleError(msg)
+    missing = [key for key in _CORE_KEYS if key not in header]
+    if missing:
+        msg = f"header field {missing[0]!r} is missing"
+        raise BundleError(msg)
+    extension: dict[str, Any] = {
+        k: v for k, v in header.items() if k not in _CORE_KEYS + ("opaque", "scale", "lifting")
+    }
+    kind = _index(KIND_CODES, header["kind"], "kind")
+    colour = _index(COLOUR_CODES, header["colour"], "colour")
+    dtype = _index(DTYPE_CODES, header["dtype"], "dtype")
+    fit = _index(("none", "pad"), header["fit"], "fit")
+    shape = _sizes(header["shape"], "shape")
+    if not 1 <= len(shape) <= 4:
+        msg = f"header field 'shape' must list 1 to 4 sizes, not {len(shape)}"
+        raise BundleError(msg)
+    boundary = header["boundary"]
+    if not isinstance(boundary, list) or not 1 <= len(boundary) <= 2:
+        msg = "header field 'boundary' must list one or two boundaries"
+        raise BundleError(msg)
+    boundary_codes = [_index(BOUNDARY_CODES, b, "boundary") for b in boundary] + [0]
+    pads = header["pads"]
+    if not isinstance(pads, list) or len(pads) != len(boundary):
+        msg = f"header field 'pads' must hold one pair per boundary ({len(boundary)})"
+        raise BundleError(msg)
+    for pair in pads:
+        if not isinstance(pair, list) or len(pair) != 2:
+            msg = f"header field 'pads' must hold pairs of sizes, not {pair!r}"
+            raise BundleError(msg[:200])
+        _sizes(pair, "pads")
+    levels = header["levels"]
+    if isinstance(levels, bool) or not isinstance(levels, int) or not 0 <= levels <= 255:
+        msg = f"header field 'levels' must be an integer from 0 to 255, not {levels!r}"
+        raise BundleError(msg[:200])
+    fitted = _sizes(header["fitted"], "fitted")
+    fitted_derived = fitted == _derived_fitted(shape, pads)
+    if all(p == [0, 0] for p in pads):
+        pads_mode = 0
+    elif all(p[0] == 0 for p in pads):
+        pads_mode = 1
+    else:
+        pads_mode = 2
+
+    wavelet = header["wavelet"]
+    lifting = header.get("lifting")
+    lifting_compact = (
+        wavelet == "reversible"
+        and isinstance(lifting, list)
+        and len(lifting) <= 255
+        and all(isinstance(n, str) and n in LIFTING_CODES for n in lifting)
+    )
+    if lifting_compact:
+        wavelet_code = WAVELET_CODES.index("reversible")
+    elif wavelet in WAVELET_CODES[1:4]:
+        wavelet_code = WAVELET_CODES.index(wavelet)
+    else:
+        wavelet_code = 0
+        extension["wavelet"] = wavelet
+    if "lifting" in header and not lifting_compact:
+        extension["lifting"] = lifting
+
+    opaque = header.get("opaque", False) is True
+    if "opaque" in header and not opaque:
+        extension["opaque"] = header["opaque"]
+    scale = header.get("scale")
+    scale_compact = "scale" in header and isinstance(scale, int) and not isinstance(scale, bool)
+    if "scale" in header and not scale_compact:
+        extension["scale"] = scale
+
+    quantizer = header["quantizer"]
+    quantizer_code = QUANTIZER_CODES.index(quantizer) if quantizer in QUANTIZER_CODES else 2
+    if quantizer_code == IN_EXTENSION:
+        extension["quantizer"] = quantizer
+    qparams = _compact_qparams(header) if quantizer_code != IN_EXTENSION else None
+    if qparams is None:
+        extension["qparams"] = header["qparams"]
+    coder = header["coder"]
+    coder_code = CODER_CODES.index(coder) if coder in CODER_CODES else 2
+    if coder_code == IN_EXTENSION:
+        extension["coder"] = coder
+    cparams = _compact_cparams(header) if coder_code != IN_EXTENSION else None
+    if cparams is None:
+        extension["cparams"] = header["cparams"]
+
+    out = bytearray(
+        [
+            kind | colour << 2 | (len(shape) - 1) << 4 | fit << 6 | opaque << 7,
+            dtype | (len(boundary) - 1) << 4 | fitted_derived << 5 | pads_mode << 6,
+            wavelet_code | boundary_codes[0] << 3 | boundary_codes[1] << 5 | scale_compact << 7,
+            quantizer_code
+            | coder_code << 2
+            | (qparams is not None) << 4
+            | (cparams is not None) << 5
+            | bool(extension) << 6
+            | (qparams is not None and qparams[1]) << 7,
+        ]
+    )
+    out += _varint(levels)
+    for size in shape:
+        out += _varint(size)
+    if not fitted_derived:
+        if not 1 <= len(fitted) <= 4:
+            msg = f"header field 'fitted' must list 1 to 4 sizes, not {len(fitted)}"
+            raise BundleError(msg)
+        out += _varint(len(fitted))
+        for size in fitted:
+            out += _varint(size)
+    for before, after in pads:
+        if pads_mode == 2:
+            out += _varint(before)
+        if pads_mode:
+            out += _varint(after)
+    if lifting_compact:
+        assert isinstance(lifting, list)
+        out += _varint(len(lifting))
+        codes = [LIFTING_CODES.index(name) for name in lifting]
+        for start in range(0, len(codes), 4):
+            out.append(sum(c << (2 * i) for i, c in enumerate(codes[start : start + 4])))
+    out += _number(header["peak"], "peak")
+    if scale_compact:
+        assert isinstance(scale, int)
+        out += _varint(_zigzag(scale))
+    if qparams is not None:
+        out += qparams[0]
+    if cparams is not None:
+        out += cparams
+    psnr = header["psnr"]
+    if psnr is None:
+        out += _varint(0)
+    elif (
+        isinstance(psnr, float) and abs(psnr) < 1e12 and _same_float(round(psnr * 1e4) / 1e4, psnr)
+    ):
+        out += _varint(_zigzag(round(psnr * 1e4)) + 2)
+    else:
+        out += _varint(1) + _number(psnr, "psnr")
+    out += _number(header["max_error"], "max_error", upper_float32=True)
+    if extension:
+        try:
+            text = json.dumps(extension, separators=(",", ":"), allow_nan=False).encode()
+        except (TypeError, ValueError) as exc:
+            msg = f"the header's other fields are not JSON: {exc}"
+            raise BundleError(msg) from exc
+        packer = zlib.compressobj(9, zlib.DEFLATED, -15)
+        packed = packer.compress(text) + packer.flush()
+        if len(text) > _MAX_EXTENSION or len(packed) > _MAX_EXTENSION:
+            msg = (
+                f"the header's other fields take {len(text)} bytes, more than "
+                f"MAX_HEADER_SIZE = {_MAX_EXTENSION}"
+            )
+            raise BundleError(msg)
+        out += _varint(len(packed)) + packed
+    return bytes(out)
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
+
+
+class _Reader:
+    """Reads a binary header in order; every error names the field it was reading."""
+
+    def __init__(self, data: bytes | bytearray | memoryview) -> None:
+        self.data = bytes(data)
+        self.offset = 0
+
+    def fail(self, field: str, problem: str) -> BundleError:
+        return BundleError(f"binary header field {field!r} (at byte {self.offset}): {problem}")
+
+    def take(self, size: int, field: str) -> bytes:
+        remaining = len(self.data) - self.offset
+        if size > remaining:
+            problem = f"the header ends: it needs {size} byte(s), {remaining} remain"
+            raise self.fail(field, problem)
+        out = self.data[self.offset : self.offset + size]
+        self.offset += size
+        return out
+
+    def byte(self, field: str) -> int:
+        return self.take(1, field)[0]
+
+    def varint(self, field: str, maximum: int) -> int:
+        value = shift = 0
+        for count in range(MAX_VARINT_BYTES):
+            byte = self.byte(field)
+            value |= (byte & 0x7F) << shift
+            shift += 7
+            if not byte & 0x80:
+                if byte == 0 and count:
+                    raise self.fail(field, "a varint with a needless trailing zero byte")
+                if value > maximum:
+                    raise self.fail(field, f"{value} is more than the largest, {maximum}")
+                return value
+        raise self.fail(field, f"a varint longer than {MAX_VARINT_BYTES} bytes")
+
+    def code(self, value: int, table: tuple[str, ...], field: str) -> str:
+        if value >= len(table) or not table[value]:
+            raise self.fail(field, f"unknown code {value}; known: {list(table)}")
+        return table[value]
+
+    def number(self, field: str) -> Any:
+        head = self.varint(field, _MAX_NUMBER_HEAD)
+        form, rest = head & 15, head >> 4
+        if form <= _NUM_DECIMAL_MAX - _NUM_DECIMAL_MIN:
+            k = _unzigzag(rest)
+            return float(f"{k}e{form + _NUM_DECIMAL_MIN}")
+        if form == _NUM_INT:
+            return _unzigzag(rest)
+        if rest:
+            raise self.fail(field, f"number form {form} takes no value bits, found {rest}")
+        if form == _NUM_NULL:
+            return None
+        fmt = _F32 if form == _NUM_FLOAT32 else _F64
+        (value,) = fmt.unpack(self.take(fmt.size, field))
+        if not math.isfinite(value):
+            raise self.fail(field, f"{value} is not a finite number")
+        return float(value)
+
+    def end(self) -> None:
+        if self.offset != len(self.data):
+            extra = len(self.data) - self.offset
+            raise self.fail("end", f"{extra} unexpected byte(s) after the last field")
+
+
+def _unzigzag(value: int) -> int:
+    return value >> 1 if not value & 1 else -(value >> 1) - 1
+
+
+def _unpack_weights(reader: _Reader, levels: int, two_d: bool) -> list[list[float]]:
+    same_hv = reader.varint("qparams.weights", 2**levels - 1) if two_d else 0
+    weights: list[list[float]] = []
+    for index in range(levels + 1):
+        entry: list[float] = []
+        for band in range(1 if index == 0 else 3 if two_d else 1):
+            if two_d and band == 1 and same_hv >> (index - 1) & 1:
+                entry.append(entry[0])
+                continue
+            (code,) = _U16.unpack(reader.take(2, "qparams.weights"))
+            if code >= WEIGHT_CODE_LIMIT:
+                raise reader.fail("qparams.weights", f"weight code {code} is not a weight")
+            exponent, mantissa = divmod(code, 9000)
+            entry.append(float(f"{mantissa + 1000}e{exponent + WEIGHT_EXPONENT_MIN}"))
+        weights.append(entry)
+    return weights
+
+
+def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
+    """The header dict of a binary header (the exact bytes, nothing after them).
+
+    Raises
+    ------
+    BundleError
+        For any malformed input, naming the field being read: truncated, an unknown code, a
+        varint too long or too large, a non-finite number, bytes left over.  What the fields
+        say together is checked by :func:`bundle.check_header` and the codec.
+    """
+    reader = _Reader(data)
+    flags = [reader.byte("flags") for _ in range(4)]
+    kind = reader.code(flags[0] & 3, KIND_CODES, "kind")
+    colour = reader.code(flags[0] >> 2 & 3, COLOUR_CODES, "colour")
+    rank = (flags[0] >> 4 & 3) + 1
+    fit = ("none", "pad")[flags[0] >> 6 & 1]
+    opaque = bool(flags[0] >> 7)
+    dtype = reader.code(flags[1] & 15, DTYPE_CODES, "dtype")
+    axes = (flags[1] >> 4 & 1) + 1
+    fitted_derived = bool(flags[1] >> 5 & 1)
+    pads_mode = flags[1] >> 6
+    if pads_mode == 3:
+        raise reader.fail("pads", "unknown pads form 3")
+    wavelet_code = flags[2] & 7
+    if wavelet_code >= len(WAVELET_CODES):
+        raise reader.fail("wavelet", f"unknown code {wavelet_code}; known: {WAVELET_CODES}")
+    boundary = [reader.code(flags[2] >> 3 & 3, BOUNDARY_CODES, "boundary")]
+    if axes == 2:
+        boundary.append(reader.code(flags[2] >> 5 & 3, BOUNDARY_CODES, "boundary"))
+    elif flags[2] >> 5 & 3:
+        raise reader.fail("boundary", "a second boundary code for one axis")
+    has_scale = bool(flags[2] >> 7)
+    quantizer_code, coder_code = flags[3] & 3, flags[3] >> 2 & 3
+    if quantizer_code > IN_EXTENSION:
+        raise reader.fail("quantizer", f"unknown code {quantizer_code}")
+    if coder_code > IN_EXTENSION:
+        raise reader.fail("coder", f"unknown code {coder_code}")
+    q_compact, c_compact = bool(flags[3] >> 4 & 1), bool(flags[3] >> 5 & 1)
+    has_extension, default_rounding = bool(flags[3] >> 6 & 1), bool(flags[3] >> 7)
+    if (q_compact and quantizer_code == IN_EXTENSION) or (c_compact and coder_code == 2):
+        raise reader.fail("flags", "compact parameters for a stage named in the extension")
+    if default_rounding and not (q_compact and quantizer_code == 1):
+        raise reader.fail("flags", "the default-rounding flag without a deadzone quantizer")
+
+    levels = reader.varint("levels", 255)
+    shape = [reader.varint("shape", _MAX_SIZE) for _ in range(rank)]
+    fitted = None
+    if not fitted_derived:
+        count = reader.varint("fitted", 4)
+        fitted = [reader.varint("fitted", _MAX_SIZE) for _ in range(count)]
+    pads = []
+    for _ in range(axes):
+        before = reader.varint("pads", _MAX_SIZE) if pads_mode == 2 else 0
+        after = reader.varint("pads", _MAX_SIZE) if pads_mode else 0
+        pads.append([before, after])
+    if fitted is None:
+        fitted = _derived_fitted(shape, pads)
+    header: dict[str, Any] = {
+        "kind": kind,
+        "shape": shape,
+        "dtype": dtype,
+        "fit": fit,
+        "pads": pads,
+        "fitted": fitted,
+    }
+    if wavelet_code:
+        header["wavelet"] = WAVELET_CODES[wavelet_code]
+    header["boundary"] = boundary
+    header["levels"] = levels
+    header["colour"] = colour
+    if wavelet_code == WAVELET_CODES.index("reversible"):
+        count = reader.varint("lifting", 255)
+        codes = []
+        for start in range(0, count, 4):
+            byte = reader.byte("lifting")
+            for i in range(min(4, count - start)):
+                codes.append(byte >> (2 * i) & 3)
+            if byte >> (2 * min(4, count - start)):
+                raise reader.fail("lifting", "bits set beyond the last filter")
+        header["lifting"] = [reader.code(c, LIFTING_CODES, "lifting") for c in codes]
+    header["peak"] = reader.number("peak")
+    if has_scale:
+        header["scale"] = _unzigzag(reader.varint("scale", 2**20))
+    if opaque:
+        header["opaque"] = True
+    if quantizer_code != IN_EXTENSION:
+        header["quantizer"] = QUANTIZER_CODES[quantizer_code]
+    if q_compact and quantizer_code == 0:
+        header["qparams"] = {}
+    elif q_compact:
+        (step,) = _F64.unpack(reader.take(8, "qparams.step"))
+        rounding = DEFAULT_ROUNDING if default_rounding else reader.number("qparams.rounding")
+        weights = _unpack_weights(reader, levels, axes == 2)
+        header["qparams"] = {
+            "name": "deadzone",
+            "step": step,
+            "weights": weights,
+            "rounding": rounding,
+        }
+    if coder_code != IN_EXTENSION:
+        header["coder"] = CODER_CODES[coder_code]
+    if c_compact and coder_code == 1:
+        header["cparams"] = {"coder": "zlib"}
+    elif c_compact:
+        byte = reader.byte("cparams")
+        cparams: dict[str, Any] = {
+            "coder": "context",
+            "version": byte & 15,
+            "two_d": bool(byte >> 4 & 1),
+        }
+        if byte >> 5:
+            cparams["block"] = 2 ** ((byte >> 5) + 3)
+        header["cparams"] = cparams
+    psnr_head = reader.varint("psnr", _MAX_NUMBER_HEAD)
+    if psnr_head == 0:
+        header["psnr"] = None
+    elif psnr_head == 1:
+        header["psnr"] = reader.number("psnr")
+    else:
+        header["psnr"] = _unzigzag(psnr_head - 2) / 1e4
+    header["max_error"] = reader.number("max_error")
+    if has_extension:
+        _merge_extension(reader, header)
+    reader.end()
+    return header
+
+
+def _merge_extension(reader: _Reader, header: dict[str, Any]) -> None:
+    size = reader.varint("extension", _MAX_EXTENSION)
+    packed = reader.take(size, "extension")
+    inflater = zlib.decompressobj(-15)
+    try:
+        text = inflater.decompress(packed, _MAX_EXTENSION + 1)
+    except zlib.error as exc:
+        raise reader.fail("extension", f"not valid DEFLATE data: {exc}") from exc
+    if len(text) > _MAX_EXTENSION or not inflater.eof or inflater.unused_data:
+        raise reader.fail("extension", "the DEFLATE stream is too long, cut or followed by bytes")
+    try:
+        extension = json.loads(text.decode("utf-8"), parse_constant=_no_constant)
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise reader.fail("extension", f"not UTF-8 JSON: {str(exc)[:80]}") from exc
+    if not isinstance(extension, dict) or not extension:
+        raise reader.fail("extension", "not a non-empty JSON object")
+    for key, value in extension.items():
+        if key in header:
+            raise reader.fail("extension", f"it repeats the field {key[:40]!r}")
+        header[key] = value
+
+
+def _no_constant(name: str) -> None:
+    msg = f"binary header field 'extension' contains {name}, which is not a number"
+    raise BundleError(msg)
