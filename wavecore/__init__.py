@@ -8,6 +8,7 @@ from __future__ import annotations
 from . import cdf97 as _cdf97  # noqa: F401  (importing it registers "cdf97")
 from .codec import decode, encode_curve, encode_image, encode_surface, inspect
 from .curves import CurveDecomposition, decompose_curve, fitting_length, transfer_details
+from .curvesets import CurveSet, decode_curves, encode_curves
 from .errors import (
     BundleError,
     InvalidCoefficients,
@@ -47,6 +48,7 @@ __version__ = "0.1.0"
 __all__ = [
     "BundleError",
     "CurveDecomposition",
+    "CurveSet",
     "GridFit",
     "ImageDecomposition",
     "InvalidCoefficients",
@@ -61,10 +63,12 @@ __all__ = [
     "coarse_extent",
     "crop_padding",
     "decode",
+    "decode_curves",
     "decompose_curve",
     "decompose_image",
     "decompose_surface",
     "encode_curve",
+    "encode_curves",
     "encode_image",
     "encode_surface",
     "fit_grid",
