@@ -18,6 +18,9 @@ from .errors import (
 )
 from .filters import matrices, wavelet_names
 from .images import ImageDecomposition, decompose_image, subband_mosaic
+from .io import decode_file as decode_curve_file
+from .io import encode_file as encode_curve_file
+from .io import format_from_suffix as curve_file_format
 from .multilevel import (
     max_level,
     valid_length,
@@ -62,12 +65,15 @@ __all__ = [
     "basis_norms_nd",
     "coarse_extent",
     "crop_padding",
+    "curve_file_format",
     "decode",
+    "decode_curve_file",
     "decode_curves",
     "decompose_curve",
     "decompose_image",
     "decompose_surface",
     "encode_curve",
+    "encode_curve_file",
     "encode_curves",
     "encode_image",
     "encode_surface",

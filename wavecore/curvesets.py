@@ -894,11 +894,25 @@ def _decode(bundle: Any) -> CurveSet:
 
 
 def inspect_curves(bundle: Any) -> dict[str, Any]:
-    """Describe a curve-set bundle without decoding its coefficients."""
+    """Describe a curve-set bundle without decoding its coefficients.
+
+    ``kind`` is ``"curves"``; ``count`` curves with their ``points``, ``dims`` and ``closed``
+    flags; ``tolerance`` (also as ``max_error``: the guaranteed bound); ``total_bytes`` and
+    ``payload_bytes`` (the entropy-coded coefficients; the rest is header and records).
+    """
     info, records, chunks, _ = _parse(bundle)
+    total = len(bytes(bundle))
+    payload = sum(len(c) for c in chunks)
     return {
         "kind": "curves",
         "version": f"{VERSION}",
+        "shape": [len(records)],
+        "levels": max((_layout(info, r)[1] for r in records if r.mode != _MODE_RAW), default=0),
+        "boundary": ["closed" if r.closed else "open" for r in records],
+        "colour": "none",
+        "psnr": None,
+        "header_bytes": total - payload,
+        "chunks": [],
         "count": len(records),
         "dtype": info["dtype"].name,
         "wavelet": info["wavelet"],
@@ -907,7 +921,8 @@ def inspect_curves(bundle: Any) -> dict[str, Any]:
         "closed": [r.closed for r in records],
         "points": [r.count + r.repeated for r in records],
         "dims": [r.d for r in records],
-        "total_bytes": len(bytes(bundle)),
-        "payload_bytes": sum(len(c) for c in chunks),
+        "total_points": sum(r.count + r.repeated for r in records),
+        "total_bytes": total,
+        "payload_bytes": payload,
         "metadata": info["has_metadata"],
     }
