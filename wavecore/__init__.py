@@ -21,6 +21,7 @@ from .images import ImageDecomposition, decompose_image, subband_mosaic
 from .io import decode_file as decode_curve_file
 from .io import encode_file as encode_curve_file
 from .io import format_from_suffix as curve_file_format
+from .io import read_curves as read_curve_file
 from .multilevel import (
     max_level,
     valid_length,
@@ -84,6 +85,7 @@ __all__ = [
     "max_level",
     "minimum_length",
     "pad_to_fit",
+    "read_curve_file",
     "remove_smallest",
     "resample_curve",
     "resample_grid",

@@ -14,6 +14,7 @@ writes the decoded curves back as the same format or another.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from ..curvesets import decode_curves, encode_curves
@@ -60,17 +61,24 @@ def _check_format(fmt: Any) -> str:
     return str(fmt)
 
 
-def read_curves(data: bytes | str, fmt: str, *, tolerance: float | None = None) -> CurveData:
+def read_curves(
+    data: bytes | str,
+    fmt: str,
+    *,
+    tolerance: float | None = None,
+    max_points: int | None = None,
+) -> CurveData:
     """Read a file's curves (``fmt`` one of :data:`FORMATS`).
 
     ``tolerance`` matters for SVG only: curved segments are sampled so that the polyline is
-    within a quarter of it (default: 1e-3 of the drawing's size).
+    within a quarter of it (default: 1e-3 of the drawing's size).  ``max_points`` bounds the
+    SVG's samples (an :class:`~wavecore.InvalidParameter` once passed, before they are made).
     """
     fmt = _check_format(fmt)
     if fmt == "geojson":
         return read_geojson(data)
     if fmt == "svg":
-        return read_svg(data, tolerance=tolerance)
+        return read_svg(data, tolerance=tolerance, max_points=max_points)
     return read_curve_json(data)
 
 
@@ -91,14 +99,21 @@ def encode_file(
     tolerance: float | None = None,
     wavelet: str | None = None,
     level: int | None = None,
+    check: Callable[[CurveData], None] | None = None,
+    max_points: int | None = None,
 ) -> bytes:
     """Read a curve file and code it into one curve-set bundle.
+
+    ``check``, when given, sees the curves before they are coded (the service checks their
+    cost there); ``max_points`` bounds an SVG's samples (see :func:`read_curves`).
 
     For SVG the curved segments are sampled to a quarter of ``tolerance`` and the samples coded
     to the rest (three quarters), so decoded points stay within ``tolerance`` of the drawing's
     sampled outline and of its true curves at the vertices.
     """
-    curves = read_curves(data, fmt, tolerance=tolerance)
+    curves = read_curves(data, fmt, tolerance=tolerance, max_points=max_points)
+    if check is not None:
+        check(curves)
     code_tolerance = tolerance
     if fmt == "svg":
         code_tolerance = 0.75 * curves.tolerance if curves.tolerance else tolerance

@@ -78,7 +78,9 @@ def _samples(segment: Any, tolerance: float, se: Any) -> np.ndarray:
     return np.array([[segment.end.x, segment.end.y]], dtype=np.float64)
 
 
-def read_svg(data: bytes | str, *, tolerance: float | None = None) -> CurveData:
+def read_svg(
+    data: bytes | str, *, tolerance: float | None = None, max_points: int | None = None
+) -> CurveData:
     """Read an SVG document's outlines as curves.
 
     Parameters
@@ -88,6 +90,8 @@ def read_svg(data: bytes | str, *, tolerance: float | None = None) -> CurveData:
     tolerance : float, optional
         Curved segments are sampled so that the polyline is within ``SAMPLING_SHARE`` (a
         quarter) of it.  Default: ``1e-3`` × the drawing's diagonal.
+    max_points : int, optional
+        Refuse (``InvalidParameter``) once the samples pass this many points.
 
     Raises
     ------
@@ -118,6 +122,7 @@ def read_svg(data: bytes | str, *, tolerance: float | None = None) -> CurveData:
     curves: list[np.ndarray] = []
     closed: list[bool] = []
     elements = []
+    total = 0
     for shape, path in zip(shapes, paths, strict=True):
         indices = []
         for subpath in path.as_subpaths():
@@ -132,6 +137,13 @@ def read_svg(data: bytes | str, *, tolerance: float | None = None) -> CurveData:
                     is_closed = True
                     continue
                 pieces.append(_samples(segment, sampling, se))
+                total += len(pieces[-1])
+                if max_points is not None and total > max_points:
+                    msg = (
+                        f"SVG sampled to tolerance {tolerance:g} gives more than {max_points} "
+                        "points; give a larger tolerance or a smaller drawing"
+                    )
+                    raise InvalidParameter(msg)
             points = np.concatenate(pieces)
             if is_closed and len(points) > 1 and np.allclose(points[0], points[-1]):
                 points = points[:-1]
