@@ -211,3 +211,28 @@ def test_suffixes() -> None:
     assert wavecore.curve_file_format("x.svg") == "svg"
     with pytest.raises(wavecore.InvalidParameter, match="suffix"):
         wavecore.curve_file_format("x.kml")
+
+
+def test_cli_encodes_and_decodes_curve_files_by_suffix(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    cli = pytest.importorskip("service.cli", reason="the CLI lives in the service package")
+    source = tmp_path / "layer.geojson"
+    source.write_text(json.dumps(FEATURES))
+    bundle = tmp_path / "layer.wcb"
+    assert cli.main(["encode", str(source), str(bundle), "--tolerance", "0.05", "-q"]) == 0
+    assert wavecore.inspect(bundle.read_bytes())["count"] == 6
+    back = tmp_path / "back.geojson"
+    assert cli.main(["decode", str(bundle), str(back), "-q"]) == 0
+    assert json.loads(back.read_text())["features"][0]["properties"]["name"] == "Lac Léman"
+    drawing = tmp_path / "back.svg"
+    assert cli.main(["decode", str(bundle), str(drawing), "-q"]) == 0
+    assert drawing.read_text().count("<path") == 6
+    svg = tmp_path / "shapes.svg"
+    svg.write_bytes(SVG)
+    assert cli.main(["encode", str(svg), str(tmp_path / "shapes.wcb"), "-q"]) == 0
+    assert cli.main(["decode", str(tmp_path / "shapes.wcb"), str(tmp_path / "s.svg"), "-q"]) == 0
+    assert 'id="dot"' in (tmp_path / "s.svg").read_text()
+    # a plain curve JSON stays a single curve (the old contract)
+    one = tmp_path / "one.json"
+    one.write_text(json.dumps({"points": [[0, 0], [1, 1], [2, 0], [3, 1]]}))
+    assert cli.main(["encode", str(one), str(tmp_path / "one.wcb"), "-q"]) == 0
+    assert wavecore.inspect((tmp_path / "one.wcb").read_bytes())["kind"] == "curve"
