@@ -69,6 +69,7 @@ import struct
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -275,20 +276,28 @@ def _arc_fractions(points: np.ndarray, closed: bool) -> np.ndarray:
 def _segment_distances(
     queries: np.ndarray, nodes: np.ndarray, first: np.ndarray, count: int
 ) -> np.ndarray:
-    """Distance from each query to the nearest of segments ``first + k`` (``0 <= k < count``)."""
-    best = np.full(len(queries), np.inf)
+    """Distance from each query to the nearest of segments ``first + k`` (``0 <= k < count``).
+
+    All ``len(queries) × count`` pairs at once, in slices of queries that keep the temporary
+    arrays near a million pairs (``count`` is at most a few times the density ratio of the two
+    polylines, so the pairs are linear in the points).
+    """
+    best = np.empty(len(queries))
     last = len(nodes) - 2
-    for k in range(count):
-        index = np.clip(first + k, 0, last)
+    offsets = np.arange(count)
+    rows = max(1, (1 << 20) // max(count, 1))
+    for start in range(0, len(queries), rows):
+        stop = min(start + rows, len(queries))
+        index = np.clip(first[start:stop, None] + offsets, 0, last)
         a = nodes[index]
-        b = nodes[index + 1]
-        ab = b - a
-        length2 = np.einsum("ij,ij->i", ab, ab)
-        t = np.einsum("ij,ij->i", queries - a, ab)
+        ab = nodes[index + 1] - a
+        rel = queries[start:stop, None, :] - a
+        length2 = np.einsum("ijk,ijk->ij", ab, ab)
+        t = np.einsum("ijk,ijk->ij", rel, ab)
         t = np.divide(t, length2, out=np.zeros_like(t), where=length2 > 0)
-        t = np.clip(t, 0.0, 1.0)
-        gap = queries - (a + t[:, None] * ab)
-        np.minimum(best, np.sqrt(np.einsum("ij,ij->i", gap, gap)), out=best)
+        np.clip(t, 0.0, 1.0, out=t)
+        gap = rel - t[..., None] * ab
+        best[start:stop] = np.sqrt(np.einsum("ijk,ijk->ij", gap, gap).min(axis=1))
     return best
 
 
@@ -361,9 +370,17 @@ def _band_lengths(m: int, level: int, boundary: str, wavelet: str) -> list[int]:
     return [m, *reversed(details)]
 
 
-def _qparams(lengths: list[int], d: int, step: float, rounding: float, wavelet: str, boundary: str):
-    template = [np.zeros((length, d)) for length in lengths]
-    weights = band_weights(template, wavelet=wavelet, boundary=boundary, axes=(0,))
+@lru_cache(maxsize=256)
+def _weights(lengths: tuple[int, ...], wavelet: str, boundary: str) -> list[list[float]]:
+    """The quantizer's band weights for these band lengths (they depend on nothing else)."""
+    template = [np.zeros((length, 1)) for length in lengths]
+    return band_weights(template, wavelet=wavelet, boundary=boundary, axes=(0,))
+
+
+def _qparams(
+    lengths: list[int], step: float, rounding: float, wavelet: str, boundary: str
+) -> dict[str, Any]:
+    weights = _weights(tuple(lengths), wavelet, boundary)
     return {"name": "deadzone", "step": step, "weights": weights, "rounding": rounding}
 
 
@@ -371,7 +388,7 @@ def _synthesize(
     qcoeffs: list[np.ndarray], step: float, rounding: float, wavelet: str, boundary: str
 ) -> np.ndarray:
     lengths = [len(q) for q in qcoeffs]
-    params = _qparams(lengths, qcoeffs[0].shape[1], step, rounding, wavelet, boundary)
+    params = _qparams(lengths, step, rounding, wavelet, boundary)
     coeffs = dequantize_bands(qcoeffs, params, wavelet=wavelet, boundary=boundary, axes=(0,))
     if len(coeffs) == 1:
         return np.asarray(coeffs[0])
@@ -454,16 +471,29 @@ class _CurveCoder:
             if count <= 2 * n and count not in counts:
                 counts.append(count)
             target /= math.sqrt(2.0)
-        # the fewest points whose re-sampled polyline stays within half the tolerance
+        # the fewest points whose re-sampled polyline stays within its share of the tolerance:
+        # a bisection over the candidates (the cut grows as the count falls, nearly always
+        # monotonically; the chosen count is itself measured, so a non-monotone case only
+        # costs bytes)
         chosen = None
-        for count in sorted(counts):
+        candidates = sorted(counts)
+
+        def fits(count: int) -> bool:
             if count == n:
-                chosen = count
-                break
+                return True
             fitted = resample_curve(points, count, closed=closed)
-            if _deviation(points, fitted, closed, paired=False) <= _RESAMPLE_SHARE * self.tolerance:
-                chosen = count
-                break
+            return _deviation(points, fitted, closed, paired=False) <= limit
+
+        limit = _RESAMPLE_SHARE * self.tolerance
+        low, high = 0, len(candidates) - 1
+        if candidates and fits(candidates[high]):
+            while low < high:
+                middle = (low + high) // 2
+                if fits(candidates[middle]):
+                    high = middle
+                else:
+                    low = middle + 1
+            chosen = candidates[high]
         if chosen is not None:
             plans.append((_MODE_RESAMPLED, chosen))
         plans.append((_MODE_PADDED, n))
