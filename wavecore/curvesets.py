@@ -18,8 +18,9 @@ the segments within a window of the point's position along the curve: a minimum 
 segments can only be larger, so the measured value bounds the true distance from above, at a
 cost linear in the number of points.  A curve whose quantized coefficients miss the bound gets
 a finer step; one that misses it even at the finest step is padded rather than re-sampled (then
-decoded point ``i`` belongs to original point ``i``), and as the last resort it is stored as it
-is (``mode`` 2 below), so the bound holds for any finite input.
+decoded point ``i`` belongs to original point ``i``, and at a fine enough step the decoded points
+are as near their originals as needed), and as the last resort it is stored as it is (``mode`` 2
+below), so the bound holds for any finite input.
 
 How a curve is coded
 --------------------
@@ -319,15 +320,8 @@ def _one_way(source: np.ndarray, target: np.ndarray, closed: bool) -> float:
     return float(np.max(_segment_distances(source, nodes, centre - half, 2 * half + 1)))
 
 
-def _deviation(original: np.ndarray, decoded: np.ndarray, closed: bool, paired: bool) -> float:
-    """Largest deviation both ways (an upper bound); ``paired`` when point ``i`` matches ``i``.
-
-    Paired points within ``t`` of each other put every point of one polyline within ``t`` of
-    the other (a point on a segment is the same convex combination of the two ends), so the
-    pointwise distance bounds both directions.
-    """
-    if paired:
-        return float(np.max(np.linalg.norm(decoded - original, axis=1)))
+def _deviation(original: np.ndarray, decoded: np.ndarray, closed: bool) -> float:
+    """Largest deviation both ways (an upper bound of the true one)."""
     return max(_one_way(original, decoded, closed), _one_way(decoded, original, closed))
 
 
@@ -482,7 +476,7 @@ class _CurveCoder:
             if count == n:
                 return True
             fitted = resample_curve(points, count, closed=closed)
-            return _deviation(points, fitted, closed, paired=False) <= limit
+            return _deviation(points, fitted, closed) <= limit
 
         limit = _RESAMPLE_SHARE * self.tolerance
         low, high = 0, len(candidates) - 1
@@ -506,8 +500,10 @@ class _CurveCoder:
             q, decoded = self._try(coeffs, exponent, closed, mode, count)
             if q is None:
                 return None
-            paired = mode == _MODE_PADDED
-            if _deviation(original, decoded.astype(np.float64), closed, paired) <= self.tolerance:
+            # windowed polyline distances for padded curves too: they let decoded points slide
+            # along the curve, which the pointwise distance does not (2-4 % fewer bytes on the
+            # benchmark's glyphs at fine tolerances)
+            if _deviation(original, decoded.astype(np.float64), closed) <= self.tolerance:
                 return _Coded(mode, count, exponent, q), decoded
             return None
 
