@@ -206,3 +206,25 @@ def test_curve_set_is_told_from_other_bundles() -> None:
     assert not curvesets.is_curve_set(single)
     assert curvesets.is_curve_set(wavecore.encode_curves([_star(50)]))
     assert wavecore.inspect(wavecore.encode_curves([_star(50)]))["kind"] == "curves"
+
+
+def test_crafted_bundles_with_a_valid_crc_give_curves_or_bundle_error() -> None:
+    import struct
+    import zlib
+
+    bundle = wavecore.encode_curves(
+        [_star(80), _walk(40, 3), _walk(1, 4)], closed=[True, False, False], tolerance=0.01
+    )
+    rng = np.random.default_rng(8)
+    for _ in range(300):
+        body = bytearray(bundle[:-4])
+        for _ in range(int(rng.integers(1, 4))):
+            at = int(rng.integers(5, len(body)))
+            body[at] = int(rng.integers(0, 256))
+        crafted = bytes(body) + struct.pack("<I", zlib.crc32(bytes(body)))
+        try:
+            out = wavecore.decode(crafted)
+        except wavecore.BundleError:
+            continue
+        assert isinstance(out, list)
+        assert all(isinstance(c, np.ndarray) and c.ndim == 2 for c in out)

@@ -114,7 +114,7 @@ _MIN_POINTS = 8
 #: quantizer's): measured best on the glyphs of benchmarks/curves.py.
 _RESAMPLE_SHARE = 0.7
 #: The most points a bundle may declare in all (the decoder's bound on hostile counts).
-MAX_POINTS = 1 << 28
+MAX_POINTS = 1 << 27
 _MODE_RESAMPLED, _MODE_PADDED, _MODE_RAW = 0, 1, 2
 _INDEX_LIMIT = 1 << 29  # quantized integers beyond this would not fit the coder's int32
 
