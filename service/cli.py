@@ -48,7 +48,9 @@ BUNDLE_SUFFIXES = {".wcb", ".wvb"}
 SERVICE_EXTRA = "pip install 'wavecore[service]'"
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp", ".gif", ".ppm"}
 IMAGE_SUFFIXES |= {".pgm", ".pbm", ".tga", ".jp2", ".j2k", ".ico", ".pcx", ".sgi"}
-ENCODE_SUFFIXES = IMAGE_SUFFIXES | {".npy", ".json"}
+ENCODE_SUFFIXES = IMAGE_SUFFIXES | {".npy", ".json", ".geojson", ".svg"}
+# Curve files coded as one curve set (a .json with "curves" too; one with "points" stays a curve).
+CURVE_FILE_SUFFIXES = {".geojson": "geojson", ".svg": "svg"}
 
 
 class CLIError(Exception):
@@ -283,6 +285,45 @@ def _load_input(path: Path, kind: str | None) -> tuple[str, np.ndarray, bool]:
     return kind or "image", _read_image(path), False
 
 
+def _curve_file_format(path: Path) -> str | None:
+    """``geojson``/``svg``/``json`` for a file read as a curve set, else ``None``."""
+    suffix = path.suffix.lower()
+    if suffix in CURVE_FILE_SUFFIXES:
+        return CURVE_FILE_SUFFIXES[suffix]
+    if suffix == ".json":
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (ValueError, UnicodeDecodeError):
+            return None
+        return "json" if isinstance(data, dict) and "curves" in data else None
+    return None
+
+
+def _encode_curve_file(path: Path, args: argparse.Namespace, many: bool) -> Row:
+    start = time.perf_counter()
+    if args.keep is not None or args.quality is not None or args.bpp is not None:
+        msg = "a curve file takes --tolerance (or none), not --keep, --quality or --bpp"
+        raise CLIError(msg)
+    fmt = _curve_file_format(path) or "json"
+    bundle = wavecore.encode_curve_file(
+        path.read_bytes(), fmt, tolerance=args.tolerance, wavelet=args.wavelet, level=args.level
+    )
+    out = output_for(path, Path(args.output), many, BUNDLE_SUFFIX)
+    out.write_bytes(bundle)
+    info = wavecore.inspect(bundle)
+    values = {
+        "kind": "curves",
+        "shape": f"{info['count']} curves",
+        "input": _size(path.stat().st_size),
+        "bundle": _size(len(bundle)),
+        "ratio": f"{path.stat().st_size / len(bundle):.1f}",
+        "bpp": "",
+        "PSNR": f"±{info['tolerance']:.3g}",
+        "seconds": f"{time.perf_counter() - start:.2f}",
+    }
+    return Row(path.name, values)
+
+
 def cmd_encode(args: argparse.Namespace) -> int:
     files, many = expand(args.input, ENCODE_SUFFIXES)
     targets = {
@@ -297,6 +338,8 @@ def cmd_encode(args: argparse.Namespace) -> int:
 
     def work(path: Path) -> Row:
         start = time.perf_counter()
+        if _curve_file_format(path):
+            return _encode_curve_file(path, args, many)
         kind, data, closed = _load_input(path, args.kind)
         closed = closed or args.closed
         allowed = {"image": {"keep", "quality", "bpp"}, "curve": {"keep", "tolerance"}}
@@ -338,13 +381,38 @@ def cmd_encode(args: argparse.Namespace) -> int:
     return run_many(files, many, work, columns, quiet=args.quiet)
 
 
+def _decode_curve_file(
+    path: Path, bundle: bytes, info: dict[str, Any], args: argparse.Namespace, many: bool
+) -> Row:
+    start = time.perf_counter()
+    written = (wavecore.decode_curves(bundle).metadata or {}).get("format")
+    default = {"geojson": ".geojson", "svg": ".svg"}.get(str(written), ".json")
+    out = output_for(path, Path(args.output), many, args.format or default)
+    suffix = out.suffix.lower()
+    formats = {".geojson": "geojson", ".svg": "svg", ".json": "json"}
+    if suffix not in formats:
+        msg = f"a decoded curve set can be written as .geojson, .svg, .json, not {suffix or 'none'}"
+        raise CLIError(msg)
+    out.write_bytes(wavecore.decode_curve_file(bundle, formats[suffix]))
+    values = {
+        "kind": "curves",
+        "shape": f"{info['count']} curves",
+        "output": out.name,
+        "seconds": f"{time.perf_counter() - start:.2f}",
+    }
+    return Row(path.name, values)
+
+
 def cmd_decode(args: argparse.Namespace) -> int:
     files, many = expand(args.bundle, BUNDLE_SUFFIXES)
 
     def work(path: Path) -> Row:
         start = time.perf_counter()
         bundle = path.read_bytes()
-        kind = wavecore.inspect(bundle)["kind"]
+        info = wavecore.inspect(bundle)
+        kind = info["kind"]
+        if kind == "curves":
+            return _decode_curve_file(path, bundle, info, args, many)
         arr = wavecore.decode(bundle, keep=args.keep, level=args.level)
         default = ".png" if kind == "image" else ".json"
         out = output_for(path, Path(args.output), many, args.format or default)
@@ -500,7 +568,8 @@ def build_parser() -> argparse.ArgumentParser:
     dec.add_argument("output", metavar="OUT", help="the output file (a folder for several)")
     dec.add_argument("--keep", type=_fraction, help="keep only this fraction of the details")
     dec.add_argument("--level", type=int, default=0, help="k levels coarser (default 0)")
-    dec.add_argument("--format", choices=[".png", ".webp", ".tiff", ".npy", ".json"],
+    dec.add_argument("--format", choices=[".png", ".webp", ".tiff", ".npy", ".json", ".geojson",
+                                          ".svg"],
                      help="output suffix when OUT is a folder")  # fmt: skip
     dec.add_argument("-q", "--quiet", action="store_true", help="no progress bar or table")
     dec.set_defaults(run=cmd_decode)

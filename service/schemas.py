@@ -96,7 +96,7 @@ class ReconstructParams(_Body):
 
     keep: float | None = Field(default=None, ge=0, le=1)
     level: int = Field(default=0, ge=0)
-    format: Literal["png", "webp", "tiff", "npy", "json"] | None = None
+    format: Literal["png", "webp", "tiff", "npy", "json", "geojson", "svg"] | None = None
 
 
 class PointsResult(BaseModel):

@@ -9,6 +9,7 @@ from . import cdf97 as _cdf97  # noqa: F401  (importing it registers "cdf97")
 from .adjoint import synthesis_adjoint, synthesis_step_adjoint
 from .codec import decode, encode_curve, encode_image, encode_surface, inspect
 from .curves import CurveDecomposition, decompose_curve, fitting_length, transfer_details
+from .curvesets import CurveSet, decode_curves, encode_curves
 from .errors import (
     BundleError,
     InvalidCoefficients,
@@ -18,6 +19,10 @@ from .errors import (
 )
 from .filters import matrices, wavelet_names
 from .images import ImageDecomposition, decompose_image, subband_mosaic
+from .io import decode_file as decode_curve_file
+from .io import encode_file as encode_curve_file
+from .io import format_from_suffix as curve_file_format
+from .io import read_curves as read_curve_file
 from .multilevel import (
     default_level,
     max_level,
@@ -49,6 +54,7 @@ __version__ = "0.1.0"
 __all__ = [
     "BundleError",
     "CurveDecomposition",
+    "CurveSet",
     "GridFit",
     "ImageDecomposition",
     "InvalidCoefficients",
@@ -62,12 +68,17 @@ __all__ = [
     "basis_norms_nd",
     "coarse_extent",
     "crop_padding",
+    "curve_file_format",
     "decode",
+    "decode_curve_file",
+    "decode_curves",
     "decompose_curve",
     "decompose_image",
     "decompose_surface",
     "default_level",
     "encode_curve",
+    "encode_curve_file",
+    "encode_curves",
     "encode_image",
     "encode_surface",
     "fit_grid",
@@ -77,6 +88,7 @@ __all__ = [
     "max_level",
     "minimum_length",
     "pad_to_fit",
+    "read_curve_file",
     "remove_smallest",
     "resample_curve",
     "resample_grid",

@@ -58,6 +58,14 @@ _ACCEPT = {
     "image/webp": "webp",
     "image/tiff": "tiff",
     "application/json": "json",
+    "application/geo+json": "geojson",
+    "image/svg+xml": "svg",
+}
+#: What a curve set (``kind`` ``curves``) can be written as, with its media type.
+CURVE_FILE_FORMATS = {
+    "geojson": "application/geo+json",
+    "svg": "image/svg+xml",
+    "json": "application/json",
 }
 
 
@@ -76,8 +84,13 @@ async def _read_bundle(request: Request) -> tuple[bytes, dict[str, str]]:
     return await request.body(), {}
 
 
-def _choose_format(requested: str | None, kind: str, accept: str) -> str:
-    allowed = ("png", "webp", "tiff", "npy") if kind == "image" else ("json", "npy")
+def _choose_format(requested: str | None, kind: str, accept: str, own: str = "json") -> str:
+    if kind == "curves":  # the format it was read from first
+        allowed: tuple[str, ...] = (own, *(f for f in CURVE_FILE_FORMATS if f != own))
+    elif kind == "image":
+        allowed = ("png", "webp", "tiff", "npy")
+    else:
+        allowed = ("json", "npy")
     if requested is not None:
         if requested not in allowed:
             msg = f"a {kind} can be reconstructed as {', '.join(allowed)}, not {requested}"
@@ -87,6 +100,29 @@ def _choose_format(requested: str | None, kind: str, accept: str) -> str:
         if media_type in accept and fmt in allowed:
             return fmt
     return allowed[0]
+
+
+def _reconstruct_curves(
+    bundle: bytes, info: dict[str, Any], requested: str | None, accept: str, settings: Settings
+) -> tuple[bytes, str, dict[str, str]]:
+    """A curve set written as GeoJSON, SVG or curve JSON (its own format by default)."""
+    too_long = [n for n in info["points"] if n > settings.max_points]
+    if too_long or max(info["dims"], default=1) > settings.max_dimension:
+        msg = (
+            f"the bundle decodes to curves of up to {max(info['points'], default=0)} points of "
+            f"{max(info['dims'], default=1)} coordinates, more than this server's limits of "
+            f"{settings.max_points} points and {settings.max_dimension} coordinates"
+        )
+        raise Problem("bundle-too-large", msg)
+    samples = sum(
+        cost.CURVE_FACTOR * n * (d + 1) for n, d in zip(info["points"], info["dims"], strict=True)
+    )
+    cost.check(samples, f"a bundle of {info['count']} curves", settings)
+    curveset = wavecore.decode_curves(bundle)
+    own = (curveset.metadata or {}).get("format", "json")
+    fmt = _choose_format(requested, "curves", accept, own if own in CURVE_FILE_FORMATS else "json")
+    headers = {"X-Wavecore-Kind": "curves", "X-Wavecore-Curves": str(info["count"])}
+    return wavecore.decode_curve_file(bundle, fmt), CURVE_FILE_FORMATS[fmt], headers
 
 
 def _check_declared_size(info: dict[str, Any], settings: Settings) -> None:
@@ -127,6 +163,8 @@ def reconstruct_job(
     settings: Settings,
 ) -> tuple[bytes, str, dict[str, str]]:
     info = wavecore.inspect(bundle)
+    if info["kind"] == "curves":
+        return _reconstruct_curves(bundle, info, requested, accept, settings)
     _check_declared_size(info, settings)
     cost.check_bundle(info, settings)
     kind = info["kind"]
@@ -158,9 +196,12 @@ def reconstruct_job(
                 "image/tiff": {},
                 NPY_MEDIA_TYPE: {},
                 "application/json": {"schema": PointsResult.model_json_schema()},
+                "application/geo+json": {},
+                "image/svg+xml": {},
             },
             "description": "Images as PNG (default), WebP, TIFF or .npy; curves and surfaces "
-            "as JSON (default) or .npy.",
+            "as JSON (default) or .npy; curve sets as GeoJSON, SVG or curve JSON (default: "
+            "the format they were read from).",
         },
         **problem_responses(400, 406, 413, 422, 503),
     },
@@ -173,8 +214,11 @@ async def reconstruct(
     ] = None,
     level: Annotated[int, Query(ge=0, description="0: full size; k: k levels coarser")] = 0,
     format: Annotated[
-        Literal["png", "webp", "tiff", "npy", "json"] | None,
-        Query(description="Output format; default by kind, or by the Accept header"),
+        Literal["png", "webp", "tiff", "npy", "json", "geojson", "svg"] | None,
+        Query(
+            description="Output format; default by kind (a curve set: the format it was read "
+            "from), or by the Accept header"
+        ),
     ] = None,
 ) -> Response:
     """`keep` drops the smallest stored details at decode time (0.4 removes the smallest

@@ -2,14 +2,18 @@
 
 The JSON body is read as bytes and parsed by the job, on a worker (``service.intake``): a
 20 MB body never blocks the event loop, and never becomes millions of Python floats.
+
+``/v1/curves/encode`` also takes curve files: an ``application/geo+json`` body (GeoJSON) or an
+``image/svg+xml`` one (SVG), coded as one curve set (``wavecore.encode_curves``) with the file's
+structure kept; ``tolerance``, ``wavelet`` and ``level`` then come from the query string.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 
 import wavecore
@@ -60,6 +64,54 @@ def encode_job(body: bytes | bytearray, settings: Settings) -> tuple[bytes, dict
     return bundle, headers
 
 
+#: Curve file media types → the format ``wavecore.encode_curve_file`` reads.
+CURVE_FILE_TYPES = {"application/geo+json": "geojson", "image/svg+xml": "svg"}
+
+
+def curve_file_job(
+    body: bytes,
+    fmt: str,
+    tolerance: float | None,
+    wavelet: str | None,
+    level: int | None,
+    settings: Settings,
+) -> tuple[bytes, dict[str, str]]:
+    """Read a GeoJSON or SVG body, check its cost, code it as one curve set."""
+
+    def check(data: Any) -> None:
+        for index, points in enumerate(data.curves):
+            if len(points) > settings.max_points:
+                msg = (
+                    f"curve {index} has {len(points)} points, more than this server's limit of "
+                    f"{settings.max_points}"
+                )
+                raise Problem("too-costly", msg)
+        samples = sum(cost.CURVE_FACTOR * len(c) * (c.shape[1] + 1) for c in data.curves)
+        total = sum(len(c) for c in data.curves)
+        cost.check(samples, f"{len(data.curves)} curves of {total} points", settings)
+
+    try:
+        bundle = wavecore.encode_curve_file(
+            body,
+            fmt,
+            tolerance=tolerance,
+            wavelet=wavelet,
+            level=level,
+            check=check,
+            max_points=cost.sample_limit(settings) // (3 * cost.CURVE_FACTOR),
+        )
+    except wavecore.InvalidParameter as exc:
+        raise Problem("invalid-parameter", f"{fmt}: {exc}"[:600]) from None
+    info = wavecore.inspect(bundle)
+    headers = {
+        "X-Wavecore-Bytes": str(len(bundle)),
+        "X-Wavecore-Ratio": f"{len(body) / len(bundle):.3f}",
+        "X-Wavecore-Max-Error": f"{info['tolerance']:.6g}",
+        "X-Wavecore-Curves": str(info["count"]),
+    }
+    return bundle, headers
+
+
 @router.post(
     "/encode",
     response_class=Response,
@@ -70,11 +122,37 @@ def encode_job(body: bytes | bytearray, settings: Settings) -> tuple[bytes, dict
         **problem_responses(413, 415, 422, 503),
     },
 )
-async def encode_curve(request: Request) -> Response:
+async def encode_curve(
+    request: Request,
+    tolerance: Annotated[
+        float | None,
+        Query(gt=0, allow_inf_nan=False, description="GeoJSON/SVG bodies: the guaranteed bound"),
+    ] = None,
+    wavelet: Annotated[
+        Literal["bspline2", "haar", "cdf97"] | None,
+        Query(description="GeoJSON/SVG bodies: the wavelet (default bspline2)"),
+    ] = None,
+    level: Annotated[
+        int | None, Query(ge=0, le=24, description="GeoJSON/SVG bodies: the most levels")
+    ] = None,
+) -> Response:
     """Without `keep` or `tolerance` the largest point deviation is 1e-3 × the bounding box's
-    diagonal.  `X-Wavecore-Max-Error` gives the measured largest deviation."""
+    diagonal.  `X-Wavecore-Max-Error` gives the measured largest deviation.
+
+    A GeoJSON (`application/geo+json`) or SVG (`image/svg+xml`) body is coded as one curve set:
+    every line, ring and subpath a curve, every point within `tolerance` (query) both ways,
+    features, properties and paint kept; `X-Wavecore-Max-Error` is then the guaranteed bound."""
+    content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    settings = settings_of(request)
+    if content_type in CURVE_FILE_TYPES:
+        fmt = CURVE_FILE_TYPES[content_type]
+        data = await request.body()
+        bundle, headers = await run_work(
+            request, curve_file_job, data, fmt, tolerance, wavelet, level, settings
+        )
+        return Response(bundle, media_type=BUNDLE_MEDIA_TYPE, headers=headers)
     body = await read_json_bytes(request)
-    bundle, headers = await run_work(request, encode_job, body, settings_of(request))
+    bundle, headers = await run_work(request, encode_job, body, settings)
     return Response(bundle, media_type=BUNDLE_MEDIA_TYPE, headers=headers)
 
 

@@ -650,6 +650,8 @@
     state.info = info;
     state.loaded += 1;
     document.body.dataset.bundles = String(state.loaded);
+    $("curveset-info").hidden = true;
+    delete $("curve-plot").dataset.curves;
     state.kind = info.kind === "curve" ? "curve" : "image";
     document.body.dataset.kind = state.kind;
     if (info.kind !== "image" && info.kind !== "curve") {
@@ -1081,14 +1083,95 @@
     encode();
   }
 
+  // ---------------------------------------------------------------- curve files: GeoJSON, SVG
+
+  const CURVE_FILE_TYPES = { geojson: "application/geo+json", svg: "image/svg+xml" };
+  const GEOJSON_TYPES = ["FeatureCollection", "Feature", "LineString", "MultiLineString", "Polygon", "MultiPolygon", "GeometryCollection"];
+
+  function curveFileFormat(file, data) {
+    const name = file.name.toLowerCase();
+    if (name.endsWith(".svg") || file.type === "image/svg+xml") return "svg";
+    if (name.endsWith(".geojson") || file.type === "application/geo+json") return "geojson";
+    if (data && !Array.isArray(data) && GEOJSON_TYPES.includes(data.type)) return "geojson";
+    return null;
+  }
+
+  // Draws every curve of a decoded curve set (the server's curve JSON) in the curve plot.
+  function drawCurveSet(curves, summary) {
+    const svg = $("curve-plot");
+    const sets = curves.map((c) => asPoints(c.points));
+    const view = fitView(sets);
+    svg.setAttribute("viewBox", view.box);
+    for (const el of [...svg.querySelectorAll("g")]) el.remove();
+    const g = svgEl("g", { transform: view.flip });
+    sets.forEach((points, i) => {
+      g.appendChild(svgEl("path", { class: "recon set-curve", d: pathData(points, curves[i].closed), "stroke-width": 2 * view.unit }));
+    });
+    svg.appendChild(g);
+    svg.dataset.curves = String(curves.length);
+    $("empty").hidden = true;
+    $("image-views").hidden = true;
+    $("curve-views").hidden = false;
+    $("curveset-info").hidden = false;
+    $("curveset-info").textContent = summary;
+  }
+
+  async function encodeCurveFile(file, fmt) {
+    const seq = ++state.seq.encode;
+    const progress = startProgress("Compressing…");
+    progress.upload(1);
+    const settings = readSettings();
+    const query = new URLSearchParams();
+    if (settings.tolerance) query.set("tolerance", settings.tolerance);
+    if (settings.level) query.set("level", settings.level);
+    query.set("wavelet", $("wavelet").value);
+    try {
+      const response = await request("encode", "POST", `/v1/curves/encode?${query}`, file, {
+        headers: { "Content-Type": CURVE_FILE_TYPES[fmt] },
+      });
+      if (seq !== state.seq.encode) return;
+      const bundle = new Blob([response.blob], { type: BUNDLE_TYPE });
+      const back = await reconstruct("reconstruct", bundle, { format: "json" });
+      if (seq !== state.seq.encode) return;
+      const data = JSON.parse(await back.blob.text());
+      const bytes = Number(response.header("X-Wavecore-Bytes")) || bundle.size;
+      const bound = Number(response.header("X-Wavecore-Max-Error"));
+      drawCurveSet(
+        data.curves,
+        `${data.curves.length} curves from ${file.name}: ${formatBytes(bytes)} (the file: ${formatBytes(file.size)}), every point within ${formatNumber(bound, 4)}`,
+      );
+      $("curve-plot").dataset.bytes = String(bytes);
+      const download = $("download");
+      if (state.urls.download) URL.revokeObjectURL(state.urls.download);
+      state.urls.download = URL.createObjectURL(bundle);
+      download.href = state.urls.download;
+      download.download = `${file.name.replace(/\.[^.]+$/, "")}.wcb`;
+      download.hidden = false;
+    } catch (err) {
+      if (!isAbort(err)) showError("curve-file-error", err);
+    } finally {
+      if (seq === state.seq.encode) stopProgress();
+    }
+  }
+
   async function chooseCurveFile(file) {
     clearErrors(...ENCODE_ERRORS);
     if (!file) return;
+    $("curveset-info").hidden = true;
+    delete $("curve-plot").dataset.curves;
+    if (curveFileFormat(file, null) === "svg") {
+      encodeCurveFile(file, "svg");
+      return;
+    }
     let data;
     try {
       data = JSON.parse(await file.text());
     } catch (err) {
       showError("curve-file-error", `“${file.name}” is not valid JSON: ${err.message}`);
+      return;
+    }
+    if (curveFileFormat(file, data) === "geojson") {
+      encodeCurveFile(file, "geojson");
       return;
     }
     const points = Array.isArray(data) ? data : data && data.points;

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import curvesets
 from ..bundle import Bundle, read_bundle
 from ..errors import BundleError, InvalidParameter
 from ..layout import band_names
@@ -77,6 +78,8 @@ def decode(
     >>> decode(bundle, level=2).shape, decode(bundle, drop_levels=2).shape
     ((9, 12), (9, 12))
     """
+    if curvesets.is_curve_set(bundle):  # encode_curves' bundles: a list of (n_i, d) arrays
+        return curvesets.decode_curves(bundle).curves  # type: ignore[return-value]
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
     if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
         msg = f"level must be an integer >= 0, not {level!r}"
@@ -152,6 +155,8 @@ def inspect(bundle: Any) -> dict[str, Any]:
     >>> info["levels"], [c["level"] for c in info["chunks"]], info["lossless"]
     (2, [2, 1, 0], True)
     """
+    if curvesets.is_curve_set(bundle):
+        return curvesets.inspect_curves(bundle)
     parsed, plan = _open(bundle)
     header = parsed.header
     try:

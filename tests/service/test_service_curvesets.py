@@ -1,0 +1,154 @@
+"""GeoJSON and SVG through the service: in process and against the live uvicorn server."""
+
+from __future__ import annotations
+
+import json
+
+import httpx
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.anyio
+pytest.importorskip("svgelements", reason="SVG reading is the svg extra (part of the test extra)")
+
+GEOJSON = "application/geo+json"
+SVG_TYPE = "image/svg+xml"
+
+
+def _ring(n: int, radius: float) -> list[list[float]]:
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    pts = np.stack([radius * np.cos(t), radius * np.sin(t) * 0.6], axis=1)
+    return np.concatenate([pts, pts[:1]]).tolist()
+
+
+FEATURES = {
+    "type": "FeatureCollection",
+    "features": [
+        {
+            "type": "Feature",
+            "properties": {"name": "field", "crop": "wheat"},
+            "geometry": {"type": "Polygon", "coordinates": [_ring(120, 5.0), _ring(40, 1.0)]},
+        },
+        {
+            "type": "Feature",
+            "properties": {"name": "road"},
+            "geometry": {
+                "type": "LineString",
+                "coordinates": np.cumsum(
+                    np.random.default_rng(2).normal(size=(200, 2)), 0
+                ).tolist(),
+            },
+        },
+    ],
+}
+
+SVG = b"""<svg xmlns="http://www.w3.org/2000/svg" width="120" height="80">
+<path id="s" d="M 10 40 Q 40 0 70 40 T 110 40" fill="none" stroke="green"/>
+<ellipse cx="60" cy="40" rx="30" ry="15" fill="orange"/>
+</svg>"""
+
+
+def _max_gap(a: list, b: list) -> float:
+    """Largest distance from a point of ``a`` to the polyline ``b`` (exact, every segment)."""
+    p, nodes = np.asarray(a, float)[:, None, :], np.asarray(b, float)
+    s, e = nodes[:-1], nodes[1:]
+    ab = e - s
+    t = np.clip(np.einsum("pij,ij->pi", p - s, ab) / np.maximum((ab * ab).sum(1), 1e-300), 0, 1)
+    gap = p - (s + t[..., None] * ab)
+    return float(np.sqrt((gap * gap).sum(-1)).min(1).max())
+
+
+async def test_geojson_round_trip(client: httpx.AsyncClient) -> None:
+    r = await client.post(
+        "/v1/curves/encode",
+        params={"tolerance": 0.02},
+        content=json.dumps(FEATURES),
+        headers={"content-type": GEOJSON},
+    )
+    assert r.status_code == 200, r.text
+    assert r.headers["x-wavecore-curves"] == "3"
+    assert float(r.headers["x-wavecore-max-error"]) == 0.02
+    bundle = r.content
+    r = await client.post("/v1/bundles/reconstruct", content=bundle)
+    assert r.status_code == 200, r.text
+    assert r.headers["content-type"].startswith(GEOJSON)
+    back = r.json()
+    assert [f["properties"] for f in back["features"]] == [
+        f["properties"] for f in FEATURES["features"]
+    ]
+    outer = back["features"][0]["geometry"]["coordinates"][0]
+    original = FEATURES["features"][0]["geometry"]["coordinates"][0]
+    assert max(_max_gap(original, outer), _max_gap(outer, original)) <= 0.02
+    road = back["features"][1]["geometry"]["coordinates"]
+    road0 = FEATURES["features"][1]["geometry"]["coordinates"]
+    assert max(_max_gap(road0, road), _max_gap(road, road0)) <= 0.02
+    # another format by format= and by Accept
+    r = await client.post("/v1/bundles/reconstruct", params={"format": "svg"}, content=bundle)
+    assert r.status_code == 200 and r.headers["content-type"].startswith(SVG_TYPE)
+    assert r.text.count("<path") == 3
+    r = await client.post(
+        "/v1/bundles/reconstruct", content=bundle, headers={"accept": "application/json"}
+    )
+    assert r.status_code == 200 and r.json()["kind"] == "curves"
+    r = await client.post("/v1/bundles/reconstruct", params={"format": "png"}, content=bundle)
+    assert r.status_code == 406 and "geojson" in r.json()["detail"]
+    info = (await client.post("/v1/bundles/inspect", content=bundle)).json()
+    assert info["kind"] == "curves" and info["count"] == 3
+
+
+async def test_svg_round_trip(client: httpx.AsyncClient) -> None:
+    r = await client.post(
+        "/v1/curves/encode",
+        params={"tolerance": 0.1, "wavelet": "cdf97"},
+        content=SVG,
+        headers={"content-type": SVG_TYPE},
+    )
+    assert r.status_code == 200, r.text
+    r2 = await client.post("/v1/bundles/reconstruct", content=r.content)
+    assert r2.status_code == 200 and r2.headers["content-type"].startswith(SVG_TYPE)
+    assert 'id="s"' in r2.text and 'fill="orange"' in r2.text
+    r3 = await client.post(
+        "/v1/bundles/reconstruct", content=r.content, headers={"accept": GEOJSON}
+    )
+    assert r3.status_code == 200
+    kinds = [f["geometry"]["type"] for f in r3.json()["features"]]
+    assert kinds == ["LineString", "Polygon"]
+
+
+@pytest.mark.parametrize(
+    ("body", "media_type", "words"),
+    [
+        (b"{oops", GEOJSON, "not valid JSON"),
+        (b'{"type": "Point", "coordinates": [1, 2]}', GEOJSON, "'Point' is not a curve"),
+        (
+            b'{"type": "LineString", "coordinates": [[0, 0], [1, "x"]]}',
+            GEOJSON,
+            "coordinates",
+        ),
+        (b"<svg><path d=", SVG_TYPE, "could not be parsed"),
+        (b'<svg xmlns="http://www.w3.org/2000/svg"/>', SVG_TYPE, "no shape"),
+    ],
+)
+async def test_bad_files_are_named(
+    client: httpx.AsyncClient, body: bytes, media_type: str, words: str
+) -> None:
+    r = await client.post("/v1/curves/encode", content=body, headers={"content-type": media_type})
+    assert r.status_code == 422, r.text
+    assert r.headers["content-type"].startswith("application/problem+json")
+    assert words in r.json()["detail"]
+
+
+async def test_too_many_points_cost_413(make_client) -> None:  # type: ignore[no-untyped-def]
+    line = {"type": "LineString", "coordinates": [[i, i % 7] for i in range(3000)]}
+    async with make_client(max_points=1000) as client:
+        r = await client.post(
+            "/v1/curves/encode", content=json.dumps(line), headers={"content-type": GEOJSON}
+        )
+    assert r.status_code == 413 and "3000 points" in r.json()["detail"]
+
+
+async def test_json_contract_unchanged(client: httpx.AsyncClient) -> None:
+    r = await client.post("/v1/curves/encode", json={"points": _ring(50, 1.0)[:-1], "closed": True})
+    assert r.status_code == 200
+    r = await client.post("/v1/bundles/reconstruct", content=r.content)
+    assert r.json()["kind"] == "curve"

@@ -1,0 +1,238 @@
+"""Curve files: GeoJSON, SVG and curve JSON through bundles, structure and bound kept."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import wavecore
+from wavecore import io as wio
+
+pytest.importorskip("svgelements", reason="SVG reading is the svg extra (part of the test extra)")
+
+
+def _to_polyline(source: np.ndarray, target: np.ndarray, closed: bool) -> float:
+    nodes = np.concatenate([target, target[:1]]) if closed else target
+    a, b = nodes[:-1], nodes[1:]
+    ab = b - a
+    length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300)
+    p = source[:, None, :]
+    t = np.clip(np.einsum("pij,ij->pi", p - a, ab) / length2, 0.0, 1.0)
+    gap = p - (a + t[..., None] * ab)
+    return float(np.sqrt(np.einsum("pij,pij->pi", gap, gap).min(axis=1)).max())
+
+
+def _both_ways(original: list, decoded: list, closed: bool) -> float:
+    a, b = np.asarray(original, float), np.asarray(decoded, float)
+    if closed:  # GeoJSON rings repeat their first position
+        a, b = a[:-1], b[:-1]
+    return max(_to_polyline(a, b, closed), _to_polyline(b, a, closed))
+
+
+def _ring(n: int, radius: float, centre: tuple[float, float], seed: int) -> list:
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    r = radius * (1 + 0.1 * np.random.default_rng(seed).random(n))
+    pts = np.stack([centre[0] + r * np.cos(t), centre[1] + r * np.sin(t)], axis=1)
+    return np.concatenate([pts, pts[:1]]).tolist()
+
+
+FEATURES = {
+    "type": "FeatureCollection",
+    "name": "test layer",
+    "features": [
+        {
+            "type": "Feature",
+            "id": "lake",
+            "properties": {"name": "Lac Léman", "depth": 310, "tags": ["a", None]},
+            "geometry": {
+                "type": "Polygon",
+                "coordinates": [_ring(200, 10, (6.5, 46.4), 1), _ring(30, 1, (6.5, 46.4), 2)],
+            },
+        },
+        {
+            "type": "Feature",
+            "properties": None,
+            "geometry": {
+                "type": "MultiLineString",
+                "coordinates": [
+                    np.cumsum(np.random.default_rng(3).normal(size=(300, 3)), 0).tolist(),
+                    [[0.0, 0.0], [1.0, 1.0]],
+                ],
+            },
+        },
+        {
+            "type": "Feature",
+            "properties": {"islands": 2},
+            "geometry": {
+                "type": "MultiPolygon",
+                "coordinates": [[_ring(50, 2, (0, 0), 4)], [_ring(60, 3, (9, 9), 5)]],
+            },
+        },
+        {"type": "Feature", "properties": {"empty": True}, "geometry": None},
+    ],
+}
+
+
+def test_geojson_round_trip_keeps_structure_and_bound() -> None:
+    bundle = wavecore.encode_curve_file(json.dumps(FEATURES).encode(), "geojson", tolerance=0.05)
+    back = json.loads(wavecore.decode_curve_file(bundle))
+    assert back["name"] == "test layer"
+    for original, decoded in zip(FEATURES["features"], back["features"], strict=True):
+        assert decoded["properties"] == original["properties"]
+        assert decoded.get("id") == original.get("id")
+        if original["geometry"] is None:
+            assert decoded["geometry"] is None
+            continue
+        assert decoded["geometry"]["type"] == original["geometry"]["type"]
+    lake, lines, islands = (f["geometry"]["coordinates"] for f in back["features"][:3])
+    originals = [f["geometry"]["coordinates"] for f in FEATURES["features"][:3]]
+    for ring, original in zip(lake, originals[0], strict=True):
+        assert ring[0] == ring[-1]
+        assert _both_ways(original, ring, True) <= 0.05
+    for line, original in zip(lines, originals[1], strict=True):
+        assert len(line[0]) == len(original[0])  # 3-D positions stay 3-D
+        assert _both_ways(original, line, False) <= 0.05
+    for polygon, original in zip(islands, originals[2], strict=True):
+        assert _both_ways(original[0], polygon[0], True) <= 0.05
+
+
+@pytest.mark.parametrize(
+    "geometry",
+    [
+        {"type": "LineString", "coordinates": [[0, 0], [1, 2], [3, 1]]},
+        {"type": "Polygon", "coordinates": [[[0, 0], [4, 0], [4, 3], [0, 0]]]},
+    ],
+)
+def test_bare_geometries_come_back_as_themselves(geometry: dict) -> None:
+    bundle = wavecore.encode_curve_file(json.dumps(geometry), "geojson", tolerance=0.01)
+    back = json.loads(wavecore.decode_curve_file(bundle, "geojson"))
+    assert back["type"] == geometry["type"]
+    closed = geometry["type"] == "Polygon"
+    coords = back["coordinates"][0] if closed else back["coordinates"]
+    original = geometry["coordinates"][0] if closed else geometry["coordinates"]
+    assert _both_ways(original, coords, closed) <= 0.01
+
+
+@pytest.mark.parametrize(
+    ("document", "words"),
+    [
+        ("{not json", "not valid JSON"),
+        ({"type": "Point", "coordinates": [0, 0]}, "'Point' is not a curve"),
+        ({"type": "LineString", "coordinates": [[0, 0]]}, "at least 2"),
+        ({"type": "LineString", "coordinates": [[0, "a"], [1, 1]]}, "lists of numbers"),
+        ({"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [0, 0]]]}, r"coordinates\[0\]"),
+        (
+            {"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": 3}]},
+            r"features\[0\].geometry",
+        ),
+        ({"type": "LineString", "coordinates": [[0, 0, 0, 0], [1, 1, 1, 1]]}, "2 or 3"),
+    ],
+)
+def test_bad_geojson_is_named(document: object, words: str) -> None:
+    text = document if isinstance(document, str) else json.dumps(document)
+    with pytest.raises(wavecore.InvalidParameter, match=words):
+        wavecore.encode_curve_file(text, "geojson")
+
+
+SVG = b"""<svg xmlns="http://www.w3.org/2000/svg" width="200" height="100" viewBox="0 0 200 100">
+<g transform="translate(10, 5)">
+<path id="wave" d="M 0 50 C 30 0 60 100 90 50 S 150 0 180 50" fill="none" stroke="red"/>
+</g>
+<circle id="dot" cx="100" cy="50" r="30" fill="blue"/>
+<rect x="5" y="5" width="20" height="10"/>
+</svg>"""
+
+
+def test_svg_is_sampled_to_the_tolerance_and_written_back() -> None:
+    tolerance = 0.05
+    data = wio.read_curves(SVG, "svg", tolerance=tolerance)
+    assert data.closed == [False, True, True]
+    # the circle's samples lie on it, and its chords are within a quarter of the tolerance
+    circle = data.curves[1]
+    radius = np.linalg.norm(circle - [100, 50], axis=1)
+    assert np.allclose(radius, 30, atol=1e-9)
+    chord_middles = (circle + np.roll(circle, -1, axis=0)) / 2
+    assert np.min(np.linalg.norm(chord_middles - [100, 50], axis=1)) >= 30 - tolerance / 4
+    # the transform is applied
+    assert data.curves[0][0] == pytest.approx([10, 55])
+    bundle = wavecore.encode_curve_file(SVG, "svg", tolerance=tolerance)
+    text = wavecore.decode_curve_file(bundle).decode()
+    assert text.startswith("<svg") and 'id="wave"' in text and 'fill="blue"' in text
+    back = wio.read_curves(text.encode(), "svg", tolerance=tolerance)
+    assert len(back.curves) == 3 and back.closed == [False, True, True]
+    for original, decoded, closed in zip(data.curves, back.curves, data.closed, strict=True):
+        # the written SVG keeps 6 significant digits: 1e-3 on these coordinates at most
+        assert (
+            max(_to_polyline(original, decoded, closed), _to_polyline(decoded, original, closed))
+            <= 0.75 * tolerance + 1e-3
+        )
+
+
+@pytest.mark.parametrize(
+    ("document", "words"),
+    [
+        (b"<svg", "could not be parsed"),
+        (b'<svg xmlns="http://www.w3.org/2000/svg"></svg>', "no shape"),
+        (b"\xff\xfe\x00", "UTF-8"),
+    ],
+)
+def test_bad_svg_is_named(document: bytes, words: str) -> None:
+    with pytest.raises(wavecore.InvalidParameter, match=words):
+        wavecore.encode_curve_file(document, "svg")
+
+
+def test_curve_json_one_and_many() -> None:
+    one = {"points": [[0, 0], [1, 0], [1, 1], [0, 1]], "closed": True}
+    bundle = wavecore.encode_curve_file(json.dumps(one), "json", tolerance=1e-3)
+    back = json.loads(wavecore.decode_curve_file(bundle))
+    assert back["kind"] == "curves" and back["curves"][0]["closed"] is True
+    assert _both_ways(one["points"], back["curves"][0]["points"], False) <= 1e-3
+    many = {
+        "curves": [{"points": [[0, 0], [2, 2], [3, 0]]}, {"points": one["points"], "closed": True}]
+    }
+    data = wio.read_curves(json.dumps(many), "json")
+    assert data.closed == [False, True]
+
+
+def test_formats_convert_into_each_other() -> None:
+    bundle = wavecore.encode_curve_file(json.dumps(FEATURES), "geojson", tolerance=0.05)
+    svg = wavecore.decode_curve_file(bundle, "svg")
+    assert svg.count(b"<path") == 6  # not from an SVG: one path per curve
+    as_json = json.loads(wavecore.decode_curve_file(bundle, "json"))
+    assert len(as_json["curves"]) == 6
+    with pytest.raises(wavecore.InvalidParameter, match="format"):
+        wavecore.decode_curve_file(bundle, "kml")
+
+
+def test_suffixes() -> None:
+    assert wavecore.curve_file_format("a/b.GeoJSON") == "geojson"
+    assert wavecore.curve_file_format("x.svg") == "svg"
+    with pytest.raises(wavecore.InvalidParameter, match="suffix"):
+        wavecore.curve_file_format("x.kml")
+
+
+def test_cli_encodes_and_decodes_curve_files_by_suffix(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    cli = pytest.importorskip("service.cli", reason="the CLI lives in the service package")
+    source = tmp_path / "layer.geojson"
+    source.write_text(json.dumps(FEATURES))
+    bundle = tmp_path / "layer.wcb"
+    assert cli.main(["encode", str(source), str(bundle), "--tolerance", "0.05", "-q"]) == 0
+    assert wavecore.inspect(bundle.read_bytes())["count"] == 6
+    back = tmp_path / "back.geojson"
+    assert cli.main(["decode", str(bundle), str(back), "-q"]) == 0
+    assert json.loads(back.read_text())["features"][0]["properties"]["name"] == "Lac Léman"
+    drawing = tmp_path / "back.svg"
+    assert cli.main(["decode", str(bundle), str(drawing), "-q"]) == 0
+    assert drawing.read_text().count("<path") == 6
+    svg = tmp_path / "shapes.svg"
+    svg.write_bytes(SVG)
+    assert cli.main(["encode", str(svg), str(tmp_path / "shapes.wcb"), "-q"]) == 0
+    assert cli.main(["decode", str(tmp_path / "shapes.wcb"), str(tmp_path / "s.svg"), "-q"]) == 0
+    assert 'id="dot"' in (tmp_path / "s.svg").read_text()
+    # a plain curve JSON stays a single curve (the old contract)
+    one = tmp_path / "one.json"
+    one.write_text(json.dumps({"points": [[0, 0], [1, 1], [2, 0], [3, 1]]}))
+    assert cli.main(["encode", str(one), str(tmp_path / "one.wcb"), "-q"]) == 0
+    assert wavecore.inspect((tmp_path / "one.wcb").read_bytes())["kind"] == "curve"
