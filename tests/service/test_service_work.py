@@ -30,7 +30,7 @@ def _alive(pid: int) -> bool:
     """Whether a process is still running (a zombie waiting to be reaped is not)."""
     try:
         state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except FileNotFoundError:
+    except (FileNotFoundError, ProcessLookupError):  # gone, or gone while being read
         return False
     return state != "Z"
 
