@@ -16,6 +16,7 @@ from .errors import (
     WavecoreError,
 )
 from .filters import matrices, wavelet_names
+from .grids import decode_grid, encode_grid
 from .images import ImageDecomposition, decompose_image, subband_mosaic
 from .multilevel import (
     max_level,
@@ -61,10 +62,12 @@ __all__ = [
     "coarse_extent",
     "crop_padding",
     "decode",
+    "decode_grid",
     "decompose_curve",
     "decompose_image",
     "decompose_surface",
     "encode_curve",
+    "encode_grid",
     "encode_image",
     "encode_surface",
     "fit_grid",
