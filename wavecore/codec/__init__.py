@@ -1,0 +1,56 @@
+"""The codec: the one package that composes the coding stages into bundles, and back.
+
+``encode_image`` / ``encode_curve`` / ``encode_surface`` run
+
+    front end (shape, dtype, colour, size fitting) → transform → threshold (``keep``) →
+    quantize → entropy code → bundle,
+
+and :func:`decode` runs the same path backwards, as far as the requested resolution level needs.
+
+Contract notes for the owners of ``quantize.py`` and ``entropy.py`` (read by them):
+
+* ``dequantize_bands`` is called with a *prefix* of the layout, ``[cA, level L, ..., level k+1]``,
+  when ``decode(..., level=k)`` asks for a coarse image, so ``params`` must describe the bands
+  from the coarse end (per-level lists indexed from ``cA``), and nothing may be recomputed from
+  the shape of the finest band that is handed in.
+* ``decode_levels`` is likewise given only the first ``L - k + 1`` chunks and shapes.
+* Everything in ``params`` must survive a JSON round trip (it is stored in the bundle header),
+  and the decoder side must treat it as untrusted: a crafted header can hold any JSON there.
+  As a last line of defence :func:`decode` turns any exception other than ``BundleError`` that
+  escapes the decoding stages into a ``BundleError``, but please raise ``BundleError`` yourself.
+* The lossless path hands ``encode_levels`` the integer LeGall 5/3 / integer Haar coefficients
+  (``int32``, magnitudes up to about 2**20 for 16-bit RGB) with no quantizer.
+* ``bpp`` counts the whole bundle, header included, and ``params`` live in the header (stored
+  deflated): a float with 17 significant digits costs about 10 bytes even deflated, so rounding
+  steps to ~6 significant digits (and quantizing with the rounded value) buys bits at low rates.
+* Golden bundles (``tests/golden``) are decoded in every test run: once they are committed, a
+  coder or quantizer whose old bitstreams/params no longer decode the same needs a new name (or
+  a version key in ``params``), never a silent change behind the old one.
+
+The package, one module per concern:
+
+* :mod:`.plan`: the caller's arguments checked, and the plan (what a bundle's header records
+  about how the data was transformed): sizes and levels, header dict <-> plan;
+* :mod:`.samples`: the sample domain: colour, dtype, scaling of huge or tiny floats, the
+  transform both ways, and the error metrics (PSNR, largest error);
+* :mod:`.ratecontrol`: the searches for a step that meets ``quality``, ``bpp`` or
+  ``tolerance``;
+* :mod:`.encode`: the front ends ``encode_image``/``encode_curve``/``encode_surface``, and the
+  lossless pipeline;
+* :mod:`.decode`: ``decode`` and ``inspect``.
+"""
+
+from __future__ import annotations
+
+from .decode import decode, inspect
+from .encode import DEFAULT_RELATIVE_TOLERANCE as DEFAULT_RELATIVE_TOLERANCE
+from .encode import encode_curve, encode_image, encode_surface
+from .plan import DEFAULT_CODER as DEFAULT_CODER
+from .plan import LOSSLESS_WAVELET as LOSSLESS_WAVELET
+from .ratecontrol import DEFAULT_QUALITY as DEFAULT_QUALITY
+from .ratecontrol import KEEP_RELATIVE_STEP as KEEP_RELATIVE_STEP
+from .samples import _cast as _cast  # the three compiled passes tests/test_colour.py checks
+from .samples import _to_integers as _to_integers
+from .samples import _ycbcr_from as _ycbcr_from
+
+__all__ = ["decode", "encode_curve", "encode_image", "encode_surface", "inspect"]

@@ -1,0 +1,372 @@
+"""The front ends: ``encode_image``, ``encode_curve`` and ``encode_surface`` check their input,
+make the plan and hand it to the rate control; lossless images take their own pipeline."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from .. import lossless as _lossless
+from ..arguments import closed_flags
+from ..bundle import write_bundle
+from ..colour import rct_forward
+from ..entropy import encode_levels
+from ..errors import BundleError, InvalidParameter
+from ..filters import get_wavelet
+from ..threshold import check_share
+from .plan import (
+    _MAX_CURVE_LEVELS,
+    _MAX_IMAGE_LEVELS,
+    DEFAULT_CODER,
+    LOSSLESS_WAVELET,
+    Plan,
+    _as_array,
+    _default_level,
+    _dtype_name,
+    _fit,
+    _level_arg,
+    _one_of,
+    _positive,
+)
+from .ratecontrol import _encode_lossy
+from .samples import _is_opaque, _peak, _scaled, _scaled_tolerance, _ycbcr_from
+
+#: Without ``keep``/``tolerance``, curves are coded to this fraction of their bounding-box
+#: diagonal as the largest point deviation.
+DEFAULT_RELATIVE_TOLERANCE = 1e-3
+
+
+def _refuses_as_parameter(encoder: Callable[..., bytes]) -> Callable[..., bytes]:
+    """An encoder's ``BundleError`` (say, a header past the format's limits) is its input's
+    fault: raise it as ``InvalidParameter``, so that callers (the service) never mistake an
+    encode for a bad bundle."""
+
+    @functools.wraps(encoder)
+    def checked(*args: Any, **kwargs: Any) -> bytes:
+        try:
+            return encoder(*args, **kwargs)
+        except BundleError as exc:
+            msg = f"this input cannot be stored in a bundle: {exc}"
+            raise InvalidParameter(msg) from exc
+
+    return checked
+
+
+@_refuses_as_parameter
+def encode_image(
+    image: Any,
+    *,
+    wavelet: str = "cdf97",
+    level: int | None = None,
+    keep: float | None = None,
+    quality: float | None = None,
+    bpp: float | None = None,
+    lossless: bool = False,
+) -> bytes:
+    """Encode an image into a bundle.
+
+    Parameters
+    ----------
+    image : array_like
+        ``(H, W)`` grey or ``(H, W, C)`` with ``C`` from 1 to 4 (grey, grey + alpha, RGB, RGBA);
+        ``uint8``, ``uint16`` or float, any byte order and layout.  Any finite float works,
+        subnormals to ``±1.7e308`` (coded in an exactly scaled domain, the header's
+        ``scale``).  An alpha channel that decodes exactly, as an opaque one always does, is
+        left out of ``quality`` and of the recorded PSNR, which are then the colour channels'.
+    wavelet : str
+        The wavelet for lossy coding: ``"cdf97"`` by default, the one that wins the measured
+        rate–distortion on photographs (docs/benchmarks.md); ``"bspline2"`` (the paper's,
+        smooth, with interpolated ends), ``"haar"`` or an alias (see
+        :func:`wavecore.wavelet_names`).  The bundle records it, so any bundle decodes alike.
+    level : int, optional
+        Decomposition levels; ``None`` picks up to 5, keeping the coarsest band at least about
+        4 pixels a side.  Any image size works: the image is edge-padded to a size that fits,
+        and the padding is recorded and cropped again.
+    keep : float, optional
+        Fraction of detail coefficients kept (the smallest ``1 - keep`` by their effect on the
+        reconstruction are removed), quantized finely (about 60 dB).
+    quality : float, optional
+        Target PSNR in dB, met or exceeded (measured on the decoded image, in the original
+        dtype, against the dtype's peak: 255, 65535, or 1 for floats in ``[0, 1]``, else the
+        data range).
+    bpp : float, optional
+        Target bits per pixel: ``8 × len(bundle) / (H × W)``, header included; never exceeded
+        and within 3 % below.
+    lossless : bool
+        Code bit-exactly (``uint8``/``uint16`` only) with the reversible LeGall 5/3 integer
+        lifting and the reversible colour transform; ``wavelet`` is then not used.
+
+    With none of ``keep``/``quality``/``bpp`` the image is coded to ``quality=40`` dB.
+
+    Returns
+    -------
+    bytes
+        The bundle (see :mod:`wavecore.bundle`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavecore import decode, inspect
+    >>> image = (np.add.outer(np.arange(40), np.arange(30)) * 3).astype(np.uint8)
+    >>> bundle = encode_image(image, quality=35)
+    >>> out = decode(bundle)
+    >>> out.shape, out.dtype, inspect(bundle)["psnr"] >= 35
+    ((40, 30), dtype('uint8'), True)
+    >>> bool(np.array_equal(decode(encode_image(image, lossless=True)), image))
+    True
+    """
+    _one_of(keep=keep, quality=quality, bpp=bpp)
+    arr = _as_array(image, "image")
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and not 1 <= arr.shape[2] <= 4):
+        msg = f"image must be (H, W) or (H, W, C) with 1 to 4 channels, not shape {arr.shape}"
+        raise InvalidParameter(msg)
+    level = _level_arg(level)
+    if lossless:
+        if keep is not None or quality is not None or bpp is not None:
+            msg = "lossless=True cannot be combined with keep, quality or bpp"
+            raise InvalidParameter(msg)
+        return _encode_lossless(arr, level)
+    keep = None if keep is None else check_share(keep, "keep", "details to keep")
+    quality = None if quality is None else _positive(quality, "quality", "a PSNR in dB")
+    bpp = None if bpp is None else _positive(bpp, "bpp", "bits per pixel")
+    dtype = _dtype_name(arr, "image")
+    arr, scale = _scaled(arr)
+    colour = "ycbcr" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
+    data = _ycbcr_from(arr) if colour == "ycbcr" else arr.astype(np.float64)
+    bank = get_wavelet(wavelet)
+    # Images use the paper's endpoint-interpolating rows; a wavelet without them (cdf97's
+    # symmetric extension) uses its own non-periodic boundary.
+    boundary = ("open", "open") if "open" in bank.rules else (next(iter(bank.rules)),) * 2
+    fitted, pads, levels = _fit(data, level, bank.name, boundary, _MAX_IMAGE_LEVELS)
+    plan = Plan(
+        "image",
+        arr.shape,
+        dtype,
+        bank.name,
+        boundary,
+        levels,
+        colour,
+        pads,
+        fitted.shape,
+        _peak(arr, dtype, "image"),
+        scale=scale,
+        opaque=_is_opaque(arr),
+    )
+    return _encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None)
+
+
+def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
+    dtype = _dtype_name(arr, "image", integer_only=True)
+    colour = "rct" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
+    data = rct_forward(arr) if colour == "rct" else arr.astype(np.int64)
+    # At most as many levels as leave every subband non-empty (5/3 fits any size unpadded).
+    deepest = min(arr.shape[:2]).bit_length() - 1
+    if level is None:
+        level = min(_default_level(arr.shape[:2], _MAX_IMAGE_LEVELS), deepest)
+    elif level > deepest:
+        msg = (
+            f"level {level} is too deep for a lossless {arr.shape[0]}×{arr.shape[1]} image: "
+            f"at most {deepest} levels leave every subband non-empty"
+        )
+        raise InvalidParameter(msg)
+    # First-order entropy only guides the choice of filters (the context coder ranks them
+    # differently), so code the choice with and without the closed bspline2 and keep the smaller.
+    choices = []
+    for candidates in (("legall53", "haar"), _lossless.FILTERS):
+        lifting = _lossless.choose_filters(data, level, (0, 1), candidates)
+        if lifting not in choices:
+            choices.append(lifting)
+    bundles = [_lossless_bundle(arr, data, dtype, colour, level, lifting) for lifting in choices]
+    return min(bundles, key=len)
+
+
+def _lossless_bundle(
+    arr: np.ndarray, data: np.ndarray, dtype: str, colour: str, level: int, lifting: list[str]
+) -> bytes:
+    plan = Plan(
+        "image",
+        arr.shape,
+        dtype,
+        LOSSLESS_WAVELET,
+        ("symmetric", "symmetric"),
+        level,
+        colour,
+        ((0, 0), (0, 0)),
+        arr.shape,
+        _peak(arr, dtype, "image"),
+        tuple(lifting),
+    )
+    coeffs = _lossless.forward(data, level, (0, 1), lifting)
+    chunks, cparams = encode_levels(coeffs, coder=DEFAULT_CODER)
+    header = plan.header()
+    header.update(
+        quantizer="none",
+        qparams={},
+        coder=str(cparams.get("coder", DEFAULT_CODER)),
+        cparams=cparams,
+        psnr=None,
+        max_error=0.0,
+    )
+    return write_bundle(header, chunks)
+
+
+@_refuses_as_parameter
+def encode_curve(
+    points: Any,
+    *,
+    closed: bool | None = None,
+    level: int | None = None,
+    keep: float | None = None,
+    tolerance: float | None = None,
+    wavelet: str = "bspline2",
+    boundary: str | None = None,
+) -> bytes:
+    """Encode a curve, ``(n, d)`` points (or ``(n,)`` samples), into a bundle.
+
+    Parameters
+    ----------
+    points : array_like
+        The points in order, any ``n >= 1`` and ``d >= 1``, any finite values (huge or tiny
+        floats are coded in an exactly scaled domain).  The curve is extended at its end to
+        a length that fits (``wavecore.pad_to_fit``: repeated last point when open, a straight
+        blend back to the first point when closed); the decoder gives back exactly ``n`` points.
+    closed : bool, optional
+        A closed curve (periodic boundary) or an open one (endpoint interpolating, the
+        default).
+    level : int, optional
+        Levels; ``None`` picks up to 8, keeping at least about 4 coarse points.
+    keep : float, optional
+        Fraction of detail vectors kept (the rest, smallest effect first, removed).
+    tolerance : float, optional
+        The largest allowed distance between an original point and its decoded point; verified
+        on the decoded bundle.  Default: ``1e-3`` × the bounding-box diagonal.
+    wavelet : str
+        ``"bspline2"`` (the paper's, smooth; the default), ``"haar"`` (piecewise constant: a
+        staircase once details are dropped) or ``"cdf97"``.
+    boundary : {"open", "closed"}, optional
+        The same choice as ``closed``, spelled as elsewhere in the library: ``"closed"`` is
+        ``closed=True``.  Give either; both is accepted only when they agree.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavecore import decode, inspect
+    >>> t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    >>> circle = np.stack([np.cos(t), np.sin(t)], axis=1)
+    >>> bundle = encode_curve(circle, closed=True, tolerance=1e-3)
+    >>> out = decode(bundle)
+    >>> out.shape, bool(np.max(np.linalg.norm(out - circle, axis=1)) <= 1e-3)
+    ((50, 2), True)
+    """
+    _one_of(keep=keep, tolerance=tolerance)
+    arr = _as_array(points, "points")
+    if arr.ndim not in (1, 2):
+        msg = f"points must be (n, d) or (n,), not shape {arr.shape}"
+        raise InvalidParameter(msg)
+    (is_closed,) = closed_flags(closed, boundary, 1)
+    level = _level_arg(level)
+    keep = None if keep is None else check_share(keep, "keep", "details to keep")
+    dtype = _dtype_name(arr, "points")
+    arr, scale = _scaled(arr)
+    data = arr.astype(np.float64).reshape(arr.shape[0], -1)
+    boundaries = ("closed",) if is_closed else ("open",)
+    bank = get_wavelet(wavelet)
+    fitted, pads, levels = _fit(data, level, bank.name, boundaries, _MAX_CURVE_LEVELS)
+    diagonal = float(np.linalg.norm(data.max(axis=0) - data.min(axis=0)))
+    plan = Plan(
+        "curve",
+        arr.shape,
+        dtype,
+        bank.name,
+        boundaries,
+        levels,
+        "none",
+        pads,
+        fitted.shape,
+        _peak(data, dtype, "curve"),
+        scale=scale,
+    )
+    if keep is None:
+        if tolerance is None:
+            tolerance = DEFAULT_RELATIVE_TOLERANCE * (diagonal if diagonal > 0 else 1.0)
+        else:  # in the coded (scaled) units
+            tolerance = _scaled_tolerance(_positive(tolerance, "tolerance", "a distance"), scale)
+    return _encode_lossy(plan, arr, fitted, keep=keep, quality=None, bpp=None, tolerance=tolerance)
+
+
+@_refuses_as_parameter
+def encode_surface(
+    grid: Any,
+    *,
+    closed: tuple[bool, bool] | None = None,
+    level: int | None = None,
+    keep: float | None = None,
+    quality: float | None = None,
+    wavelet: str = "bspline2",
+    boundary: str | tuple[str, str] | None = None,
+) -> bytes:
+    """Encode a surface, a ``(U, V, d)`` grid of points or a ``(U, V)`` height field.
+
+    Parameters
+    ----------
+    grid : array_like
+        The grid; each of the two grid axes is padded to a length that fits and cropped again.
+        Any finite values (huge or tiny floats are coded in an exactly scaled domain).
+    closed : pair of bool, optional
+        Per grid axis, periodic (``True``, e.g. the circles of a surface of revolution) or open
+        (the default).
+    level : int, optional
+        Levels; ``None`` picks up to 5.
+    keep : float, optional
+        Fraction of detail vectors kept.
+    quality : float, optional
+        Target PSNR in dB against the data range (largest minus smallest value), met or
+        exceeded.  Default: 40 dB.
+    wavelet : str
+        ``"bspline2"`` (the paper's, the default), ``"haar"``, ``"cdf97"`` or an alias (see
+        :func:`wavecore.wavelet_names`); the bundle records it.
+    boundary : str or pair of str, optional
+        The same choice as ``closed``, spelled ``"open"`` / ``"closed"`` (one for both axes, or
+        one per axis).  Give either; both is accepted only when they agree.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavecore import decode, inspect
+    >>> u, v = np.meshgrid(np.linspace(0, 1, 20), np.linspace(0, 1, 24), indexing="ij")
+    >>> bundle = encode_surface(np.sin(3 * u) * np.cos(2 * v), quality=50)
+    >>> decode(bundle).shape, inspect(bundle)["psnr"] >= 50
+    ((20, 24), True)
+    """
+    _one_of(keep=keep, quality=quality)
+    arr = _as_array(grid, "grid")
+    if arr.ndim not in (2, 3):
+        msg = f"grid must be (U, V) or (U, V, d), not shape {arr.shape}"
+        raise InvalidParameter(msg)
+    flags = closed_flags(closed, boundary, 2)
+    level = _level_arg(level)
+    keep = None if keep is None else check_share(keep, "keep", "details to keep")
+    quality = None if quality is None else _positive(quality, "quality", "a PSNR in dB")
+    dtype = _dtype_name(arr, "grid")
+    arr, scale = _scaled(arr)
+    data = arr.astype(np.float64)
+    bank = get_wavelet(wavelet)
+    boundaries = tuple("closed" if c else "open" for c in flags)
+    fitted, pads, levels = _fit(data, level, bank.name, boundaries, _MAX_IMAGE_LEVELS)
+    plan = Plan(
+        "surface",
+        arr.shape,
+        dtype,
+        bank.name,
+        boundaries,
+        levels,
+        "none",
+        pads,
+        fitted.shape,
+        _peak(data, dtype, "surface"),
+        scale=scale,
+    )
+    return _encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=None, tolerance=None)

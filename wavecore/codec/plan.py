@@ -1,0 +1,307 @@
+"""The plan: the caller's arguments checked, and what a bundle's header records about how the
+data was transformed (kind, shape, dtype, wavelet, boundaries, levels, colour, padding, peak),
+as a :class:`Plan`, to a header dict and back (with the kind-specific consistency checks)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .. import lossless as _lossless
+from ..arguments import as_native
+from ..bundle import DTYPES, MAX_ELEMENTS
+from ..errors import BundleError, InvalidLength, InvalidParameter
+from ..filters import get_wavelet
+from ..multilevel import valid_length
+from ..resample import pad_to_fit
+
+DEFAULT_CODER = "context"
+LOSSLESS_WAVELET = "reversible"
+_MAX_IMAGE_LEVELS = 5
+_MAX_CURVE_LEVELS = 8
+_PAD_ALLOWANCE = 64  # padded length <= 2 × length + this (the default levels stay far below)
+
+
+# --------------------------------------------------------------------------------------------
+# Validation of the caller's arguments
+# --------------------------------------------------------------------------------------------
+
+
+def _positive(value: Any, name: str, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        msg = f"{name} must be a positive number ({what}), not {value!r}"
+        raise InvalidParameter(msg)
+    if not (math.isfinite(float(value)) and float(value) > 0):
+        msg = f"{name} must be a positive finite number ({what}), not {value!r}"
+        raise InvalidParameter(msg)
+    return float(value)
+
+
+def _one_of(**targets: Any) -> None:
+    given = [name for name, value in targets.items() if value is not None]
+    if len(given) > 1:
+        msg = f"give at most one of {', '.join(targets)}, not {' and '.join(given)}"
+        raise InvalidParameter(msg)
+
+
+def _level_arg(level: Any) -> int | None:
+    if level is None:
+        return None
+    if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
+        msg = f"level must be None or an integer >= 0, not {level!r}"
+        raise InvalidParameter(msg)
+    if level > 30:
+        msg = f"level {level} is more than 30; no input is that large"
+        raise InvalidParameter(msg)
+    return int(level)
+
+
+def _as_array(data: Any, name: str) -> np.ndarray:
+    arr = np.asarray(as_native(data))
+    if arr.dtype == np.bool_ or arr.dtype.kind not in "uif":
+        msg = f"{name} must hold real numbers (integers or floats), not {arr.dtype}"
+        raise InvalidParameter(msg)
+    if arr.size == 0:
+        msg = f"{name} is empty (shape {arr.shape})"
+        raise InvalidParameter(msg)
+    if arr.size > MAX_ELEMENTS:
+        msg = f"{name} has {arr.size} elements, more than the bundle limit {MAX_ELEMENTS}"
+        raise InvalidParameter(msg)
+    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        msg = f"{name} holds NaN or infinite values; only finite numbers can be encoded"
+        raise InvalidParameter(msg)
+    return arr
+
+
+def _dtype_name(arr: np.ndarray, name: str, *, integer_only: bool = False) -> str:
+    allowed = ("uint8", "uint16") if integer_only else DTYPES
+    if arr.dtype.name in allowed:
+        return arr.dtype.name
+    if not integer_only and arr.dtype.kind == "f":
+        return "float64"  # longdouble: no wider float is portable, so it comes back as float64
+    msg = f"{name} has dtype {arr.dtype}; expected one of {', '.join(allowed)}"
+    raise InvalidParameter(msg)
+
+
+# --------------------------------------------------------------------------------------------
+# The plan: everything the header records about how the data was transformed
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Plan:
+    kind: str
+    shape: tuple[int, ...]
+    dtype: str
+    wavelet: str
+    boundary: tuple[str, ...]
+    levels: int
+    colour: str
+    pads: tuple[tuple[int, int], ...]
+    fitted: tuple[int, ...]
+    peak: float
+    lifting: tuple[str, ...] = ()  # lossless only: the reversible filter per level, finest first
+    scale: int = 0  # the coded values are the original's times 2**-scale (see _scaled)
+    opaque: bool = False  # an image whose alpha channel is fully opaque (see _finish)
+
+    @property
+    def axes(self) -> tuple[int, ...]:
+        return (0,) if len(self.boundary) == 1 else (0, 1)
+
+    def header(self) -> dict[str, Any]:
+        return {
+            "kind": self.kind,
+            "shape": list(self.shape),
+            "dtype": self.dtype,
+            "fit": "pad" if any(after or before for before, after in self.pads) else "none",
+            "pads": [list(p) for p in self.pads],
+            "fitted": list(self.fitted),
+            "wavelet": self.wavelet,
+            "boundary": list(self.boundary),
+            "levels": self.levels,
+            "colour": self.colour,
+            "peak": self.peak,
+            **({"lifting": list(self.lifting)} if self.wavelet == LOSSLESS_WAVELET else {}),
+            **({"scale": self.scale} if self.scale else {}),
+            **({"opaque": True} if self.opaque else {}),
+        }
+
+
+def _band_shapes(plan: Plan) -> list[Any]:
+    """Subband shapes in ``wavedec``/``wavedec2`` layout, computed without any allocation."""
+    if plan.wavelet == LOSSLESS_WAVELET:
+        return _lossless.band_shapes(plan.fitted, plan.levels, plan.axes)
+    bank = get_wavelet(plan.wavelet)
+    rules = [bank.rule(b) for b in plan.boundary]
+    current = list(plan.fitted)
+    details: list[Any] = []
+    for _ in range(plan.levels):
+        coarse, fine = list(current), list(current)
+        for a, rule in zip(plan.axes, rules, strict=True):
+            coarse[a] = rule.coarse_length(current[a])
+            fine[a] = rule.detail_length(current[a])
+        if len(plan.axes) == 1:
+            details.append(tuple(fine))
+        else:
+            cH, cV = list(coarse), list(coarse)
+            cH[0], cV[1] = fine[0], fine[1]
+            details.append((tuple(cH), tuple(cV), tuple(fine)))
+        current = coarse
+    return [tuple(current), *reversed(details)]
+
+
+def _default_level(sizes: Sequence[int], most: int) -> int:
+    smallest = min(sizes)
+    return max(1, min(most, math.floor(math.log2(max(smallest, 8) / 4))))
+
+
+def _fit(
+    data: np.ndarray, plan_level: int | None, wavelet: str, boundary: Sequence[str], most: int
+) -> tuple[np.ndarray, tuple[tuple[int, int], ...], int]:
+    axes = (0,) if len(boundary) == 1 else (0, 1)
+    level = plan_level
+    if level is None:
+        level = _default_level([data.shape[a] for a in axes], most)
+    for axis in axes:
+        n = data.shape[axis]
+        fitted = valid_length(n, level, boundary[axes.index(axis)], wavelet)
+        if fitted > _padded_limit(n):
+            msg = (
+                f"level {level} is too deep for length {n} (axis {axis}): it would pad it to "
+                f"{fitted}, more than {_padded_limit(n)}; give a smaller level"
+            )
+            raise InvalidParameter(msg)
+    padded, pads = pad_to_fit(data, level, axes=axes, boundary=list(boundary), wavelet=wavelet)
+    return padded, tuple((int(b), int(a)) for b, a in pads), level
+
+
+def _padded_limit(n: int) -> int:
+    """The longest padded length a bundle may declare for an original length ``n``.
+
+    Bounding the padding keeps what a decoder allocates proportional to the original's size,
+    so a tiny bundle cannot ask for a huge grid by declaring many levels.
+    """
+    return 2 * n + _PAD_ALLOWANCE
+
+
+# --------------------------------------------------------------------------------------------
+# The header read back into a plan, with the kind-specific checks
+# --------------------------------------------------------------------------------------------
+
+
+def _plan_from_header(header: dict[str, Any]) -> Plan:
+    """Check the kind-specific consistency of a (generically valid) header."""
+    kind, shape, fitted = header["kind"], tuple(header["shape"]), tuple(header["fitted"])
+    boundary, pads, levels = tuple(header["boundary"]), header["pads"], header["levels"]
+    ranks = {"image": (2, 3), "curve": (1, 2), "surface": (2, 3)}[kind]
+    axes_count = 1 if kind == "curve" else 2
+    if len(shape) not in ranks or len(boundary) != axes_count:
+        msg = f"header: a {kind} cannot have shape {list(shape)} and {len(boundary)} boundaries"
+        raise BundleError(msg)
+    expected = list(shape) if len(shape) > 1 else [shape[0], 1]
+    for axis, (before, after) in enumerate(pads):
+        expected[axis] += before + after
+    if list(fitted) != expected:
+        msg = f"header field 'fitted' is {list(fitted)}; shape and pads make it {expected}"
+        raise BundleError(msg)
+    for axis in range(axes_count):
+        if fitted[axis] > _padded_limit(expected[axis] - sum(pads[axis])):
+            msg = f"header field 'pads' pads axis {axis} far beyond its length: {pads[axis]}"
+            raise BundleError(msg)
+    if kind == "image" and len(shape) == 3 and shape[2] > 4:
+        msg = f"header: an image has at most 4 channels, not {shape[2]}"
+        raise BundleError(msg)
+    colour = header["colour"]
+    if colour != "none" and (kind != "image" or len(shape) != 3 or shape[2] < 3):
+        msg = f"header: colour transform {colour!r} needs an image with 3 or 4 channels"
+        raise BundleError(msg)
+    wavelet = header["wavelet"]
+    if wavelet == LOSSLESS_WAVELET:
+        if kind != "image" or colour == "ycbcr" or header["dtype"] not in ("uint8", "uint16"):
+            msg = "header: the lossless wavelet is only for uint8/uint16 images"
+            raise BundleError(msg)
+        if any(b != "symmetric" for b in boundary):
+            msg = f"header field 'boundary' must be symmetric for lossless, not {list(boundary)}"
+            raise BundleError(msg)
+        if any(before or after for before, after in pads):
+            msg = "header: a lossless bundle is never padded"
+            raise BundleError(msg)
+        lifting = header.get("lifting")
+        if (
+            not isinstance(lifting, list)
+            or len(lifting) != levels
+            or any(name not in _lossless.FILTERS for name in lifting)
+        ):
+            msg = (
+                f"header field 'lifting' must list one of {list(_lossless.FILTERS)} per level "
+                f"({levels}), not {str(lifting)[:80]}"
+            )
+            raise BundleError(msg)
+        sizes = list(fitted[:2])
+        for index, name in enumerate(lifting):
+            if name == "bspline2" and any(n % 2 for n in sizes):
+                msg = (
+                    f"header field 'lifting': level {index + 1} has odd sizes {sizes} for bspline2"
+                )
+                raise BundleError(msg)
+            sizes = [(n + 1) // 2 for n in sizes]
+    else:
+        lifting = []  # the key means nothing for the other wavelets: ignored, as unknown keys are
+        try:
+            bank = get_wavelet(wavelet)
+            for axis, b in enumerate(boundary):
+                if not bank.rule(b).fits(fitted[axis], levels):
+                    msg = f"length {fitted[axis]} does not fit {levels} levels"
+                    raise InvalidLength(msg)
+        except InvalidParameter as exc:
+            msg = f"header: wavelet {wavelet!r}, boundary {list(boundary)}, levels: {exc}"
+            raise BundleError(msg) from exc
+    # The header names each stage twice (its name, and again inside its parameters): the two
+    # must agree, or a reader that trusts either would be misled.
+    coder = header["cparams"].get("coder")
+    if header["coder"] != coder:
+        msg = f"header field 'coder' is {header['coder']!r}, but 'cparams' names {coder!r}"
+        raise BundleError(msg[:200])
+    quantizer = "none" if wavelet == LOSSLESS_WAVELET else header["qparams"].get("name")
+    if header["quantizer"] != quantizer:
+        msg = f"header field 'quantizer' is {header['quantizer']!r}; expected {quantizer!r}"
+        raise BundleError(msg[:200])
+    return Plan(
+        kind,
+        shape,
+        header["dtype"],
+        wavelet,
+        boundary,
+        levels,
+        colour,
+        tuple((int(b), int(a)) for b, a in pads),
+        fitted,
+        float(header["peak"]),
+        tuple(lifting),
+        _scale_from_header(header),
+        _opaque_from_header(header, kind, shape),
+    )
+
+
+def _opaque_from_header(header: dict[str, Any], kind: str, shape: tuple[int, ...]) -> bool:
+    """The optional ``opaque`` key (format 1.2): the alpha channel decodes fully opaque."""
+    opaque = header.get("opaque", False)
+    if opaque is not False and (
+        opaque is not True or kind != "image" or len(shape) != 3 or shape[2] not in (2, 4)
+    ):
+        msg = f"header field 'opaque' must be true, and only for images with alpha, not {opaque!r}"
+        raise BundleError(msg[:200])
+    return bool(opaque)
+
+
+def _scale_from_header(header: dict[str, Any]) -> int:
+    """The optional ``scale`` key (format 1.2): decoded values are multiplied by 2**scale."""
+    scale = int(header.get("scale", 0))  # its type and range are checked by check_header
+    if scale and np.dtype(header["dtype"]).kind != "f":
+        msg = f"header field 'scale' is {scale}, but only float data is ever scaled"
+        raise BundleError(msg)
+    return scale

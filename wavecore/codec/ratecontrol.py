@@ -1,0 +1,555 @@
+"""Rate control: the searches for the quantizer step that meets a ``quality``, ``bpp`` or
+``tolerance`` target (or codes ``keep``), over one decomposition held by :class:`_LossyEncoder`."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from .._kernels import largest_scaled, log_histogram_counts, top_octave
+from ..bundle import write_bundle
+from ..entropy import encode_levels
+from ..errors import InvalidParameter
+from ..quantize import (
+    APPROX_ROUNDING,
+    DEFAULT_ROUNDING,
+    REFINE_MAX_COEFFICIENTS,
+    band_weights,
+    dequantize_bands,
+    quantize_bands,
+)
+from ..threshold import remove_smallest
+from ..transform import run_rows
+from .decode import decode
+from .plan import DEFAULT_CODER
+from .plan import Plan as _Plan
+from .samples import decompose as _decompose
+from .samples import finish as _finish
+from .samples import measure_errors as _errors
+from .samples import reconstruct as _reconstruct
+from .samples import unscaled as _unscaled
+
+#: Without ``keep``/``quality``/``bpp``, images and surfaces are coded to this PSNR (dB).
+DEFAULT_QUALITY = 40.0
+#: With ``keep``, the quantizer step, relative to the peak: fine enough (about 60 dB) that the
+#: thresholding decides what is lost.
+KEEP_RELATIVE_STEP = 1.0 / 512.0
+_SEARCH_STEPS = 18
+_BPP_EVALUATIONS = 24
+_MODEL_EVALUATIONS = 24
+_QUALITY_EVALUATIONS = 24
+_QUALITY_SLACK_DB = 0.02  # quality searches stop within this much above the target
+#: The closed-loop quantizer's squared error, relative to the open loop's at the same step
+#: (measured 0.78-0.89 for ``bspline2`` and 0.97-1.0 for ``cdf97`` on scikit-image's pictures at
+#: 30-48 dB): where the quality search aims its first closed-loop quantization, from a search of
+#: the ten times cheaper open loop.
+_TYPICAL_REFINED_RATIO = {"bspline2": 0.81, "cdf97": 0.985}
+_OTHER_REFINED_RATIO = 0.9
+#: Brackets narrower than this (relative) hold a jump of the error, not a slope: stop there.
+_QUALITY_STEP_RESOLUTION = 2e-4
+_HEADER_GUESS = 600.0  # bytes, for the size estimate before the real coder has run
+_OCTAVE_BINS = 64  # the size estimate's magnitude histograms: bins per octave,
+_OCTAVES = 48  # and octaves below each band's largest magnitude
+#: What the context coder typically writes, relative to the first-order estimate (0.7-0.9 on
+#: scikit-image's pictures): where the bpp search aims its first real coding.
+_TYPICAL_CODED_RATIO = 0.8
+_LONGEST_FLOAT = 1.2345678901234567e-300  # 23 characters, the longest repr of a positive float
+
+
+class _LossyEncoder:
+    """Holds one decomposition and codes it at any step, for the rate-control searches.
+
+    The last quantization and entropy coding are cached, so the searches' final bundle does not
+    redo them.
+    """
+
+    def __init__(self, plan: _Plan, original: np.ndarray, transformed: np.ndarray) -> None:
+        self.plan = plan
+        self.original = original
+        self.coeffs = _decompose(plan, transformed)
+        self.kept = self.coeffs
+        self.kept_fraction = 1.0
+        self.vector_axis = -1 if plan.kind != "image" else None
+        self._quantized: tuple[tuple[float, float], list[Any], dict[str, Any]] | None = None
+        self._coded: tuple[tuple[float, float], list[bytes], dict[str, Any]] | None = None
+        self._estimates: dict[tuple[float, float], float] = {}
+        self._open_loop: dict[tuple[float, float], float] = {}
+        self._errors_at: dict[tuple[float, float], tuple[float | None, float]] = {}
+        self._histogram_cache: tuple[float, list[tuple[np.ndarray, np.ndarray, float]]] | None = (
+            None
+        )
+
+    def keep(self, fraction: float) -> None:
+        if fraction == self.kept_fraction:
+            return
+        self.kept_fraction = fraction
+        self.kept = remove_smallest(
+            self.coeffs,
+            1.0 - fraction,
+            wavelet=self.plan.wavelet,
+            boundary=list(self.plan.boundary),
+            axes=self.plan.axes,
+            vector_axis=self.vector_axis,
+        )
+
+    def _quantize_bands(self, step: float, **options: Any) -> tuple[list[Any], dict[str, Any]]:
+        return quantize_bands(
+            self.kept,
+            step,
+            wavelet=self.plan.wavelet,
+            boundary=list(self.plan.boundary),
+            axes=self.plan.axes,
+            **options,
+        )
+
+    def quantize(self, step: float) -> tuple[list[Any], dict[str, Any]]:
+        key = (step, self.kept_fraction)
+        if self._quantized is None or self._quantized[0] != key:
+            q, params = self._quantize_bands(step)
+            self._quantized = (key, q, params)
+        return self._quantized[1], self._quantized[2]
+
+    def code(self, step: float) -> tuple[list[bytes], dict[str, Any]]:
+        key = (step, self.kept_fraction)
+        if self._coded is None or self._coded[0] != key:
+            chunks, cparams = encode_levels(self.quantize(step)[0], coder=DEFAULT_CODER)
+            self._coded = (key, chunks, cparams)
+        return self._coded[1], self._coded[2]
+
+    def reconstruct(self, qcoeffs: list[Any], qparams: dict[str, Any]) -> np.ndarray:
+        coeffs = dequantize_bands(
+            qcoeffs,
+            qparams,
+            wavelet=self.plan.wavelet,
+            boundary=list(self.plan.boundary),
+            axes=self.plan.axes,
+        )
+        decoded = _finish(self.plan, _reconstruct(self.plan, coeffs), 0)
+        if self.plan.scale:
+            # Measured on exactly what decode returns (subnormals rounded, the largest values
+            # saturated), brought back to the coded units, where the squares cannot overflow.
+            decoded = np.ldexp(decoded, -self.plan.scale)
+        return decoded
+
+    def refines(self) -> bool:
+        """Whether :meth:`quantize` runs the closed loop (small decompositions of images)."""
+        total = sum(
+            sum(np.size(band) for band in entry) if isinstance(entry, tuple | list) else entry.size
+            for entry in self.kept
+        )
+        return total <= REFINE_MAX_COEFFICIENTS
+
+    def open_loop_mse(self, step: float) -> float:
+        """The squared error at ``step`` without the closed-loop refinement (a model for it).
+
+        It costs a quantization and a synthesis, against the closed loop's dozen of syntheses
+        and adjoints; the cached closed-loop quantization is left alone.
+        """
+        key = (step, self.kept_fraction)
+        if key not in self._open_loop:
+            q, params = self._quantize_bands(step, refine=0)
+            psnr = _errors(self.plan, self.original, self.reconstruct(q, params))[0]
+            peak2 = self.plan.peak**2
+            self._open_loop[key] = 0.0 if psnr is None else peak2 * 10.0 ** (-psnr / 10.0)
+        return self._open_loop[key]
+
+    def quality(self, step: float) -> tuple[float, float]:
+        """(PSNR, max error) at ``step``; an exact result counts as infinite PSNR."""
+        psnr, max_error = self._measured(step)
+        return (math.inf if psnr is None else psnr), max_error
+
+    def _measured(self, step: float) -> tuple[float | None, float]:
+        """The errors at ``step``, kept for the final bundle's header (no second synthesis)."""
+        key = (step, self.kept_fraction)
+        if key not in self._errors_at:
+            q, params = self.quantize(step)
+            self._errors_at[key] = _errors(self.plan, self.original, self.reconstruct(q, params))
+        return self._errors_at[key]
+
+    def _assemble(self, step: float, errors: tuple[float | None, float] | None) -> bytes:
+        qparams = self.quantize(step)[1]
+        chunks, cparams = self.code(step)
+        if errors is None:
+            errors = self._measured(step)
+        header = self.plan.header()
+        header.update(
+            quantizer=str(qparams.get("name", "deadzone")),
+            qparams=qparams,
+            coder=str(cparams.get("coder", DEFAULT_CODER)),
+            cparams=cparams,
+            psnr=errors[0],
+            max_error=_unscaled(errors[1], self.plan.scale),
+        )
+        return write_bundle(header, chunks)
+
+    def bundle(self, step: float) -> bytes:
+        """The bundle at ``step``, with its measured PSNR and largest error in the header."""
+        return self._assemble(step, None)
+
+    def size_bound(self, step: float) -> float:
+        """An upper bound on ``len(self.bundle(step))`` that skips measuring the errors.
+
+        The placeholders are floats with the longest JSON form, so the real header can only
+        be shorter (by at most a few dozen bytes).
+        """
+        return float(len(self._assemble(step, (_LONGEST_FLOAT, _LONGEST_FLOAT))))
+
+    def size_estimate(self, step: float) -> float:
+        """A cheap stand-in for :meth:`size_bound`: first-order entropy of every band, in bytes.
+
+        From a histogram of each band's magnitudes (in its quantizer's units) in 1/64-octave
+        bins, made once: an estimate at any step then costs microseconds, not a quantization.
+        The bpp search uses it to choose where to run the real coder.
+        """
+        key = (step, self.kept_fraction)
+        if key not in self._estimates:
+            bits = 0.0
+            for counts, centres, rounding in self._histograms():
+                indices = np.floor(centres / step + rounding)
+                histogram = np.bincount(
+                    np.minimum(indices, 255).astype(np.int64), weights=counts, minlength=256
+                )
+                present = histogram[histogram > 0]
+                bits -= float(np.sum(present * np.log2(present / counts.sum())))
+                beyond = indices > 255  # larger magnitudes by their bit length
+                bits += 1.2 * float(np.sum(counts[beyond] * np.log2(indices[beyond])))
+                bits += float(counts[indices >= 1].sum())  # a bit per sign
+            self._estimates[key] = bits / 8.0 + _HEADER_GUESS
+        return self._estimates[key]
+
+    def _histograms(self) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """Per band: bin counts, bin centres (magnitude / band weight) and dead-zone rounding."""
+        if self._histogram_cache is None or self._histogram_cache[0] != self.kept_fraction:
+            levels = band_weights(
+                self.kept,
+                wavelet=self.plan.wavelet,
+                boundary=list(self.plan.boundary),
+                axes=self.plan.axes,
+            )
+            out = []
+            for index, (entry, weights) in enumerate(zip(self.kept, levels, strict=True)):
+                bands = entry if isinstance(entry, tuple | list) else (entry,)
+                rounding = APPROX_ROUNDING if index == 0 else DEFAULT_ROUNDING
+                for band, weight in zip(bands, weights, strict=True):
+                    values = np.ascontiguousarray(band, dtype=np.float64).reshape(-1)
+                    counts, top = _log_histogram(values, 1.0 / weight)
+                    octave, step = np.divmod(np.arange(counts.size), _OCTAVE_BINS)
+                    centres = 2.0 ** (top - _OCTAVES + octave - 1) * (
+                        2.0 + (2 * step + 1) / _OCTAVE_BINS
+                    )  # the middle of each bin, halfway along its mantissa range
+                    centres[0] = 0.0  # everything tiny, zeros included
+                    used = counts > 0
+                    out.append((counts[used].astype(np.float64), centres[used], rounding))
+            self._histogram_cache = (self.kept_fraction, out)
+        return self._histogram_cache[1]
+
+
+def _log_histogram(values: np.ndarray, scale: float) -> tuple[np.ndarray, int]:
+    """``_kernels.log_histogram(values, scale, _OCTAVE_BINS, _OCTAVES)`` in slices over the
+    threads: a largest value, then counts, both exact whatever the slicing (a maximum, and
+    integer counts added up)."""
+    parts: list[Any] = []
+    run_rows(
+        lambda lo, hi: parts.append(largest_scaled(values[lo:hi], scale)), values.size, values.size
+    )
+    top = int(top_octave(max(parts, default=0.0)))
+    parts.clear()
+    run_rows(
+        lambda lo, hi: parts.append(
+            log_histogram_counts(values[lo:hi], scale, _OCTAVE_BINS, _OCTAVES, top)
+        ),
+        values.size,
+        values.size,
+    )
+    return np.sum(parts, axis=0), top
+
+
+class _Search:
+    """Finds the step whose measured value is as large as allowed (``value <= bound``).
+
+    ``measure(step)`` is a positive value that grows or shrinks with the step roughly like a
+    power law (bundle size ~ step**-1, squared error ~ step**2).  The search keeps the largest
+    value within the bound and the smallest beyond it, interpolates between them in log-log
+    (the secant method, clamped so both brackets move), and before it has both extrapolates
+    with the expected exponent, at most a factor 16 per step (or asks ``guide(step, value)``
+    for the next step, when given).  It stops once a value lies in ``[enough, bound]``.
+    """
+
+    def __init__(
+        self,
+        measure: Callable[[float], float],
+        bound: float,
+        enough: float,
+        slope: float,
+        low: float,
+        high: float,
+        guide: Callable[[float, float], float] | None = None,
+        aim: float | None = None,
+        resolution: float = 0.0,
+    ) -> None:
+        self.measure, self.bound, self.enough = measure, bound, enough
+        self.guide = guide
+        self.resolution = resolution
+        if aim is None:
+            aim = math.sqrt(bound * enough) if enough > 0 else bound
+        self.aim = max(aim, 1e-300)
+        self.slope, self.low, self.high = slope, low, high
+        self.within: tuple[float, float] | None = None  # (step, value) with value <= bound
+        self.beyond: tuple[float, float] | None = None  # (step, value) with value > bound
+        self.last: tuple[float, float] | None = None
+        # The bracket the secant narrows: the latest evaluations on either side between the
+        # two.  Where the value is not monotone in the step (the quantizer's error can dip
+        # when the step grows), the largest value within is not always the bracket's end.
+        self.inner: tuple[float, float] | None = None
+        self.outer: tuple[float, float] | None = None
+
+    def done(self) -> bool:
+        return self.within is not None and self.within[1] >= self.enough
+
+    def evaluate(self, step: float) -> float:
+        value = max(self.measure(step), 1e-300)
+        self.last = (step, value)
+        bracketed = self.inner is not None and self.outer is not None
+        if value <= self.bound:
+            if self.within is None or value > self.within[1]:
+                self.within = (step, value)
+            if self._narrows(step) if bracketed else self.within == (step, value):
+                self.inner = (step, value)
+        else:
+            if self.beyond is None or value < self.beyond[1]:
+                self.beyond = (step, value)
+            if self._narrows(step) if bracketed else self.beyond == (step, value):
+                self.outer = (step, value)
+        return value
+
+    def _narrows(self, step: float) -> bool:
+        assert self.inner is not None and self.outer is not None
+        return min(self.inner[0], self.outer[0]) < step < max(self.inner[0], self.outer[0])
+
+    def next_step(self) -> float | None:
+        if self.inner is not None and self.outer is not None:
+            (s0, v0), (s1, v1) = self.inner, self.outer
+            if s0 == s1 or abs(math.log(s1 / s0)) <= self.resolution:
+                return None
+            t = 0.5
+            if v0 != v1:
+                t = (math.log(self.aim) - math.log(v0)) / (math.log(v1) - math.log(v0))
+            t = min(max(t, 0.1), 0.9)
+            step = math.exp(math.log(s0) + t * (math.log(s1) - math.log(s0)))
+            return None if step in (s0, s1) else step
+        assert self.last is not None
+        s, v = self.last
+        if self.guide is not None:
+            step = min(max(self.guide(s, v), self.low), self.high)
+            if step != s:
+                return step  # else the guide is stuck: extrapolate as without it
+        exponent = (math.log(self.aim) - math.log(v)) / self.slope
+        step = s * math.exp(min(max(exponent, -math.log(16)), math.log(16)))
+        step = min(max(step, self.low), self.high)
+        return None if step == s else step
+
+    def run(self, start: float, evaluations: int) -> None:
+        step: float | None = start
+        for _ in range(evaluations):
+            if step is None:
+                return
+            self.evaluate(step)
+            if self.done():
+                return
+            step = self.next_step()
+
+
+def _largest_step(ok: Callable[[float], bool], low: float, high: float) -> float:
+    """The largest step in ``[low, high]`` (log scale) for which ``ok`` holds; ``ok(low)`` must."""
+    if ok(high):
+        return high
+    for _ in range(_SEARCH_STEPS):
+        mid = math.sqrt(low * high)
+        if ok(mid):
+            low = mid
+        else:
+            high = mid
+    return low
+
+
+def _encode_lossy(
+    plan: _Plan,
+    original: np.ndarray,
+    transformed: np.ndarray,
+    *,
+    keep: float | None,
+    quality: float | None,
+    bpp: float | None,
+    tolerance: float | None,
+) -> bytes:
+    encoder = _LossyEncoder(plan, original, transformed)
+    low, high = plan.peak * 2.0**-20, plan.peak * 4.0
+    if keep is not None:
+        encoder.keep(keep)
+        return encoder.bundle(plan.peak * KEEP_RELATIVE_STEP)
+    if tolerance is not None:
+        return _encode_to_tolerance(encoder, tolerance, low, high)
+    if bpp is not None:
+        return _encode_to_bpp(encoder, bpp, low, high)
+    return _encode_to_quality(encoder, DEFAULT_QUALITY if quality is None else quality, low, high)
+
+
+def _encode_to_quality(encoder: _LossyEncoder, target: float, low: float, high: float) -> bytes:
+    """The largest step whose PSNR meets ``target`` (and exceeds it by at most ~0.02 dB)."""
+    peak2 = encoder.plan.peak**2
+
+    def mse(step: float) -> float:
+        psnr = encoder.quality(step)[0]
+        return 0.0 if math.isinf(psnr) else peak2 * 10.0 ** (-psnr / 10.0)
+
+    bound = peak2 * 10.0 ** (-target / 10.0)
+    enough = bound * 10.0 ** (-_QUALITY_SLACK_DB / 10.0)
+    # A uniform quantizer's error is step**2 / 12: the first guess.
+    first = min(max(math.sqrt(12.0 * bound), low), high)
+    if not encoder.refines():
+        search = _Search(mse, bound, enough, 2.0, low, high, resolution=_QUALITY_STEP_RESOLUTION)
+        search.run(first, _QUALITY_EVALUATIONS)
+    else:
+        # The closed loop costs about ten open-loop quantizations, and its error is the open
+        # loop's times a ratio that changes slowly with the step: scale the open-loop error by
+        # the latest measured ratio (a typical one to begin with), solve that model for the
+        # step, and run the closed loop only there, until its errors bracket the target; then
+        # they alone are interpolated.  Usually two closed-loop quantizations, against four.
+        ratio = _TYPICAL_REFINED_RATIO.get(encoder.plan.wavelet, _OTHER_REFINED_RATIO)
+
+        def scaled_model_step(step: float, value: float | None) -> float:
+            nonlocal ratio
+            if value is not None:
+                model_value = encoder.open_loop_mse(step)
+                if value > 0 and model_value > 0:
+                    ratio = value / model_value
+            model = _Search(
+                lambda s: encoder.open_loop_mse(s) * ratio, bound, enough, 2.0, low, high
+            )
+            model.run(step, _MODEL_EVALUATIONS)
+            return (model.within or model.last or (low, 0.0))[0]
+
+        search = _Search(
+            mse,
+            bound,
+            enough,
+            2.0,
+            low,
+            high,
+            guide=scaled_model_step,
+            resolution=_QUALITY_STEP_RESOLUTION,
+        )
+        search.run(scaled_model_step(first, None), _QUALITY_EVALUATIONS)
+    if search.within is None or encoder.quality(search.within[0])[0] < target:
+        best = encoder.quality(low)[0]
+        if best < target:
+            msg = (
+                f"quality {target} dB cannot be reached for this data (the finest quantizer "
+                f"gives {best:.2f} dB); ask for less, or use lossless=True for 8/16-bit images"
+            )
+            raise InvalidParameter(msg)
+        step = _largest_step(lambda s: encoder.quality(s)[0] >= target, low, high)
+    else:
+        step = search.within[0]
+    return encoder.bundle(step)
+
+
+def _encode_to_tolerance(
+    encoder: _LossyEncoder, tolerance: float, low: float, high: float
+) -> bytes:
+    if encoder.quality(low)[1] > tolerance:
+        msg = (
+            f"tolerance {tolerance} cannot be met (the finest quantizer leaves a deviation of "
+            f"{encoder.quality(low)[1]:.3g}); ask for a larger tolerance"
+        )
+        raise InvalidParameter(msg)
+    step = _largest_step(lambda s: encoder.quality(s)[1] <= tolerance, low, high)
+    while True:  # verify on the decoded bundle, and tighten until the guarantee holds
+        data = encoder.bundle(step)
+        decoded = decode(data)
+        if encoder.plan.scale:
+            decoded = np.ldexp(decoded, -encoder.plan.scale)
+        if _errors(encoder.plan, encoder.original, decoded)[1] <= tolerance or step <= low:
+            return data
+        step /= 2
+
+
+def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) -> bytes:
+    """The bundle closest below ``bpp`` (whole bundle, header included), within 3 % of it.
+
+    The cheap size estimate (first-order entropy), scaled by how the real coder compares with
+    it, chooses each step to code for real (usually one or two codings); once the real sizes
+    bracket the budget they are interpolated.  If the size jumps between two neighbouring
+    steps, the finer one is trimmed by removing its least important details.
+    """
+    plan = encoder.plan
+    pixels = plan.shape[0] * plan.shape[1]
+    budget = math.floor(bpp * pixels / 8.0)
+    # Aim at 99.3 % of the budget, and stop at anything from 97.5 % (the promise is 97 %; the
+    # real header is at most 2 × 23 bytes shorter than the bound): each miss costs a coding.
+    enough = min(budget, max(math.ceil(0.97 * bpp * pixels / 8.0) + 48, math.ceil(0.975 * budget)))
+    aim = 0.993 * budget
+    if budget < 64:  # not even a header fits: say what the smallest bundle would be
+        enough = budget = 0
+    # The cheap model (first-order entropy) over-estimates what the context coder writes, by a
+    # factor that depends on the picture: scale it by the latest measured ratio (a typical one
+    # to begin with) and solve the scaled model for the next step to code for real, until the
+    # real sizes bracket the budget; then the real sizes alone are interpolated.
+    ratio = _TYPICAL_CODED_RATIO
+
+    def scaled_model_step(step: float, value: float | None) -> float:
+        nonlocal ratio
+        if value is not None:
+            ratio = value / encoder.size_estimate(step)
+        # The model only points the way, so a looser window will do for it.
+        model = _Search(
+            lambda s: encoder.size_estimate(s) * ratio, budget, 0.985 * budget, -1.0, low, high
+        )
+        model.run(step, _MODEL_EVALUATIONS)
+        return (model.within or model.last or (high, 0.0))[0]
+
+    real = _Search(
+        encoder.size_bound, budget, enough, -1.0, low, high, guide=scaled_model_step, aim=aim
+    )
+    real.run(scaled_model_step(plan.peak / 16.0, None), _BPP_EVALUATIONS)
+    if real.within is None:
+        real.evaluate(high)
+        if real.within is None:
+            smallest = len(encoder.bundle(high))
+            msg = (
+                f"bpp {bpp} is below what this image can be coded in: the smallest bundle is "
+                f"{smallest} bytes = {8 * smallest / pixels:.4f} bpp (header included)"
+            )
+            raise InvalidParameter(msg)
+        real.run(real.next_step() or high, _BPP_EVALUATIONS)
+    fits = (real.within[0], int(real.within[1])) if real.within is not None else (high, 0)
+    if fits[1] < enough and real.beyond is not None:
+        # The size jumps between two neighbouring steps (many coefficients cross a bin edge
+        # together, e.g. on pixel-repeated images): take the finer step and drop its least
+        # important details, which lowers the size smoothly, until the bundle fits.
+        fits = _fill_by_removal(encoder, real.beyond[0], fits, budget, enough)
+    return encoder.bundle(fits[0])
+
+
+def _fill_by_removal(
+    encoder: _LossyEncoder, step: float, fits: tuple[float, int], budget: int, enough: int
+) -> tuple[float, int]:
+    best_removed: float | None = None
+    few, many = 0.0, 1.0  # fractions of details removed: too big, small enough
+    for _ in range(_SEARCH_STEPS):
+        removed = (few + many) / 2
+        encoder.keep(1.0 - removed)
+        size = encoder.size_bound(step)
+        if size <= budget:
+            many = removed
+            if size > fits[1]:
+                fits, best_removed = (step, int(size)), removed
+            if size >= enough:
+                break
+        else:
+            few = removed
+    encoder.keep(1.0 - (best_removed if best_removed is not None else 0.0))
+    return fits

@@ -1,0 +1,268 @@
+"""The sample domain: the transform both ways, colour, dtype, the exact scaling of huge or tiny
+floats, and the error metrics (PSNR, largest error) that the rate control measures."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .._kernels import colour_to_floats, colour_to_integers, squared_and_largest_error
+from ..colour import YCBCR_INVERSE_MATRIX, YCBCR_MATRIX, rct_inverse, ycbcr_forward, ycbcr_inverse
+from ..errors import InvalidParameter
+from ..multilevel import wavedec, wavedec2, waverec, waverec2
+from ..resample import crop_padding
+from ..transform import run_rows
+from .plan import LOSSLESS_WAVELET, Plan
+
+#: Float data whose largest magnitude lies outside ``[2**-256, 2**256]`` is coded in a scaled
+#: domain, multiplied by an exact power of two (recorded as the header's ``scale``), so that
+#: squares, sums and steps never overflow or underflow; ordinary data is coded unscaled, as
+#: before (its bundles do not change).
+_UNSCALED_EXPONENT = 256
+_LARGEST_FLOAT = float(np.finfo(np.float64).max)
+
+
+def decompose(plan: Plan, data: np.ndarray) -> list[Any]:
+    if len(plan.axes) == 1:
+        return wavedec(data, plan.wavelet, plan.boundary[0], plan.levels, axis=0)
+    return wavedec2(data, plan.wavelet, list(plan.boundary), plan.levels, axes=(0, 1))
+
+
+def reconstruct(plan: Plan, coeffs: list[Any]) -> np.ndarray:
+    if len(plan.axes) == 1:
+        return waverec(coeffs, plan.wavelet, plan.boundary[0], axis=0)
+    return waverec2(coeffs, plan.wavelet, list(plan.boundary), axes=(0, 1))
+
+
+def finish(plan: Plan, data: np.ndarray, level: int) -> np.ndarray:
+    """Transformed-domain samples → the caller's array: crop, inverse colour, shape, dtype."""
+    out = _finish_samples(plan, data, level)
+    if plan.opaque:
+        # An opaque alpha channel comes back exactly opaque, whatever the quantizer did to it:
+        # a picture that was opaque must not turn faintly translucent.
+        out[..., -1] = _opaque_value(out.dtype)
+    return out
+
+
+def _opaque_value(dtype: np.dtype[Any]) -> float:
+    return float(np.iinfo(dtype).max) if dtype.kind in "iu" else 1.0
+
+
+def _is_opaque(arr: np.ndarray) -> bool:
+    """An image whose alpha channel (the last of 2 or 4) is fully opaque: the dtype's largest
+    value for integers, 1.0 for floats."""
+    if arr.ndim != 3 or arr.shape[2] not in (2, 4):
+        return False
+    return bool(np.all(arr[..., -1] == _opaque_value(arr.dtype)))
+
+
+def _finish_samples(plan: Plan, data: np.ndarray, level: int) -> np.ndarray:
+    if plan.wavelet == LOSSLESS_WAVELET:
+        cropped = data  # the 5/3 lifting fits every size; nothing was padded
+    else:
+        cropped = crop_padding(
+            data,
+            plan.pads,
+            axes=plan.axes,
+            level=level,
+            boundary=list(plan.boundary),
+            wavelet=plan.wavelet,
+        )
+    if plan.colour == "ycbcr" and np.dtype(plan.dtype).kind in "iu":
+        # The common case, in one pass: colour matrix, rounding and clipping together.
+        return _to_integers(np.asarray(cropped, dtype=np.float64), plan.dtype, YCBCR_INVERSE_MATRIX)
+    if plan.colour == "ycbcr":
+        cropped = ycbcr_inverse(cropped)
+    elif plan.colour == "rct":
+        cropped = rct_inverse(cropped)
+    if len(plan.shape) == 1:  # a 1-D curve (a time series) was coded as (n, 1)
+        cropped = cropped[:, 0]
+    if plan.scale:
+        # Clipped first, so that a value just past the largest float does not become infinite.
+        limit = math.ldexp(_LARGEST_FLOAT, -plan.scale) if plan.scale > 0 else math.inf
+        cropped = np.ldexp(np.clip(cropped, -limit, limit), plan.scale)
+    return _cast(cropped, plan.dtype)
+
+
+def _scaled(arr: np.ndarray) -> tuple[np.ndarray, int]:
+    """``(arr × 2**-scale, scale)``: float data brought near magnitude 1 when it is huge or tiny.
+
+    A power of two is exact (no rounding, short of underflow far below the peak), so any finite
+    float64 round-trips within the requested target, from subnormals to ``±1.7e308``.
+    """
+    if arr.dtype.kind != "f":
+        return arr, 0
+    largest = np.max(np.abs(arr))
+    if largest == 0:
+        return arr, 0
+    exponent = int(np.frexp(largest)[1])
+    if abs(exponent) <= _UNSCALED_EXPONENT:
+        return arr, 0
+    if not -1073 <= exponent <= 1024:  # only a longdouble gets here: it comes back as float64
+        msg = (
+            f"the data's largest magnitude, {largest!r}, is outside the float64 range that a "
+            "bundle stores (5e-324 to 1.8e308 for the largest magnitude)"
+        )
+        raise InvalidParameter(msg)
+    return np.ldexp(arr, -exponent).astype(np.float64), exponent
+
+
+def _scaled_tolerance(tolerance: float, scale: int) -> float:
+    """A distance in the original's units → the coded units (``tolerance × 2**-scale``)."""
+    if not scale:
+        return tolerance
+    try:
+        scaled = math.ldexp(tolerance, -scale)
+    except OverflowError:
+        return _LARGEST_FLOAT
+    if scaled == 0.0:
+        msg = (
+            f"tolerance {tolerance!r} is below what float64 can resolve for points as large as "
+            f"2**{scale}; ask for a larger tolerance"
+        )
+        raise InvalidParameter(msg)
+    return scaled
+
+
+def unscaled(value: float, scale: int) -> float:
+    """A scaled-domain distance back in the original's units (capped at the largest float)."""
+    try:
+        return min(math.ldexp(value, scale), _LARGEST_FLOAT)
+    except OverflowError:
+        return _LARGEST_FLOAT
+
+
+def _to_integers(data: np.ndarray, dtype: str, matrix: np.ndarray | None) -> np.ndarray:
+    """Float64 ``(H, W)`` or ``(H, W, C)`` samples rounded and clipped into an integer dtype
+    (NaN → 0), after ``matrix`` on the first three channels when given: one compiled pass in
+    threads, where NumPy made five full-size float64 temporaries."""
+    info = np.iinfo(dtype)
+    src = data if data.ndim == 3 else data[:, :, None]
+    out = np.empty(src.shape, dtype=dtype)
+    colours = YCBCR_INVERSE_MATRIX if matrix is None else matrix  # unused when matrix is None
+    lo, hi = float(info.min), float(info.max)
+    run_rows(
+        lambda a, b: colour_to_integers(src, colours, matrix is not None, lo, hi, out, a, b),
+        src.shape[0],
+        src.size,
+    )
+    return out.reshape(data.shape)
+
+
+def _ycbcr_from(rgb: np.ndarray) -> np.ndarray:
+    """``ycbcr_forward(rgb.astype(float64))``, by one compiled pass in threads."""
+    if rgb.dtype in _UNCOMPILED_DTYPES:
+        return ycbcr_forward(rgb.astype(np.float64))
+    out = np.empty(rgb.shape, dtype=np.float64)
+    run_rows(
+        lambda lo, hi: colour_to_floats(rgb, YCBCR_MATRIX, out, lo, hi), rgb.shape[0], rgb.size
+    )
+    return out
+
+
+def _cast(data: np.ndarray, dtype: str) -> np.ndarray:
+    target = np.dtype(dtype)
+    if target.kind in "iu" and data.dtype == np.float64 and data.ndim in (2, 3):
+        return _to_integers(data, dtype, None)
+    if target.kind in "iu":
+        info = np.iinfo(target)
+        values = np.nan_to_num(np.asarray(data, dtype=np.float64), nan=0.0)
+        return np.clip(np.rint(values), info.min, info.max).astype(target)
+    values = np.nan_to_num(np.asarray(data, dtype=np.float64))
+    if target.itemsize < 8:
+        # A float16/float32 original near its dtype's largest value may decode a little beyond
+        # it: saturate, rather than turn it into infinity.
+        largest = float(np.finfo(target).max)
+        values = np.clip(values, -largest, largest)
+    return values.astype(target)
+
+
+#: Dtypes the compiled loops do not take (NumPy handles them instead).
+_UNCOMPILED_DTYPES = {np.dtype(np.float16), np.dtype(np.longdouble)}
+
+
+def measure_errors(
+    plan: Plan, original: np.ndarray, decoded: np.ndarray
+) -> tuple[float | None, float]:
+    """(PSNR in dB or None when exact, largest error: per sample, or per point for curves).
+
+    An image's alpha channel (the last of 2 or 4) that decodes exactly, as an opaque one does,
+    is left out: counting its zero errors would lift the PSNR above what the colours get (an
+    opaque RGBA picture coded to 35 dB showed 33.77 dB on its RGB).  So the quality targets
+    hold on the colour channels, and the figure is the one a viewer of the colours measures.
+    """
+    if (
+        plan.kind == "image"
+        and decoded.ndim == 3
+        and decoded.shape[2] in (2, 4)
+        and np.array_equal(decoded[..., -1], original[..., -1])
+    ):
+        decoded, original = decoded[..., :-1], original[..., :-1]
+    per_point = plan.kind == "curve" and decoded.ndim == 2
+    if not per_point and {decoded.dtype, original.dtype}.isdisjoint(_UNCOMPILED_DTYPES):
+        # One compiled pass: pictures are large, and the rate searches measure them often.
+        total, largest = _squared_and_largest_error(
+            np.ascontiguousarray(decoded).ravel(), np.ascontiguousarray(original).ravel()
+        )
+        return _psnr(plan, float(total) / decoded.size), float(largest)
+    diff = decoded.astype(np.float64) - original.astype(np.float64)
+    magnitude = np.linalg.norm(diff, axis=1) if per_point else np.abs(diff)
+    return _psnr(plan, float(np.mean(diff * diff))), float(np.max(magnitude))
+
+
+def _squared_and_largest_error(decoded: np.ndarray, original: np.ndarray) -> tuple[float, float]:
+    """``squared_and_largest_error``, in slices over the threads when that gives the same bits.
+
+    Integer samples have integer squared errors; while their total stays below 2**53 every
+    partial sum is exact, so any slicing adds up to the one-pass total, bit for bit (the PSNR
+    written in the header must not depend on the thread count).  Floats keep one pass.
+    """
+    if decoded.dtype.kind in "iub" and original.dtype.kind in "iub":
+        spans = [_integer_span(decoded.dtype), _integer_span(original.dtype)]
+        widest = float(max(spans))
+        if widest * widest * max(decoded.size, 1) < 2.0**53:
+            parts: list[tuple[float, float]] = []
+            run_rows(
+                lambda lo, hi: parts.append(
+                    squared_and_largest_error(decoded[lo:hi], original[lo:hi])
+                ),
+                decoded.size,
+                decoded.size,
+            )
+            return sum(p[0] for p in parts), max(p[1] for p in parts)
+    total, largest = squared_and_largest_error(decoded, original)
+    return float(total), float(largest)
+
+
+def _integer_span(dtype: np.dtype[Any]) -> int:
+    """The largest difference of two values of an integer (or boolean) dtype."""
+    if dtype.kind == "b":
+        return 1
+    info = np.iinfo(dtype)
+    return int(info.max) - int(info.min)
+
+
+def _psnr(plan: Plan, mse: float) -> float | None:
+    """PSNR in dB against the plan's peak, or None when exact."""
+    if mse == 0.0:
+        return None
+    # In logarithms, so that no square or ratio overflows or underflows; an error too large
+    # for a float still gives a (very low) finite figure.
+    mse = min(mse, _LARGEST_FLOAT) if mse == mse else _LARGEST_FLOAT
+    db = 20.0 * math.log10(max(plan.peak, 1e-300)) - 10.0 * math.log10(mse)
+    # Rounded down, so that the recorded value never claims more than was measured.
+    return math.floor(db * 1e4) / 1e4
+
+
+def _peak(arr: np.ndarray, dtype: str, kind: str) -> float:
+    if dtype == "uint8":
+        return 255.0
+    if dtype == "uint16":
+        return 65535.0
+    lo, hi = float(arr.min()), float(arr.max())
+    if kind == "image" and lo >= 0.0 and hi <= 1.0:
+        return 1.0
+    span = hi - lo
+    return span if span > 0 else max(abs(hi), 1.0)
