@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import grids
 from .. import lossless as _lossless
 from ..bundle import Bundle, read_bundle
 from ..entropy import decode_levels
@@ -82,6 +83,10 @@ def decode(
     if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
         msg = f"level must be an integer >= 0, not {level!r}"
         raise InvalidParameter(msg)
+    if grids.is_grid_bundle(bundle):  # a grid's container around a surface bundle
+        return grids.decode_grid(
+            bundle, level=level if drop_levels is None else drop_levels, keep=keep
+        )
     if drop_levels is not None:
         if (
             isinstance(drop_levels, bool)
@@ -190,6 +195,8 @@ def inspect(bundle: Any) -> dict[str, Any]:
     >>> info["levels"], [c["level"] for c in info["chunks"]], info["lossless"]
     (2, [2, 1, 0], True)
     """
+    if grids.is_grid_bundle(bundle):
+        return grids.inspect_grid(bundle)
     parsed, plan = _open(bundle)
     header = parsed.header
     try:
