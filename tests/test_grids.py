@@ -14,11 +14,12 @@ from wavecore import BundleError, InvalidParameter
 from wavecore.grids import (
     decode_mask,
     decode_outliers,
+    decode_positions,
     encode_mask,
     encode_outliers,
+    encode_positions,
     fill_missing,
     inspect_grid,
-    roughness_contexts,
 )
 
 
@@ -387,10 +388,22 @@ def test_damaged_bundles_raise_bundle_error() -> None:
             wavecore.decode(bytes(damaged))
 
 
+@pytest.mark.parametrize("density", [0.0, 1e-4, 0.01, 0.08, 0.5, 1.0])
+@pytest.mark.parametrize("size", [1, 7, 5000])
+def test_positions_round_trip(density: float, size: int) -> None:
+    flags = np.random.default_rng(int(density * 1e4) + size).random(size) < density
+    assert np.array_equal(decode_positions(encode_positions(flags), size), flags)
+
+
+def test_positions_cost_near_their_entropy() -> None:
+    p, size = 0.08, 200_000
+    flags = np.random.default_rng(31).random(size) < p
+    entropy_bytes = size * -(p * math.log2(p) + (1 - p) * math.log2(1 - p)) / 8
+    assert len(encode_positions(flags)) < 1.05 * entropy_bytes
+
+
 def test_outlier_section_round_trip_with_escapes_and_exact_values() -> None:
     rng = np.random.default_rng(26)
-    decoded = rng.standard_normal((20, 30))
-    contexts = roughness_contexts(decoded, 0.1)
     flags = rng.random((20, 30)) < 0.2
     count = int(flags.sum())
     multiples = rng.integers(-3, 4, count)
@@ -400,8 +413,8 @@ def test_outlier_section_round_trip_with_escapes_and_exact_values() -> None:
     exact[5:8] = True
     multiples[exact] = 0
     values = rng.standard_normal(3).astype("<f4")
-    section = encode_outliers(flags, contexts, multiples, exact, values)
-    got = decode_outliers(section, contexts, np.dtype(np.float32))
+    section = encode_outliers(flags, multiples, exact, values)
+    got = decode_outliers(section, flags.size, np.dtype(np.float32))
     assert np.array_equal(got[0], flags.reshape(-1))
     assert np.array_equal(got[1], multiples) and np.array_equal(got[2], exact)
     assert np.array_equal(got[3], values)

@@ -12,13 +12,14 @@ import numpy as np
 
 from .. import lossless as _lossless
 from ..arguments import closed_flags
-from ..bundle import write_bundle
+from ..bundle import read_bundle, write_bundle
 from ..colour import rct_forward
 from ..entropy import encode_levels
 from ..errors import BundleError, InvalidParameter
 from ..filters import get_wavelet
 from ..quantize import DEFAULT_ROUNDING, dequantize_bands, quantize_bands
 from ..threshold import check_share
+from .decode import decode
 from .plan import (
     _MAX_CURVE_LEVELS,
     _MAX_IMAGE_LEVELS,
@@ -432,7 +433,6 @@ def _bounded_surface(
     )
 
 
-@_refuses_as_parameter
 def encode_surface_at_step(
     grid: Any,
     step: float,
@@ -441,12 +441,14 @@ def encode_surface_at_step(
     wavelet: str = "cdf97",
     boundary: tuple[str, str] = ("open", "open"),
     rounding: float = DEFAULT_ROUNDING,
-) -> bytes:
+) -> tuple[bytes, np.ndarray]:
     """A surface bundle quantized once at ``step`` (the base step of the dead-zone quantizer,
     in the data's units): no search and no closed-loop refinement, the fastest lossy coding.
 
-    For :mod:`wavecore.grids`, whose outlier pass needs a core of a known step, not a PSNR;
-    not part of the public API.
+    Returns the bundle and what :func:`wavecore.decode` returns for it (the encoder's own
+    reconstruction, from the same integers and parameters; decoded again only if the stored
+    parameters did not survive the header exactly).  For :mod:`wavecore.grids`, whose outlier
+    pass needs a core of a known step, not a PSNR; not part of the public API.
     """
     arr = _as_array(grid, "grid")
     level = _level_arg(level)
@@ -484,9 +486,8 @@ def encode_surface_at_step(
     dequantized = dequantize_bands(
         quantized, qparams, wavelet=plan.wavelet, boundary=bounds, axes=plan.axes
     )
-    decoded = finish(plan, reconstruct(plan, dequantized), 0)
-    if scale:
-        decoded = np.ldexp(decoded, -scale)
+    output = finish(plan, reconstruct(plan, dequantized), 0)
+    decoded = np.ldexp(output, -scale) if scale else output
     psnr, largest = measure_errors(plan, arr, decoded)
     header = plan.header()
     header.update(
@@ -497,4 +498,11 @@ def encode_surface_at_step(
         psnr=psnr,
         max_error=unscaled(largest, scale),
     )
-    return write_bundle(header, chunks)
+    try:
+        bundle = write_bundle(header, chunks)
+    except BundleError as exc:
+        msg = f"this input cannot be stored in a bundle: {exc}"
+        raise InvalidParameter(msg) from exc
+    if read_bundle(bundle).header.get("qparams") != qparams:
+        output = decode(bundle)  # the header rounded a parameter: take the decoder's result
+    return bundle, output
