@@ -402,6 +402,19 @@ def test_positions_cost_near_their_entropy() -> None:
     assert len(encode_positions(flags)) < 1.05 * entropy_bytes
 
 
+def test_crafted_shapes_raise_bundle_error_before_allocating() -> None:
+    import struct
+    import zlib
+
+    bundle = wavecore.encode_grid(terrain((20, 24), seed=29), max_error=1.0)
+    body = bytearray(bundle[:-4])
+    for shape in [(2**31, 2**31), (21, 24), (0, 24)]:
+        struct.pack_into("<2I", body, 9, *shape)  # the shape field, after the 9-byte head
+        crafted = bytes(body) + struct.pack("<I", zlib.crc32(bytes(body)))
+        with pytest.raises(BundleError):
+            wavecore.decode(crafted)
+
+
 def test_outlier_section_round_trip_with_escapes_and_exact_values() -> None:
     rng = np.random.default_rng(26)
     flags = rng.random((20, 30)) < 0.2

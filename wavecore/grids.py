@@ -56,6 +56,7 @@ import constriction
 import numpy as np
 
 from .arguments import as_native
+from .bundle import MAX_ELEMENTS
 from .errors import BundleError, InvalidParameter
 
 __all__ = ["decode_grid", "encode_grid", "inspect_grid", "is_grid_bundle"]
@@ -127,8 +128,8 @@ def checked_grid(data: Any, ndims: Sequence[int], what: str) -> np.ndarray:
     if arr.size == 0:
         msg = f"the {what} is empty (shape {arr.shape})"
         raise InvalidParameter(msg)
-    if any(n >= _MAX_SHAPE for n in arr.shape):
-        msg = f"the {what}'s shape {arr.shape} has a side of 2**31 or more"
+    if any(n >= _MAX_SHAPE for n in arr.shape) or arr.size > MAX_ELEMENTS:
+        msg = f"the {what}'s shape {arr.shape} holds more than {MAX_ELEMENTS} values"
         raise InvalidParameter(msg)
     if arr.dtype.kind == "f" and arr.dtype.itemsize > 8:
         arr = arr.astype(np.float64)  # longdouble: no wider float is portable
@@ -588,6 +589,12 @@ def _decode_core(core: bytes, level: int, keep: float | None = None) -> np.ndarr
     return decode(core, level=level, keep=keep)
 
 
+def _inspect_core(core: bytes) -> dict[str, Any]:
+    from .codec import inspect
+
+    return inspect(core)
+
+
 def _peak(values: np.ndarray) -> float:
     """The codec's peak of a float surface: its range, or its magnitude (at least 1) if flat."""
     lo, hi = float(values.min()), float(values.max())
@@ -971,6 +978,11 @@ class _Parsed:
             msg = "grid bundle is truncated"
             raise BundleError(msg)
         self.shape = struct.unpack_from(f"<{ndim}I", data, position)
+        if not 0 < math.prod(self.shape) <= MAX_ELEMENTS:
+            msg = (
+                f"grid bundle declares shape {list(self.shape)}, outside 1 to {MAX_ELEMENTS} values"
+            )
+            raise BundleError(msg)
         position += 4 * ndim
         fields = _TAIL.unpack_from(data, position)
         position += _TAIL.size
@@ -1055,16 +1067,21 @@ def _decode(parsed: _Parsed, level: int, keep: float | None) -> np.ndarray:
         if level and layout == LAYOUT_VOLUME:
             msg = "a lossless volume decodes at level 0 only (its slices share one picture)"
             raise InvalidParameter(msg)
+        stacked = (shape[0] * shape[1], shape[2]) if layout == LAYOUT_VOLUME else shape
+        if tuple(_inspect_core(parsed.core)["shape"]) != stacked:
+            msg = f"grid core does not hold the grid's {list(shape)} samples"
+            raise BundleError(msg)
         core = _decode_core(parsed.core, level, keep).astype(np.int64) + parsed.offset
         if layout == LAYOUT_VOLUME:
             core = core.reshape(shape)
         return _to_dtype(core.astype(np.float64), dtype)
     smoothed = keep is not None and keep < 1.0
-    decoded = _decode_core(parsed.core, level, keep)
     expected = _to_core(np.empty(shape, dtype=np.bool_), layout).shape
-    if level == 0 and decoded.shape != expected:
-        msg = f"grid core decodes to {decoded.shape}, not the grid's {expected}"
+    core_shape = tuple(_inspect_core(parsed.core)["shape"])
+    if core_shape != expected:  # checked before anything of the grid's size is allocated
+        msg = f"grid core holds {list(core_shape)}, not the grid's {list(expected)}"
         raise BundleError(msg)
+    decoded = _decode_core(parsed.core, level, keep)
     if level == 0 and not smoothed:
         final = _to_dtype(decoded, dtype)
         if parsed.outliers:
