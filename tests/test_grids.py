@@ -125,6 +125,17 @@ def test_integer_grids_are_lossless(dtype: str) -> None:
     assert out.dtype == data.dtype and np.array_equal(out, data)
 
 
+def test_whole_numbers_stored_as_floats_may_come_back_exact() -> None:
+    data = np.rint(terrain((60, 70), seed=30)).astype(np.float32)  # metres, as float32
+    bundle = wavecore.encode_grid(data, max_error=0.1)
+    out = wavecore.decode(bundle)
+    assert out.dtype == np.float32 and np.array_equal(out, data)
+    assert inspect_grid(bundle)["lossless"]  # cheaper than the bounded code at so tight a bound
+    loose = wavecore.encode_grid(data, max_error=20.0)
+    assert not inspect_grid(loose)["lossless"] and len(loose) < len(bundle)
+    assert largest_error(wavecore.decode(loose), data) <= 20.0
+
+
 def test_wide_integers_are_lossless_through_the_bound_path() -> None:
     data = (terrain((25, 26), seed=8) * 1e6).astype(np.int64) - 10**8  # range 1e9
     bundle = wavecore.encode_grid(data, lossless=True)

@@ -6,6 +6,7 @@ The public API is what ``__all__`` lists; everything else is internal.
 from __future__ import annotations
 
 from . import cdf97 as _cdf97  # noqa: F401  (importing it registers "cdf97")
+from .adjoint import synthesis_adjoint, synthesis_step_adjoint
 from .codec import decode, encode_curve, encode_image, encode_surface, inspect
 from .curves import CurveDecomposition, decompose_curve, fitting_length, transfer_details
 from .errors import (
@@ -19,6 +20,7 @@ from .filters import matrices, wavelet_names
 from .grids import decode_grid, encode_grid
 from .images import ImageDecomposition, decompose_image, subband_mosaic
 from .multilevel import (
+    default_level,
     max_level,
     valid_length,
     wavedec,
@@ -66,6 +68,7 @@ __all__ = [
     "decompose_curve",
     "decompose_image",
     "decompose_surface",
+    "default_level",
     "encode_curve",
     "encode_grid",
     "encode_image",
@@ -81,7 +84,9 @@ __all__ = [
     "resample_curve",
     "resample_grid",
     "subband_mosaic",
+    "synthesis_adjoint",
     "synthesis_step",
+    "synthesis_step_adjoint",
     "transfer_details",
     "valid_length",
     "wavedec",

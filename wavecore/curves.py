@@ -29,7 +29,7 @@ from .arguments import closed_flags
 from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import (
-    _as_int,
+    as_int,
     check_level_bound,
     growth_limit,
     wavedec,
@@ -58,8 +58,8 @@ def fitting_length(
     (98, 96, 14)
     """
     rule = get_wavelet(wavelet).rule(boundary)
-    n = _as_int(n, "n", minimum=1)
-    level = _as_int(level, "level")
+    n = as_int(n, "n", minimum=1)
+    level = as_int(level, "level")
     check_level_bound(
         level,
         rule,
@@ -175,7 +175,7 @@ class CurveDecomposition:
 
         ``level=0`` is the fitted fine curve; the default is the coarsest, ``self.level``.
         """
-        level = self.level if level is None else _as_int(level, "level")
+        level = self.level if level is None else as_int(level, "level")
         if level > self.level:
             msg = f"level {level} is deeper than the decomposition's {self.level} levels"
             raise InvalidParameter(msg)
@@ -286,7 +286,7 @@ def decompose_curve(
     n = len(arr)
     if level is None:
         level = _default_level(n, boundary, bank)
-    level = _as_int(level, "level", minimum=1)
+    level = as_int(level, "level", minimum=1)
     check_level_bound(
         level,
         bank.rule(boundary),

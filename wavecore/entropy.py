@@ -35,6 +35,7 @@ from numba import njit
 
 from .blockcoder import BLOCK_SIZE, decode_blocks, encode_blocks
 from .errors import BundleError, InvalidParameter
+from .layout import as_levels, is_band_group
 
 __all__ = ["CODERS", "decode_levels", "encode_levels"]
 
@@ -44,15 +45,10 @@ MAX_ELEMENTS = 1 << 31
 
 
 def _entries(qcoeffs: Sequence[Any]) -> list[list[np.ndarray]]:
-    if isinstance(qcoeffs, np.ndarray) or not len(qcoeffs):
-        msg = "qcoeffs must be a non-empty list [cA, details of level L, ..., details of level 1]"
-        raise InvalidParameter(msg)
     out = []
-    for entry in qcoeffs:
-        bands = list(entry) if isinstance(entry, tuple | list) else [entry]
+    for bands in as_levels(qcoeffs, "qcoeffs"):
         arrays = []
-        for band in bands:
-            arr = np.asarray(band)
+        for arr in bands:
             if arr.dtype.kind not in "iu":
                 msg = f"quantized coefficients must be integers, not {arr.dtype}"
                 raise InvalidParameter(msg)
@@ -126,10 +122,7 @@ def _shape_entries(shapes: Sequence[Any]) -> list[list[tuple[int, ...]]]:
         if not isinstance(entry, tuple | list):
             msg = f"band shape entry {entry!r} is not a tuple"
             raise BundleError(msg)
-        if entry and all(isinstance(e, tuple | list) for e in entry):
-            bands = [tuple(e) for e in entry]
-        else:
-            bands = [tuple(entry)]
+        bands = [tuple(e) for e in entry] if is_band_group(entry) else [tuple(entry)]
         for band in bands:
             if not all(isinstance(n, int | np.integer) and 0 <= n <= MAX_ELEMENTS for n in band):
                 msg = f"band shape {band!r} is not a tuple of sizes"
@@ -204,15 +197,9 @@ def decode_levels(
         levels = _decode_zlib(chunks, layout)
     out: list[Any] = []
     for index, (arrays, bands) in enumerate(zip(levels, layout, strict=True)):
-        is_single = len(bands) == 1 and not (
-            index > 0 and isinstance(shapes[index], tuple | list) and _is_nested(shapes[index])
-        )
+        is_single = len(bands) == 1 and not (index > 0 and is_band_group(shapes[index]))
         out.append(arrays[0] if is_single else tuple(arrays))
     return out
-
-
-def _is_nested(entry: Any) -> bool:
-    return bool(entry) and all(isinstance(e, tuple | list) for e in entry)
 
 
 def _decode_zlib(

@@ -754,9 +754,18 @@ def encode_layout(
     mask_bytes = encode_mask(missing) if has_mask else b""
 
     if bound is not None:
-        return _encode_bounded(
+        bounded = _encode_bounded(
             arr, layout, core, core_values, original, core_missing, mask_bytes, bound, data_range
         )
+        if dtype.kind == "f" and not has_mask and layout != LAYOUT_POINTS and _integers(values):
+            # Whole numbers stored as floats (an elevation model in metres, say): coded
+            # bit-exactly they can be smaller than any lossy code of a tight bound (a third
+            # smaller than the bounded code at 1e-4 of the range on the benchmark's model).
+            try:
+                return min(bounded, _encode_lossless(arr, layout, level), key=len)
+            except InvalidParameter:  # a level too deep for the reversible filters
+                return bounded
+        return bounded
     # RMSE (or PSNR) and bpp: the core alone, verified over the finite cells.
     peak = _peak(core_values)
     if bpp_target is not None:
@@ -902,6 +911,15 @@ def _corrected(
     arithmetic, shared)."""
     with np.errstate(over="ignore", invalid="ignore"):
         return _to_dtype(decoded + multiples.astype(np.float64) * unit, dtype)
+
+
+def _integers(values: np.ndarray) -> bool:
+    """Whether float64 ``values`` are all whole numbers spanning at most 65535 (a uint16 after
+    an offset, as the reversible path takes them)."""
+    lo, hi = float(values.min()), float(values.max())
+    if not (hi - lo <= 65535 and abs(lo) < 2**52 and abs(hi) < 2**52):
+        return False
+    return bool(np.array_equal(values, np.rint(values)))
 
 
 def _encode_lossless(arr: np.ndarray, layout: int, level: int | None) -> bytes:

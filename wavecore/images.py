@@ -38,7 +38,7 @@ import numpy as np
 from .arguments import as_native
 from .errors import InvalidCoefficients, InvalidParameter
 from .filters import FilterBank, get_wavelet
-from .multilevel import _as_int, wavedec2, waverec2
+from .multilevel import as_int, default_level, wavedec2, waverec2
 from .resample import GridFit, fit_grid
 from .threshold import keep_largest
 from .transform import normalize_axis
@@ -60,14 +60,6 @@ def _to_dtype(data: np.ndarray, dtype: np.dtype[Any]) -> np.ndarray:
         info = np.iinfo(dtype)
         return np.clip(np.rint(data), info.min, info.max).astype(dtype)
     return data.astype(dtype)
-
-
-def _default_level(sizes: Sequence[int]) -> int:
-    """The most levels that keep every side of the coarsest image at 8 pixels or more."""
-    level = 1
-    while all(n >= 8 << (level + 1) for n in sizes):
-        level += 1
-    return level
 
 
 @dataclass(frozen=True)
@@ -115,7 +107,7 @@ class ImageDecomposition:
         Float64 in the input's value range; about ``1/2**level`` of the input's size per side
         (padding cropped away).  ``level=0`` gives the full-size image as float.
         """
-        level = self.level if level is None else _as_int(level, "level")
+        level = self.level if level is None else as_int(level, "level")
         if level > self.level:
             msg = f"level {level} is deeper than the decomposition's {self.level} levels"
             raise InvalidParameter(msg)
@@ -174,7 +166,8 @@ def decompose_image(
     image : array_like
         ``(H, W)`` for grey, or with a channel axis (RGB, RGBA, any count).  Integer or float.
     level : int, optional
-        Number of levels.  Default: as many as keep the coarsest image at 8 pixels per side or
+        Number of levels.  Default: the library's one rule, :func:`wavecore.default_level`
+        (the codec's too): up to 5, keeping the coarsest image at about 4 pixels per side or
         more (at least 1).
     channel_axis : int or None, keyword-only
         The axis of the colour channels, as in scikit-image; ``None`` for a grey image.
@@ -207,7 +200,7 @@ def decompose_image(
     >>> grey = np.linspace(0, 1, 30 * 40).reshape(30, 40).astype(np.float32)
     >>> dec = decompose_image(grey)
     >>> dec.level, dec.reconstruct().dtype, bool(np.array_equal(dec.reconstruct(), grey))
-    (1, dtype('float32'), True)
+    (2, dtype('float32'), True)
     >>> decompose_image(np.zeros((5, 40)))
     Traceback (most recent call last):
       ...
@@ -235,8 +228,8 @@ level of the open boundary of 'bspline2' needs at least 8 samples per axis
         work = np.moveaxis(arr, axis, -1)
     sizes = work.shape[:2]
     if level is None:
-        level = _default_level(sizes)
-    level = _as_int(level, "level", minimum=1)
+        level = default_level(sizes)
+    level = as_int(level, "level", minimum=1)
     fitted, grid_fit = fit_grid(
         work.astype(np.float64), level, axes=(0, 1), boundary=boundary, wavelet=bank, method=fit
     )

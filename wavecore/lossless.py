@@ -60,6 +60,7 @@ from typing import Any
 
 import numpy as np
 
+from . import layout
 from .errors import InvalidParameter
 
 __all__ = ["FILTERS", "band_shapes", "choose_filters", "forward", "inverse", "lift", "unlift"]
@@ -173,25 +174,12 @@ def band_shapes(shape: Sequence[int], level: int, axes: Sequence[int] = (0, 1)) 
     >>> band_shapes((5, 8), 2)
     [(2, 2), ((1, 2), (2, 2), (1, 2)), ((2, 4), (3, 4), (2, 4))]
     """
-    current = list(shape)
-    details: list[Any] = []
-    for _ in range(level):
-        coarse = list(current)
-        fine = list(current)
-        for a in axes:
-            coarse[a] = (current[a] + 1) // 2
-            fine[a] = current[a] // 2
-        if len(axes) == 1:
-            details.append(tuple(fine))
-        else:
-            a0, a1 = axes
-            cH = list(coarse)
-            cH[a0] = fine[a0]
-            cV = list(coarse)
-            cV[a1] = fine[a1]
-            details.append((tuple(cH), tuple(cV), tuple(fine)))
-        current = coarse
-    return [tuple(current), *reversed(details)]
+    return layout.band_shapes(shape, level, axes, _halves)
+
+
+def _halves(_: int, n: int) -> tuple[int, int]:
+    """One lifting step's split: ``ceil(n / 2)`` coarse samples, ``floor(n / 2)`` details."""
+    return (n + 1) // 2, n // 2
 
 
 def _filters(filters: Sequence[str] | None, level: int) -> list[str]:

@@ -37,6 +37,7 @@ from .transform import (
 )
 
 __all__ = [
+    "default_level",
     "max_level",
     "valid_length",
     "wavedec",
@@ -53,7 +54,8 @@ def _rule(wavelet: str | FilterBank, boundary: str) -> tuple[FilterBank, Boundar
     return bank, bank.rule(boundary)
 
 
-def _as_int(value: Any, name: str, minimum: int = 0) -> int:
+def as_int(value: Any, name: str, minimum: int = 0) -> int:
+    """``value`` as an ``int`` of at least ``minimum``, or an error that names ``name``."""
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         msg = f"{name} must be an integer, not {value!r}"
         raise InvalidParameter(msg)
@@ -115,6 +117,45 @@ def check_level_bound(level: int, rule: BoundaryRule, limit: int, what: str) -> 
     raise InvalidParameter(msg)
 
 
+#: The default depth of images and surfaces (``most`` of :func:`default_level`), and of curves.
+#: Measured with the codec on scikit-image's 512 × 512 camera and astronaut: a sixth level made
+#: the bundles at 40 dB 0.05-0.20 % larger, and at 0.25-1 bpp changed PSNR by +0.02 to -0.15 dB
+#: (bspline2 and cdf97), so deeper does not pay; JPEG 2000's usual depth is 5 too.
+DEFAULT_MOST_LEVELS = 5
+DEFAULT_MOST_CURVE_LEVELS = 8
+#: The default level keeps about this many coarse samples per axis, or more.
+DEFAULT_COARSEST = 4
+
+
+def default_level(
+    sizes: Sequence[int], most: int = DEFAULT_MOST_LEVELS, coarsest: int = DEFAULT_COARSEST
+) -> int:
+    """The number of levels used when none is given: one rule for the front ends and the codec.
+
+    The most levels, up to ``most``, that keep at least ``coarsest`` samples per axis in the
+    coarsest band (``min(sizes) >= coarsest * 2**level``), and at least one.
+
+    Parameters
+    ----------
+    sizes : sequence of int
+        The lengths of the transformed axes.
+    most : int
+        The deepest default (5 for images and surfaces, 8 for curves).
+    coarsest : int
+        The fewest coarse samples per axis.
+
+    Examples
+    --------
+    >>> default_level([512, 512]), default_level([40, 30]), default_level([1000], most=8)
+    (5, 2, 7)
+    """
+    smallest = min(int(n) for n in sizes)
+    level = 1
+    while level < most and smallest >= coarsest << (level + 1):
+        level += 1
+    return level
+
+
 def max_level(n: int, boundary: str = "open", wavelet: str | FilterBank = "bspline2") -> int:
     """How many levels a length ``n`` allows, exactly (no padding, no re-sampling).
 
@@ -138,7 +179,7 @@ def max_level(n: int, boundary: str = "open", wavelet: str | FilterBank = "bspli
     (7, 9, 0)
     """
     _, rule = _rule(wavelet, boundary)
-    return _level_count(rule, _as_int(n, "length"))
+    return _level_count(rule, as_int(n, "length"))
 
 
 def valid_length(
@@ -157,8 +198,8 @@ def valid_length(
     (514, 512, 14)
     """
     _, rule = _rule(wavelet, boundary)
-    n = _as_int(n, "length")
-    level = _as_int(level, "level")
+    n = as_int(n, "length")
+    level = as_int(level, "level")
     check_level_bound(
         level,
         rule,
@@ -210,26 +251,29 @@ def _check_length(bank: FilterBank, boundary: str, n: int, level: int, axis: int
     raise InvalidLength(msg)
 
 
-def _resolve_level(
+def resolve_level(
     level: Any,
     bank: FilterBank,
     boundaries: Sequence[str],
     sizes: Sequence[int],
     axes: Sequence[int],
 ) -> int:
+    """The level to use: the deepest that every axis fits when ``None``, else ``level``
+    checked against every axis (the error names the nearest lengths that fit)."""
     if level is None:
         level = min(_level_count(bank.rule(b), n) for b, n in zip(boundaries, sizes, strict=True))
         if level == 0:
             for b, n, ax in zip(boundaries, sizes, axes, strict=True):
                 _check_length(bank, b, n, 1, ax)
         return level
-    level = _as_int(level, "level")
+    level = as_int(level, "level")
     for b, n, ax in zip(boundaries, sizes, axes, strict=True):
         _check_length(bank, b, n, level, ax)
     return level
 
 
-def _boundaries(boundary: str | Sequence[str], count: int, bank: FilterBank) -> list[str]:
+def resolve_boundaries(boundary: str | Sequence[str], count: int, bank: FilterBank) -> list[str]:
+    """One boundary per axis (``count``), each one ``bank`` has a rule for."""
     if isinstance(boundary, str):
         result = [boundary] * count
     elif not isinstance(boundary, Sequence) or isinstance(boundary, bytes):
@@ -255,7 +299,8 @@ def _boundaries(boundary: str | Sequence[str], count: int, bank: FilterBank) -> 
     return result
 
 
-def _axes(axes: Sequence[int] | None, ndim: int) -> list[int]:
+def resolve_axes(axes: Sequence[int] | None, ndim: int) -> list[int]:
+    """``axes`` (all when ``None``, one int accepted) as distinct non-negative axes of ``ndim``."""
     if axes is None:
         return list(range(ndim))
     if isinstance(axes, int | np.integer):
@@ -316,8 +361,8 @@ def wavedec(
         msg = "cannot decompose a scalar; pass an array with at least one dimension"
         raise InvalidParameter(msg)
     axis = normalize_axis(axis, arr.ndim)
-    (b,) = _boundaries(boundary, 1, bank)
-    level = _resolve_level(level, bank, [b], [arr.shape[axis]], [axis])
+    (b,) = resolve_boundaries(boundary, 1, bank)
+    level = resolve_level(level, bank, [b], [arr.shape[axis]], [axis])
     details: list[np.ndarray] = []
     coarse = arr
     for _ in range(level):
@@ -356,7 +401,7 @@ def waverec(
     True
     """
     bank = get_wavelet(wavelet)
-    (b,) = _boundaries(boundary, 1, bank)
+    (b,) = resolve_boundaries(boundary, 1, bank)
     if isinstance(coeffs, np.ndarray) or not len(coeffs):
         msg = "coeffs must be a non-empty list [cA_L, cD_L, ..., cD_1]"
         raise InvalidCoefficients(msg)
@@ -416,9 +461,9 @@ def wavedecn(
     if arr.ndim == 0:
         msg = "cannot decompose a scalar; pass an array with at least one dimension"
         raise InvalidParameter(msg)
-    ax = _axes(axes, arr.ndim)
-    bounds = _boundaries(boundary, len(ax), bank)
-    level = _resolve_level(level, bank, bounds, [arr.shape[a] for a in ax], ax)
+    ax = resolve_axes(axes, arr.ndim)
+    bounds = resolve_boundaries(boundary, len(ax), bank)
+    level = resolve_level(level, bank, bounds, [arr.shape[a] for a in ax], ax)
     coarse = arr
     details: list[dict[str, np.ndarray]] = []
     for _ in range(level):
@@ -470,8 +515,8 @@ def waverecn(
     if coarse.ndim == 0:
         msg = "cA must have at least one dimension"
         raise InvalidCoefficients(msg)
-    ax = _axes(axes, coarse.ndim)
-    bounds = _boundaries(boundary, len(ax), bank)
+    ax = resolve_axes(axes, coarse.ndim)
+    bounds = resolve_boundaries(boundary, len(ax), bank)
     keys = set(_keys(len(ax)))
     for level_details in coeffs[1:]:
         if not isinstance(level_details, dict):
@@ -592,3 +637,13 @@ def waverec2(
             {k: v for k, v in zip(("da", "ad", "dd"), bands, strict=True) if v is not None}
         )
     return waverecn([coeffs[0], *levels], wavelet, boundary, axes)
+
+
+# The private spellings these helpers had before they were shared, for code written against
+# them on other branches; new code imports the public names (tests/test_private_imports.py).
+_as_int, _axes, _boundaries, _resolve_level = (
+    as_int,
+    resolve_axes,
+    resolve_boundaries,
+    resolve_level,
+)

@@ -34,7 +34,7 @@ from functools import lru_cache
 import numpy as np
 
 from .filters import CACHE_CLEARERS, BoundaryRule, FilterBank, get_wavelet
-from .multilevel import _axes, _boundaries, _resolve_level
+from .multilevel import resolve_axes, resolve_boundaries, resolve_level
 
 __all__ = ["basis_norms", "basis_norms_nd"]
 
@@ -285,8 +285,8 @@ def basis_norms(
     True
     """
     bank = get_wavelet(wavelet)
-    (b,) = _boundaries(boundary, 1, bank)
-    lvl = _resolve_level(level, bank, [b], [int(n)], [0])
+    (b,) = resolve_boundaries(boundary, 1, bank)
+    lvl = resolve_level(level, bank, [b], [int(n)], [0])
     return list(_norms(int(n), bank.name, b, lvl))
 
 
@@ -312,9 +312,9 @@ def basis_norms_nd(
     """
     bank = get_wavelet(wavelet)
     shape = tuple(int(s) for s in shape)
-    axes = _axes(None, len(shape))
-    bounds = _boundaries(boundary, len(shape), bank)
-    lvl = _resolve_level(level, bank, bounds, shape, axes)
+    axes = resolve_axes(None, len(shape))
+    bounds = resolve_boundaries(boundary, len(shape), bank)
+    lvl = resolve_level(level, bank, bounds, shape, axes)
 
     def outer(vectors: list[np.ndarray]) -> np.ndarray:
         result = vectors[0]

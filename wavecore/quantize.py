@@ -25,17 +25,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
 from . import _kernels
-from .errors import InvalidCoefficients, InvalidLength, InvalidParameter
-from .filters import get_wavelet, step_sparse
+from .adjoint import synthesis_adjoint
+from .errors import InvalidLength, InvalidParameter
+from .filters import get_wavelet
+from .layout import as_levels, from_levels
 from .multilevel import waverec, waverec2
 from .norms import basis_norms
-from .transform import _run_blocks, _view3, run_rows
+from .transform import run_rows
 
 __all__ = ["dequantize_bands", "quantize_bands", "reconstruction_offset"]
 
@@ -53,20 +54,6 @@ REFINE_ITERATIONS = 6
 #: Above this many coefficients the default is no refinement (a 1024 × 1024 grey image, or
 #: 590 × 590 RGB, is about the limit), to keep large encodes fast.
 REFINE_MAX_COEFFICIENTS = 1 << 20
-
-
-def _layout(coeffs: Sequence[Any]) -> list[list[np.ndarray]]:
-    """``[[cA], [bands of level L], ..., [bands of level 1]]`` as float arrays."""
-    if isinstance(coeffs, np.ndarray) or not len(coeffs):
-        msg = "coeffs must be a non-empty list [cA, details of level L, ..., details of level 1]"
-        raise InvalidCoefficients(msg)
-    levels: list[list[np.ndarray]] = [[np.asarray(coeffs[0])]]
-    for entry in coeffs[1:]:
-        if isinstance(entry, tuple | list):
-            levels.append([np.asarray(band) for band in entry])
-        else:
-            levels.append([np.asarray(entry)])
-    return levels
 
 
 def _fine_lengths(levels: list[list[np.ndarray]], axes: Sequence[int]) -> list[int]:
@@ -129,7 +116,7 @@ def band_weights(
     digits (they are stored in the header, and the encoder uses the rounded values too); listed
     from the coarse end, ``[[cA], [level L bands], ...]``.
     """
-    norms = _band_norms(_layout(coeffs), wavelet, boundary, tuple(int(a) for a in axes))
+    norms = _band_norms(as_levels(coeffs), wavelet, boundary, tuple(int(a) for a in axes))
     return [[float(f"{1.0 / max(norm, 1e-12):.4g}") for norm in level] for level in norms]
 
 
@@ -208,7 +195,7 @@ def quantize_bands(
         msg = f"rounding must be in (0, 0.5], not {rounding!r}"
         raise InvalidParameter(msg)
     axes = tuple(int(a) for a in axes)
-    levels = _layout(coeffs)
+    levels = as_levels(coeffs)
     weights = band_weights(coeffs, wavelet=wavelet, boundary=boundary, axes=axes)
     out_levels: list[list[np.ndarray]] = []
     for index, (bands, level_weights) in enumerate(zip(levels, weights, strict=True)):
@@ -234,14 +221,7 @@ def quantize_bands(
         raise InvalidParameter(msg)
     if refine and len(levels) > 1:
         out_levels = _refine(coeffs, levels, out_levels, params, wavelet, boundary, axes, refine)
-    return _unlayout(coeffs, out_levels), params
-
-
-def _unlayout(template: Sequence[Any], levels: list[list[np.ndarray]]) -> list[Any]:
-    out: list[Any] = [levels[0][0]]
-    for entry, bands in zip(template[1:], levels[1:], strict=True):
-        out.append(tuple(bands) if isinstance(entry, tuple | list) else bands[0])
-    return out
+    return from_levels(coeffs, out_levels), params
 
 
 def _number(value: Any, what: str) -> float:
@@ -293,7 +273,7 @@ def dequantize_bands(
         msg = f"quantizer step {step!r} or rounding {rounding!r} out of range"
         raise InvalidParameter(msg)
     weights = params.get("weights")
-    levels = _layout(qcoeffs)
+    levels = as_levels(qcoeffs)
     if not isinstance(weights, list) or len(weights) < len(levels):
         msg = f"quantizer parameters describe fewer levels than the {len(levels)} given"
         raise InvalidParameter(msg)
@@ -315,7 +295,7 @@ def dequantize_bands(
             _dequantize_flat(np.ravel(q), offset, band_step, values.reshape(-1))
             restored.append(values)
         out_levels.append(restored)
-    return _unlayout(qcoeffs, out_levels)
+    return from_levels(qcoeffs, out_levels)
 
 
 def reconstruction_offset(q: np.ndarray, rounding: float) -> float:
@@ -347,63 +327,11 @@ def reconstruction_offset(q: np.ndarray, rounding: float) -> float:
 # --------------------------------------------------------------------------------------------
 
 
-@lru_cache(maxsize=128)
-def _transposed(bank_name: str, boundary: str, m: int) -> tuple[tuple[np.ndarray, ...], ...]:
-    """``P.T`` and ``Q.T`` of one step of fine length ``m``, in compressed-row form (cached)."""
-    _, _, P, Q = step_sparse(bank_name, boundary, m)
-    out = []
-    for matrix in (P, Q):
-        rows = np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))
-        order = np.argsort(matrix.indices, kind="stable")
-        indptr = np.zeros(matrix.shape[1] + 1, dtype=np.intp)
-        np.add.at(indptr, matrix.indices + 1, 1)
-        out.append(
-            (np.cumsum(indptr), rows[order].astype(np.intp), matrix.weights[order].astype(float))
-        )
-    return out[0], out[1]
-
-
-def _adjoint_step(
-    data: np.ndarray, bank_name: str, boundary: str, axis: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(P.T @ data, Q.T @ data)`` along ``axis``, with the transform's compiled kernel.
-
-    The axis is moved to the front first, so that the kernel's inner loop runs along whole rows
-    (contiguous and long) whatever the axis: the same sums in the same order, several times
-    faster than along the last axis of an image.
-    """
-    p_t, q_t = _transposed(bank_name, boundary, data.shape[axis])
-    arr = np.ascontiguousarray(np.moveaxis(np.asarray(data, dtype=np.float64), axis, 0))
-    x = _view3(arr, 0)
-    r, s = len(p_t[0]) - 1, len(q_t[0]) - 1
-    coarse = np.empty((x.shape[0], r, x.shape[2]))
-    detail = np.empty((x.shape[0], s, x.shape[2]))
-    args = (x, *p_t, *q_t, coarse, detail)
-    _run_blocks(_kernels.analysis3, args, x.shape[0], max(r, s), x.size)
-    rest = arr.shape[1:]
-    return (
-        np.moveaxis(coarse.reshape((r, *rest)), 0, axis),
-        np.moveaxis(detail.reshape((s, *rest)), 0, axis),
-    )
-
-
 def _adjoint(
     residual: np.ndarray, bank_name: str, bounds: list[str], axes: tuple[int, ...], count: int
 ) -> list[list[np.ndarray]]:
     """``S.T @ residual`` for the synthesis ``S`` of ``count`` levels, in ``levels`` layout."""
-    details: list[list[np.ndarray]] = []
-    coarse = residual
-    for _ in range(count):
-        if len(axes) == 1:
-            coarse, high = _adjoint_step(coarse, bank_name, bounds[0], axes[0])
-            details.append([high])
-            continue
-        (a0, a1), (b0, b1) = axes, bounds
-        low, high = _adjoint_step(coarse, bank_name, b0, a0)
-        cH, cD = _adjoint_step(high, bank_name, b1, a1)
-        coarse, cV = _adjoint_step(low, bank_name, b1, a1)
-        details.append([cH, cV, cD])
-    return [[coarse], *reversed(details)]
+    return as_levels(synthesis_adjoint(residual, bank_name, bounds, count, axes))
 
 
 def _synthesis(
@@ -438,9 +366,9 @@ def _refine(
     shape_of = [len(level) for level in q_levels]
     steps = [params["step"] * w for level in params["weights"] for w in level]
     deq = dequantize_bands(
-        _unlayout(template, q_levels), params, wavelet=wavelet, boundary=boundary, axes=axes
+        from_levels(template, q_levels), params, wavelet=wavelet, boundary=boundary, axes=axes
     )
-    flat_c = [np.asarray(band, dtype=np.float64) for level in _layout(deq) for band in level]
+    flat_c = [np.asarray(band, dtype=np.float64) for level in as_levels(deq) for band in level]
     keep = [np.ones(flat_q[0].shape, dtype=bool)] + [band != 0 for band in flat_q[1:]]
     precondition = [(s / params["step"]) ** 2 for s in steps]  # 1 / norm² of each band
 

@@ -37,12 +37,12 @@ from .errors import InvalidLength, InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import (
     MAX_LENGTH,
-    _as_int,
-    _axes,
-    _boundaries,
+    as_int,
     check_level_bound,
     growth_limit,
     max_level,
+    resolve_axes,
+    resolve_boundaries,
     valid_length,
 )
 from .transform import as_float_array, run_rows
@@ -105,10 +105,10 @@ def pad_to_fit(
     True
     """
     arr = np.asarray(data)
-    ax = _axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
+    ax = resolve_axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
     bank = get_wavelet(wavelet)
-    bounds = _boundaries(boundary, len(ax), bank)
-    level = _as_int(level, "level")
+    bounds = resolve_boundaries(boundary, len(ax), bank)
+    level = as_int(level, "level")
     pads: list[tuple[int, int]] = []
     for a, b in zip(ax, bounds, strict=True):
         n = arr.shape[a]
@@ -213,8 +213,8 @@ def coarse_extent(
     if before:
         msg = f"padding before the data ({before}) is not supported; pad_to_fit pads at the end"
         raise InvalidParameter(msg)
-    n = _as_int(n, "n", minimum=1)
-    level = _as_int(level, "level")
+    n = as_int(n, "n", minimum=1)
+    level = as_int(level, "level")
     bank = get_wavelet(wavelet)
     rule = bank.rule(boundary)
     if not rule.fits(n + after, level):
@@ -286,11 +286,11 @@ def crop_padding(
     ((42, 66), (7, 10), (6, 9))
     """
     arr = np.asarray(data)
-    ax = _axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
+    ax = resolve_axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
     if len(pads) != len(ax):
         msg = f"got {len(pads)} pads for {len(ax)} axes; give one (before, after) per axis"
         raise InvalidParameter(msg)
-    bounds = _boundaries(boundary, len(ax), get_wavelet(wavelet))
+    bounds = resolve_boundaries(boundary, len(ax), get_wavelet(wavelet))
     index: list[slice] = [slice(None)] * arr.ndim
     for a, b, pad in zip(ax, bounds, pads, strict=True):
         before, after = (int(p) for p in pad)
@@ -304,7 +304,7 @@ def crop_padding(
         # The padded fine length is unknown here; recover it from the coarse length.
         rule = get_wavelet(wavelet).rule(b)
         padded = arr.shape[a]
-        check_level_bound(_as_int(level, "level"), rule, MAX_LENGTH, "a coarse approximation")
+        check_level_bound(as_int(level, "level"), rule, MAX_LENGTH, "a coarse approximation")
         for _ in range(level):
             padded = 2 * padded - rule.extra
         keep = coarse_extent(
@@ -364,7 +364,7 @@ def resample_curve(
     if arr.ndim != 2:
         msg = f"points must have shape (m, d) or (m,), not {arr.shape}"
         raise InvalidParameter(msg)
-    n = _as_int(n, "n", minimum=2)
+    n = as_int(n, "n", minimum=2)
     if not np.all(np.isfinite(arr)):
         msg = "points must be finite (no NaN or infinity)"
         raise InvalidParameter(msg)
@@ -433,12 +433,12 @@ def resample_grid(
     [0.0, 2.0]
     """
     arr = as_float_array(data)
-    ax = _axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
-    lengths = [_as_int(s, "length", minimum=1) for s in shape]
+    ax = resolve_axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
+    lengths = [as_int(s, "length", minimum=1) for s in shape]
     if len(lengths) != len(ax):
         msg = f"got {len(lengths)} lengths for {len(ax)} axes; give one per axis"
         raise InvalidParameter(msg)
-    bounds = _boundaries(boundary, len(ax), get_wavelet("bspline2"))
+    bounds = resolve_boundaries(boundary, len(ax), get_wavelet("bspline2"))
     for a, b, n_out in zip(ax, bounds, lengths, strict=True):
         n_in = arr.shape[a]
         if n_in == n_out:
@@ -572,9 +572,9 @@ def fit_grid(
         raise InvalidParameter(msg)
     arr = np.asarray(data)
     bank = get_wavelet(wavelet)
-    ax = tuple(_axes(axes, arr.ndim))
-    bounds = tuple(_boundaries(boundary, len(ax), bank))
-    level = _as_int(level, "level")
+    ax = tuple(resolve_axes(axes, arr.ndim))
+    bounds = tuple(resolve_boundaries(boundary, len(ax), bank))
+    level = as_int(level, "level")
     original = tuple(arr.shape[a] for a in ax)
     for a, b, n in zip(ax, bounds, original, strict=True):
         check_level_bound(

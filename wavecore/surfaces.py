@@ -27,7 +27,7 @@ import numpy as np
 
 from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet
-from .multilevel import _as_int, valid_length, wavedecn, waverecn
+from .multilevel import as_int, valid_length, wavedecn, waverecn
 from .resample import GridFit, fit_grid
 from .threshold import keep_largest
 from .transform import as_float_array
@@ -72,7 +72,7 @@ class SurfaceDecomposition:
 
         ``level=0`` is the fine grid.  With ``fit="pad"`` the padding is cropped away.
         """
-        level = self.level if level is None else _as_int(level, "level")
+        level = self.level if level is None else as_int(level, "level")
         if level > self.level:
             msg = f"level {level} is deeper than the decomposition's {self.level} levels"
             raise InvalidParameter(msg)
@@ -170,7 +170,7 @@ def decompose_surface(
             _deeper_fits(n, level + 1, b, bank) for n, b in zip(arr.shape[:2], bounds, strict=False)
         ):
             level += 1
-    level = _as_int(level, "level", minimum=1)
+    level = as_int(level, "level", minimum=1)
     fitted, grid_fit = fit_grid(
         arr, level, axes=(0, 1), boundary=boundary, wavelet=bank, method=fit
     )

@@ -16,16 +16,14 @@ from typing import Any
 
 import numpy as np
 
-from .arguments import as_native
 from .errors import InvalidCoefficients, InvalidParameter
 from .filters import FilterBank, get_wavelet
-from .multilevel import _boundaries
+from .layout import as_keyed, from_keyed
+from .multilevel import resolve_boundaries
 from .norms import basis_norms_nd
 from .transform import normalize_axis
 
 __all__ = ["remove_smallest"]
-
-_WAVEDEC2_KEYS = ("da", "ad", "dd")  # the order of (cH, cV, cD) in wavedec2's tuples
 
 
 def remove_smallest(
@@ -110,7 +108,7 @@ def remove_smallest(
         if keep is None
         else 1.0 - check_share(keep, "keep", "details to keep")
     )
-    kind, coarse, levels = _as_bands(coeffs)
+    kind, coarse, levels = as_keyed(coeffs)
     if not levels:
         return [np.array(coarse, copy=True)]
     key_length = len(next(iter(levels[0])))
@@ -126,7 +124,7 @@ def remove_smallest(
         # Only the weights need the wavelet's size rule: plain ranking works on any bands
         # (the codec ranks integer 5/3 lifting bands, whose lengths follow no rule here).
         bank = get_wavelet(wavelet)
-        bounds = _boundaries(boundary, len(ax), bank)
+        bounds = resolve_boundaries(boundary, len(ax), bank)
         norms = _band_norms(_fine_lengths(coarse, levels, ax, bank, bounds), levels, bank, bounds)
 
     sizes: list[np.ndarray] = []
@@ -158,7 +156,7 @@ def remove_smallest(
             kept[mask] = 0
             new_bands[key] = np.transpose(kept, inverse)
         out_levels.append(new_bands)
-    return _from_bands(kind, np.array(coarse, copy=True), out_levels)
+    return from_keyed(kind, np.array(coarse, copy=True), out_levels)
 
 
 def check_share(value: Any, name: str = "fraction", meaning: str = "details to remove") -> float:
@@ -181,67 +179,6 @@ def keep_largest(coeffs: Sequence[Any], keep: Any, **options: Any) -> list[Any]:
     """
     share = check_share(keep, "keep", "details to keep")
     return remove_smallest(coeffs, 1.0 - share, **options)
-
-
-def _as_bands(coeffs: Any) -> tuple[str, np.ndarray, list[dict[str, np.ndarray]]]:
-    """Any of the three layouts as (kind, cA, [{key: band}] coarse level first)."""
-    if isinstance(coeffs, np.ndarray | dict) or not isinstance(coeffs, Sequence) or not coeffs:
-        msg = "coeffs must be a non-empty list as wavedec, wavedec2 or wavedecn returns it"
-        raise InvalidCoefficients(msg)
-    coarse = as_native(np.asarray(coeffs[0]))
-    if coarse.ndim == 0:
-        msg = "cA must have at least one dimension"
-        raise InvalidCoefficients(msg)
-    details = list(coeffs[1:])
-    if not details:
-        return "wavedec", coarse, []
-    first = details[0]
-    levels: list[dict[str, np.ndarray]] = []
-    if isinstance(first, dict):
-        kind = "wavedecn"
-        for d in details:
-            if not isinstance(d, dict) or not d:
-                msg = "every level of a wavedecn list must be a non-empty dict of detail bands"
-                raise InvalidCoefficients(msg)
-            levels.append({k: _band(v, k) for k, v in d.items()})
-    elif isinstance(first, tuple | list):
-        kind = "wavedec2"
-        for d in details:
-            if not isinstance(d, tuple | list) or len(d) != 3:
-                msg = "every level of a wavedec2 list must be a tuple (cH, cV, cD)"
-                raise InvalidCoefficients(msg)
-            levels.append({k: _band(v, k) for k, v in zip(_WAVEDEC2_KEYS, d, strict=True)})
-    else:
-        kind = "wavedec"
-        levels = [{"d": _band(d, "cD")} for d in details]
-    lengths = {len(k) for bands in levels for k in bands}
-    if len(lengths) != 1:
-        msg = f"detail keys of different lengths {sorted(lengths)}; expected one per axis"
-        raise InvalidCoefficients(msg)
-    for bands in levels:
-        for key, band in bands.items():
-            if band.ndim != coarse.ndim:
-                msg = (
-                    f"detail band {key!r} has {band.ndim} dimensions but cA has {coarse.ndim}; "
-                    "they must match"
-                )
-                raise InvalidCoefficients(msg)
-    return kind, coarse, levels
-
-
-def _band(value: Any, name: str) -> np.ndarray:
-    if value is None:
-        msg = f"detail band {name!r} is None; remove_smallest needs every band as an array"
-        raise InvalidCoefficients(msg)
-    return as_native(np.asarray(value))
-
-
-def _from_bands(kind: str, coarse: np.ndarray, levels: list[dict[str, np.ndarray]]) -> list[Any]:
-    if kind == "wavedec":
-        return [coarse, *(bands["d"] for bands in levels)]
-    if kind == "wavedec2":
-        return [coarse, *(tuple(bands[k] for k in _WAVEDEC2_KEYS) for bands in levels)]
-    return [coarse, *levels]
 
 
 def _resolve_axes(axes: Sequence[int] | None, ndim: int, count: int) -> list[int]:

@@ -49,8 +49,10 @@ from .plan import DEFAULT_CODER as DEFAULT_CODER
 from .plan import LOSSLESS_WAVELET as LOSSLESS_WAVELET
 from .ratecontrol import DEFAULT_QUALITY as DEFAULT_QUALITY
 from .ratecontrol import KEEP_RELATIVE_STEP as KEEP_RELATIVE_STEP
-from .samples import _cast as _cast  # the three compiled passes tests/test_colour.py checks
-from .samples import _to_integers as _to_integers
-from .samples import _ycbcr_from as _ycbcr_from
+
+# The three compiled passes tests/test_colour.py checks, under the names it imports.
+from .samples import cast as _cast  # noqa: F401
+from .samples import to_integers as _to_integers  # noqa: F401
+from .samples import ycbcr_from as _ycbcr_from  # noqa: F401
 
 __all__ = ["decode", "encode_curve", "encode_image", "encode_surface", "inspect"]

@@ -12,9 +12,10 @@ from .. import lossless as _lossless
 from ..bundle import Bundle, read_bundle
 from ..entropy import decode_levels
 from ..errors import BundleError, InvalidParameter
+from ..layout import band_names
 from ..quantize import dequantize_bands
 from ..threshold import check_share, remove_smallest
-from .plan import LOSSLESS_WAVELET, Plan, _band_shapes, _plan_from_header
+from .plan import LOSSLESS_WAVELET, Plan, plan_from_header
 from .samples import finish, reconstruct, unscaled
 
 
@@ -24,7 +25,7 @@ def _open(bundle: Any) -> tuple[Bundle, Plan]:
         raise BundleError(msg)
     parsed = read_bundle(bundle)
     try:
-        return parsed, _plan_from_header(parsed.header)
+        return parsed, plan_from_header(parsed.header)
     except BundleError:
         raise
     except Exception as exc:
@@ -124,7 +125,7 @@ def _decode(parsed: Bundle, plan: Plan, keep: float | None, level: int) -> np.nd
         if not chunk:  # every coder writes a few bytes even for all-zero bands
             msg = f"chunk {index} is empty; no encoder writes an empty chunk"
             raise BundleError(msg)
-    shapes = _band_shapes(plan)[:count]
+    shapes = plan.band_shapes()[:count]
     header = parsed.header
     with np.errstate(all="ignore"):
         qcoeffs = decode_levels(chunks, shapes, header["cparams"])
@@ -200,7 +201,7 @@ def inspect(bundle: Any) -> dict[str, Any]:
     parsed, plan = _open(bundle)
     header = parsed.header
     try:
-        shapes = _band_shapes(plan)
+        shapes = plan.band_shapes()
     except Exception as exc:  # a crafted header that passed every check; see decode
         msg = f"corrupt bundle: {type(exc).__name__}: {exc}"
         raise BundleError(msg) from exc
@@ -212,9 +213,7 @@ def inspect(bundle: Any) -> dict[str, Any]:
         chunks.append(
             {
                 "level": plan.levels - index,
-                "bands": ["cA"]
-                if index == 0
-                else (["cD"] if len(plan.axes) == 1 else ["cH", "cV", "cD"]),
+                "bands": band_names(index, len(plan.axes)),
                 "shapes": band_shapes,
                 "bytes": len(chunk) if chunk is not None else None,
                 "present": chunk is not None,

@@ -17,35 +17,35 @@ from ..colour import rct_forward
 from ..entropy import encode_levels
 from ..errors import BundleError, InvalidParameter
 from ..filters import get_wavelet
+from ..multilevel import default_level
 from ..quantize import DEFAULT_ROUNDING, dequantize_bands, quantize_bands
 from ..threshold import check_share
 from .decode import decode
 from .plan import (
-    _MAX_CURVE_LEVELS,
-    _MAX_IMAGE_LEVELS,
     DEFAULT_CODER,
     LOSSLESS_WAVELET,
+    MAX_CURVE_LEVELS,
+    MAX_IMAGE_LEVELS,
     Plan,
-    _as_array,
-    _default_level,
-    _dtype_name,
-    _fit,
-    _level_arg,
-    _one_of,
-    _positive,
+    as_array,
+    dtype_name,
+    fit,
+    level_arg,
+    one_of,
+    positive,
 )
-from .ratecontrol import _encode_lossy
+from .ratecontrol import encode_lossy
 from .samples import (
-    _is_opaque,
-    _peak,
-    _scaled,
-    _scaled_tolerance,
-    _ycbcr_from,
     decompose,
     finish,
+    is_opaque,
     measure_errors,
+    peak_of,
     reconstruct,
+    scaled,
+    scaled_tolerance,
     unscaled,
+    ycbcr_from,
 )
 
 #: Without ``keep``/``tolerance``, curves are coded to this fraction of their bounding-box
@@ -132,29 +132,29 @@ def encode_image(
     >>> bool(np.array_equal(decode(encode_image(image, lossless=True)), image))
     True
     """
-    _one_of(keep=keep, quality=quality, bpp=bpp)
-    arr = _as_array(image, "image")
+    one_of(keep=keep, quality=quality, bpp=bpp)
+    arr = as_array(image, "image")
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and not 1 <= arr.shape[2] <= 4):
         msg = f"image must be (H, W) or (H, W, C) with 1 to 4 channels, not shape {arr.shape}"
         raise InvalidParameter(msg)
-    level = _level_arg(level)
+    level = level_arg(level)
     if lossless:
         if keep is not None or quality is not None or bpp is not None:
             msg = "lossless=True cannot be combined with keep, quality or bpp"
             raise InvalidParameter(msg)
         return _encode_lossless(arr, level)
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
-    quality = None if quality is None else _positive(quality, "quality", "a PSNR in dB")
-    bpp = None if bpp is None else _positive(bpp, "bpp", "bits per pixel")
-    dtype = _dtype_name(arr, "image")
-    arr, scale = _scaled(arr)
+    quality = None if quality is None else positive(quality, "quality", "a PSNR in dB")
+    bpp = None if bpp is None else positive(bpp, "bpp", "bits per pixel")
+    dtype = dtype_name(arr, "image")
+    arr, scale = scaled(arr)
     colour = "ycbcr" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
-    data = _ycbcr_from(arr) if colour == "ycbcr" else arr.astype(np.float64)
+    data = ycbcr_from(arr) if colour == "ycbcr" else arr.astype(np.float64)
     bank = get_wavelet(wavelet)
     # Images use the paper's endpoint-interpolating rows; a wavelet without them (cdf97's
     # symmetric extension) uses its own non-periodic boundary.
     boundary = ("open", "open") if "open" in bank.rules else (next(iter(bank.rules)),) * 2
-    fitted, pads, levels = _fit(data, level, bank.name, boundary, _MAX_IMAGE_LEVELS)
+    fitted, pads, levels = fit(data, level, bank.name, boundary, MAX_IMAGE_LEVELS)
     plan = Plan(
         "image",
         arr.shape,
@@ -165,21 +165,21 @@ def encode_image(
         colour,
         pads,
         fitted.shape,
-        _peak(arr, dtype, "image"),
+        peak_of(arr, dtype, "image"),
         scale=scale,
-        opaque=_is_opaque(arr),
+        opaque=is_opaque(arr),
     )
-    return _encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None)
+    return encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None)
 
 
 def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
-    dtype = _dtype_name(arr, "image", integer_only=True)
+    dtype = dtype_name(arr, "image", integer_only=True)
     colour = "rct" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
     data = rct_forward(arr) if colour == "rct" else arr.astype(np.int64)
     # At most as many levels as leave every subband non-empty (5/3 fits any size unpadded).
     deepest = min(arr.shape[:2]).bit_length() - 1
     if level is None:
-        level = min(_default_level(arr.shape[:2], _MAX_IMAGE_LEVELS), deepest)
+        level = min(default_level(arr.shape[:2], MAX_IMAGE_LEVELS), deepest)
     elif level > deepest:
         msg = (
             f"level {level} is too deep for a lossless {arr.shape[0]}×{arr.shape[1]} image: "
@@ -210,7 +210,7 @@ def _lossless_bundle(
         colour,
         ((0, 0), (0, 0)),
         arr.shape,
-        _peak(arr, dtype, "image"),
+        peak_of(arr, dtype, "image"),
         tuple(lifting),
     )
     coeffs = _lossless.forward(data, level, (0, 1), lifting)
@@ -275,20 +275,20 @@ def encode_curve(
     >>> out.shape, bool(np.max(np.linalg.norm(out - circle, axis=1)) <= 1e-3)
     ((50, 2), True)
     """
-    _one_of(keep=keep, tolerance=tolerance)
-    arr = _as_array(points, "points")
+    one_of(keep=keep, tolerance=tolerance)
+    arr = as_array(points, "points")
     if arr.ndim not in (1, 2):
         msg = f"points must be (n, d) or (n,), not shape {arr.shape}"
         raise InvalidParameter(msg)
     (is_closed,) = closed_flags(closed, boundary, 1)
-    level = _level_arg(level)
+    level = level_arg(level)
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
-    dtype = _dtype_name(arr, "points")
-    arr, scale = _scaled(arr)
+    dtype = dtype_name(arr, "points")
+    arr, scale = scaled(arr)
     data = arr.astype(np.float64).reshape(arr.shape[0], -1)
     boundaries = ("closed",) if is_closed else ("open",)
     bank = get_wavelet(wavelet)
-    fitted, pads, levels = _fit(data, level, bank.name, boundaries, _MAX_CURVE_LEVELS)
+    fitted, pads, levels = fit(data, level, bank.name, boundaries, MAX_CURVE_LEVELS)
     diagonal = float(np.linalg.norm(data.max(axis=0) - data.min(axis=0)))
     plan = Plan(
         "curve",
@@ -300,15 +300,15 @@ def encode_curve(
         "none",
         pads,
         fitted.shape,
-        _peak(data, dtype, "curve"),
+        peak_of(data, dtype, "curve"),
         scale=scale,
     )
     if keep is None:
         if tolerance is None:
             tolerance = DEFAULT_RELATIVE_TOLERANCE * (diagonal if diagonal > 0 else 1.0)
         else:  # in the coded (scaled) units
-            tolerance = _scaled_tolerance(_positive(tolerance, "tolerance", "a distance"), scale)
-    return _encode_lossy(plan, arr, fitted, keep=keep, quality=None, bpp=None, tolerance=tolerance)
+            tolerance = scaled_tolerance(positive(tolerance, "tolerance", "a distance"), scale)
+    return encode_lossy(plan, arr, fitted, keep=keep, quality=None, bpp=None, tolerance=tolerance)
 
 
 @_refuses_as_parameter
@@ -369,25 +369,25 @@ def encode_surface(
     >>> decode(bundle).shape, inspect(bundle)["psnr"] >= 50
     ((20, 24), True)
     """
-    _one_of(keep=keep, quality=quality, max_error=max_error, rmse=rmse, psnr=psnr, bpp=bpp)
+    one_of(keep=keep, quality=quality, max_error=max_error, rmse=rmse, psnr=psnr, bpp=bpp)
     if max_error is not None:  # the grid container's outlier pass keeps the bound
         return _bounded_surface(grid, closed, boundary, level, wavelet, max_error)
     quality = psnr if psnr is not None else quality
-    arr = _as_array(grid, "grid")
+    arr = as_array(grid, "grid")
     if arr.ndim not in (2, 3):
         msg = f"grid must be (U, V) or (U, V, d), not shape {arr.shape}"
         raise InvalidParameter(msg)
     flags = closed_flags(closed, boundary, 2)
-    level = _level_arg(level)
+    level = level_arg(level)
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
-    quality = None if quality is None else _positive(quality, "quality", "a PSNR in dB")
-    bpp = None if bpp is None else _positive(bpp, "bpp", "bits per grid point")
-    dtype = _dtype_name(arr, "grid")
-    arr, scale = _scaled(arr)
+    quality = None if quality is None else positive(quality, "quality", "a PSNR in dB")
+    bpp = None if bpp is None else positive(bpp, "bpp", "bits per grid point")
+    dtype = dtype_name(arr, "grid")
+    arr, scale = scaled(arr)
     data = arr.astype(np.float64)
     bank = get_wavelet(wavelet)
     boundaries = tuple("closed" if c else "open" for c in flags)
-    fitted, pads, levels = _fit(data, level, bank.name, boundaries, _MAX_IMAGE_LEVELS)
+    fitted, pads, levels = fit(data, level, bank.name, boundaries, MAX_IMAGE_LEVELS)
     plan = Plan(
         "surface",
         arr.shape,
@@ -398,17 +398,17 @@ def encode_surface(
         "none",
         pads,
         fitted.shape,
-        _peak(data, dtype, "surface"),
+        peak_of(data, dtype, "surface"),
         scale=scale,
     )
     if rmse is not None:
         # PSNR against the plan's peak is measured on exactly what decode returns; the tiny
         # margin keeps the conversion's rounding from leaving the RMSE a hair above the target.
-        target = _positive(rmse, "rmse", "a root-mean-square error")
+        target = positive(rmse, "rmse", "a root-mean-square error")
         quality = 20.0 * math.log10(plan.peak / _unscaled_rmse(target, scale)) + 1e-6
         if quality <= 0:  # any coding meets so loose a target: code coarsely
             quality = 1e-3
-    return _encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None)
+    return encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None)
 
 
 def _unscaled_rmse(rmse: float, scale: int) -> float:
@@ -450,13 +450,13 @@ def encode_surface_at_step(
     parameters did not survive the header exactly).  For :mod:`wavecore.grids`, whose outlier
     pass needs a core of a known step, not a PSNR; not part of the public API.
     """
-    arr = _as_array(grid, "grid")
-    level = _level_arg(level)
-    dtype = _dtype_name(arr, "grid")
-    arr, scale = _scaled(arr)
+    arr = as_array(grid, "grid")
+    level = level_arg(level)
+    dtype = dtype_name(arr, "grid")
+    arr, scale = scaled(arr)
     data = arr.astype(np.float64)
     bank = get_wavelet(wavelet)
-    fitted, pads, levels = _fit(data, level, bank.name, boundary, _MAX_IMAGE_LEVELS)
+    fitted, pads, levels = fit(data, level, bank.name, boundary, MAX_IMAGE_LEVELS)
     plan = Plan(
         "surface",
         arr.shape,
@@ -467,10 +467,10 @@ def encode_surface_at_step(
         "none",
         pads,
         fitted.shape,
-        _peak(data, dtype, "surface"),
+        peak_of(data, dtype, "surface"),
         scale=scale,
     )
-    coded_step = _positive(_unscaled_rmse(step, scale), "step", "a quantizer step")
+    coded_step = positive(_unscaled_rmse(step, scale), "step", "a quantizer step")
     bounds = list(plan.boundary)
     coeffs = decompose(plan, fitted)
     quantized, qparams = quantize_bands(

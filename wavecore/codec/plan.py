@@ -16,13 +16,20 @@ from ..arguments import as_native
 from ..bundle import DTYPES, MAX_ELEMENTS
 from ..errors import BundleError, InvalidLength, InvalidParameter
 from ..filters import get_wavelet
-from ..multilevel import valid_length
+from ..layout import band_shapes
+from ..multilevel import (
+    DEFAULT_MOST_CURVE_LEVELS,
+    DEFAULT_MOST_LEVELS,
+    default_level,
+    valid_length,
+)
 from ..resample import pad_to_fit
 
 DEFAULT_CODER = "context"
 LOSSLESS_WAVELET = "reversible"
-_MAX_IMAGE_LEVELS = 5
-_MAX_CURVE_LEVELS = 8
+# The default depths are the library's one rule (multilevel.default_level), not the codec's own.
+MAX_IMAGE_LEVELS = DEFAULT_MOST_LEVELS
+MAX_CURVE_LEVELS = DEFAULT_MOST_CURVE_LEVELS
 _PAD_ALLOWANCE = 64  # padded length <= 2 × length + this (the default levels stay far below)
 
 
@@ -31,7 +38,7 @@ _PAD_ALLOWANCE = 64  # padded length <= 2 × length + this (the default levels s
 # --------------------------------------------------------------------------------------------
 
 
-def _positive(value: Any, name: str, what: str) -> float:
+def positive(value: Any, name: str, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
         msg = f"{name} must be a positive number ({what}), not {value!r}"
         raise InvalidParameter(msg)
@@ -41,14 +48,14 @@ def _positive(value: Any, name: str, what: str) -> float:
     return float(value)
 
 
-def _one_of(**targets: Any) -> None:
+def one_of(**targets: Any) -> None:
     given = [name for name, value in targets.items() if value is not None]
     if len(given) > 1:
         msg = f"give at most one of {', '.join(targets)}, not {' and '.join(given)}"
         raise InvalidParameter(msg)
 
 
-def _level_arg(level: Any) -> int | None:
+def level_arg(level: Any) -> int | None:
     if level is None:
         return None
     if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
@@ -60,7 +67,7 @@ def _level_arg(level: Any) -> int | None:
     return int(level)
 
 
-def _as_array(data: Any, name: str) -> np.ndarray:
+def as_array(data: Any, name: str) -> np.ndarray:
     arr = np.asarray(as_native(data))
     if arr.dtype == np.bool_ or arr.dtype.kind not in "uif":
         msg = f"{name} must hold real numbers (integers or floats), not {arr.dtype}"
@@ -77,7 +84,7 @@ def _as_array(data: Any, name: str) -> np.ndarray:
     return arr
 
 
-def _dtype_name(arr: np.ndarray, name: str, *, integer_only: bool = False) -> str:
+def dtype_name(arr: np.ndarray, name: str, *, integer_only: bool = False) -> str:
     allowed = ("uint8", "uint16") if integer_only else DTYPES
     if arr.dtype.name in allowed:
         return arr.dtype.name
@@ -105,7 +112,7 @@ class Plan:
     fitted: tuple[int, ...]
     peak: float
     lifting: tuple[str, ...] = ()  # lossless only: the reversible filter per level, finest first
-    scale: int = 0  # the coded values are the original's times 2**-scale (see _scaled)
+    scale: int = 0  # the coded values are the original's times 2**-scale (see scaled)
     opaque: bool = False  # an image whose alpha channel is fully opaque (see _finish)
 
     @property
@@ -130,42 +137,27 @@ class Plan:
             **({"opaque": True} if self.opaque else {}),
         }
 
-
-def _band_shapes(plan: Plan) -> list[Any]:
-    """Subband shapes in ``wavedec``/``wavedec2`` layout, computed without any allocation."""
-    if plan.wavelet == LOSSLESS_WAVELET:
-        return _lossless.band_shapes(plan.fitted, plan.levels, plan.axes)
-    bank = get_wavelet(plan.wavelet)
-    rules = [bank.rule(b) for b in plan.boundary]
-    current = list(plan.fitted)
-    details: list[Any] = []
-    for _ in range(plan.levels):
-        coarse, fine = list(current), list(current)
-        for a, rule in zip(plan.axes, rules, strict=True):
-            coarse[a] = rule.coarse_length(current[a])
-            fine[a] = rule.detail_length(current[a])
-        if len(plan.axes) == 1:
-            details.append(tuple(fine))
-        else:
-            cH, cV = list(coarse), list(coarse)
-            cH[0], cV[1] = fine[0], fine[1]
-            details.append((tuple(cH), tuple(cV), tuple(fine)))
-        current = coarse
-    return [tuple(current), *reversed(details)]
+    def band_shapes(self) -> list[Any]:
+        """Subband shapes in ``wavedec``/``wavedec2`` layout, computed without any allocation."""
+        if self.wavelet == LOSSLESS_WAVELET:
+            return _lossless.band_shapes(self.fitted, self.levels, self.axes)
+        bank = get_wavelet(self.wavelet)
+        rules = [bank.rule(b) for b in self.boundary]
+        return band_shapes(
+            self.fitted,
+            self.levels,
+            self.axes,
+            lambda i, n: (rules[i].coarse_length(n), rules[i].detail_length(n)),
+        )
 
 
-def _default_level(sizes: Sequence[int], most: int) -> int:
-    smallest = min(sizes)
-    return max(1, min(most, math.floor(math.log2(max(smallest, 8) / 4))))
-
-
-def _fit(
+def fit(
     data: np.ndarray, plan_level: int | None, wavelet: str, boundary: Sequence[str], most: int
 ) -> tuple[np.ndarray, tuple[tuple[int, int], ...], int]:
     axes = (0,) if len(boundary) == 1 else (0, 1)
     level = plan_level
     if level is None:
-        level = _default_level([data.shape[a] for a in axes], most)
+        level = default_level([data.shape[a] for a in axes], most)
     for axis in axes:
         n = data.shape[axis]
         fitted = valid_length(n, level, boundary[axes.index(axis)], wavelet)
@@ -193,7 +185,7 @@ def _padded_limit(n: int) -> int:
 # --------------------------------------------------------------------------------------------
 
 
-def _plan_from_header(header: dict[str, Any]) -> Plan:
+def plan_from_header(header: dict[str, Any]) -> Plan:
     """Check the kind-specific consistency of a (generically valid) header."""
     kind, shape, fitted = header["kind"], tuple(header["shape"]), tuple(header["fitted"])
     boundary, pads, levels = tuple(header["boundary"]), header["pads"], header["levels"]

@@ -553,3 +553,7 @@ def _fill_by_removal(
             few = removed
     encoder.keep(1.0 - (best_removed if best_removed is not None else 0.0))
     return fits
+
+
+#: The front ends' entry point (wavecore.codec.encode), under a public name.
+encode_lossy = _encode_lossy

@@ -50,7 +50,7 @@ def _opaque_value(dtype: np.dtype[Any]) -> float:
     return float(np.iinfo(dtype).max) if dtype.kind in "iu" else 1.0
 
 
-def _is_opaque(arr: np.ndarray) -> bool:
+def is_opaque(arr: np.ndarray) -> bool:
     """An image whose alpha channel (the last of 2 or 4) is fully opaque: the dtype's largest
     value for integers, 1.0 for floats."""
     if arr.ndim != 3 or arr.shape[2] not in (2, 4):
@@ -72,7 +72,7 @@ def _finish_samples(plan: Plan, data: np.ndarray, level: int) -> np.ndarray:
         )
     if plan.colour == "ycbcr" and np.dtype(plan.dtype).kind in "iu":
         # The common case, in one pass: colour matrix, rounding and clipping together.
-        return _to_integers(np.asarray(cropped, dtype=np.float64), plan.dtype, YCBCR_INVERSE_MATRIX)
+        return to_integers(np.asarray(cropped, dtype=np.float64), plan.dtype, YCBCR_INVERSE_MATRIX)
     if plan.colour == "ycbcr":
         cropped = ycbcr_inverse(cropped)
     elif plan.colour == "rct":
@@ -83,10 +83,10 @@ def _finish_samples(plan: Plan, data: np.ndarray, level: int) -> np.ndarray:
         # Clipped first, so that a value just past the largest float does not become infinite.
         limit = math.ldexp(_LARGEST_FLOAT, -plan.scale) if plan.scale > 0 else math.inf
         cropped = np.ldexp(np.clip(cropped, -limit, limit), plan.scale)
-    return _cast(cropped, plan.dtype)
+    return cast(cropped, plan.dtype)
 
 
-def _scaled(arr: np.ndarray) -> tuple[np.ndarray, int]:
+def scaled(arr: np.ndarray) -> tuple[np.ndarray, int]:
     """``(arr × 2**-scale, scale)``: float data brought near magnitude 1 when it is huge or tiny.
 
     A power of two is exact (no rounding, short of underflow far below the peak), so any finite
@@ -109,7 +109,7 @@ def _scaled(arr: np.ndarray) -> tuple[np.ndarray, int]:
     return np.ldexp(arr, -exponent).astype(np.float64), exponent
 
 
-def _scaled_tolerance(tolerance: float, scale: int) -> float:
+def scaled_tolerance(tolerance: float, scale: int) -> float:
     """A distance in the original's units → the coded units (``tolerance × 2**-scale``)."""
     if not scale:
         return tolerance
@@ -134,7 +134,7 @@ def unscaled(value: float, scale: int) -> float:
         return _LARGEST_FLOAT
 
 
-def _to_integers(data: np.ndarray, dtype: str, matrix: np.ndarray | None) -> np.ndarray:
+def to_integers(data: np.ndarray, dtype: str, matrix: np.ndarray | None) -> np.ndarray:
     """Float64 ``(H, W)`` or ``(H, W, C)`` samples rounded and clipped into an integer dtype
     (NaN → 0), after ``matrix`` on the first three channels when given: one compiled pass in
     threads, where NumPy made five full-size float64 temporaries."""
@@ -151,7 +151,7 @@ def _to_integers(data: np.ndarray, dtype: str, matrix: np.ndarray | None) -> np.
     return out.reshape(data.shape)
 
 
-def _ycbcr_from(rgb: np.ndarray) -> np.ndarray:
+def ycbcr_from(rgb: np.ndarray) -> np.ndarray:
     """``ycbcr_forward(rgb.astype(float64))``, by one compiled pass in threads."""
     if rgb.dtype in _UNCOMPILED_DTYPES:
         return ycbcr_forward(rgb.astype(np.float64))
@@ -162,10 +162,10 @@ def _ycbcr_from(rgb: np.ndarray) -> np.ndarray:
     return out
 
 
-def _cast(data: np.ndarray, dtype: str) -> np.ndarray:
+def cast(data: np.ndarray, dtype: str) -> np.ndarray:
     target = np.dtype(dtype)
     if target.kind in "iu" and data.dtype == np.float64 and data.ndim in (2, 3):
-        return _to_integers(data, dtype, None)
+        return to_integers(data, dtype, None)
     if target.kind in "iu":
         info = np.iinfo(target)
         values = np.nan_to_num(np.asarray(data, dtype=np.float64), nan=0.0)
@@ -256,7 +256,7 @@ def _psnr(plan: Plan, mse: float) -> float | None:
     return math.floor(db * 1e4) / 1e4
 
 
-def _peak(arr: np.ndarray, dtype: str, kind: str) -> float:
+def peak_of(arr: np.ndarray, dtype: str, kind: str) -> float:
     if dtype == "uint8":
         return 255.0
     if dtype == "uint16":
