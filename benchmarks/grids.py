@@ -45,6 +45,13 @@ ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs" / "benchmarks.md"
 BEGIN, END = "<!-- grids:begin -->", "<!-- grids:end -->"
 RELATIVE_ERRORS = (1e-4, 1e-3, 1e-2)
+#: The issue's targets, gathered while the tables are made: (grid, figure) per comparison.
+SUMMARY: dict[str, list[tuple[str, float]]] = {
+    "sz3": [],
+    "sperr": [],
+    "openjpeg": [],
+    "held": [],  # (grid, 1.0 when wavecore's bound held on every sample)
+}
 
 
 def dem() -> np.ndarray:
@@ -203,9 +210,11 @@ def bounded_table(title: str, data: np.ndarray) -> list[str]:
                 f"{row['rmse']:.4g} | {row['max']:.4g} | {'yes' if row['held'] else 'NO'} | "
                 f"{row['enc']:.1f} | {row['dec']:.1f} |"
             )
+        SUMMARY["held"].append((title, 1.0 if rows[0]["held"] else 0.0))
         ours = rows[0]["ratio"]
         sz3 = next(r for r in rows if r["codec"] == "SZ3")["ratio"]
         lines.append(f"| | *wavecore / SZ3 ratio* | **{ours / sz3:.3f}** | | | | | |")
+        SUMMARY["sz3"].append((f"{title}, t = {relative:g} × range", ours / sz3))
     return [*lines, ""]
 
 
@@ -220,6 +229,9 @@ def equal_bytes_table(title: str, data: np.ndarray) -> list[str]:
     ]
     for relative in (2e-3, 1e-3, 5e-4):
         row = run_equal_bytes(data, relative)
+        SUMMARY["sperr"].append((title, row["wavecore"] / row["sperr"]))
+        if not math.isnan(row["j2k"]):
+            SUMMARY["openjpeg"].append((title, row["wavecore"] / row["j2k"]))
         lines.append(
             f"| {row['bytes']} | {row['wavecore']:.4g} | {row['sperr_bytes']} | "
             f"{row['sperr']:.4g} | {row['j2k_bytes'] or '—'} | {row['j2k']:.4g} | "
@@ -251,6 +263,7 @@ def integer_table(data: np.ndarray) -> list[str]:
         lines.append(
             f"| {t} | {len(ours)} | {len(sz3)} | {len(sperr)} | {len(sz3) / len(ours):.3f} |"
         )
+        SUMMARY["sz3"].append((f"elevation model as int16, t = {t}", len(sz3) / len(ours)))
     lossless = wavecore.encode_grid(data, lossless=True)
     shifted = (data.astype(np.int32) - int(data.min())).astype(np.uint16)
     j2k = imagecodecs.jpeg2k_encode(shifted, reversible=True, codecformat="j2k")
@@ -278,6 +291,33 @@ def wavelet_table(grids: dict[str, np.ndarray]) -> list[str]:
         cells = " | ".join(str(size) for size in sizes)
         lines.append(f"| {title} | {cells} | {sizes[1] / sizes[0]:.3f} |")
     return [*lines, ""]
+
+
+def summary_lines() -> list[str]:
+    """The issue's grid targets against this run's figures."""
+
+    def span(key: str) -> str:
+        values = [v for _, v in SUMMARY[key]]
+        return f"{min(values):.3f}–{max(values):.3f}" if values else "n/a"
+
+    def misses(key: str, bad: Callable[[float], bool]) -> str:
+        missed = [name for name, v in SUMMARY[key] if bad(v)]
+        if not missed:
+            return f"met on all {len(SUMMARY[key])} rows"
+        return f"missed on {len(missed)} of {len(SUMMARY[key])} rows: {'; '.join(missed)}"
+
+    return [
+        "Targets (issue 13) in this run:",
+        "",
+        f"- RMSE at equal bytes ≤ SPERR's: wavecore / SPERR {span('sperr')}, "
+        f"{misses('sperr', lambda v: v > 1.0)}.",
+        f"- RMSE at equal bytes ≤ OpenJPEG's (16-bit): wavecore / OpenJPEG {span('openjpeg')}, "
+        f"{misses('openjpeg', lambda v: v > 1.0)}.",
+        f"- Compression ratio at equal largest error ≥ SZ3's: wavecore / SZ3 {span('sz3')}, "
+        f"{misses('sz3', lambda v: v < 1.0)}.",
+        f"- wavecore's bound held on every sample: {misses('held', lambda v: v < 1.0)}.",
+        "",
+    ]
 
 
 def speed_lines(field: np.ndarray) -> list[str]:
@@ -338,6 +378,7 @@ def main() -> None:
         }
     )
     lines += speed_lines(field)
+    lines += summary_lines()
     load = loadavg()
     lines += [f"Load average at the end: {' '.join(load)}.", END]
     text = "\n".join(lines)
