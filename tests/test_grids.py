@@ -83,6 +83,12 @@ def _core_of(bundle: bytes) -> bytes:
     return bundle[start : start + info["core_bytes"]]
 
 
+@pytest.mark.parametrize("shape", [(1, 1), (1, 5000), (5000, 1), (2, 3), (3, 1, 700)])
+def test_thin_and_tiny_grids_hold_the_bound(shape: tuple[int, ...]) -> None:
+    data = np.random.default_rng(32).standard_normal(shape).cumsum(axis=-1)
+    assert_bound(data.astype(">f8"), 0.01)
+
+
 @pytest.mark.parametrize("wavelet", ["cdf97", "bspline2", "haar"])
 def test_every_wavelet_holds_the_bound(wavelet: str) -> None:
     data = terrain((40, 57), seed=3)
