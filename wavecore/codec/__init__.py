@@ -31,13 +31,20 @@ The package, one module per concern:
 
 * :mod:`.plan`: the caller's arguments checked, and the plan (what a bundle's header records
   about how the data was transformed): sizes and levels, header dict <-> plan;
+* :mod:`.stages`: the stage registry (transforms ``wavelet``/``reversible``, quantizers
+  ``deadzone``/``none``, coders ``context``/``zlib``, colours ``none``/``ycbcr``/``rct``), each
+  with a ``codec_id`` and ``get_config``/``from_config``, and the one map from header fields to
+  stage configs (:func:`~.stages.pipeline`) that decoding dispatches through;
 * :mod:`.samples`: the sample domain: colour, dtype, scaling of huge or tiny floats, the
   transform both ways, and the error metrics (PSNR, largest error);
 * :mod:`.ratecontrol`: the searches for a step that meets ``quality``, ``bpp`` or
   ``tolerance``;
 * :mod:`.encode`: the front ends ``encode_image``/``encode_curve``/``encode_surface``, and the
   lossless pipeline;
-* :mod:`.decode`: ``decode`` and ``inspect``.
+* :mod:`.decode`: ``decode`` (the pipeline backwards, through the registry) and ``inspect``.
+
+The coefficient layout lives in :mod:`wavecore.layout`, the default level in
+:func:`wavecore.default_level`.
 """
 
 from __future__ import annotations
@@ -46,7 +53,6 @@ from .decode import decode, inspect
 from .encode import DEFAULT_RELATIVE_TOLERANCE as DEFAULT_RELATIVE_TOLERANCE
 from .encode import encode_curve, encode_image, encode_surface
 from .plan import DEFAULT_CODER as DEFAULT_CODER
-from .plan import LOSSLESS_WAVELET as LOSSLESS_WAVELET
 from .ratecontrol import DEFAULT_QUALITY as DEFAULT_QUALITY
 from .ratecontrol import KEEP_RELATIVE_STEP as KEEP_RELATIVE_STEP
 
@@ -54,5 +60,6 @@ from .ratecontrol import KEEP_RELATIVE_STEP as KEEP_RELATIVE_STEP
 from .samples import cast as _cast  # noqa: F401
 from .samples import to_integers as _to_integers  # noqa: F401
 from .samples import ycbcr_from as _ycbcr_from  # noqa: F401
+from .stages import LOSSLESS_WAVELET as LOSSLESS_WAVELET
 
 __all__ = ["decode", "encode_curve", "encode_image", "encode_surface", "inspect"]

@@ -8,15 +8,13 @@ from typing import Any
 import numpy as np
 
 from .. import grids
-from .. import lossless as _lossless
 from ..bundle import Bundle, read_bundle
-from ..entropy import decode_levels
 from ..errors import BundleError, InvalidParameter
 from ..layout import band_names
-from ..quantize import dequantize_bands
-from ..threshold import check_share, remove_smallest
-from .plan import LOSSLESS_WAVELET, Plan, plan_from_header
-from .samples import finish, reconstruct, unscaled
+from ..threshold import check_share
+from .plan import Plan, plan_from_header
+from .samples import finish, unscaled
+from .stages import pipeline
 
 
 def _open(bundle: Any) -> tuple[Bundle, Plan]:
@@ -119,58 +117,21 @@ def decode(
 
 
 def _decode(parsed: Bundle, plan: Plan, keep: float | None, level: int) -> np.ndarray:
+    """The encoding pipeline backwards, through the stages the header names, as far as
+    ``level`` needs: entropy decoding, dequantization, ``keep``, inverse transform, finish."""
     count = plan.levels - level + 1
     chunks = [parsed.chunk(i) for i in range(count)]
     for index, chunk in enumerate(chunks):
         if not chunk:  # every coder writes a few bytes even for all-zero bands
             msg = f"chunk {index} is empty; no encoder writes an empty chunk"
             raise BundleError(msg)
-    shapes = plan.band_shapes()[:count]
-    header = parsed.header
+    stages = pipeline(parsed.header)
     with np.errstate(all="ignore"):
-        qcoeffs = decode_levels(chunks, shapes, header["cparams"])
-        if plan.wavelet == LOSSLESS_WAVELET:
-            if keep is not None and keep < 1.0 and len(qcoeffs) > 1:
-                return _decode_lossless_keep(plan, qcoeffs, keep, level)
-            data = _lossless.inverse(qcoeffs, plan.axes, plan.lifting)
-            return finish(plan, data, level)
-        try:
-            coeffs = dequantize_bands(
-                qcoeffs,
-                header["qparams"],
-                wavelet=plan.wavelet,
-                boundary=list(plan.boundary),
-                axes=plan.axes,
-            )
-        except InvalidParameter as exc:
-            msg = f"header field 'qparams' does not fit the bundle: {exc}"
-            raise BundleError(msg[:300]) from exc
+        qcoeffs = stages.coder.decode(chunks, plan.band_shapes()[:count])
+        coeffs = stages.quantizer.decode(qcoeffs, plan)
         if keep is not None and keep < 1.0 and len(coeffs) > 1:
-            coeffs = remove_smallest(
-                coeffs,
-                1.0 - keep,
-                wavelet=plan.wavelet,
-                boundary=list(plan.boundary),
-                axes=plan.axes,
-                vector_axis=None if plan.kind == "image" else -1,
-            )
-        return finish(plan, reconstruct(plan, coeffs), level)
-
-
-def _decode_lossless_keep(plan: Plan, qcoeffs: list[Any], keep: float, level: int) -> np.ndarray:
-    """``keep`` on a lossless bundle: drop the smallest integer details, then invert exactly."""
-    kept = remove_smallest(
-        [np.asarray(qcoeffs[0], dtype=np.float64), *qcoeffs[1:]],
-        1.0 - keep,
-        wavelet="haar",  # 5/3 norms are not tabulated; rank by plain magnitude instead
-        weighted=False,
-        axes=plan.axes,
-        vector_axis=None,
-    )
-    ints: list[Any] = [np.asarray(qcoeffs[0])]
-    for bands in kept[1:]:
-        ints.append(tuple(np.asarray(b).astype(np.int64) for b in bands))
-    return finish(plan, _lossless.inverse(ints, plan.axes, plan.lifting), level)
+            coeffs = stages.transform.keep(coeffs, keep, plan)
+        return finish(plan, stages.transform.inverse(coeffs, plan), level)
 
 
 def inspect(bundle: Any) -> dict[str, Any]:
@@ -230,7 +191,7 @@ def inspect(bundle: Any) -> dict[str, Any]:
         "boundary": list(plan.boundary),
         "levels": plan.levels,
         "colour": plan.colour,
-        "lossless": plan.wavelet == LOSSLESS_WAVELET,
+        "lossless": plan.transform.lossless,
         "quantizer": header["quantizer"],
         "coder": header["coder"],
         "psnr": header["psnr"],

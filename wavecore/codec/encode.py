@@ -13,7 +13,6 @@ import numpy as np
 from .. import lossless as _lossless
 from ..arguments import closed_flags
 from ..bundle import read_bundle, write_bundle
-from ..colour import rct_forward
 from ..entropy import encode_levels
 from ..errors import BundleError, InvalidParameter
 from ..filters import get_wavelet
@@ -23,7 +22,6 @@ from ..threshold import check_share
 from .decode import decode
 from .plan import (
     DEFAULT_CODER,
-    LOSSLESS_WAVELET,
     MAX_CURVE_LEVELS,
     MAX_IMAGE_LEVELS,
     Plan,
@@ -47,6 +45,7 @@ from .samples import (
     unscaled,
     ycbcr_from,
 )
+from .stages import LOSSLESS_WAVELET, NoQuantizer, get_coder, get_colour
 
 #: Without ``keep``/``tolerance``, curves are coded to this fraction of their bounding-box
 #: diagonal as the largest point deviation.
@@ -175,7 +174,7 @@ def encode_image(
 def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
     dtype = dtype_name(arr, "image", integer_only=True)
     colour = "rct" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
-    data = rct_forward(arr) if colour == "rct" else arr.astype(np.int64)
+    data = get_colour({"id": colour}).forward(arr).astype(np.int64, copy=False)
     # At most as many levels as leave every subband non-empty (5/3 fits any size unpadded).
     deepest = min(arr.shape[:2]).bit_length() - 1
     if level is None:
@@ -213,11 +212,12 @@ def _lossless_bundle(
         peak_of(arr, dtype, "image"),
         tuple(lifting),
     )
-    coeffs = _lossless.forward(data, level, (0, 1), lifting)
-    chunks, cparams = encode_levels(coeffs, coder=DEFAULT_CODER)
+    coeffs = plan.transform.forward(data, level)
+    coder = get_coder({"id": DEFAULT_CODER})
+    chunks, cparams = coder.encode(coeffs)
     header = plan.header()
     header.update(
-        quantizer="none",
+        quantizer=NoQuantizer.codec_id,
         qparams={},
         coder=str(cparams.get("coder", DEFAULT_CODER)),
         cparams=cparams,

@@ -11,12 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from .. import lossless as _lossless
 from ..arguments import as_native
 from ..bundle import DTYPES, MAX_ELEMENTS
-from ..errors import BundleError, InvalidLength, InvalidParameter
-from ..filters import get_wavelet
-from ..layout import band_shapes
+from ..errors import BundleError, InvalidParameter
 from ..multilevel import (
     DEFAULT_MOST_CURVE_LEVELS,
     DEFAULT_MOST_LEVELS,
@@ -24,9 +21,9 @@ from ..multilevel import (
     valid_length,
 )
 from ..resample import pad_to_fit
+from .stages import Transform, get_transform, transform_config, transform_of
 
 DEFAULT_CODER = "context"
-LOSSLESS_WAVELET = "reversible"
 # The default depths are the library's one rule (multilevel.default_level), not the codec's own.
 MAX_IMAGE_LEVELS = DEFAULT_MOST_LEVELS
 MAX_CURVE_LEVELS = DEFAULT_MOST_CURVE_LEVELS
@@ -132,23 +129,19 @@ class Plan:
             "levels": self.levels,
             "colour": self.colour,
             "peak": self.peak,
-            **({"lifting": list(self.lifting)} if self.wavelet == LOSSLESS_WAVELET else {}),
+            **self.transform.header_fields(),
             **({"scale": self.scale} if self.scale else {}),
             **({"opaque": True} if self.opaque else {}),
         }
 
+    @property
+    def transform(self) -> Transform:
+        """The transform stage (a filter bank, or the lossless integer lifting)."""
+        return transform_of(self.wavelet, self.boundary, self.lifting)
+
     def band_shapes(self) -> list[Any]:
         """Subband shapes in ``wavedec``/``wavedec2`` layout, computed without any allocation."""
-        if self.wavelet == LOSSLESS_WAVELET:
-            return _lossless.band_shapes(self.fitted, self.levels, self.axes)
-        bank = get_wavelet(self.wavelet)
-        rules = [bank.rule(b) for b in self.boundary]
-        return band_shapes(
-            self.fitted,
-            self.levels,
-            self.axes,
-            lambda i, n: (rules[i].coarse_length(n), rules[i].detail_length(n)),
-        )
+        return self.transform.band_shapes(self.fitted, self.levels, self.axes)
 
 
 def fit(
@@ -212,53 +205,16 @@ def plan_from_header(header: dict[str, Any]) -> Plan:
         msg = f"header: colour transform {colour!r} needs an image with 3 or 4 channels"
         raise BundleError(msg)
     wavelet = header["wavelet"]
-    if wavelet == LOSSLESS_WAVELET:
-        if kind != "image" or colour == "ycbcr" or header["dtype"] not in ("uint8", "uint16"):
-            msg = "header: the lossless wavelet is only for uint8/uint16 images"
-            raise BundleError(msg)
-        if any(b != "symmetric" for b in boundary):
-            msg = f"header field 'boundary' must be symmetric for lossless, not {list(boundary)}"
-            raise BundleError(msg)
-        if any(before or after for before, after in pads):
-            msg = "header: a lossless bundle is never padded"
-            raise BundleError(msg)
-        lifting = header.get("lifting")
-        if (
-            not isinstance(lifting, list)
-            or len(lifting) != levels
-            or any(name not in _lossless.FILTERS for name in lifting)
-        ):
-            msg = (
-                f"header field 'lifting' must list one of {list(_lossless.FILTERS)} per level "
-                f"({levels}), not {str(lifting)[:80]}"
-            )
-            raise BundleError(msg)
-        sizes = list(fitted[:2])
-        for index, name in enumerate(lifting):
-            if name == "bspline2" and any(n % 2 for n in sizes):
-                msg = (
-                    f"header field 'lifting': level {index + 1} has odd sizes {sizes} for bspline2"
-                )
-                raise BundleError(msg)
-            sizes = [(n + 1) // 2 for n in sizes]
-    else:
-        lifting = []  # the key means nothing for the other wavelets: ignored, as unknown keys are
-        try:
-            bank = get_wavelet(wavelet)
-            for axis, b in enumerate(boundary):
-                if not bank.rule(b).fits(fitted[axis], levels):
-                    msg = f"length {fitted[axis]} does not fit {levels} levels"
-                    raise InvalidLength(msg)
-        except InvalidParameter as exc:
-            msg = f"header: wavelet {wavelet!r}, boundary {list(boundary)}, levels: {exc}"
-            raise BundleError(msg) from exc
+    config = transform_config(wavelet, boundary, header.get("lifting"))
+    transform = get_transform(config)
+    lifting = transform.check_header(header)
     # The header names each stage twice (its name, and again inside its parameters): the two
     # must agree, or a reader that trusts either would be misled.
     coder = header["cparams"].get("coder")
     if header["coder"] != coder:
         msg = f"header field 'coder' is {header['coder']!r}, but 'cparams' names {coder!r}"
         raise BundleError(msg[:200])
-    quantizer = "none" if wavelet == LOSSLESS_WAVELET else header["qparams"].get("name")
+    quantizer = "none" if transform.lossless else header["qparams"].get("name")
     if header["quantizer"] != quantizer:
         msg = f"header field 'quantizer' is {header['quantizer']!r}; expected {quantizer!r}"
         raise BundleError(msg[:200])

@@ -9,12 +9,11 @@ from typing import Any
 import numpy as np
 
 from .._kernels import colour_to_floats, colour_to_integers, squared_and_largest_error
-from ..colour import YCBCR_INVERSE_MATRIX, YCBCR_MATRIX, rct_inverse, ycbcr_forward, ycbcr_inverse
+from ..colour import YCBCR_INVERSE_MATRIX, YCBCR_MATRIX, ycbcr_forward
 from ..errors import InvalidParameter
-from ..multilevel import wavedec, wavedec2, waverec, waverec2
-from ..resample import crop_padding
 from ..transform import run_rows
-from .plan import LOSSLESS_WAVELET, Plan
+from .plan import Plan
+from .stages import get_colour
 
 #: Float data whose largest magnitude lies outside ``[2**-256, 2**256]`` is coded in a scaled
 #: domain, multiplied by an exact power of two (recorded as the header's ``scale``), so that
@@ -25,15 +24,13 @@ _LARGEST_FLOAT = float(np.finfo(np.float64).max)
 
 
 def decompose(plan: Plan, data: np.ndarray) -> list[Any]:
-    if len(plan.axes) == 1:
-        return wavedec(data, plan.wavelet, plan.boundary[0], plan.levels, axis=0)
-    return wavedec2(data, plan.wavelet, list(plan.boundary), plan.levels, axes=(0, 1))
+    """The plan's transform of the (colour-transformed, fitted) samples."""
+    return plan.transform.forward(data, plan.levels)
 
 
 def reconstruct(plan: Plan, coeffs: list[Any]) -> np.ndarray:
-    if len(plan.axes) == 1:
-        return waverec(coeffs, plan.wavelet, plan.boundary[0], axis=0)
-    return waverec2(coeffs, plan.wavelet, list(plan.boundary), axes=(0, 1))
+    """The plan's inverse transform (before cropping and the inverse colour transform)."""
+    return plan.transform.inverse(coeffs, plan)
 
 
 def finish(plan: Plan, data: np.ndarray, level: int) -> np.ndarray:
@@ -59,24 +56,12 @@ def is_opaque(arr: np.ndarray) -> bool:
 
 
 def _finish_samples(plan: Plan, data: np.ndarray, level: int) -> np.ndarray:
-    if plan.wavelet == LOSSLESS_WAVELET:
-        cropped = data  # the 5/3 lifting fits every size; nothing was padded
-    else:
-        cropped = crop_padding(
-            data,
-            plan.pads,
-            axes=plan.axes,
-            level=level,
-            boundary=list(plan.boundary),
-            wavelet=plan.wavelet,
-        )
-    if plan.colour == "ycbcr" and np.dtype(plan.dtype).kind in "iu":
+    cropped = plan.transform.crop(data, plan, level)
+    colour = get_colour({"id": plan.colour})
+    if colour.inverse_matrix is not None and np.dtype(plan.dtype).kind in "iu":
         # The common case, in one pass: colour matrix, rounding and clipping together.
-        return to_integers(np.asarray(cropped, dtype=np.float64), plan.dtype, YCBCR_INVERSE_MATRIX)
-    if plan.colour == "ycbcr":
-        cropped = ycbcr_inverse(cropped)
-    elif plan.colour == "rct":
-        cropped = rct_inverse(cropped)
+        return to_integers(np.asarray(cropped, dtype=np.float64), plan.dtype, colour.inverse_matrix)
+    cropped = colour.inverse(cropped)
     if len(plan.shape) == 1:  # a 1-D curve (a time series) was coded as (n, 1)
         cropped = cropped[:, 0]
     if plan.scale:
