@@ -352,6 +352,15 @@ def test_coarse_level_and_its_nan_cells() -> None:
     assert np.count_nonzero(np.isnan(coarse)) == 16
 
 
+def test_keep_smooths_without_the_corrections_and_keeps_the_nan_cells() -> None:
+    data = terrain((48, 64), seed=33)
+    data[4:9, 4:9] = np.nan
+    bundle = wavecore.encode_grid(data, max_error=0.2)
+    smooth = wavecore.decode(bundle, keep=0.1)
+    assert smooth.shape == data.shape and np.array_equal(np.isnan(smooth), np.isnan(data))
+    assert largest_error(smooth, data) > 0.2  # most details gone: the bound is the full decode's
+
+
 def test_window_is_the_same_as_slicing() -> None:
     data = terrain((50, 70), seed=23)
     bundle = wavecore.encode_grid(data, max_error=0.2)

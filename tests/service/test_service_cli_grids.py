@@ -62,3 +62,10 @@ def test_grid_options_on_an_image_are_refused(
     status = main(["encode", str(tmp_path / "img.npy"), str(tmp_path / "o.wcb"), "--rmse", "1"])
     assert status == 1
     assert "--rmse does not apply" in capsys.readouterr().err
+
+
+def test_inspect_describes_a_grid(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bundle = tmp_path / "g.wcb"
+    bundle.write_bytes(wavecore.encode_grid(height_field((20, 30), seed=3), max_error=0.1))
+    assert main(["inspect", str(bundle)]) == 0
+    assert capsys.readouterr().out.startswith("grid 20×30 float64")
