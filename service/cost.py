@@ -41,7 +41,7 @@ TRANSFER_FACTOR = 4
 #: in 1-D, 909 B in 3-D), so a point of ``d`` coordinates counts ``4 (d + 1)`` samples.
 CURVE_FACTOR = 4
 
-#: The codec's deepest default levels (``codec._MAX_IMAGE_LEVELS`` / ``_MAX_CURVE_LEVELS``).
+#: The codec's deepest default levels (``most`` of ``wavecore.default_level``).
 DEFAULT_MOST_LEVELS = {"image": 5, "surface": 5, "curve": 8}
 
 
@@ -70,9 +70,8 @@ def check(samples: int, what: str, settings: Settings) -> None:
 
 
 def _default_level(sizes: Sequence[int], most: int) -> int:
-    # The codec's rule: up to ``most`` levels, fewer for a small side.
-    smallest = min(sizes)
-    return max(1, min(most, math.floor(math.log2(max(smallest, 8) / 4))))
+    # The codec's own rule (the library's one default-level rule), not a copy of it.
+    return wavecore.default_level(sizes, most)
 
 
 def padded_lengths(
