@@ -28,7 +28,7 @@ import wavecore
 from . import errors
 from .imaging import set_pixel_limit
 from .middleware import BodyLimitMiddleware, Metrics, MetricsMiddleware
-from .routes import bundles, curves, docs, health, images, pages, surfaces
+from .routes import bundles, curves, docs, grids, health, images, pages, surfaces
 from .settings import Settings
 from .work import AdmissionMiddleware, WorkPool
 
@@ -83,7 +83,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.pool = pool
     app.state.metrics = Metrics()
     errors.install(app)
-    for module in (images, curves, surfaces, bundles, health, pages, docs):
+    for module in (images, curves, surfaces, grids, bundles, health, pages, docs):
         app.include_router(module.router)
     if STATIC.is_dir():
         app.mount("/static", StaticFiles(directory=STATIC), name="static")

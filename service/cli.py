@@ -11,10 +11,12 @@
 inputs ``OUT`` is a folder, a progress bar runs on stderr and a summary table follows.
 Images are read with Pillow (anything it reads); ``.json`` inputs are curves
 (``{"points": [...], "closed": false}`` or a bare list of points) and ``.npy`` inputs are
-images, unless ``--kind`` says ``curve`` or ``surface``.  Bundles are written as ``.wcb``
+images, unless ``--kind`` says ``curve``, ``surface`` or ``grid``; a ``.npy`` or TIFF that no
+image takes (signed or wide integers, NaN cells, a volume) is a grid (``--max-error``,
+``--rmse``, ``--psnr``, ``--bpp``, ``--lossless``).  Bundles are written as ``.wcb``
 (``.wvb``, the suffix of the test suite's golden bundles, is read too).
 Decoded images are written by ``OUT``'s extension (``.png``, ``.webp``, ``.tiff``, ``.npy``),
-curves and surfaces as ``.json`` or ``.npy``.
+curves and surfaces as ``.json`` or ``.npy``, grids as ``.npy`` or ``.tiff``.
 
 It lives in ``service`` (installed as ``wavecore_service``) because it reads and writes image
 files with Pillow, which ``wavecore`` itself never imports.  With only the core install
@@ -116,6 +118,18 @@ def _image_file_bytes(arr: np.ndarray, suffix: str) -> bytes:
 def _npy_bytes(arr: np.ndarray) -> bytes:
     out = io.BytesIO()
     np.save(out, arr, allow_pickle=False)
+    return out.getvalue()
+
+
+def _grid_tiff_bytes(arr: np.ndarray) -> bytes:
+    """A decoded grid as a TIFF in its own dtype (tifffile, of the service extra)."""
+    try:
+        import tifffile
+    except ModuleNotFoundError:
+        msg = f"writing a grid as TIFF needs the service extra (tifffile): {SERVICE_EXTRA}"
+        raise CLIError(msg) from None
+    out = io.BytesIO()
+    tifffile.imwrite(out, arr)
     return out.getvalue()
 
 
@@ -281,7 +295,12 @@ def _load_input(path: Path, kind: str | None) -> tuple[str, np.ndarray, bool]:
             msg = f"{path}: {key} must be a rectangular list of numbers ({exc})"
             raise CLIError(msg) from None
     if suffix == ".npy":
-        return kind or "image", np.load(path, allow_pickle=False), False
+        arr = np.load(path, allow_pickle=False)
+        return kind or ("grid" if _only_a_grid(arr) else "image"), arr, False
+    if kind == "grid" or (kind is None and suffix in (".tif", ".tiff")):
+        grid = _read_grid(path)
+        if kind == "grid" or _only_a_grid(grid):
+            return "grid", grid, False
     return kind or "image", _read_image(path), False
 
 
@@ -322,13 +341,34 @@ def _encode_curve_file(path: Path, args: argparse.Namespace, many: bool) -> Row:
         "seconds": f"{time.perf_counter() - start:.2f}",
     }
     return Row(path.name, values)
+def _only_a_grid(arr: np.ndarray) -> bool:
+    """An array that no image codec takes but a grid does: signed or wide integers, NaN cells,
+    or a volume (more than 4 values per pixel).  Such ``.npy`` and TIFF inputs are grids."""
+    if arr.dtype.kind in "iu" and arr.dtype.name not in ("uint8", "uint16"):
+        return True
+    if arr.ndim == 3 and arr.shape[2] > 4:
+        return True
+    return arr.dtype.kind == "f" and bool(np.isnan(arr).any())
+
+
+def _read_grid(path: Path) -> np.ndarray:
+    """A TIFF (GeoTIFF) height map in its own dtype (service/gridfiles.py, through tifffile)."""
+    gridfiles = _service_module("gridfiles", f"reading the TIFF file {path.name}")
+    settings = _settings()
+    try:
+        grid: np.ndarray = gridfiles.read_grid_file(
+            path.read_bytes(), path.name, max_elements=settings.max_grid_points * 4
+        )
+    except gridfiles.GridFileError as exc:
+        raise CLIError(f"{path}: {exc}") from None
+    return grid
 
 
 def cmd_encode(args: argparse.Namespace) -> int:
     files, many = expand(args.input, ENCODE_SUFFIXES)
     targets = {
         name: getattr(args, name)
-        for name in ("keep", "quality", "bpp", "tolerance")
+        for name in ("keep", "quality", "bpp", "tolerance", "max_error", "rmse", "psnr")
         if getattr(args, name) is not None
     }
 
@@ -342,14 +382,23 @@ def cmd_encode(args: argparse.Namespace) -> int:
             return _encode_curve_file(path, args, many)
         kind, data, closed = _load_input(path, args.kind)
         closed = closed or args.closed
-        allowed = {"image": {"keep", "quality", "bpp"}, "curve": {"keep", "tolerance"}}
+        allowed = {
+            "image": {"keep", "quality", "bpp"},
+            "curve": {"keep", "tolerance"},
+            "grid": {"quality", "bpp", "max_error", "rmse", "psnr"},
+        }
         extra = set(targets) - allowed.get(kind, {"keep", "quality"})
-        if extra or (args.lossless and kind != "image"):
+        if extra or (args.lossless and kind not in ("image", "grid")):
             msg = f"--{(sorted(extra) or ['lossless'])[0]} does not apply to a {kind}"
             raise CLIError(msg)
         if kind == "image":
             bundle = wavecore.encode_image(
                 data, level=args.level, lossless=args.lossless, **chosen, **targets
+            )
+        elif kind == "grid":
+            grid_targets = {("psnr" if k == "quality" else k): v for k, v in targets.items()}
+            bundle = wavecore.encode_grid(
+                data, level=args.level, lossless=args.lossless, **chosen, **grid_targets
             )
         elif kind == "curve":
             bundle = wavecore.encode_curve(
@@ -414,18 +463,22 @@ def cmd_decode(args: argparse.Namespace) -> int:
         if kind == "curves":
             return _decode_curve_file(path, bundle, info, args, many)
         arr = wavecore.decode(bundle, keep=args.keep, level=args.level)
-        default = ".png" if kind == "image" else ".json"
+        default = {"image": ".png", "grid": ".npy"}.get(kind, ".json")
         out = output_for(path, Path(args.output), many, args.format or default)
         suffix = out.suffix.lower()
         if suffix == ".npy":
             data = _npy_bytes(arr)
         elif kind == "image" and suffix in (".png", ".webp", ".tif", ".tiff"):
             data = _image_file_bytes(arr, suffix)
-        elif kind != "image" and suffix == ".json":
+        elif kind == "grid" and suffix in (".tif", ".tiff"):
+            data = _grid_tiff_bytes(arr)
+        elif kind not in ("image", "grid") and suffix == ".json":
             key = "points" if kind == "curve" else "grid"
             data = json.dumps({key: arr.tolist()}).encode()
         else:
-            allowed = ".png, .webp, .tiff, .npy" if kind == "image" else ".json, .npy"
+            allowed = {"image": ".png, .webp, .tiff, .npy", "grid": ".npy, .tiff"}.get(
+                kind, ".json, .npy"
+            )
             msg = f"a decoded {kind} can be written as {allowed}, not {suffix or 'no extension'}"
             raise CLIError(msg)
         out.write_bytes(data)
@@ -551,13 +604,21 @@ def build_parser() -> argparse.ArgumentParser:
     target.add_argument("--bpp", type=float, help="target bits per pixel (images)")
     target.add_argument("--tolerance", type=float, help="largest point deviation (curves)")
     target.add_argument("--lossless", action="store_true", help="bit-exact (8/16-bit images)")
+    target.add_argument("--max-error", type=float, help="grids: largest error on every sample")
+    target.add_argument("--rmse", type=float, help="grids: target root-mean-square error")
+    target.add_argument("--psnr", type=float, help="grids: target PSNR in dB (against the range)")
     enc.add_argument(
         "--wavelet",
         default=None,
         help="images: cdf97 (default), bspline2, haar; curves: bspline2 (default), cdf97, haar",
     )
     enc.add_argument("--level", type=int, help="levels (default: automatic)")
-    enc.add_argument("--kind", choices=["image", "curve", "surface"], help="override by suffix")
+    enc.add_argument(
+        "--kind",
+        choices=["image", "curve", "surface", "grid"],
+        help="override by suffix (a .npy or TIFF of signed integers, NaN cells or more than 4 "
+        "values per pixel is a grid)",
+    )
     enc.add_argument("--closed", action="store_true", help="closed curve / closed first axis")
     enc.add_argument("--closed-v", action="store_true", help="surface: closed second axis")
     enc.add_argument("-q", "--quiet", action="store_true", help="no progress bar or table")

@@ -186,3 +186,17 @@ def check_bundle(info: dict[str, Any], settings: Settings) -> None:
     samples = math.prod(max(s, 0) for s in sizes)
     shape = " × ".join(str(s) for s in sizes)
     check(samples, f"a bundle that decodes {shape} samples", settings)
+
+
+def check_grid_data(shape: Sequence[int], level: int | None, settings: Settings) -> None:
+    """The cost of encoding a height field ``(H, W)`` or a volume ``(D, H, W)`` as a grid.
+
+    A volume's slices are coded together (``D`` values per point of the 2-D transform), and
+    the outlier pass and NaN fill hold a few more arrays of the grid's size: counted as twice
+    the padded samples.
+    """
+    rows, cols = (shape[-2], shape[-1]) if len(shape) == 3 else (shape[0], shape[1])
+    slices = shape[0] if len(shape) == 3 else 1
+    fitted, _ = padded_lengths([rows, cols], level, ["open", "open"], "cdf97", "surface")
+    size = "×".join(str(s) for s in shape)
+    check(2 * fitted[0] * fitted[1] * slices, f"a {size} grid", settings)

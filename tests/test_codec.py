@@ -387,8 +387,9 @@ def test_the_public_signatures_are_the_issues_contract() -> None:
         # ``wavelet`` on surfaces and ``drop_levels`` on decode, after the old parameters.
         "encode_curve": "(points, *, closed=None, level=None, keep=None, tolerance=None, "
         "wavelet='bspline2', boundary=None)",
+        # Issue 13 gave surfaces the grids' targets, after the old parameters.
         "encode_surface": "(grid, *, closed=None, level=None, keep=None, quality=None, "
-        "wavelet='bspline2', boundary=None)",
+        "wavelet='bspline2', boundary=None, max_error=None, rmse=None, psnr=None, bpp=None)",
         "decode": "(bundle, *, keep=None, level=0, drop_levels=None)",
         "inspect": "(bundle)",
     }

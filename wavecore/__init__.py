@@ -18,6 +18,7 @@ from .errors import (
     WavecoreError,
 )
 from .filters import matrices, wavelet_names
+from .grids import decode_grid, encode_grid
 from .images import ImageDecomposition, decompose_image, subband_mosaic
 from .io import decode_file as decode_curve_file
 from .io import encode_file as encode_curve_file
@@ -72,6 +73,7 @@ __all__ = [
     "decode",
     "decode_curve_file",
     "decode_curves",
+    "decode_grid",
     "decompose_curve",
     "decompose_image",
     "decompose_surface",
@@ -79,6 +81,7 @@ __all__ = [
     "encode_curve",
     "encode_curve_file",
     "encode_curves",
+    "encode_grid",
     "encode_image",
     "encode_surface",
     "fit_grid",

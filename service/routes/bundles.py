@@ -7,6 +7,7 @@ string (or, in a form, from fields of those names).
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Request
@@ -89,6 +90,8 @@ def _choose_format(requested: str | None, kind: str, accept: str, own: str = "js
         allowed: tuple[str, ...] = (own, *(f for f in CURVE_FILE_FORMATS if f != own))
     elif kind == "image":
         allowed = ("png", "webp", "tiff", "npy")
+    elif kind == "grid":  # NaN cells have no JSON form: npy first
+        allowed = ("npy", "json")
     else:
         allowed = ("json", "npy")
     if requested is not None:
@@ -139,13 +142,20 @@ def _check_declared_size(info: dict[str, Any], settings: Settings) -> None:
     elif kind == "curve":
         count, limit, what = shape[0], settings.max_points, "points"
         size = f"a curve of {shape[0]} points"
+    elif kind == "grid":  # a height field or a volume: every value counts
+        count, limit, what = (
+            math.prod(shape),
+            settings.max_grid_points * settings.max_dimension,
+            "values",
+        )
+        size = f"a {' × '.join(map(str, shape))} grid"
     else:
         count, limit, what = shape[0] * shape[1], settings.max_grid_points, "grid points"
         size = f"a {shape[0]} × {shape[1]} surface"
     if count > limit:
         msg = f"the bundle decodes to {size}, more than this server's limit of {limit} {what}"
         raise Problem("bundle-too-large", msg)
-    vector = kind != "image" and len(shape) > (1 if kind == "curve" else 2)
+    vector = kind not in ("image", "grid") and len(shape) > (1 if kind == "curve" else 2)
     if vector and shape[-1] > settings.max_dimension:
         msg = (
             f"the bundle decodes to {shape[-1]}-D points, more than this server's limit of "

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from .. import curvesets
+from .. import grids
 from ..bundle import Bundle, read_bundle
 from ..errors import BundleError, InvalidParameter
 from ..layout import band_names
@@ -84,6 +85,10 @@ def decode(
     if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
         msg = f"level must be an integer >= 0, not {level!r}"
         raise InvalidParameter(msg)
+    if grids.is_grid_bundle(bundle):  # a grid's container around a surface bundle
+        return grids.decode_grid(
+            bundle, level=level if drop_levels is None else drop_levels, keep=keep
+        )
     if drop_levels is not None:
         if (
             isinstance(drop_levels, bool)
@@ -157,6 +162,8 @@ def inspect(bundle: Any) -> dict[str, Any]:
     """
     if curvesets.is_curve_set(bundle):
         return curvesets.inspect_curves(bundle)
+    if grids.is_grid_bundle(bundle):
+        return grids.inspect_grid(bundle)
     parsed, plan = _open(bundle)
     header = parsed.header
     try:

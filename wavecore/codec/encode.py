@@ -4,6 +4,7 @@ make the plan and hand it to the rate control; lossless images take their own pi
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -11,11 +12,14 @@ import numpy as np
 
 from .. import lossless as _lossless
 from ..arguments import closed_flags
-from ..bundle import write_bundle
+from ..bundle import read_bundle, write_bundle
+from ..entropy import encode_levels
 from ..errors import BundleError, InvalidParameter
 from ..filters import get_wavelet
 from ..multilevel import default_level
+from ..quantize import DEFAULT_ROUNDING, dequantize_bands, quantize_bands
 from ..threshold import check_share
+from .decode import decode
 from .plan import (
     DEFAULT_CODER,
     MAX_CURVE_LEVELS,
@@ -29,7 +33,18 @@ from .plan import (
     positive,
 )
 from .ratecontrol import encode_lossy
-from .samples import is_opaque, peak_of, scaled, scaled_tolerance, ycbcr_from
+from .samples import (
+    decompose,
+    finish,
+    is_opaque,
+    measure_errors,
+    peak_of,
+    reconstruct,
+    scaled,
+    scaled_tolerance,
+    unscaled,
+    ycbcr_from,
+)
 from .stages import LOSSLESS_WAVELET, NoQuantizer, get_coder, get_colour
 
 #: Without ``keep``/``tolerance``, curves are coded to this fraction of their bounding-box
@@ -306,6 +321,10 @@ def encode_surface(
     quality: float | None = None,
     wavelet: str = "bspline2",
     boundary: str | tuple[str, str] | None = None,
+    max_error: float | None = None,
+    rmse: float | None = None,
+    psnr: float | None = None,
+    bpp: float | None = None,
 ) -> bytes:
     """Encode a surface, a ``(U, V, d)`` grid of points or a ``(U, V)`` height field.
 
@@ -330,6 +349,16 @@ def encode_surface(
     boundary : str or pair of str, optional
         The same choice as ``closed``, spelled ``"open"`` / ``"closed"`` (one for both axes, or
         one per axis).  Give either; both is accepted only when they agree.
+    max_error : float, optional
+        A bound on the absolute error of every value (each coordinate of each point); the
+        result is a grid bundle (:func:`wavecore.encode_grid`, whose outlier corrections
+        guarantee it), decoded by :func:`wavecore.decode` alike.
+    rmse : float, optional
+        Target root-mean-square error over all values, met or beaten.
+    psnr : float, optional
+        The same as ``quality``, under the name :func:`wavecore.encode_grid` uses.
+    bpp : float, optional
+        Bits per grid point (``8 × len(bundle) / (U × V)``, header included), never exceeded.
 
     Examples
     --------
@@ -340,7 +369,10 @@ def encode_surface(
     >>> decode(bundle).shape, inspect(bundle)["psnr"] >= 50
     ((20, 24), True)
     """
-    one_of(keep=keep, quality=quality)
+    one_of(keep=keep, quality=quality, max_error=max_error, rmse=rmse, psnr=psnr, bpp=bpp)
+    if max_error is not None:  # the grid container's outlier pass keeps the bound
+        return _bounded_surface(grid, closed, boundary, level, wavelet, max_error)
+    quality = psnr if psnr is not None else quality
     arr = as_array(grid, "grid")
     if arr.ndim not in (2, 3):
         msg = f"grid must be (U, V) or (U, V, d), not shape {arr.shape}"
@@ -349,6 +381,7 @@ def encode_surface(
     level = level_arg(level)
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
     quality = None if quality is None else positive(quality, "quality", "a PSNR in dB")
+    bpp = None if bpp is None else positive(bpp, "bpp", "bits per grid point")
     dtype = dtype_name(arr, "grid")
     arr, scale = scaled(arr)
     data = arr.astype(np.float64)
@@ -368,4 +401,108 @@ def encode_surface(
         peak_of(data, dtype, "surface"),
         scale=scale,
     )
-    return encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=None, tolerance=None)
+    if rmse is not None:
+        # PSNR against the plan's peak is measured on exactly what decode returns; the tiny
+        # margin keeps the conversion's rounding from leaving the RMSE a hair above the target.
+        target = positive(rmse, "rmse", "a root-mean-square error")
+        quality = 20.0 * math.log10(plan.peak / _unscaled_rmse(target, scale)) + 1e-6
+        if quality <= 0:  # any coding meets so loose a target: code coarsely
+            quality = 1e-3
+    return encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None)
+
+
+def _unscaled_rmse(rmse: float, scale: int) -> float:
+    """An RMSE in the original's units → the coded units of a scaled plan."""
+    return math.ldexp(rmse, -scale) if scale else rmse
+
+
+def _bounded_surface(
+    grid: Any, closed: Any, boundary: Any, level: Any, wavelet: str, max_error: Any
+) -> bytes:
+    from .. import grids  # the grid container composes this codec: imported when used
+
+    arr = grids.checked_grid(grid, (2, 3), "grid")
+    flags = closed_flags(closed, boundary, 2)
+    return grids.encode_layout(
+        arr,
+        grids.LAYOUT_FIELD if arr.ndim == 2 else grids.LAYOUT_POINTS,
+        wavelet=wavelet,
+        level=level,
+        boundary=("closed" if flags[0] else "open", "closed" if flags[1] else "open"),
+        max_error=max_error,
+    )
+
+
+def encode_surface_at_step(
+    grid: Any,
+    step: float,
+    *,
+    level: int | None = None,
+    wavelet: str = "cdf97",
+    boundary: tuple[str, str] = ("open", "open"),
+    rounding: float = DEFAULT_ROUNDING,
+) -> tuple[bytes, np.ndarray]:
+    """A surface bundle quantized once at ``step`` (the base step of the dead-zone quantizer,
+    in the data's units): no search and no closed-loop refinement, the fastest lossy coding.
+
+    Returns the bundle and what :func:`wavecore.decode` returns for it (the encoder's own
+    reconstruction, from the same integers and parameters; decoded again only if the stored
+    parameters did not survive the header exactly).  For :mod:`wavecore.grids`, whose outlier
+    pass needs a core of a known step, not a PSNR; not part of the public API.
+    """
+    arr = as_array(grid, "grid")
+    level = level_arg(level)
+    dtype = dtype_name(arr, "grid")
+    arr, scale = scaled(arr)
+    data = arr.astype(np.float64)
+    bank = get_wavelet(wavelet)
+    fitted, pads, levels = fit(data, level, bank.name, boundary, MAX_IMAGE_LEVELS)
+    plan = Plan(
+        "surface",
+        arr.shape,
+        dtype,
+        bank.name,
+        tuple(boundary),
+        levels,
+        "none",
+        pads,
+        fitted.shape,
+        peak_of(data, dtype, "surface"),
+        scale=scale,
+    )
+    coded_step = positive(_unscaled_rmse(step, scale), "step", "a quantizer step")
+    bounds = list(plan.boundary)
+    coeffs = decompose(plan, fitted)
+    quantized, qparams = quantize_bands(
+        coeffs,
+        coded_step,
+        wavelet=plan.wavelet,
+        boundary=bounds,
+        axes=plan.axes,
+        rounding=rounding,
+        refine=0,
+    )
+    chunks, cparams = encode_levels(quantized, coder=DEFAULT_CODER)
+    dequantized = dequantize_bands(
+        quantized, qparams, wavelet=plan.wavelet, boundary=bounds, axes=plan.axes
+    )
+    output = finish(plan, reconstruct(plan, dequantized), 0)
+    decoded = np.ldexp(output, -scale) if scale else output
+    psnr, largest = measure_errors(plan, arr, decoded)
+    header = plan.header()
+    header.update(
+        quantizer=str(qparams.get("name", "deadzone")),
+        qparams=qparams,
+        coder=str(cparams.get("coder", DEFAULT_CODER)),
+        cparams=cparams,
+        psnr=psnr,
+        max_error=unscaled(largest, scale),
+    )
+    try:
+        bundle = write_bundle(header, chunks)
+    except BundleError as exc:
+        msg = f"this input cannot be stored in a bundle: {exc}"
+        raise InvalidParameter(msg) from exc
+    if read_bundle(bundle).header.get("qparams") != qparams:
+        output = decode(bundle)  # the header rounded a parameter: take the decoder's result
+    return bundle, output

@@ -1,0 +1,127 @@
+"""Grid files in: ``.npy`` and (Geo)TIFF height maps, read with their own dtype.
+
+Used by ``POST /v1/grids/encode`` and by the CLI.  TIFF goes through tifffile (already the
+service's reader of 16-bit RGB TIFFs, service/imaging.py): it reads 16-bit, signed and float
+samples and multi-page stacks as they are, where Pillow turns them into 8-bit or 32-bit
+integers, and it exposes GeoTIFF's ``GDAL_NODATA`` tag, whose cells become NaN (floats).
+Both readers learn the shape and dtype from the header, so the size is refused before any
+sample is decoded.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+
+import numpy as np
+
+__all__ = ["GridFileError", "is_grid_file", "read_grid_file"]
+
+NPY_MAGIC = b"\x93NUMPY"
+TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # classic and BigTIFF
+#: GeoTIFF's no-data value (GDAL's private tag 42113, an ASCII number).
+GDAL_NODATA_TAG = 42113
+
+
+class GridFileError(ValueError):
+    """A grid file that cannot be read; ``kind`` is the problem type to answer with."""
+
+    def __init__(self, kind: str, message: str) -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+def is_grid_file(data: bytes) -> bool:
+    """Whether ``data`` begins as a ``.npy`` or a TIFF file does."""
+    return data.startswith(NPY_MAGIC) or data[:4] in TIFF_MAGICS
+
+
+def read_grid_file(data: bytes, name: str, *, max_elements: int) -> np.ndarray:
+    """A ``.npy`` or TIFF file's array, in its own dtype (NaN for GeoTIFF no-data cells).
+
+    Raises
+    ------
+    GridFileError
+        ``unsupported-media-type`` for something that is neither, or is unreadable;
+        ``invalid-parameter`` for a dtype that is not numeric or a size above
+        ``max_elements``.
+
+    Examples
+    --------
+    >>> buffer = io.BytesIO(); np.save(buffer, np.arange(6, dtype=">i2").reshape(2, 3))
+    >>> read_grid_file(buffer.getvalue(), "file", max_elements=10).dtype.str
+    '>i2'
+    """
+    if data.startswith(NPY_MAGIC):
+        return _read_npy(data, name, max_elements)
+    if data[:4] in TIFF_MAGICS:
+        return _read_tiff(data, name, max_elements)
+    msg = f"{name} is neither a .npy file nor a TIFF (GeoTIFF) height map"
+    raise GridFileError("unsupported-media-type", msg)
+
+
+def _check(shape: tuple[int, ...], dtype: np.dtype, name: str, max_elements: int) -> None:
+    if dtype.kind not in "iuf" or dtype.fields is not None:
+        msg = f"{name} has dtype {dtype}; a grid holds integers or floats"
+        raise GridFileError("invalid-parameter", msg)
+    size = math.prod(shape)
+    if size > max_elements:
+        msg = f"{name} has {size} values; the limit is {max_elements}"
+        raise GridFileError("invalid-parameter", msg)
+
+
+def _read_npy(data: bytes, name: str, max_elements: int) -> np.ndarray:
+    f = io.BytesIO(data)
+    try:
+        version = np.lib.format.read_magic(f)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(f)
+        elif version == (2, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(f)
+        else:
+            msg = f".npy version {version} is not supported (1.0 and 2.0 are)"
+            raise ValueError(msg)
+    except ValueError as exc:
+        msg = f"{name} is not a readable .npy file: {exc}"
+        raise GridFileError("unsupported-media-type", msg[:500]) from None
+    _check(shape, dtype, name, max_elements)
+    expected = math.prod(shape) * dtype.itemsize
+    if len(data) - f.tell() != expected:
+        msg = (
+            f"{name} is truncated or padded: its header declares {expected} bytes of data "
+            f"and {len(data) - f.tell()} follow"
+        )
+        raise GridFileError("unsupported-media-type", msg)
+    flat = np.frombuffer(data, dtype=dtype, offset=f.tell())
+    return flat.reshape(shape, order="F" if fortran else "C")
+
+
+def _read_tiff(data: bytes, name: str, max_elements: int) -> np.ndarray:
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(io.BytesIO(data)) as tif:
+            series = tif.series[0]
+            shape, dtype = tuple(series.shape), np.dtype(series.dtype)
+            _check(shape, dtype, name, max_elements)
+            arr = series.asarray()
+            page = tif.pages.first
+            nodata = page.tags.get(GDAL_NODATA_TAG)
+            nodata_text = None if nodata is None else str(nodata.value).strip("\x00 ")
+    except GridFileError:
+        raise
+    except Exception as exc:  # tifffile reports bad files in many exception types
+        msg = f"{name} is not a readable TIFF: {type(exc).__name__}: {exc}"
+        raise GridFileError("unsupported-media-type", msg[:500]) from None
+    while arr.ndim > 2 and arr.shape[0] == 1:  # a single page of a stack
+        arr = arr[0]
+    while arr.ndim > 2 and arr.shape[-1] == 1:  # one sample per pixel
+        arr = arr[..., 0]
+    if nodata_text and arr.dtype.kind == "f":
+        try:
+            value = float(nodata_text)
+        except ValueError:
+            value = None
+        if value is not None:
+            arr = np.where(arr == value, np.nan, arr).astype(arr.dtype)
+    return arr
