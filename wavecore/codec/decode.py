@@ -7,8 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import curvesets
-from .. import grids
+from .. import curvesets, grids
 from ..bundle import Bundle, read_bundle
 from ..errors import BundleError, InvalidParameter
 from ..layout import band_names
