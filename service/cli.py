@@ -341,6 +341,8 @@ def _encode_curve_file(path: Path, args: argparse.Namespace, many: bool) -> Row:
         "seconds": f"{time.perf_counter() - start:.2f}",
     }
     return Row(path.name, values)
+
+
 def _only_a_grid(arr: np.ndarray) -> bool:
     """An array that no image codec takes but a grid does: signed or wide integers, NaN cells,
     or a volume (more than 4 values per pixel).  Such ``.npy`` and TIFF inputs are grids."""
