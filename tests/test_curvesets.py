@@ -228,3 +228,11 @@ def test_crafted_bundles_with_a_valid_crc_give_curves_or_bundle_error() -> None:
             continue
         assert isinstance(out, list)
         assert all(isinstance(c, np.ndarray) and c.ndim == 2 for c in out)
+
+
+@pytest.mark.parametrize("option", [{"keep": 0.5}, {"level": 1}, {"drop_levels": 1}])
+def test_decode_refuses_options_a_curve_set_cannot_honour(option: dict[str, float]) -> None:
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]] * 4)
+    bundle = wavecore.encode_curves([square, square[::-1] * 2], tolerance=1e-3)
+    with pytest.raises(wavecore.InvalidParameter, match="curve set decodes whole"):
+        wavecore.decode(bundle, **option)  # type: ignore[arg-type]

@@ -79,6 +79,12 @@ def decode(
     ((9, 12), (9, 12))
     """
     if curvesets.is_curve_set(bundle):  # encode_curves' bundles: a list of (n_i, d) arrays
+        if keep is not None or level or drop_levels:
+            msg = (
+                "a curve set decodes whole, at its guaranteed tolerance: keep, level and "
+                "drop_levels do not apply to it"
+            )
+            raise InvalidParameter(msg)
         return curvesets.decode_curves(bundle).curves  # type: ignore[return-value]
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
     if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
