@@ -520,6 +520,13 @@ def synthesis_2d(
 # --------------------------------------------------------------------------------------------
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _rounded_into(v, lo, hi):
+    """``clip(rint(v), lo, hi)``, NaN → 0: the same values as the general loop below."""
+    v = np.rint(v) if v == v else 0.0
+    return min(max(v, lo), hi)
+
+
 @njit(nogil=True, cache=True)
 def colour_to_integers(src, matrix, use_matrix, lo, hi, out, row_lo, row_hi):
     """``out = clip(rint(matrix @ src), lo, hi)`` per pixel (NaN → 0), rows ``[row_lo, row_hi)``.
@@ -529,6 +536,20 @@ def colour_to_integers(src, matrix, use_matrix, lo, hi, out, row_lo, row_hi):
     the NumPy version made five full-size float64 copies of a decoded picture.
     """
     cols, channels = src.shape[1], src.shape[2]
+    if use_matrix and channels == 3:
+        # The common case (a colour picture), without a branch per sample, so it vectorises.
+        m00, m01, m02 = matrix[0, 0], matrix[0, 1], matrix[0, 2]
+        m10, m11, m12 = matrix[1, 0], matrix[1, 1], matrix[1, 2]
+        m20, m21, m22 = matrix[2, 0], matrix[2, 1], matrix[2, 2]
+        for i in range(row_lo, row_hi):
+            row = src[i]
+            dest = out[i]
+            for j in range(cols):
+                y, cb, cr = row[j, 0], row[j, 1], row[j, 2]
+                dest[j, 0] = _rounded_into(m00 * y + m01 * cb + m02 * cr, lo, hi)
+                dest[j, 1] = _rounded_into(m10 * y + m11 * cb + m12 * cr, lo, hi)
+                dest[j, 2] = _rounded_into(m20 * y + m21 * cb + m22 * cr, lo, hi)
+        return
     for i in range(row_lo, row_hi):
         for j in range(cols):
             pixel = src[i, j]
@@ -589,13 +610,11 @@ def deadzone_quantize(values, inverse_step, rounding, largest, out):
 def dequantize(q, offset, step, out):
     """``out = sign(q) · (|q| + offset) · step`` for ``q != 0``, and 0 where ``q == 0``."""
     for k in range(q.size):
-        v = q[k]
-        if v > 0:
-            out[k] = (float(v) + offset) * step
-        elif v < 0:
-            out[k] = -(float(-np.int64(v)) + offset) * step
-        else:
-            out[k] = 0.0
+        v = np.int64(q[k])
+        # Selects rather than branches, so that it vectorises; the same values as
+        # ``(v + offset) * step`` for positive ``v``, negated for negative ones.
+        scaled = (float(abs(v)) + offset) * step
+        out[k] = 0.0 if v == 0 else (scaled if v > 0 else -scaled)
 
 
 @njit(nogil=True, cache=True)
