@@ -805,11 +805,14 @@ def encode_span(flat, planes, blocks, lo, hi):
 
     An all-zero block has length 0; any other block at least 1 byte.
     """
-    # Room for 2 bits per position to begin with (it grows when a block does not fit).
+    # Room for 8 bits per position to begin with: a block that does not fit is coded again
+    # from its start into a larger buffer, and at 2 bits per position (as before) every dense
+    # block (coarse levels, high rates, lossless) was coded twice.  The pages of ``np.empty``
+    # are only mapped as they are written, so unused room costs address space, not memory.
     room = 0
     for b in range(lo, hi):
         area = (blocks[b, B_ROW1] - blocks[b, B_ROW0]) * (blocks[b, B_COL1] - blocks[b, B_COL0])
-        room += area * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO]) // 4
+        room += area * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO])
     out = np.empty(max(1024, room), dtype=np.uint8)
     lengths = np.zeros(hi - lo, dtype=np.int64)
     models = np.empty(CONTEXTS, dtype=np.int32)
