@@ -1,9 +1,10 @@
 """Codec speed against OpenJPEG (and OpenJPH, when imagecodecs is installed), in one process.
 
 Run with ``.venv/bin/python benchmarks/codec_speed.py`` (``--size 1024`` for a quick look,
-``--profile`` to print where our time goes, ``--write`` to put the table into
-``docs/benchmarks.md``).  Everything is timed in this one process, on the same pictures, as
-medians of ``--repeat`` runs:
+``--profile`` to print where our time goes, ``--stages`` for a table of each stage's wall,
+CPU and calling-thread (serial) time on one thread and on the default threads, ``--write``
+to put the table into ``docs/benchmarks.md``).  Everything is timed in this one process, on
+the same pictures, as medians of ``--repeat`` runs:
 
 * **2048 × 2048 RGB at 1 bpp**: scikit-image's astronaut enlarged with Lanczos plus a little
   seeded noise (so that the fine subbands are not empty).  Ours is
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import functools
 import io
 import math
 import os
@@ -180,6 +182,97 @@ class OpenJPH(Peer):
         return np.asarray(imagecodecs.htj2k_decode(self.blob))
 
 
+#: The stages timed by ``--stages``: (label, module, function).  Each function is replaced,
+#: for the run, in every ``wavecore`` module that holds it, so the table survives the codec
+#: moving between modules.  What is not listed (colour, error metrics, the rate search's
+#: estimates) is the "other" line.
+STAGES = (
+    ("pad", "wavecore.resample", "pad_to_fit"),
+    ("analysis", "wavecore.multilevel", "wavedec2"),
+    ("quantize", "wavecore.quantize", "quantize_bands"),
+    ("block coding", "wavecore.entropy", "encode_levels"),
+    ("block decoding", "wavecore.entropy", "decode_levels"),
+    ("dequantize", "wavecore.quantize", "dequantize_bands"),
+    ("synthesis", "wavecore.multilevel", "waverec2"),
+    ("crop", "wavecore.resample", "crop_padding"),
+    ("header", "wavecore.bundle", "write_bundle"),
+    ("header", "wavecore.bundle", "read_bundle"),
+)
+
+
+def stage_table(run: Callable[[], object], repeat: int) -> list[str]:
+    """Per stage: wall, CPU of all threads, CPU of the calling thread (the serial part), calls.
+
+    Medians are not additive, so these are means over ``repeat`` runs.  Only calls made from
+    the calling thread and not nested in another timed stage count.
+    """
+    import sys
+    import threading
+    from collections import defaultdict
+
+    totals: dict[str, list[float]] = defaultdict(lambda: [0.0, 0.0, 0.0, 0.0])
+    inside = [False]
+    main = threading.get_ident()
+
+    def timed(label: str, function: Callable[..., Any]) -> Callable[..., Any]:
+        def call(*args: Any, **kwargs: Any) -> Any:
+            if inside[0] or threading.get_ident() != main:
+                return function(*args, **kwargs)
+            inside[0] = True
+            start = (time.perf_counter(), time.process_time(), time.thread_time())
+            try:
+                return function(*args, **kwargs)
+            finally:
+                inside[0] = False
+                row = totals[label]
+                row[0] += time.perf_counter() - start[0]
+                row[1] += time.process_time() - start[1]
+                row[2] += time.thread_time() - start[2]
+                row[3] += 1
+
+        return call
+
+    replaced: list[tuple[Any, str, Any]] = []
+    for label, module_name, name in STAGES:
+        original = getattr(sys.modules[module_name], name, None)
+        if original is None:
+            continue
+        wrapper = timed(label, original)
+        for module in list(sys.modules.values()):
+            if not getattr(module, "__name__", "").startswith("wavecore"):
+                continue
+            for attr, value in list(vars(module).items()):
+                if value is original:
+                    replaced.append((module, attr, value))
+                    setattr(module, attr, wrapper)
+    whole = [0.0, 0.0, 0.0]
+    try:
+        for _ in range(repeat):
+            start = (time.perf_counter(), time.process_time(), time.thread_time())
+            run()
+            whole[0] += time.perf_counter() - start[0]
+            whole[1] += time.process_time() - start[1]
+            whole[2] += time.thread_time() - start[2]
+    finally:
+        for module, attr, value in replaced:
+            setattr(module, attr, value)
+    lines = [f"  {'stage':16s} {'wall':>7s} {'CPU':>7s} {'serial':>7s} {'calls':>5s}"]
+    listed = [0.0, 0.0, 0.0]
+    for label, (wall, cpu, serial, calls) in sorted(totals.items(), key=lambda kv: -kv[1][1]):
+        lines.append(
+            f"  {label:16s} {wall / repeat:6.3f}s {cpu / repeat:6.3f}s {serial / repeat:6.3f}s "
+            f"{calls / repeat:5.1f}"
+        )
+        listed = [listed[0] + wall, listed[1] + cpu, listed[2] + serial]
+    rest = [(w - t) / repeat for w, t in zip(whole, listed, strict=True)]
+    lines.append(f"  {'other':16s} {rest[0]:6.3f}s {rest[1]:6.3f}s {rest[2]:6.3f}s")
+    lines.append(
+        f"  {'total':16s} {whole[0] / repeat:6.3f}s {whole[1] / repeat:6.3f}s "
+        f"{whole[2] / repeat:6.3f}s"
+    )
+    return lines
+
+
 def measure_ours(
     image: np.ndarray, options: dict[str, Any], repeat: int
 ) -> tuple[bytes, float, float]:
@@ -198,6 +291,7 @@ def run_case(
     repeat: int,
     say: Callable[[str], None],
     profile: bool,
+    stages: bool = False,
 ) -> None:
     megapixels = image.shape[0] * image.shape[1] / 1e6
     pixels = image.shape[0] * image.shape[1]
@@ -257,6 +351,24 @@ def run_case(
             f"{'':14s} two threads over one: encode {one_enc / t_enc:.2f}x, "
             f"decode {one_dec / t_dec:.2f}x"
         )
+        if stages:
+            bundle = wavecore.encode_image(image, **options)
+            for threads in (1, None):
+                set_threads(threads)
+                try:
+                    for what, run in (
+                        ("encode", functools.partial(wavecore.encode_image, image, **options)),
+                        ("decode", functools.partial(wavecore.decode, bundle)),
+                    ):
+                        say(
+                            f"{label} {what} by stage, "
+                            f"{'1 thread' if threads else 'default threads'}, "
+                            f"means of {repeat}, load {load()}"
+                        )
+                        for text in stage_table(run, repeat):
+                            say(text)
+                finally:
+                    set_threads(None)
         if profile:
             profiler = cProfile.Profile()
             profiler.enable()
@@ -274,6 +386,11 @@ def main() -> None:
     parser.add_argument("--skip-grey", action="store_true", help="only the RGB picture")
     parser.add_argument("--skip-rgb", action="store_true", help="only the grey picture")
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument(
+        "--stages",
+        action="store_true",
+        help="time each stage (wall, CPU, calling thread's CPU) on one thread and the default",
+    )
     parser.add_argument("--write", action="store_true", help="put the table in docs/benchmarks.md")
     args = parser.parse_args()
     report: list[str] = []
@@ -294,6 +411,7 @@ def main() -> None:
             args.repeat,
             say,
             args.profile,
+            args.stages,
         )
     if not args.skip_grey:
         camera = data.camera()

@@ -231,9 +231,14 @@ def _other_band(flat, start, cols, j):
     return abs(np.int64(flat[start + j]))
 
 
+#: ``EXTERNAL_CLASS[min(e, 12)]``: the class of a weighted sum ``e`` of the other bands
+#: (0; 1-3; 4-11; 12 and more), looked up rather than branched on.
+EXTERNAL_CLASS = np.array([0, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3], dtype=np.int64)
+
+
 @njit(nogil=True, cache=True, inline="always")
 def _external_class(e):
-    return 0 if e == 0 else (1 if e < 4 else (2 if e < 12 else 3))
+    return EXTERNAL_CLASS[min(e, 12)]
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -284,6 +289,246 @@ def _tile_context(flags, base, tr, tc, grid_cols, per_plane, block, planes, p):
     return TILE_BASE + near * 2 + other
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _encode_rows(
+    flat,
+    out,
+    models,
+    scratch,
+    flags,
+    low,
+    rng,
+    cache,
+    pending,
+    pos,
+    approx,
+    offset,
+    cols,
+    r0,
+    r1,
+    c0,
+    c1,
+    base,
+    grid_cols,
+    sib1,
+    sib2,
+    luma,
+    sign_base,
+    zero_base,
+    unary_base,
+    mantissa,
+):
+    """The values of one plane of a block, row by row (the tiles flagged empty skipped).
+
+    Inlined at two call sites, one with ``approx`` True and one False, so that each copy is
+    compiled without the other kind's branches."""
+    width = c1 - c0
+    tile_cols = (c1 - c0 + TILE - 1) // TILE
+    for i in range(r0, r1):
+        row = offset + i * cols
+        srow = (i - r0) * width - c0
+        tile_row = base + ((i - r0) // TILE) * grid_cols
+        s1, s1c = _row_of(sib1, i)
+        s2, s2c = _row_of(sib2, i)
+        y0, y0c = _row_of(luma, i)
+        for tc in range(tile_cols):
+            if not approx and flags[tile_row + tc] == 0:
+                continue
+            for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
+                at = row + j
+                if approx:
+                    s = _neighbours(scratch, srow + j, width, i, j, r0, c0, c1)
+                    e = np.int64(0)
+                    value = np.int64(flat[at]) - _predict(flat, at, cols, i, j, r0, c0)
+                else:
+                    s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
+                    e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
+                    e += 4 * _other_band(flat, y0, y0c, j)
+                    value = np.int64(flat[at])
+                magnitude = abs(value)
+                ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
+                low, rng, cache, pending, pos = _encode_bit(
+                    low, rng, cache, pending, pos, out, models, ctx, 1 if magnitude else 0
+                )
+                if approx:
+                    scratch[srow + j] = magnitude
+                if magnitude == 0:
+                    continue
+                # The bit length in unary, then the bits below the leading one: the top two
+                # under adaptive models, the rest raw.
+                unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
+                klass = _bit_length(magnitude)
+                for k in range(1, klass + 1):
+                    more = 1 if klass > k else 0
+                    low, rng, cache, pending, pos = _encode_bit(
+                        low,
+                        rng,
+                        cache,
+                        pending,
+                        pos,
+                        out,
+                        models,
+                        unary + min(k - 1, UNARY_INDICES - 1),
+                        more,
+                    )
+                below = klass - 1
+                top = min(below, 2)
+                for position in range(top):
+                    bit = (magnitude >> (below - 1 - position)) & 1
+                    low, rng, cache, pending, pos = _encode_bit(
+                        low,
+                        rng,
+                        cache,
+                        pending,
+                        pos,
+                        out,
+                        models,
+                        mantissa + position * (MAX_CLASS + 1) + klass,
+                        bit,
+                    )
+                if below > top:
+                    rest = below - top
+                    low, rng, cache, pending, pos = _encode_raw(
+                        low,
+                        rng,
+                        cache,
+                        pending,
+                        pos,
+                        out,
+                        magnitude & ((np.int64(1) << rest) - 1),
+                        rest,
+                    )
+                sw = sn = np.int64(0)  # residual signs: one context
+                if not approx:
+                    if j > c0:
+                        sw = _sign_of(flat[at - 1])
+                    if i > r0:
+                        sn = _sign_of(flat[at - cols])
+                low, rng, cache, pending, pos = _encode_bit(
+                    low,
+                    rng,
+                    cache,
+                    pending,
+                    pos,
+                    out,
+                    models,
+                    sign_base + (sw + 1) * 3 + sn + 1,
+                    1 if value < 0 else 0,
+                )
+    return low, rng, cache, pending, pos
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _decode_rows(
+    data,
+    end,
+    flat,
+    models,
+    scratch,
+    flags,
+    code,
+    rng,
+    pos,
+    approx,
+    offset,
+    cols,
+    r0,
+    r1,
+    c0,
+    c1,
+    base,
+    grid_cols,
+    sib1,
+    sib2,
+    luma,
+    sign_base,
+    zero_base,
+    unary_base,
+    mantissa,
+):
+    """The decoder's :func:`_encode_rows`; the last value is 1 for a corrupt block."""
+    width = c1 - c0
+    tile_cols = (c1 - c0 + TILE - 1) // TILE
+    for i in range(r0, r1):
+        row = offset + i * cols
+        srow = (i - r0) * width - c0
+        tile_row = base + ((i - r0) // TILE) * grid_cols
+        s1, s1c = _row_of(sib1, i)
+        s2, s2c = _row_of(sib2, i)
+        y0, y0c = _row_of(luma, i)
+        for tc in range(tile_cols):
+            if not approx and flags[tile_row + tc] == 0:
+                continue
+            for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
+                at = row + j
+                prediction = np.int64(0)
+                if approx:
+                    s = _neighbours(scratch, srow + j, width, i, j, r0, c0, c1)
+                    e = np.int64(0)
+                    prediction = _predict(flat, at, cols, i, j, r0, c0)
+                else:
+                    s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
+                    e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
+                    e += 4 * _other_band(flat, y0, y0c, j)
+                ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
+                code, rng, pos, nonzero = _decode_bit(code, rng, pos, end, data, models, ctx)
+                if nonzero == 0:
+                    if approx:
+                        scratch[srow + j] = 0
+                    flat[at] = prediction
+                    continue
+                unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
+                klass = np.int64(1)
+                while True:
+                    code, rng, pos, more = _decode_bit(
+                        code,
+                        rng,
+                        pos,
+                        end,
+                        data,
+                        models,
+                        unary + min(klass - 1, UNARY_INDICES - 1),
+                    )
+                    if more == 0:
+                        break
+                    klass += 1
+                    if klass > MAX_CLASS:
+                        return code, rng, pos, 1
+                below = klass - 1
+                top = 2 if below > 2 else below
+                magnitude = np.int64(1)
+                for position in range(top):
+                    code, rng, pos, bit = _decode_bit(
+                        code,
+                        rng,
+                        pos,
+                        end,
+                        data,
+                        models,
+                        mantissa + position * (MAX_CLASS + 1) + klass,
+                    )
+                    magnitude = (magnitude << 1) | bit
+                if below > top:
+                    code, rng, pos, low_bits = _decode_raw(code, rng, pos, end, data, below - top)
+                    magnitude = (magnitude << (below - top)) | low_bits
+                sw = sn = np.int64(0)
+                if not approx:
+                    if j > c0:
+                        sw = _sign_of(flat[at - 1])
+                    if i > r0:
+                        sn = _sign_of(flat[at - cols])
+                code, rng, pos, negative = _decode_bit(
+                    code, rng, pos, end, data, models, sign_base + (sw + 1) * 3 + sn + 1
+                )
+                if approx:
+                    scratch[srow + j] = magnitude
+                result = prediction + (-magnitude if negative else magnitude)
+                if result > 2147483647 or result < -2147483648:
+                    return code, rng, pos, 1
+                flat[at] = result
+    return code, rng, pos, 0
+
+
 @njit(nogil=True, cache=True)
 def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
     """Code one block (a region of every plane of one level) into ``out`` from ``pos``.
@@ -301,7 +546,6 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
             continue
         approx = planes[p, P_KIND] == 0
         kind = 0 if approx else 1
-        width = c1 - c0
         sib1 = _plane_info(planes, planes[p, P_SIB1])
         sib2 = _plane_info(planes, planes[p, P_SIB2])
         luma = _plane_info(planes, planes[p, P_LUMA])
@@ -327,99 +571,65 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
                         low, rng, cache, pending, pos, out, models, ctx, flag
                     )
                     flags[base + tr * grid_cols + tc] = flag
-        for i in range(r0, r1):
-            row = offset + i * cols
-            srow = (i - r0) * width - c0
-            tile_row = base + ((i - r0) // TILE) * grid_cols
-            s1, s1c = _row_of(sib1, i)
-            s2, s2c = _row_of(sib2, i)
-            y0, y0c = _row_of(luma, i)
-            for tc in range(tile_cols):
-                if not approx and flags[tile_row + tc] == 0:
-                    continue
-                for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
-                    at = row + j
-                    if approx:
-                        s = _neighbours(scratch, srow + j, width, i, j, r0, c0, c1)
-                        e = np.int64(0)
-                        value = np.int64(flat[at]) - _predict(flat, at, cols, i, j, r0, c0)
-                    else:
-                        s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
-                        e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
-                        e += 4 * _other_band(flat, y0, y0c, j)
-                        value = np.int64(flat[at])
-                    magnitude = abs(value)
-                    ctx = (
-                        zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
-                    )
-                    low, rng, cache, pending, pos = _encode_bit(
-                        low, rng, cache, pending, pos, out, models, ctx, 1 if magnitude else 0
-                    )
-                    if approx:
-                        scratch[srow + j] = magnitude
-                    if magnitude == 0:
-                        continue
-                    # The bit length in unary, then the bits below the leading one: the top two
-                    # under adaptive models, the rest raw.
-                    unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
-                    klass = _bit_length(magnitude)
-                    for k in range(1, klass + 1):
-                        more = 1 if klass > k else 0
-                        low, rng, cache, pending, pos = _encode_bit(
-                            low,
-                            rng,
-                            cache,
-                            pending,
-                            pos,
-                            out,
-                            models,
-                            unary + min(k - 1, UNARY_INDICES - 1),
-                            more,
-                        )
-                    below = klass - 1
-                    top = min(below, 2)
-                    for position in range(top):
-                        bit = (magnitude >> (below - 1 - position)) & 1
-                        low, rng, cache, pending, pos = _encode_bit(
-                            low,
-                            rng,
-                            cache,
-                            pending,
-                            pos,
-                            out,
-                            models,
-                            mantissa + position * (MAX_CLASS + 1) + klass,
-                            bit,
-                        )
-                    if below > top:
-                        rest = below - top
-                        low, rng, cache, pending, pos = _encode_raw(
-                            low,
-                            rng,
-                            cache,
-                            pending,
-                            pos,
-                            out,
-                            magnitude & ((np.int64(1) << rest) - 1),
-                            rest,
-                        )
-                    sw = sn = np.int64(0)  # residual signs: one context
-                    if not approx:
-                        if j > c0:
-                            sw = _sign_of(flat[at - 1])
-                        if i > r0:
-                            sn = _sign_of(flat[at - cols])
-                    low, rng, cache, pending, pos = _encode_bit(
-                        low,
-                        rng,
-                        cache,
-                        pending,
-                        pos,
-                        out,
-                        models,
-                        sign_base + (sw + 1) * 3 + sn + 1,
-                        1 if value < 0 else 0,
-                    )
+        if approx:
+            low, rng, cache, pending, pos = _encode_rows(
+                flat,
+                out,
+                models,
+                scratch,
+                flags,
+                low,
+                rng,
+                cache,
+                pending,
+                pos,
+                True,
+                offset,
+                cols,
+                r0,
+                r1,
+                c0,
+                c1,
+                base,
+                grid_cols,
+                sib1,
+                sib2,
+                luma,
+                sign_base,
+                zero_base,
+                unary_base,
+                mantissa,
+            )
+        else:
+            low, rng, cache, pending, pos = _encode_rows(
+                flat,
+                out,
+                models,
+                scratch,
+                flags,
+                low,
+                rng,
+                cache,
+                pending,
+                pos,
+                False,
+                offset,
+                cols,
+                r0,
+                r1,
+                c0,
+                c1,
+                base,
+                grid_cols,
+                sib1,
+                sib2,
+                luma,
+                sign_base,
+                zero_base,
+                unary_base,
+                mantissa,
+            )
+
     # End at the value in [low, low + range) with the most trailing zero bytes, and flush: the
     # decoder reads zeros beyond a block's end, so the caller trims them.
     for keep in range(1, 5):
@@ -452,7 +662,6 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch, flags)
             continue
         approx = planes[p, P_KIND] == 0
         kind = 0 if approx else 1
-        width = c1 - c0
         sib1 = _plane_info(planes, planes[p, P_SIB1])
         sib2 = _plane_info(planes, planes[p, P_SIB2])
         luma = _plane_info(planes, planes[p, P_LUMA])
@@ -471,87 +680,64 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch, flags)
                     )
                     code, rng, pos, flag = _decode_bit(code, rng, pos, end, data, models, ctx)
                     flags[base + tr * grid_cols + tc] = flag
-        for i in range(r0, r1):
-            row = offset + i * cols
-            srow = (i - r0) * width - c0
-            tile_row = base + ((i - r0) // TILE) * grid_cols
-            s1, s1c = _row_of(sib1, i)
-            s2, s2c = _row_of(sib2, i)
-            y0, y0c = _row_of(luma, i)
-            for tc in range(tile_cols):
-                if not approx and flags[tile_row + tc] == 0:
-                    continue
-                for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
-                    at = row + j
-                    prediction = np.int64(0)
-                    if approx:
-                        s = _neighbours(scratch, srow + j, width, i, j, r0, c0, c1)
-                        e = np.int64(0)
-                        prediction = _predict(flat, at, cols, i, j, r0, c0)
-                    else:
-                        s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
-                        e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
-                        e += 4 * _other_band(flat, y0, y0c, j)
-                    ctx = (
-                        zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
-                    )
-                    code, rng, pos, nonzero = _decode_bit(code, rng, pos, end, data, models, ctx)
-                    if nonzero == 0:
-                        if approx:
-                            scratch[srow + j] = 0
-                        flat[at] = prediction
-                        continue
-                    unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
-                    klass = np.int64(1)
-                    while True:
-                        code, rng, pos, more = _decode_bit(
-                            code,
-                            rng,
-                            pos,
-                            end,
-                            data,
-                            models,
-                            unary + min(klass - 1, UNARY_INDICES - 1),
-                        )
-                        if more == 0:
-                            break
-                        klass += 1
-                        if klass > MAX_CLASS:
-                            return 1
-                    below = klass - 1
-                    top = 2 if below > 2 else below
-                    magnitude = np.int64(1)
-                    for position in range(top):
-                        code, rng, pos, bit = _decode_bit(
-                            code,
-                            rng,
-                            pos,
-                            end,
-                            data,
-                            models,
-                            mantissa + position * (MAX_CLASS + 1) + klass,
-                        )
-                        magnitude = (magnitude << 1) | bit
-                    if below > top:
-                        code, rng, pos, low_bits = _decode_raw(
-                            code, rng, pos, end, data, below - top
-                        )
-                        magnitude = (magnitude << (below - top)) | low_bits
-                    sw = sn = np.int64(0)
-                    if not approx:
-                        if j > c0:
-                            sw = _sign_of(flat[at - 1])
-                        if i > r0:
-                            sn = _sign_of(flat[at - cols])
-                    code, rng, pos, negative = _decode_bit(
-                        code, rng, pos, end, data, models, sign_base + (sw + 1) * 3 + sn + 1
-                    )
-                    if approx:
-                        scratch[srow + j] = magnitude
-                    result = prediction + (-magnitude if negative else magnitude)
-                    if result > 2147483647 or result < -2147483648:
-                        return 1
-                    flat[at] = result
+        if approx:
+            code, rng, pos, bad = _decode_rows(
+                data,
+                end,
+                flat,
+                models,
+                scratch,
+                flags,
+                code,
+                rng,
+                pos,
+                True,
+                offset,
+                cols,
+                r0,
+                r1,
+                c0,
+                c1,
+                base,
+                grid_cols,
+                sib1,
+                sib2,
+                luma,
+                sign_base,
+                zero_base,
+                unary_base,
+                mantissa,
+            )
+        else:
+            code, rng, pos, bad = _decode_rows(
+                data,
+                end,
+                flat,
+                models,
+                scratch,
+                flags,
+                code,
+                rng,
+                pos,
+                False,
+                offset,
+                cols,
+                r0,
+                r1,
+                c0,
+                c1,
+                base,
+                grid_cols,
+                sib1,
+                sib2,
+                luma,
+                sign_base,
+                zero_base,
+                unary_base,
+                mantissa,
+            )
+        if bad:
+            return 1
     return 0
 
 
@@ -619,11 +805,14 @@ def encode_span(flat, planes, blocks, lo, hi):
 
     An all-zero block has length 0; any other block at least 1 byte.
     """
-    # Room for 2 bits per position to begin with (it grows when a block does not fit).
+    # Room for 8 bits per position to begin with: a block that does not fit is coded again
+    # from its start into a larger buffer, and at 2 bits per position (as before) every dense
+    # block (coarse levels, high rates, lossless) was coded twice.  The pages of ``np.empty``
+    # are only mapped as they are written, so unused room costs address space, not memory.
     room = 0
     for b in range(lo, hi):
         area = (blocks[b, B_ROW1] - blocks[b, B_ROW0]) * (blocks[b, B_COL1] - blocks[b, B_COL0])
-        room += area * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO]) // 4
+        room += area * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO])
     out = np.empty(max(1024, room), dtype=np.uint8)
     lengths = np.zeros(hi - lo, dtype=np.int64)
     models = np.empty(CONTEXTS, dtype=np.int32)

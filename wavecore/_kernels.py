@@ -196,6 +196,36 @@ def _row_analysis(src, mat, out):
         w0, w1 = pat[0, 0], pat[0, 1]
         for b in range(blocks):
             o[b] = w0 * s[2 * b] + w1 * s[2 * b + 1]
+    elif taps == 9:  # cdf97's low pass: spelled out, in the general loop's order of additions
+        w0, w1, w2, w3, w4 = pat[0, 0], pat[0, 1], pat[0, 2], pat[0, 3], pat[0, 4]
+        w5, w6, w7, w8 = pat[0, 5], pat[0, 6], pat[0, 7], pat[0, 8]
+        for b in range(blocks):
+            k = 2 * b
+            o[b] = (
+                w0 * s[k]
+                + w1 * s[k + 1]
+                + w2 * s[k + 2]
+                + w3 * s[k + 3]
+                + w4 * s[k + 4]
+                + w5 * s[k + 5]
+                + w6 * s[k + 6]
+                + w7 * s[k + 7]
+                + w8 * s[k + 8]
+            )
+    elif taps == 7:  # cdf97's high pass
+        w0, w1, w2, w3 = pat[0, 0], pat[0, 1], pat[0, 2], pat[0, 3]
+        w4, w5, w6 = pat[0, 4], pat[0, 5], pat[0, 6]
+        for b in range(blocks):
+            k = 2 * b
+            o[b] = (
+                w0 * s[k]
+                + w1 * s[k + 1]
+                + w2 * s[k + 2]
+                + w3 * s[k + 3]
+                + w4 * s[k + 4]
+                + w5 * s[k + 5]
+                + w6 * s[k + 6]
+            )
     else:
         for b in range(blocks):
             o[b] = 0
@@ -231,6 +261,22 @@ def _row_synthesis(c, d, p_mat, q_mat, out):
                 s1 = s[b + 1]
                 o[2 * b] += w00 * s0 + w01 * s1
                 o[2 * b + 1] += w10 * s0 + w11 * s1
+        elif taps == 4 and pat.shape[0] == 2:
+            # cdf97's P: one pass instead of eight, each sum in the general loop's order (so
+            # the same bits: from zero, or from the value so far, one term at a time).
+            w00, w01, w02, w03 = pat[0, 0], pat[0, 1], pat[0, 2], pat[0, 3]
+            w10, w11, w12, w13 = pat[1, 0], pat[1, 1], pat[1, 2], pat[1, 3]
+            for b in range(blocks):
+                s0, s1, s2, s3 = s[b], s[b + 1], s[b + 2], s[b + 3]
+                o[2 * b] = o[2 * b] + w00 * s0 + w01 * s1 + w02 * s2 + w03 * s3
+                o[2 * b + 1] = o[2 * b + 1] + w10 * s0 + w11 * s1 + w12 * s2 + w13 * s3
+        elif taps == 5 and pat.shape[0] == 2:  # cdf97's Q
+            w00, w01, w02, w03, w04 = pat[0, 0], pat[0, 1], pat[0, 2], pat[0, 3], pat[0, 4]
+            w10, w11, w12, w13, w14 = pat[1, 0], pat[1, 1], pat[1, 2], pat[1, 3], pat[1, 4]
+            for b in range(blocks):
+                s0, s1, s2, s3, s4 = s[b], s[b + 1], s[b + 2], s[b + 3], s[b + 4]
+                o[2 * b] = o[2 * b] + w00 * s0 + w01 * s1 + w02 * s2 + w03 * s3 + w04 * s4
+                o[2 * b + 1] = o[2 * b + 1] + w10 * s0 + w11 * s1 + w12 * s2 + w13 * s3 + w14 * s4
         else:
             for i in range(pat.shape[0]):
                 oi = o[i:]
@@ -274,6 +320,45 @@ def _combine(rows, mat, r, out, cols, ws):
         w0, w1, w2, w3 = ws[0], ws[1], ws[2], ws[3]
         for i in range(n):
             out[i] = w0 * s0[i] + w1 * s1[i] + w2 * s2[i] + w3 * s3[i]
+        return
+    if count == 9:  # cdf97's low pass, in the order of the general loop below (same bits)
+        s0, s1, s2, s3, s4 = (
+            rows[cols[0]],
+            rows[cols[1]],
+            rows[cols[2]],
+            rows[cols[3]],
+            rows[cols[4]],
+        )
+        s5, s6, s7, s8 = rows[cols[5]], rows[cols[6]], rows[cols[7]], rows[cols[8]]
+        w0, w1, w2, w3, w4 = ws[0], ws[1], ws[2], ws[3], ws[4]
+        w5, w6, w7, w8 = ws[5], ws[6], ws[7], ws[8]
+        for i in range(n):
+            out[i] = (
+                w0 * s0[i]
+                + w1 * s1[i]
+                + w2 * s2[i]
+                + w3 * s3[i]
+                + w4 * s4[i]
+                + w5 * s5[i]
+                + w6 * s6[i]
+                + w7 * s7[i]
+                + w8 * s8[i]
+            )
+        return
+    if count == 7:  # cdf97's high pass
+        s0, s1, s2, s3 = rows[cols[0]], rows[cols[1]], rows[cols[2]], rows[cols[3]]
+        s4, s5, s6 = rows[cols[4]], rows[cols[5]], rows[cols[6]]
+        w0, w1, w2, w3, w4, w5, w6 = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5], ws[6]
+        for i in range(n):
+            out[i] = (
+                w0 * s0[i]
+                + w1 * s1[i]
+                + w2 * s2[i]
+                + w3 * s3[i]
+                + w4 * s4[i]
+                + w5 * s5[i]
+                + w6 * s6[i]
+            )
         return
     for i in range(n):
         out[i] = 0
@@ -380,6 +465,46 @@ def synthesis_2d(
                 for j in range(width):
                     out[j] = u0 * l0[j] + u1 * l1[j] + v0 * h0[j] + v1 * h1[j]
                 continue
+            if counts[0] == 3 and counts[1] == 4:
+                # cdf97's even rows: one pass (not one per tap), each sum in the order of the
+                # general loop below, so the same bits.
+                l0, l1, l2 = rings[0, slots[0, 0]], rings[0, slots[0, 1]], rings[0, slots[0, 2]]
+                h0, h1 = rings[1, slots[1, 0]], rings[1, slots[1, 1]]
+                h2, h3 = rings[1, slots[1, 2]], rings[1, slots[1, 3]]
+                u0, u1, u2 = weights[0, 0], weights[0, 1], weights[0, 2]
+                v0, v1, v2, v3 = weights[1, 0], weights[1, 1], weights[1, 2], weights[1, 3]
+                for j in range(width):
+                    out[j] = (
+                        u0 * l0[j]
+                        + u1 * l1[j]
+                        + u2 * l2[j]
+                        + v0 * h0[j]
+                        + v1 * h1[j]
+                        + v2 * h2[j]
+                        + v3 * h3[j]
+                    )
+                continue
+            if counts[0] == 4 and counts[1] == 5:  # cdf97's odd rows
+                l0, l1 = rings[0, slots[0, 0]], rings[0, slots[0, 1]]
+                l2, l3 = rings[0, slots[0, 2]], rings[0, slots[0, 3]]
+                h0, h1 = rings[1, slots[1, 0]], rings[1, slots[1, 1]]
+                h2, h3, h4 = rings[1, slots[1, 2]], rings[1, slots[1, 3]], rings[1, slots[1, 4]]
+                u0, u1, u2, u3 = weights[0, 0], weights[0, 1], weights[0, 2], weights[0, 3]
+                v0, v1, v2 = weights[1, 0], weights[1, 1], weights[1, 2]
+                v3, v4 = weights[1, 3], weights[1, 4]
+                for j in range(width):
+                    out[j] = (
+                        u0 * l0[j]
+                        + u1 * l1[j]
+                        + u2 * l2[j]
+                        + u3 * l3[j]
+                        + v0 * h0[j]
+                        + v1 * h1[j]
+                        + v2 * h2[j]
+                        + v3 * h3[j]
+                        + v4 * h4[j]
+                    )
+                continue
             for j in range(width):
                 out[j] = 0
             for half in range(2):
@@ -395,6 +520,13 @@ def synthesis_2d(
 # --------------------------------------------------------------------------------------------
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _rounded_into(v, lo, hi):
+    """``clip(rint(v), lo, hi)``, NaN → 0: the same values as the general loop below."""
+    v = np.rint(v) if v == v else 0.0
+    return min(max(v, lo), hi)
+
+
 @njit(nogil=True, cache=True)
 def colour_to_integers(src, matrix, use_matrix, lo, hi, out, row_lo, row_hi):
     """``out = clip(rint(matrix @ src), lo, hi)`` per pixel (NaN → 0), rows ``[row_lo, row_hi)``.
@@ -404,6 +536,20 @@ def colour_to_integers(src, matrix, use_matrix, lo, hi, out, row_lo, row_hi):
     the NumPy version made five full-size float64 copies of a decoded picture.
     """
     cols, channels = src.shape[1], src.shape[2]
+    if use_matrix and channels == 3:
+        # The common case (a colour picture), without a branch per sample, so it vectorises.
+        m00, m01, m02 = matrix[0, 0], matrix[0, 1], matrix[0, 2]
+        m10, m11, m12 = matrix[1, 0], matrix[1, 1], matrix[1, 2]
+        m20, m21, m22 = matrix[2, 0], matrix[2, 1], matrix[2, 2]
+        for i in range(row_lo, row_hi):
+            row = src[i]
+            dest = out[i]
+            for j in range(cols):
+                y, cb, cr = row[j, 0], row[j, 1], row[j, 2]
+                dest[j, 0] = _rounded_into(m00 * y + m01 * cb + m02 * cr, lo, hi)
+                dest[j, 1] = _rounded_into(m10 * y + m11 * cb + m12 * cr, lo, hi)
+                dest[j, 2] = _rounded_into(m20 * y + m21 * cb + m22 * cr, lo, hi)
+        return
     for i in range(row_lo, row_hi):
         for j in range(cols):
             pixel = src[i, j]
@@ -464,13 +610,11 @@ def deadzone_quantize(values, inverse_step, rounding, largest, out):
 def dequantize(q, offset, step, out):
     """``out = sign(q) · (|q| + offset) · step`` for ``q != 0``, and 0 where ``q == 0``."""
     for k in range(q.size):
-        v = q[k]
-        if v > 0:
-            out[k] = (float(v) + offset) * step
-        elif v < 0:
-            out[k] = -(float(-np.int64(v)) + offset) * step
-        else:
-            out[k] = 0.0
+        v = np.int64(q[k])
+        # Selects rather than branches, so that it vectorises; the same values as
+        # ``(v + offset) * step`` for positive ``v``, negated for negative ones.
+        scaled = (float(abs(v)) + offset) * step
+        out[k] = 0.0 if v == 0 else (scaled if v > 0 else -scaled)
 
 
 @njit(nogil=True, cache=True)
