@@ -1,0 +1,159 @@
+"""Rate control codes few times: the closed loop once where the target is predicted, plus at
+most one correction, and the final result is entropy-coded once per closed loop.
+
+The counts come from wrapping the coder and the quantizer where the rate control looks them up
+(``wavecore.codec.ratecontrol``), so they count what really runs.  The targets' accuracy is
+asserted alongside (97.5-100 % of the bpp budget, the quality within 0.05 dB above the target,
+the tolerance met), since a search that codes less must not land less well.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pytest
+
+from wavecore import decode, encode_curve, encode_image, encode_surface
+from wavecore.codec import ratecontrol
+
+
+@dataclass
+class Calls:
+    """What one encode ran: open- and closed-loop quantizations, and entropy codings split by
+    whether they coded a closed-loop result (a candidate for the bundle) or an open-loop trial."""
+
+    open_loops: int = 0
+    closed_loops: int = 0
+    trial_codings: int = 0
+    final_codings: int = 0
+    closed_results: list[int] = field(default_factory=list)
+
+
+@pytest.fixture
+def calls(monkeypatch: pytest.MonkeyPatch) -> Iterator[Calls]:
+    seen = Calls()
+    quantize, code = ratecontrol.quantize_bands, ratecontrol.encode_levels
+
+    def counted_quantize(*args: Any, **kwargs: Any) -> Any:
+        q, params = quantize(*args, **kwargs)
+        if kwargs.get("refine") == 0:
+            seen.open_loops += 1
+        else:
+            seen.closed_loops += 1
+            seen.closed_results.append(id(q))
+        return q, params
+
+    def counted_code(q: Any, **kwargs: Any) -> Any:
+        if id(q) in seen.closed_results:
+            seen.final_codings += 1
+        else:
+            seen.trial_codings += 1
+        return code(q, **kwargs)
+
+    monkeypatch.setattr(ratecontrol, "quantize_bands", counted_quantize)
+    monkeypatch.setattr(ratecontrol, "encode_levels", counted_code)
+    yield seen
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    mse = float(np.mean((a.astype(float) - b.astype(float)) ** 2))
+    return math.inf if mse == 0 else 10 * math.log10(255.0**2 / mse)
+
+
+def sawtooth(size: int) -> np.ndarray:
+    """Sharp ramps in three channels: the request of ``benchmarks/first_run.py --serve``, whose
+    size jumps with the step (the bpp search used to run six closed loops on it)."""
+    y, x = np.mgrid[:size, :size]
+    return np.stack([x % 256, y % 256, (x + y) % 256], -1).astype(np.uint8)
+
+
+def scikit_image(name: str) -> np.ndarray:
+    data = pytest.importorskip(
+        "skimage.data", reason="the photographs come from scikit-image (the test extra)"
+    )
+    image = np.asarray(getattr(data, name)())
+    return image[::2, ::2] if name == "astronaut" else image  # 256 × 256 RGB
+
+
+@pytest.mark.parametrize(
+    ("picture", "wavelet", "bpp"),
+    [
+        ("camera", "cdf97", 1.0),
+        ("coins", "cdf97", 0.5),
+        ("astronaut", "cdf97", 2.0),
+        ("camera", "bspline2", 1.0),
+        ("coins", "bspline2", 2.0),
+        ("astronaut", "bspline2", 0.5),
+    ],
+)
+def test_bpp_runs_the_closed_loop_at_most_twice_and_codes_it_once_each(
+    calls: Calls, picture: str, wavelet: str, bpp: float
+) -> None:
+    image = scikit_image(picture)
+    bundle = encode_image(image, wavelet=wavelet, bpp=bpp)
+    actual = 8 * len(bundle) / (image.shape[0] * image.shape[1])
+    assert 0.975 * bpp <= actual <= bpp
+    # Before, every trial was a closed loop (2 to 4 on these pictures, 6 on the sawtooth).
+    assert 1 <= calls.closed_loops <= 2
+    assert calls.final_codings == calls.closed_loops  # each closed loop coded exactly once
+    # The trials are open-loop quantizations, each coded once (and a handful suffice).
+    assert calls.trial_codings == calls.open_loops <= 12
+
+
+def test_bpp_runs_one_closed_loop_on_the_first_run_picture(calls: Calls) -> None:
+    image = sawtooth(512)
+    bundle = encode_image(image, bpp=1.0)
+    assert 0.975 <= 8 * len(bundle) / image.shape[0] ** 2 <= 1.0
+    assert (calls.closed_loops, calls.final_codings) == (1, 1)
+
+
+@pytest.mark.parametrize(
+    ("picture", "wavelet", "target"),
+    [
+        ("camera", "cdf97", 40.0),
+        ("coins", "cdf97", 32.0),
+        ("astronaut", "cdf97", 45.0),
+        ("camera", "bspline2", 40.0),
+        ("coins", "bspline2", 40.0),
+    ],
+)
+def test_quality_codes_once_with_at_most_two_closed_loops(
+    calls: Calls, picture: str, wavelet: str, target: float
+) -> None:
+    image = scikit_image(picture)
+    bundle = encode_image(image, wavelet=wavelet, quality=target)
+    assert target <= psnr(decode(bundle), image) <= target + 0.05
+    assert 1 <= calls.closed_loops <= 2
+    assert calls.final_codings == 1 and calls.trial_codings == 0
+
+
+def test_surfaces_quality_codes_once(calls: Calls) -> None:
+    # Small smooth grids have errors that jump with the step, so the closed loop may run more
+    # often there (as before); the bundle is still coded once.
+    y, x = np.mgrid[0:1:65j, 0:1:65j]
+    grid = np.sin(5 * x) * np.cos(3 * y) + 0.3 * x * y
+    encode_surface(grid, quality=45.0)
+    assert calls.closed_loops >= 1
+    assert calls.final_codings == 1 and calls.trial_codings == 0
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_tolerance_bisects_in_open_loop_and_codes_once(calls: Calls, closed: bool) -> None:
+    t = np.linspace(0, 2 * np.pi, 3000, endpoint=not closed)
+    points = np.stack([np.cos(t) + 0.1 * np.cos(7 * t), np.sin(t) + 0.05 * np.sin(13 * t)], -1)
+    tolerance = 2e-3
+    bundle = encode_curve(points, closed=closed, tolerance=tolerance)
+    assert np.max(np.linalg.norm(decode(bundle) - points, axis=1)) <= tolerance
+    # One closed loop at the open loop's step, then a bounded bisection upwards (it used to
+    # be one closed loop per bisection step, about 20).
+    assert 1 <= calls.closed_loops <= 5
+    assert calls.final_codings + calls.trial_codings == 1
+
+
+def test_keep_runs_one_closed_loop_and_one_coding(calls: Calls) -> None:
+    encode_image(sawtooth(128), keep=0.2)
+    assert (calls.closed_loops, calls.final_codings, calls.trial_codings) == (1, 1, 0)
