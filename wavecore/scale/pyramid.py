@@ -170,7 +170,7 @@ def write_pyramid(
             )
         )
     group.attrs.update(_ome_metadata(name, len(pyramid), wavelet, codec, tile))
-    da.store(pyramid, targets, lock=False)
+    da.store(pyramid, targets, lock=False)  # type: ignore[arg-type]
     stored = sum(p.stat().st_size for p in Path(store).rglob("*") if p.is_file())
     stored -= sum(p.stat().st_size for p in Path(store).rglob("zarr.json"))
     return PyramidInfo([tuple(p.shape) for p in pyramid], stored, int(level0.nbytes))
@@ -227,8 +227,9 @@ def read_region(
         ``(h, w, C)``, or ``(h, w)`` for one channel, in the image's dtype.
     """
     try:
-        group = zarr.open_group(str(store), mode="r")
-        count = len(group.attrs["ome"]["multiscales"][0]["datasets"])
+        group: Any = zarr.open_group(str(store), mode="r")
+        attrs: Any = group.attrs
+        count = len(attrs["ome"]["multiscales"][0]["datasets"])
     except (FileNotFoundError, KeyError, IndexError, TypeError, ValueError) as exc:
         msg = f"{store} is not a pyramid written by wavecore encode ({exc})"
         raise InvalidParameter(msg) from None
