@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import importlib.metadata
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -315,3 +317,22 @@ def test_xarray_to_zarr_encoding(tmp_path: Path, zarr_format: int) -> None:
     ds.to_zarr(store, encoding=encoding, zarr_format=zarr_format, consolidated=False)
     back = xr.open_zarr(store, consolidated=False)
     assert largest_error(back["t"].values, field) <= 0.02
+
+
+@pytest.mark.parametrize("missing", ["zarr", "numcodecs"])
+def test_without_the_extra_the_error_names_it(missing: str) -> None:
+    code = (
+        "import sys\n"
+        f"sys.modules[{missing!r}] = None\n"
+        "import wavecore\n"
+        "assert wavecore.decode\n"
+        "try:\n"
+        "    import wavecore.zarr\n"
+        "except ModuleNotFoundError as exc:\n"
+        "    print(exc)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    )
+    assert "pip install 'wavecore[zarr]'" in done.stdout
+    assert missing in done.stdout
