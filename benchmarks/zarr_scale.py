@@ -86,7 +86,8 @@ def start_sampling(dask_worker: Any) -> int:
 
     process = psutil.Process()
     baseline = process.memory_info().rss
-    state = {"peak": baseline, "stop": False}
+    cpu = process.cpu_times()
+    state = {"peak": baseline, "stop": False, "cpu": cpu.user + cpu.system}
 
     def run() -> None:
         while not state["stop"]:
@@ -100,10 +101,14 @@ def start_sampling(dask_worker: Any) -> int:
 
 
 def stop_sampling(dask_worker: Any) -> dict[str, int]:
+    import psutil
+
     state, thread, baseline = dask_worker.wavecore_sampler
     state["stop"] = True
     thread.join()
-    return {"baseline": int(baseline), "peak": int(state["peak"])}
+    cpu = psutil.Process().cpu_times()
+    seconds = cpu.user + cpu.system - state["cpu"]
+    return {"baseline": int(baseline), "peak": int(state["peak"]), "cpu_seconds": seconds}
 
 
 def warm_up() -> bool:
@@ -203,12 +208,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pyramid", type=int, default=0, help="also an RGB pyramid this side")
     parser.add_argument("--pyramid-tile", type=int, default=1024)
     parser.add_argument("--pyramid-lossless", action="store_true", help="lossless, not 40 dB")
+    parser.add_argument(
+        "--memory-chunks",
+        default="",
+        help="only measure one process's peak memory coding chunks of these sides (256,512,1024)",
+    )
     parser.add_argument("--json", type=Path, help="write the figures here too")
     parser.add_argument("--keep", type=Path, help="keep the stores in this folder")
     args = parser.parse_args(argv)
 
     load_start = Path("/proc/loadavg").read_text().split()[:3]
     print(f"load average at start: {' '.join(load_start)}; cpus: {os.cpu_count()}")
+    if args.memory_chunks:
+        return memory_curve([int(n) for n in args.memory_chunks.split(",")])
     work = args.keep or Path(tempfile.mkdtemp(prefix="zarr_scale_"))
     work.mkdir(parents=True, exist_ok=True)
     size, chunk = args.size, args.chunk
@@ -234,13 +246,19 @@ def main(argv: list[str] | None = None) -> int:
             run["stored_bytes"] = stored_bytes(store)
             run["throughput_per_worker"] = raw / run["seconds"] / workers
             peaks = [m["peak"] for m in run["memory"]]
+            cpu = sum(m["cpu_seconds"] for m in run["memory"])
+            run["cpu_seconds"] = cpu
+            run["throughput_per_cpu_second"] = raw / cpu
+            run["cpu_share"] = cpu / (run["seconds"] * workers)
             above = [m["peak"] - m["baseline"] for m in run["memory"]]
             run["peak_rss_max"] = max(peaks)
             run["peak_above_baseline_max"] = max(above)
             runs[workers] = run
             print(
                 f"{workers} worker(s): {run['seconds']:.1f} s, "
-                f"{run['throughput_per_worker'] / 1e6:.2f} MB/s per worker; "
+                f"{run['throughput_per_worker'] / 1e6:.2f} MB/s per worker; workers' CPU "
+                f"{cpu:.1f} s ({run['cpu_share']:.0%} of their wall time; "
+                f"{raw / cpu / 1e6:.2f} MB per CPU-second); "
                 f"peak RSS per worker {max(peaks) / 2**20:.0f} MiB "
                 f"({max(above) / 2**20:.0f} MiB above its idle size = "
                 f"{max(above) / chunk_bytes:.1f} × the {chunk_bytes / 2**20:.0f} MiB chunk)"
@@ -281,6 +299,12 @@ def main(argv: list[str] | None = None) -> int:
         results["speedup_1_to_2"] = speedup
         results["efficiency_1_to_2"] = speedup / 2
         print(f"1 → 2 workers: speed-up {speedup:.2f}×, parallel efficiency {speedup / 2:.0%}")
+        # On a shared machine the workers get what the others leave: the CPU time per MB
+        # says what the coding itself costs, and its change from 1 to 2 workers what the
+        # parallel run adds (scheduling, transfers); 100 % means none.
+        cpu_efficiency = runs[1]["cpu_seconds"] / runs[2]["cpu_seconds"]
+        results["cpu_efficiency_1_to_2"] = cpu_efficiency
+        print(f"CPU seconds 1 worker / 2 workers: {cpu_efficiency:.0%} (100 %: no parallel cost)")
     print(f"\ncompression ratio at max_error {results['bound']:.4g} (raw {raw / 2**20:.0f} MiB):")
     print(f"  {'codec':<9} {'bytes':>12} {'ratio':>8} {'largest error / bound':>22} {'MB/s':>8}")
     print(f"  {'wavecore':<9} {ours:>12} {raw / ours:>8.1f} "
@@ -304,6 +328,33 @@ def main(argv: list[str] | None = None) -> int:
         args.json.write_text(json.dumps(results, indent=1) + "\n")
     if args.keep is None:
         shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+def memory_curve(sides: list[int]) -> int:
+    """Peak resident memory above the idle process while one chunk is coded, per chunk size."""
+    from types import SimpleNamespace
+
+    from wavecore.zarr import decode_chunk, encode_chunk
+
+    warm_up()
+    for side in sides:
+        data = field_block(np.empty((side, side)), 4 * side, side, (1, 1))
+        bound = 1e-3 * float(np.ptp(data))
+        holder = SimpleNamespace()
+        start_sampling(holder)
+        start = time.perf_counter()
+        coded = encode_chunk(data, {"max_error": bound})
+        seconds = time.perf_counter() - start
+        decode_chunk(coded)
+        memory = stop_sampling(holder)
+        above = memory["peak"] - memory["baseline"]
+        print(
+            f"chunk {side}×{side} float32 ({data.nbytes / 2**20:.2f} MiB): peak "
+            f"{above / 2**20:.1f} MiB above the process before it = "
+            f"{above / data.nbytes:.1f} × the chunk; encode {seconds:.2f} s"
+        )
+    print(f"load average at end: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
     return 0
 
 
