@@ -347,11 +347,11 @@ def _corrections(
     integer = dtype.kind in _INTEGER_KINDS
     step = 2.0 * math.floor(bound) + 1.0 if integer else 2.0 * bound
     exact_values = flat.astype(np.float64)
-    error = np.abs(_cast(decoded.reshape(-1), dtype).astype(np.float64) - exact_values)
-    if integer:
-        error = np.abs(
-            _cast(decoded.reshape(-1), dtype).astype(np.int64) - flat.astype(np.int64)
-        ).astype(np.float64)
+    as_stored = _cast(decoded.reshape(-1), dtype)
+    if integer:  # in whole numbers: float64 would round values past 2**53
+        error = np.abs(as_stored.astype(np.int64) - flat.astype(np.int64)).astype(np.float64)
+    else:
+        error = np.abs(as_stored.astype(np.float64) - exact_values)
     over = np.flatnonzero((error > bound) & finite_flat)
     residual = exact_values[over] - decoded.reshape(-1)[over]
     with np.errstate(over="ignore", invalid="ignore"):
@@ -485,8 +485,8 @@ def _checked_chunk(array: Any) -> np.ndarray:
             "a Zarr format 2 array passes its chunks' shape only without filters"
         )
         raise InvalidParameter(msg)
-    if any(n >= 2**32 for n in arr.shape):
-        msg = f"chunk shape {arr.shape} has a side of 2**32 or more"
+    if arr.size >= 2**32:
+        msg = f"chunk shape {arr.shape} holds 2**32 values or more; use smaller chunks"
         raise InvalidParameter(msg)
     return np.ascontiguousarray(arr, dtype=arr.dtype.newbyteorder("="))
 
