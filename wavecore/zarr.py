@@ -10,11 +10,11 @@ both as a codec and builds no scheduler of its own.  Two classes, one chunk form
   the ``zarr.codecs`` entry point): ``zarr.create_array(..., serializer={"name": "wavecore",
   "configuration": {"max_error": 0.01}})``.
 
-Configuration (both): ``wavelet`` (default ``"bspline2"``: about half cdf97's bytes on smooth
-fields at the same bound), ``level`` (default automatic) and at most one target: ``max_error``
-(an absolute bound that holds on every value), ``psnr`` (dB against each chunk's range, met or
-exceeded), ``bpp`` (bits per value of each coded slice's bundle) or ``lossless=True`` (integer
-data, bit-exact).  No target: ``psnr=60``.
+Configuration (both): ``wavelet`` (default ``"bspline2"``: in a spot check on one smooth
+field, about half cdf97's bytes at the same bound), ``level`` (default automatic) and at most
+one target: ``max_error`` (an absolute bound that holds on every value), ``psnr`` (dB against
+each chunk's range, met or exceeded), ``bpp`` (bits per value of each coded slice's bundle) or
+``lossless=True`` (integer data, bit-exact).  No target: ``psnr=60``.
 
 Chunks of any shape (partial edge chunks too) of 2-D and 3-D float or integer data.  A 3-D
 chunk is coded as a stack of 2-D slices along its first axis (today's public API codes 2-D
