@@ -7,6 +7,14 @@
     wavecore inspect BUNDLE [--json]
     wavecore serve [--host H] [--port P] [--workers N]
 
+    wavecore encode BIG.tif|TILES/|BIG.npy OUT.zarr [--quality Q | --max-error E | --lossless]
+                    [--tile T] [--workers N | --scheduler ADDRESS]
+    wavecore decode STORE.zarr OUT.npy|OUT.tif [--level K] [--region Y0:Y1,X0:X1]
+
+An ``OUT`` ending in ``.zarr`` makes a Zarr store with a multiscale pyramid (OME-Zarr) from an
+image of any size, tile by tile with Dask (``wavecore.scale``; needs the zarr extra,
+``pip install 'wavecore[zarr]'``); ``decode`` of a ``.zarr`` reads one window at one level.
+
 ``IN``/``BUNDLE`` may be a file, a folder or a quoted glob (``"photos/*.png"``); with several
 inputs ``OUT`` is a folder, a progress bar runs on stderr and a summary table follows.
 Images are read with Pillow (anything it reads); ``.json`` inputs are curves
@@ -33,6 +41,7 @@ import importlib
 import io
 import json
 import logging
+import re
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -367,6 +376,8 @@ def _read_grid(path: Path) -> np.ndarray:
 
 
 def cmd_encode(args: argparse.Namespace) -> int:
+    if args.output.rstrip("/").lower().endswith(ZARR_SUFFIX):
+        return cmd_encode_zarr(args)
     files, many = expand(args.input, ENCODE_SUFFIXES)
     targets = {
         name: getattr(args, name)
@@ -455,6 +466,11 @@ def _decode_curve_file(
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
+    if args.bundle.rstrip("/").lower().endswith(ZARR_SUFFIX):
+        return cmd_decode_zarr(args)
+    if args.region is not None:
+        msg = "--region applies to a Zarr store (STORE.zarr)"
+        raise CLIError(msg)
     files, many = expand(args.bundle, BUNDLE_SUFFIXES)
 
     def work(path: Path) -> Row:
@@ -493,6 +509,126 @@ def cmd_decode(args: argparse.Namespace) -> int:
         return Row(path.name, values)
 
     return run_many(files, many, work, ["kind", "shape", "output", "seconds"], quiet=args.quiet)
+
+
+# --------------------------------------------------------------------------------------------
+# Gigapixel images: Zarr pyramids (the zarr extra)
+# --------------------------------------------------------------------------------------------
+
+ZARR_SUFFIX = ".zarr"
+ZARR_EXTRA = "pip install 'wavecore[zarr]'"
+
+
+def _scale_module() -> Any:
+    """wavecore.scale, or a one-line error naming the zarr extra."""
+    try:
+        return importlib.import_module("wavecore.scale")
+    except ModuleNotFoundError as exc:
+        msg = f"Zarr stores need the zarr extra ({exc.name} is missing): {ZARR_EXTRA}"
+        raise CLIError(msg) from None
+
+
+class _DaskWorkers:
+    """A dask.distributed client for the command's duration: local workers or a cluster."""
+
+    def __init__(self, workers: int | None, scheduler: str | None) -> None:
+        self.workers, self.scheduler = workers, scheduler
+        self.cluster: Any = None
+        self.client: Any = None
+
+    def __enter__(self) -> _DaskWorkers:
+        if self.workers is None and self.scheduler is None:
+            return self  # Dask's own local threads
+        from dask.distributed import Client, LocalCluster
+
+        if self.scheduler is not None:
+            self.client = Client(self.scheduler)
+        else:
+            self.cluster = LocalCluster(
+                n_workers=self.workers, threads_per_worker=1, dashboard_address=None
+            )
+            self.client = Client(self.cluster)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.client is not None:
+            self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def cmd_encode_zarr(args: argparse.Namespace) -> int:
+    """An image of any size into a Zarr pyramid, tile by tile."""
+    scale = _scale_module()
+    wrong = [n for n in ("keep", "bpp", "tolerance") if getattr(args, n) is not None]
+    if wrong or args.kind not in (None, "image"):
+        msg = f"--{(wrong or ['kind'])[0]} does not apply to a Zarr pyramid"
+        raise CLIError(msg)
+    config: dict[str, Any] = {} if args.wavelet is None else {"wavelet": args.wavelet}
+    if args.lossless:
+        config["lossless"] = True
+    elif args.max_error is not None:
+        config["max_error"] = args.max_error
+    else:
+        config["psnr"] = 40.0 if args.quality is None else args.quality
+    if args.level is not None:
+        config["level"] = args.level
+    if not Path(args.input).exists():
+        raise CLIError(f"{args.input} does not exist")
+    start = time.perf_counter()
+    source = scale.open_image_source(args.input, tile=args.tile)
+    with _DaskWorkers(args.workers, args.scheduler):
+        info = scale.write_pyramid(
+            source, args.output, config=config, tile=args.tile, name=Path(args.input).stem
+        )
+    if not args.quiet:
+        shape = "×".join(str(s) for s in source.shape)
+        levels = ", ".join("×".join(str(s) for s in shape[1:]) for shape in info.shapes)
+        print(f"{args.input}: {shape} → {args.output}")
+        print(f"levels: {levels}")
+        print(
+            f"stored {_size(info.stored_bytes)} of {_size(info.raw_bytes)} "
+            f"(every level; ratio {info.raw_bytes / max(info.stored_bytes, 1):.1f} to the "
+            f"full-size pixels), {time.perf_counter() - start:.1f} s"
+        )
+    return 0
+
+
+def _region(text: str) -> tuple[int, int, int, int]:
+    match = re.fullmatch(r"\s*(\d+):(\d+)\s*,\s*(\d+):(\d+)\s*", text)
+    if not match:
+        msg = f"{text!r} is not a region Y0:Y1,X0:X1 (full-resolution pixels)"
+        raise argparse.ArgumentTypeError(msg)
+    y0, y1, x0, x1 = (int(g) for g in match.groups())
+    return y0, y1, x0, x1
+
+
+def cmd_decode_zarr(args: argparse.Namespace) -> int:
+    """One window of a pyramid at one level, into .npy or .tif."""
+    scale = _scale_module()
+    start = time.perf_counter()
+    if not Path(args.bundle).is_dir():
+        raise CLIError(f"{args.bundle} does not exist")
+    arr = scale.read_region(args.bundle, level=args.level, region=args.region)
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".npy":
+        out.write_bytes(_npy_bytes(arr))
+    elif suffix in (".tif", ".tiff"):
+        import tifffile
+
+        tifffile.imwrite(out, arr, photometric="rgb" if arr.ndim == 3 else "minisblack")
+    elif suffix in (".png", ".webp"):
+        out.write_bytes(_image_file_bytes(arr, suffix))
+    else:
+        msg = f"a window of a Zarr pyramid is written as .npy, .tif, .png or .webp, not {suffix!r}"
+        raise CLIError(msg)
+    if not args.quiet:
+        shape = "×".join(str(s) for s in arr.shape)
+        print(f"{out}: {shape} {arr.dtype}, level {args.level}, "
+              f"{time.perf_counter() - start:.2f} s")  # fmt: skip
+    return 0
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
@@ -606,7 +742,9 @@ def build_parser() -> argparse.ArgumentParser:
     target.add_argument("--bpp", type=float, help="target bits per pixel (images)")
     target.add_argument("--tolerance", type=float, help="largest point deviation (curves)")
     target.add_argument("--lossless", action="store_true", help="bit-exact (8/16-bit images)")
-    target.add_argument("--max-error", type=float, help="grids: largest error on every sample")
+    target.add_argument(
+        "--max-error", type=float, help="grids and OUT.zarr: largest error on every value"
+    )
     target.add_argument("--rmse", type=float, help="grids: target root-mean-square error")
     target.add_argument("--psnr", type=float, help="grids: target PSNR in dB (against the range)")
     enc.add_argument(
@@ -624,6 +762,10 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument("--closed", action="store_true", help="closed curve / closed first axis")
     enc.add_argument("--closed-v", action="store_true", help="surface: closed second axis")
     enc.add_argument("-q", "--quiet", action="store_true", help="no progress bar or table")
+    enc.add_argument("--tile", type=int, default=1024, help="OUT.zarr: chunk side (default 1024)")
+    workers = enc.add_mutually_exclusive_group()
+    workers.add_argument("--workers", type=int, help="OUT.zarr: local Dask worker processes")
+    workers.add_argument("--scheduler", help="OUT.zarr: a running Dask scheduler's address")
     enc.set_defaults(run=cmd_encode)
 
     dec = sub.add_parser("decode", help="decode bundles into images, curves or surfaces")
@@ -635,6 +777,9 @@ def build_parser() -> argparse.ArgumentParser:
                                           ".svg"],
                      help="output suffix when OUT is a folder")  # fmt: skip
     dec.add_argument("-q", "--quiet", action="store_true", help="no progress bar or table")
+    dec.add_argument(
+        "--region", type=_region, help="STORE.zarr: window Y0:Y1,X0:X1 in full-resolution pixels"
+    )
     dec.set_defaults(run=cmd_decode)
 
     ins = sub.add_parser("inspect", help="describe bundles without decoding them")

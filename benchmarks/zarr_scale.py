@@ -1,0 +1,400 @@
+"""wavecore as a Zarr codec on dask.distributed: throughput, scaling, memory, ratio against peers.
+
+Run with ``.venv/bin/python benchmarks/zarr_scale.py`` (the issue's 16 384 × 16 384 float32
+field, 1 GiB) or ``--size 2048`` for a quick look; ``--pyramid 8192`` adds a synthesised RGB
+image of that side written as a Zarr pyramid (``wavecore.scale.write_pyramid``).
+
+The field is smooth (a sum of random plane waves whose amplitude falls as 1/f², fixed seed),
+made chunk by chunk from the global coordinates, so it is never whole in memory.  It is written
+into a Zarr store (format 3, the ``wavecore`` serializer) at ``max_error = 1e-3 × range``:
+
+* once on a ``LocalCluster`` of 1 worker process and once on 2 (one thread each, and one
+  library thread: ``WAVECORE_THREADS=1``), each after a warm-up that loads the compiled
+  kernels; throughput = raw bytes / wall seconds of ``store``, per worker; parallel efficiency
+  = throughput(2) / (2 × throughput(1));
+* peak memory per worker: each worker samples its own resident set every 20 ms during the
+  write (psutil); reported as the peak, and as the peak above the worker's resident set before
+  the write, against the chunk's bytes (the target: ≤ 4 × chunk + a constant);
+* the store is read back in parallel and its largest error over every value is checked
+  against the bound;
+* the peers code every chunk of the same field on the same cluster at the same bound:
+  numcodecs' Zstd (lossless, level 3), and through imagecodecs ZFP (fixed accuracy), SZ3
+  (absolute bound) and SPERR (point-wise error); their largest errors are measured too.
+
+The machine may be shared: the load average is printed at the start and the end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("WAVECORE_THREADS", "1")  # one thread per worker: scaling by workers
+
+import dask.array as da
+import numpy as np
+import zarr
+from dask.distributed import Client, LocalCluster
+
+SEED = 20261122
+WAVES = 40
+
+
+def _waves(seed: int) -> list[tuple[float, float, float, float]]:
+    rng = np.random.default_rng(seed)
+    waves = []
+    for _ in range(WAVES):
+        f = rng.uniform(1, 48)  # cycles over the whole field
+        angle = rng.uniform(0, 2 * np.pi)
+        waves.append((f * np.cos(angle), f * np.sin(angle), rng.uniform(0, 2 * np.pi), f**-2))
+    return waves
+
+
+def field_block(template: np.ndarray, size: int, chunk: int, block_id: tuple[int, int]) -> Any:
+    """The field's values over one chunk (float32), from the global coordinates."""
+    y0, x0 = block_id[0] * chunk, block_id[1] * chunk
+    y = (y0 + np.arange(template.shape[0]))[:, None] / size
+    x = (x0 + np.arange(template.shape[1]))[None, :] / size
+    out = np.zeros(template.shape, dtype=np.float64)
+    for fy, fx, phase, amplitude in _waves(SEED):
+        out += amplitude * np.sin(2 * np.pi * (fy * y + fx * x) + phase)
+    return out.astype(np.float32)
+
+
+def make_field(size: int, chunk: int) -> Any:
+    template = da.empty((size, size), chunks=chunk, dtype=np.float32)
+    return template.map_blocks(field_block, size, chunk, dtype=np.float32)
+
+
+# --------------------------------------------------------------------------------------------
+# Worker-side memory sampling
+# --------------------------------------------------------------------------------------------
+
+
+def start_sampling(dask_worker: Any) -> int:
+    """Start sampling this worker's resident set (kept on the worker object between calls)."""
+    import psutil
+
+    process = psutil.Process()
+    baseline = process.memory_info().rss
+    cpu = process.cpu_times()
+    state = {"peak": baseline, "stop": False, "cpu": cpu.user + cpu.system}
+
+    def run() -> None:
+        while not state["stop"]:
+            state["peak"] = max(state["peak"], process.memory_info().rss)
+            time.sleep(0.02)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    dask_worker.wavecore_sampler = (state, thread, baseline)
+    return int(baseline)
+
+
+def stop_sampling(dask_worker: Any) -> dict[str, int]:
+    import psutil
+
+    state, thread, baseline = dask_worker.wavecore_sampler
+    state["stop"] = True
+    thread.join()
+    cpu = psutil.Process().cpu_times()
+    seconds = cpu.user + cpu.system - state["cpu"]
+    return {"baseline": int(baseline), "peak": int(state["peak"]), "cpu_seconds": seconds}
+
+
+def warm_up() -> bool:
+    from wavecore.zarr import decode_chunk, encode_chunk
+
+    probe = field_block(np.empty((96, 80)), 1024, 96, (1, 1))
+    decode_chunk(encode_chunk(probe, {"max_error": 1e-3 * float(np.ptp(probe))}))
+    return True
+
+
+# --------------------------------------------------------------------------------------------
+# Peers, chunk by chunk on the cluster
+# --------------------------------------------------------------------------------------------
+
+
+def peer_chunk(size: int, chunk: int, block_id: tuple[int, int], bound: float) -> dict[str, Any]:
+    import imagecodecs
+    import numcodecs
+
+    rows = min(chunk, size - block_id[0] * chunk)
+    cols = min(chunk, size - block_id[1] * chunk)
+    data = field_block(np.empty((rows, cols)), size, chunk, block_id)
+    out: dict[str, Any] = {}
+    coders = {
+        "zstd": (lambda a: numcodecs.Zstd(level=3).encode(a), None),
+        "zfp": (
+            lambda a: imagecodecs.zfp_encode(a, level=bound, mode="a"),
+            imagecodecs.zfp_decode,
+        ),
+        "sz3": (
+            lambda a: imagecodecs.sz3_encode(a, mode="abs", abs=bound),
+            lambda b: imagecodecs.sz3_decode(b, shape=data.shape, dtype=data.dtype),
+        ),
+        "sperr": (
+            lambda a: imagecodecs.sperr_encode(a, level=bound, mode="pwe"),
+            lambda b: imagecodecs.sperr_decode(b),
+        ),
+    }
+    for name, (encode, decode) in coders.items():
+        start = time.perf_counter()
+        coded = bytes(encode(data))
+        seconds = time.perf_counter() - start
+        error = 0.0
+        if decode is not None:
+            back = np.asarray(decode(coded)).reshape(data.shape)
+            error = float(np.max(np.abs(back.astype(np.float64) - data)))
+        out[name] = {"bytes": len(coded), "error": error, "seconds": seconds}
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# The runs
+# --------------------------------------------------------------------------------------------
+
+
+def cluster(workers: int) -> tuple[LocalCluster, Client]:
+    c = LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        memory_limit=None,
+    )
+    return c, Client(c)
+
+
+def stored_bytes(store: Path) -> int:
+    return sum(p.stat().st_size for p in store.rglob("*") if p.is_file() and p.name != "zarr.json")
+
+
+def write_run(client: Client, size: int, chunk: int, bound: float, store: Path) -> dict[str, Any]:
+    client.run(warm_up)
+    field = make_field(size, chunk)
+    target = zarr.create_array(
+        store,
+        shape=field.shape,
+        chunks=(chunk, chunk),
+        dtype="float32",
+        serializer={"name": "wavecore", "configuration": {"max_error": bound}},
+        compressors=None,
+        overwrite=True,
+    )
+    client.run(start_sampling)
+    start = time.perf_counter()
+    field.store(target, lock=False)
+    seconds = time.perf_counter() - start
+    memory = client.run(stop_sampling)
+    return {"seconds": seconds, "memory": list(memory.values())}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--size", type=int, default=16384, help="field side (default 16384)")
+    parser.add_argument("--chunk", type=int, default=512, help="chunk side (default 512)")
+    parser.add_argument("--workers", default="1,2", help="worker counts to time (default 1,2)")
+    parser.add_argument("--no-peers", action="store_true", help="skip the peer codecs")
+    parser.add_argument("--pyramid", type=int, default=0, help="also an RGB pyramid this side")
+    parser.add_argument("--pyramid-tile", type=int, default=1024)
+    parser.add_argument("--pyramid-lossless", action="store_true", help="lossless, not 40 dB")
+    parser.add_argument(
+        "--memory-chunks",
+        default="",
+        help="only measure one process's peak memory coding chunks of these sides (256,512,1024)",
+    )
+    parser.add_argument("--json", type=Path, help="write the figures here too")
+    parser.add_argument("--keep", type=Path, help="keep the stores in this folder")
+    args = parser.parse_args(argv)
+
+    load_start = Path("/proc/loadavg").read_text().split()[:3]
+    print(f"load average at start: {' '.join(load_start)}; cpus: {os.cpu_count()}")
+    if args.memory_chunks:
+        return memory_curve([int(n) for n in args.memory_chunks.split(",")])
+    work = args.keep or Path(tempfile.mkdtemp(prefix="zarr_scale_"))
+    work.mkdir(parents=True, exist_ok=True)
+    size, chunk = args.size, args.chunk
+    raw = size * size * 4
+    chunk_bytes = chunk * chunk * 4
+    results: dict[str, Any] = {"size": size, "chunk": chunk, "raw_bytes": raw}
+    print(f"field {size}×{size} float32 ({raw / 2**20:.0f} MiB), chunks {chunk}×{chunk}")
+
+    counts = [int(w) for w in args.workers.split(",")]
+    runs: dict[int, Any] = {}
+    low = high = None
+    for workers in counts:
+        c, client = cluster(workers)
+        try:
+            if low is None:
+                field = make_field(size, chunk)
+                low, high = (float(v) for v in da.compute(field.min(), field.max()))
+                bound = 1e-3 * (high - low)
+                results.update(range=high - low, bound=bound)
+                print(f"range {high - low:.6g}; max_error = 1e-3 × range = {bound:.6g}")
+            store = work / f"wavecore_{workers}.zarr"
+            run = write_run(client, size, chunk, results["bound"], store)
+            run["stored_bytes"] = stored_bytes(store)
+            run["throughput_per_worker"] = raw / run["seconds"] / workers
+            peaks = [m["peak"] for m in run["memory"]]
+            cpu = sum(m["cpu_seconds"] for m in run["memory"])
+            run["cpu_seconds"] = cpu
+            run["throughput_per_cpu_second"] = raw / cpu
+            run["cpu_share"] = cpu / (run["seconds"] * workers)
+            above = [m["peak"] - m["baseline"] for m in run["memory"]]
+            run["peak_rss_max"] = max(peaks)
+            run["peak_above_baseline_max"] = max(above)
+            runs[workers] = run
+            print(
+                f"{workers} worker(s): {run['seconds']:.1f} s, "
+                f"{run['throughput_per_worker'] / 1e6:.2f} MB/s per worker; workers' CPU "
+                f"{cpu:.1f} s ({run['cpu_share']:.0%} of their wall time; "
+                f"{raw / cpu / 1e6:.2f} MB per CPU-second); "
+                f"peak RSS per worker {max(peaks) / 2**20:.0f} MiB "
+                f"({max(above) / 2**20:.0f} MiB above its idle size = "
+                f"{max(above) / chunk_bytes:.1f} × the {chunk_bytes / 2**20:.0f} MiB chunk)"
+            )
+            if workers == counts[-1]:
+                # Read back in parallel: the bound on every value.
+                back = da.from_zarr(str(store)).astype(np.float64)
+                exact = make_field(size, chunk).astype(np.float64)
+                worst = float(abs(back - exact).max().compute())
+                results["largest_error"] = worst
+                results["largest_error_over_bound"] = worst / results["bound"]
+                print(f"largest error {worst:.6g} = {worst / results['bound']:.4f} × the bound")
+                if not args.no_peers:
+                    n = math.ceil(size / chunk)
+                    futures = client.map(
+                        peer_chunk,
+                        [size] * n * n,
+                        [chunk] * n * n,
+                        [(i, j) for i in range(n) for j in range(n)],
+                        [results["bound"]] * n * n,
+                    )
+                    peers: dict[str, Any] = {}
+                    for part in client.gather(futures):
+                        for name, figures in part.items():
+                            entry = peers.setdefault(name, {"bytes": 0, "error": 0.0, "seconds": 0})
+                            entry["bytes"] += figures["bytes"]
+                            entry["error"] = max(entry["error"], figures["error"])
+                            entry["seconds"] += figures["seconds"]
+                    results["peers"] = peers
+        finally:
+            client.close()
+            c.close()
+    results["runs"] = {str(k): v for k, v in runs.items()}
+    ours = runs[counts[-1]]["stored_bytes"]
+    results["ratio"] = raw / ours
+    if 1 in runs and 2 in runs:
+        speedup = runs[1]["seconds"] / runs[2]["seconds"]
+        results["speedup_1_to_2"] = speedup
+        results["efficiency_1_to_2"] = speedup / 2
+        print(f"1 → 2 workers: speed-up {speedup:.2f}×, parallel efficiency {speedup / 2:.0%}")
+        # On a shared machine the workers get what the others leave: the CPU time per MB
+        # says what the coding itself costs, and its change from 1 to 2 workers what the
+        # parallel run adds (scheduling, transfers); 100 % means none.
+        cpu_efficiency = runs[1]["cpu_seconds"] / runs[2]["cpu_seconds"]
+        results["cpu_efficiency_1_to_2"] = cpu_efficiency
+        print(f"CPU seconds 1 worker / 2 workers: {cpu_efficiency:.0%} (100 %: no parallel cost)")
+    print(f"\ncompression ratio at max_error {results['bound']:.4g} (raw {raw / 2**20:.0f} MiB):")
+    print(f"  {'codec':<9} {'bytes':>12} {'ratio':>8} {'largest error / bound':>22} {'MB/s':>8}")
+    print(f"  {'wavecore':<9} {ours:>12} {raw / ours:>8.1f} "
+          f"{results['largest_error_over_bound']:>22.4f} "
+          f"{runs[counts[-1]]['throughput_per_worker'] / 1e6:>8.2f}")  # fmt: skip
+    for name, entry in results.get("peers", {}).items():
+        rate = raw / entry["seconds"] / 1e6 if entry["seconds"] else float("inf")
+        error = entry["error"] / results["bound"] if name != "zstd" else 0.0
+        print(f"  {name:<9} {entry['bytes']:>12} {raw / entry['bytes']:>8.1f} "
+              f"{error:>22.4f} {rate:>8.2f}")  # fmt: skip
+        entry["ratio"] = raw / entry["bytes"]
+    if "sz3" in results.get("peers", {}):
+        print(f"  wavecore / SZ3 ratio: {results['ratio'] / results['peers']['sz3']['ratio']:.2f}")
+
+    if args.pyramid:
+        results["pyramid"] = pyramid_run(args, work)
+    load_end = Path("/proc/loadavg").read_text().split()[:3]
+    print(f"load average at end: {' '.join(load_end)}")
+    results["load"] = {"start": load_start, "end": load_end}
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1) + "\n")
+    if args.keep is None:
+        shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+def memory_curve(sides: list[int]) -> int:
+    """Peak resident memory above the idle process while one chunk is coded, per chunk size."""
+    from types import SimpleNamespace
+
+    from wavecore.zarr import decode_chunk, encode_chunk
+
+    warm_up()
+    for side in sides:
+        data = field_block(np.empty((side, side)), 4 * side, side, (1, 1))
+        bound = 1e-3 * float(np.ptp(data))
+        holder = SimpleNamespace()
+        start_sampling(holder)
+        start = time.perf_counter()
+        coded = encode_chunk(data, {"max_error": bound})
+        seconds = time.perf_counter() - start
+        decode_chunk(coded)
+        memory = stop_sampling(holder)
+        above = memory["peak"] - memory["baseline"]
+        print(
+            f"chunk {side}×{side} float32 ({data.nbytes / 2**20:.2f} MiB): peak "
+            f"{above / 2**20:.1f} MiB above the process before it = "
+            f"{above / data.nbytes:.1f} × the chunk; encode {seconds:.2f} s"
+        )
+    print(f"load average at end: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
+    return 0
+
+
+def pyramid_run(args: argparse.Namespace, work: Path) -> dict[str, Any]:
+    from wavecore.scale import synthetic_rgb, write_pyramid
+
+    side, tile = args.pyramid, args.pyramid_tile
+    config = {"lossless": True} if args.pyramid_lossless else {"psnr": 40.0}
+    c, client = cluster(2)
+    try:
+        client.run(warm_up)
+        image = synthetic_rgb(side, tile=tile, seed=SEED)
+        client.run(start_sampling)
+        start = time.perf_counter()
+        info = write_pyramid(image, work / "pyramid.zarr", config=config, tile=tile)
+        seconds = time.perf_counter() - start
+        memory = list(client.run(stop_sampling).values())
+    finally:
+        client.close()
+        c.close()
+    raw = side * side * 3
+    peak = max(m["peak"] for m in memory)
+    above = max(m["peak"] - m["baseline"] for m in memory)
+    print(
+        f"\nRGB pyramid {side}×{side} ({raw / 2**20:.0f} MiB), tiles {tile}, {config}, 2 workers: "
+        f"{seconds:.1f} s ({raw / seconds / 1e6:.2f} MB/s), {len(info.shapes)} levels, "
+        f"stored {info.stored_bytes / 2**20:.1f} MiB (ratio {raw / info.stored_bytes:.1f}), "
+        f"peak RSS per worker {peak / 2**20:.0f} MiB ({above / 2**20:.0f} MiB above idle)"
+    )
+    return {
+        "side": side,
+        "tile": tile,
+        "config": config,
+        "seconds": seconds,
+        "levels": [list(s) for s in info.shapes],
+        "stored_bytes": info.stored_bytes,
+        "peak_rss_max": peak,
+        "peak_above_baseline_max": above,
+    }
+
+
+if __name__ == "__main__":
+    sys.exit(main())
