@@ -90,6 +90,9 @@ _OTHER_CLOSED_SIZE_RATIO = 1.0
 #: narrow inside the accepted 97.5-100 %, since open-loop codings are cheap.
 _OPEN_TRIALS_WINDOW = (0.984, 0.991)
 _OPEN_TRIALS_AIM = 0.9875
+#: How much longer a header with the two placeholders is than the real one: each number of
+#: format 2.0's header takes 1 to 10 bytes (wavecore/binheader.py), so at most 2 × 9.
+_PLACEHOLDER_EXCESS = 18
 _LONGEST_FLOAT = 1.2345678901234567e-300  # 23 characters, the longest repr of a positive float
 
 
@@ -606,9 +609,13 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
     plan = encoder.plan
     pixels = plan.shape[0] * plan.shape[1]
     budget = math.floor(bpp * pixels / 8.0)
-    # Stop at anything from 97.5 % (the promise is 97 %; the real header is at most 2 × 23
-    # bytes shorter than the bound): each miss costs a coding.
-    enough = min(budget, max(math.ceil(0.97 * bpp * pixels / 8.0) + 48, math.ceil(0.975 * budget)))
+    # Stop at anything from 97.5 % (the promise is 97 %; the real header is shorter than the
+    # bound by what its two placeholder numbers take beyond the real ones, at most
+    # _PLACEHOLDER_EXCESS bytes): each miss costs a coding.
+    enough = min(
+        budget,
+        max(math.ceil(0.97 * bpp * pixels / 8.0) + _PLACEHOLDER_EXCESS, math.ceil(0.975 * budget)),
+    )
     if budget < 64:  # not even a header fits: say what the smallest bundle would be
         enough = budget = 0
     start: float | None = None
