@@ -336,3 +336,19 @@ def test_without_the_extra_the_error_names_it(missing: str) -> None:
     )
     assert "pip install 'wavecore[zarr]'" in done.stdout
     assert missing in done.stdout
+
+
+def test_max_error_chunks_are_grid_bundles_and_infinities_keep_the_search() -> None:
+    field = np.sin(np.linspace(0, 6, 64))[:, None] * np.cos(np.linspace(0, 4, 48))
+    big_endian = field.astype(">f4")
+    coded = encode_chunk(big_endian, {"max_error": 1e-3})
+    assert coded[4] == 3  # mode 3: wavecore.encode_grid
+    out = decode_chunk(coded)
+    assert out.dtype.kind == "f" and out.dtype.itemsize == 4
+    assert np.max(np.abs(out.astype(np.float64) - big_endian)) <= 1e-3
+    field[5, 7] = np.inf
+    coded = encode_chunk(field, {"max_error": 1e-3})
+    assert coded[4] == 0
+    out = decode_chunk(coded)
+    finite = np.isfinite(field)
+    assert out[5, 7] == np.inf and np.max(np.abs(out[finite] - field[finite])) <= 1e-3
