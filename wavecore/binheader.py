@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from .errors import BundleError
+from .varints import encode_varint, unzigzag, zigzag
 
 __all__ = ["MAX_VARINT_BYTES", "pack", "unpack"]
 
@@ -113,22 +114,6 @@ _CORE_KEYS = (
 # --------------------------------------------------------------------------------------------
 
 
-def _varint(value: int) -> bytes:
-    out = bytearray()
-    while True:
-        byte = value & 0x7F
-        value >>= 7
-        if value:
-            out.append(byte | 0x80)
-        else:
-            out.append(byte)
-            return bytes(out)
-
-
-def _zigzag(value: int) -> int:
-    return value * 2 if value >= 0 else -value * 2 - 1
-
-
 def _same_float(a: float, b: float) -> bool:
     return _F64.pack(a) == _F64.pack(b)
 
@@ -153,15 +138,15 @@ def _decimal(value: float) -> tuple[int, int] | None:
 def _number(value: Any, field: str, *, upper_float32: bool = False) -> bytes:
     """The number form of ``value`` (int, float or None), shortest exact encoding."""
     if value is None:
-        return _varint(_NUM_NULL)
+        return encode_varint(_NUM_NULL)
     if isinstance(value, bool) or not isinstance(value, int | float):
         msg = f"header field {field!r} must be a number, not {str(value)[:40]!r}"
         raise BundleError(msg)
     if isinstance(value, int):
-        if _zigzag(value) * 16 + _NUM_INT > _MAX_NUMBER_HEAD:
+        if zigzag(value) * 16 + _NUM_INT > _MAX_NUMBER_HEAD:
             msg = f"header field {field!r} is an integer too large for the binary header"
             raise BundleError(msg)
-        return _varint(_zigzag(value) * 16 + _NUM_INT)
+        return encode_varint(zigzag(value) * 16 + _NUM_INT)
     value = float(value)
     best = bytes([_NUM_FLOAT64]) + _F64.pack(value)
     decimal = _decimal(value)
@@ -170,7 +155,7 @@ def _number(value: Any, field: str, *, upper_float32: bool = False) -> bytes:
         if e > _NUM_DECIMAL_MAX:
             k, e = k * 10 ** (e - _NUM_DECIMAL_MAX), _NUM_DECIMAL_MAX
         if e >= _NUM_DECIMAL_MIN and _same_float(float(f"{k}e{e}"), value):
-            short = _varint(_zigzag(k) * 16 + (e - _NUM_DECIMAL_MIN))
+            short = encode_varint(zigzag(k) * 16 + (e - _NUM_DECIMAL_MIN))
             if len(short) < len(best):
                 best = short
     if upper_float32 and len(best) > 5 and _FLOAT32_NORMAL <= abs(value) < 3.0e38:
@@ -218,7 +203,7 @@ def _pack_weights(weights: Any, levels: int, two_d: bool) -> bytes | None:
         for index, entry in enumerate(codes[1:]):
             if entry[0] == entry[1]:
                 same_hv |= 1 << index
-        out += _varint(same_hv)
+        out += encode_varint(same_hv)
     for index, entry in enumerate(codes):
         for band, code in enumerate(entry):
             if two_d and band == 1 and same_hv >> (index - 1) & 1:
@@ -424,44 +409,44 @@ def pack(header: dict[str, Any]) -> bytes:
             | (qparams is not None and qparams[1]) << 7,
         ]
     )
-    out += _varint(levels)
+    out += encode_varint(levels)
     for size in shape:
-        out += _varint(size)
+        out += encode_varint(size)
     if not fitted_derived:
         if not 1 <= len(fitted) <= 4:
             msg = f"header field 'fitted' must list 1 to 4 sizes, not {len(fitted)}"
             raise BundleError(msg)
-        out += _varint(len(fitted))
+        out += encode_varint(len(fitted))
         for size in fitted:
-            out += _varint(size)
+            out += encode_varint(size)
     for before, after in pads:
         if pads_mode == 2:
-            out += _varint(before)
+            out += encode_varint(before)
         if pads_mode:
-            out += _varint(after)
+            out += encode_varint(after)
     if lifting_compact:
         assert isinstance(lifting, list)
-        out += _varint(len(lifting))
+        out += encode_varint(len(lifting))
         codes = [LIFTING_CODES.index(name) for name in lifting]
         for start in range(0, len(codes), 4):
             out.append(sum(c << (2 * i) for i, c in enumerate(codes[start : start + 4])))
     out += _number(header["peak"], "peak")
     if scale_compact:
         assert isinstance(scale, int)
-        out += _varint(_zigzag(scale))
+        out += encode_varint(zigzag(scale))
     if qparams is not None:
         out += qparams[0]
     if cparams is not None:
         out += cparams
     psnr = header["psnr"]
     if psnr is None:
-        out += _varint(0)
+        out += encode_varint(0)
     elif (
         isinstance(psnr, float) and abs(psnr) < 1e12 and _same_float(round(psnr * 1e4) / 1e4, psnr)
     ):
-        out += _varint(_zigzag(round(psnr * 1e4)) + 2)
+        out += encode_varint(zigzag(round(psnr * 1e4)) + 2)
     else:
-        out += _varint(1) + _number(psnr, "psnr")
+        out += encode_varint(1) + _number(psnr, "psnr")
     out += _number(header["max_error"], "max_error", upper_float32=True)
     if extension:
         try:
@@ -477,7 +462,7 @@ def pack(header: dict[str, Any]) -> bytes:
                 f"MAX_HEADER_SIZE = {_MAX_EXTENSION}"
             )
             raise BundleError(msg)
-        out += _varint(len(packed)) + packed
+        out += encode_varint(len(packed)) + packed
     return bytes(out)
 
 
@@ -531,10 +516,10 @@ class _Reader:
         head = self.varint(field, _MAX_NUMBER_HEAD)
         form, rest = head & 15, head >> 4
         if form <= _NUM_DECIMAL_MAX - _NUM_DECIMAL_MIN:
-            k = _unzigzag(rest)
+            k = unzigzag(rest)
             return float(f"{k}e{form + _NUM_DECIMAL_MIN}")
         if form == _NUM_INT:
-            return _unzigzag(rest)
+            return unzigzag(rest)
         if rest:
             raise self.fail(field, f"number form {form} takes no value bits, found {rest}")
         if form == _NUM_NULL:
@@ -549,10 +534,6 @@ class _Reader:
         if self.offset != len(self.data):
             extra = len(self.data) - self.offset
             raise self.fail("end", f"{extra} unexpected byte(s) after the last field")
-
-
-def _unzigzag(value: int) -> int:
-    return value >> 1 if not value & 1 else -(value >> 1) - 1
 
 
 def _unpack_weights(reader: _Reader, levels: int, two_d: bool) -> list[list[float]]:
@@ -655,7 +636,7 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
         header["lifting"] = [reader.code(c, LIFTING_CODES, "lifting") for c in codes]
     header["peak"] = reader.number("peak")
     if has_scale:
-        header["scale"] = _unzigzag(reader.varint("scale", 2**20))
+        header["scale"] = unzigzag(reader.varint("scale", 2**20))
     if opaque:
         header["opaque"] = True
     if quantizer_code != IN_EXTENSION:
@@ -692,7 +673,7 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
     elif psnr_head == 1:
         header["psnr"] = reader.number("psnr")
     else:
-        header["psnr"] = _unzigzag(psnr_head - 2) / 1e4
+        header["psnr"] = unzigzag(psnr_head - 2) / 1e4
     header["max_error"] = reader.number("max_error")
     if has_extension:
         _merge_extension(reader, header)

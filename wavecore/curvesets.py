@@ -82,6 +82,7 @@ from .filters import get_wavelet
 from .multilevel import max_level, valid_length, wavedec, waverec
 from .quantize import DEFAULT_ROUNDING, band_weights, dequantize_bands, quantize_bands
 from .resample import pad_to_fit, resample_curve
+from .varints import encode_varint, unzigzag, zigzag
 
 __all__ = ["CurveSet", "decode_curves", "encode_curves", "inspect_curves", "is_curve_set"]
 
@@ -147,26 +148,6 @@ class CurveSet:
 
 
 # --- varints -------------------------------------------------------------------------------
-
-
-def _varint(value: int) -> bytes:
-    out = bytearray()
-    while True:
-        byte = value & 0x7F
-        value >>= 7
-        if value:
-            out.append(byte | 0x80)
-        else:
-            out.append(byte)
-            return bytes(out)
-
-
-def _zigzag(value: int) -> int:
-    return 2 * value if value >= 0 else -2 * value - 1
-
-
-def _unzigzag(value: int) -> int:
-    return value // 2 if value % 2 == 0 else -(value + 1) // 2
 
 
 class _Reader:
@@ -675,25 +656,25 @@ def encode_curves(
     flag_bits = (metadata is not None) | mixed << 1 | closed_mode << 2 | level_given << 4
     out = bytearray(MAGIC)
     out.append(VERSION)
-    out += _varint(flag_bits)
+    out += encode_varint(flag_bits)
     out.append(WAVELETS.index(name))
     out.append(DTYPES.index(dtype.name))
     out += struct.pack("<d", tolerance)
     out.append(rounding_byte)
     if not mixed:
-        out += _varint(dims[0] if dims else 1)
+        out += encode_varint(dims[0] if dims else 1)
     if level_given:
-        out += _varint(cap)
-    out += _varint(len(arrays))
-    out += _varint(4) + _varint(BLOCK_SIZE)
+        out += encode_varint(cap)
+    out += encode_varint(len(arrays))
+    out += encode_varint(4) + encode_varint(BLOCK_SIZE)
     for c, d, is_closed, repeat in zip(coded, dims, flags, repeated, strict=True):
         if mixed:
-            out += _varint(d)
-        out += _varint(c.count)
-        code = (_zigzag(c.exponent) << 2 | c.mode) << 1 | repeat
+            out += encode_varint(d)
+        out += encode_varint(c.count)
+        code = (zigzag(c.exponent) << 2 | c.mode) << 1 | repeat
         if closed_mode == 2:
             code = code << 1 | is_closed
-        out += _varint(code)
+        out += encode_varint(code)
     groups = _group_arrays(coded)
     if groups:
         entries = [g.astype(np.int32)[:, None] for g in groups]
@@ -703,16 +684,16 @@ def encode_curves(
             raise RuntimeError(msg)
     else:
         chunks = []
-    out += _varint(len(chunks))
+    out += encode_varint(len(chunks))
     for chunk in chunks:
-        out += _varint(len(chunk))
+        out += encode_varint(len(chunk))
     for chunk in chunks:
         out += chunk
     for c in coded:
         if c.raw is not None:
             out += c.raw.astype(dtype.newbyteorder("<")).tobytes()
     if metadata is not None:
-        out += _varint(len(meta_bytes)) + meta_bytes
+        out += encode_varint(len(meta_bytes)) + meta_bytes
     out += struct.pack("<I", zlib.crc32(out))
     return bytes(out)
 
@@ -789,7 +770,7 @@ def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Read
             code >>= 1
         repeated = bool(code & 1)
         mode = (code >> 1) & 3
-        exponent = _unzigzag(code >> 3)
+        exponent = unzigzag(code >> 3)
         if mode > 2 or dim < 1 or n < 1 or (mode != _MODE_RAW and n < 2):
             msg = f"curve set record {len(records)} is invalid (mode {mode}, d {dim}, n {n})"
             raise BundleError(msg)
