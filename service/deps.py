@@ -13,6 +13,7 @@ from fastapi import Request
 from pydantic import BaseModel, ValidationError
 
 from .errors import PROBLEM_JSON, Problem, validation_problem
+from .gridfiles import GridFileError, check_npy_length, read_npy_header
 from .schemas import ProblemDetails
 from .settings import Settings
 
@@ -111,19 +112,10 @@ def _err(name: str, msg: str) -> list[dict[str, Any]]:
 
 def read_npy(data: bytes, name: str, *, max_elements: int) -> np.ndarray:
     """Load a ``.npy`` file safely: header checked before anything is allocated, no pickles."""
-    f = io.BytesIO(data)
     try:
-        version = np.lib.format.read_magic(f)
-        if version == (1, 0):
-            shape, _fortran, dtype = np.lib.format.read_array_header_1_0(f)
-        elif version == (2, 0):
-            shape, _fortran, dtype = np.lib.format.read_array_header_2_0(f)
-        else:
-            msg = f".npy version {version} is not supported (1.0 and 2.0 are)"
-            raise ValueError(msg)
-    except ValueError as exc:
-        msg = f"{name} is not a readable .npy file: {exc}"
-        raise Problem("unsupported-media-type", msg[:500]) from None
+        shape, _fortran, dtype, offset = read_npy_header(data, name)
+    except GridFileError as exc:
+        raise Problem(exc.kind, str(exc)) from None
     if dtype.kind not in "biuf" or dtype.fields is not None:
         msg = f"{name} has dtype {dtype}; a numeric (bool, integer or float) array is needed"
         raise Problem("invalid-parameter", msg, errors=_err(name, msg))
@@ -131,12 +123,10 @@ def read_npy(data: bytes, name: str, *, max_elements: int) -> np.ndarray:
     if size > max_elements:
         msg = f"{name} has {size} values; the limit is {max_elements}"
         raise Problem("invalid-parameter", msg, errors=_err(name, msg))
-    if len(data) - f.tell() != size * dtype.itemsize:
-        msg = (
-            f"{name} is truncated or padded: its header declares {size * dtype.itemsize} "
-            f"bytes of data and {len(data) - f.tell()} follow"
-        )
-        raise Problem("unsupported-media-type", msg)
+    try:
+        check_npy_length(data, offset, shape, dtype, name)
+    except GridFileError as exc:
+        raise Problem(exc.kind, str(exc)) from None
     arr = np.load(io.BytesIO(data), allow_pickle=False)
     if dtype.kind != "f":
         return np.asarray(arr, dtype=np.float64)

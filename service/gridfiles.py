@@ -15,7 +15,13 @@ import math
 
 import numpy as np
 
-__all__ = ["GridFileError", "is_grid_file", "read_grid_file"]
+__all__ = [
+    "GridFileError",
+    "check_npy_length",
+    "is_grid_file",
+    "read_grid_file",
+    "read_npy_header",
+]
 
 NPY_MAGIC = b"\x93NUMPY"
 TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # classic and BigTIFF
@@ -70,7 +76,14 @@ def _check(shape: tuple[int, ...], dtype: np.dtype, name: str, max_elements: int
         raise GridFileError("invalid-parameter", msg)
 
 
-def _read_npy(data: bytes, name: str, max_elements: int) -> np.ndarray:
+def read_npy_header(data: bytes, name: str) -> tuple[tuple[int, ...], bool, np.dtype, int]:
+    """A ``.npy`` file's shape, Fortran order, dtype and data offset, read from its header only.
+
+    Raises
+    ------
+    GridFileError
+        ``unsupported-media-type`` for a header numpy cannot read.
+    """
     f = io.BytesIO(data)
     try:
         version = np.lib.format.read_magic(f)
@@ -84,15 +97,27 @@ def _read_npy(data: bytes, name: str, max_elements: int) -> np.ndarray:
     except ValueError as exc:
         msg = f"{name} is not a readable .npy file: {exc}"
         raise GridFileError("unsupported-media-type", msg[:500]) from None
-    _check(shape, dtype, name, max_elements)
+    return shape, fortran, dtype, f.tell()
+
+
+def check_npy_length(
+    data: bytes, offset: int, shape: tuple[int, ...], dtype: np.dtype, name: str
+) -> None:
+    """Refuse a ``.npy`` file whose data is not exactly what its header declares."""
     expected = math.prod(shape) * dtype.itemsize
-    if len(data) - f.tell() != expected:
+    if len(data) - offset != expected:
         msg = (
             f"{name} is truncated or padded: its header declares {expected} bytes of data "
-            f"and {len(data) - f.tell()} follow"
+            f"and {len(data) - offset} follow"
         )
         raise GridFileError("unsupported-media-type", msg)
-    flat = np.frombuffer(data, dtype=dtype, offset=f.tell())
+
+
+def _read_npy(data: bytes, name: str, max_elements: int) -> np.ndarray:
+    shape, fortran, dtype, offset = read_npy_header(data, name)
+    _check(shape, dtype, name, max_elements)
+    check_npy_length(data, offset, shape, dtype, name)
+    flat = np.frombuffer(data, dtype=dtype, offset=offset)
     return flat.reshape(shape, order="F" if fortran else "C")
 
 
