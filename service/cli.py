@@ -402,7 +402,8 @@ def cmd_encode(args: argparse.Namespace) -> int:
         }
         extra = set(targets) - allowed.get(kind, {"keep", "quality"})
         if extra or (args.lossless and kind not in ("image", "grid")):
-            msg = f"--{(sorted(extra) or ['lossless'])[0]} does not apply to a {kind}"
+            article = "an" if kind[0] in "aeiou" else "a"
+            msg = f"--{(sorted(extra) or ['lossless'])[0]} does not apply to {article} {kind}"
             raise CLIError(msg)
         if kind == "image":
             bundle = wavecore.encode_image(

@@ -111,6 +111,8 @@ def test_errors_are_messages_not_tracebacks(
     assert main(["encode", str(images / "img0.png"), str(bundle)]) == 0
     assert main(["decode", str(bundle), str(tmp_path / "out.jpg")]) == 1
     assert ".png" in capsys.readouterr().err
+    assert main(["encode", str(images / "img0.png"), str(bundle), "--tolerance", "0.1"]) == 1
+    assert "--tolerance does not apply to an image" in capsys.readouterr().err
     with pytest.raises(SystemExit) as usage:
         main(["encode", "a", "b", "--keep", "2"])
     assert usage.value.code == 2
