@@ -58,13 +58,18 @@ import numpy as np
 from .arguments import as_native
 from .bundle import MAX_ELEMENTS
 from .errors import BundleError, InvalidParameter
+from .gridpredict import decode_predictive, encode_predictive
 
 __all__ = ["decode_grid", "encode_grid", "inspect_grid", "is_grid_bundle"]
 
 MAGIC = b"WVGD"
 VERSION = 1
+#: The version of bundles whose core is the interpolation stream (flag 16), which a reader of
+#: version 1 would take for a wavecore bundle; version-1 bundles are still written otherwise.
+PREDICTIVE_VERSION = 2
 LAYOUT_FIELD, LAYOUT_VOLUME, LAYOUT_POINTS = 0, 1, 2
 _FLAG_MASK, _FLAG_OUTLIERS, _FLAG_LOSSLESS, _FLAG_BOUND = 1, 2, 4, 8
+_FLAG_PREDICTIVE = 16
 _DTYPES = (
     "uint8",
     "int8",
@@ -749,17 +754,24 @@ def encode_layout(
         if span <= 65535 and layout != LAYOUT_POINTS:
             return _encode_lossless(arr, layout, level)
         bound = 0.0
+    mask_bytes = encode_mask(missing) if has_mask else b""
+    # The interpolation coder for a bound, unless a wavelet was asked for by name (the
+    # wavelet core and its outliers, as before it) or the bound is 0 on floats.
+    predictive = wavelet is None and (bound is not None and (bound > 0 or dtype.kind in "iu"))
+    bounded = b""
+    if predictive and bound is not None:
+        bounded = _encode_predictive(arr, layout, values, missing, mask_bytes, bound)
     filled = fill_missing(values, missing) if has_mask else values
     core_values = _to_core(filled, layout)
     original = _to_core(values, layout)
     core_missing = _to_core(missing, layout)
     finite_count = max(int(np.count_nonzero(~missing)), 1)
-    mask_bytes = encode_mask(missing) if has_mask else b""
 
     if bound is not None:
-        bounded = _encode_bounded(
-            arr, layout, core, core_values, original, core_missing, mask_bytes, bound, data_range
-        )
+        if not predictive:
+            bounded = _encode_bounded(
+                arr, layout, core, core_values, original, core_missing, mask_bytes, bound
+            )
         if dtype.kind == "f" and not has_mask and layout != LAYOUT_POINTS and _integers(values):
             # Whole numbers stored as floats (an elevation model in metres, say): coded
             # bit-exactly they can be smaller than any lossy code of a tight bound (a third
@@ -838,9 +850,9 @@ def _encode_bounded(
     missing: np.ndarray,
     mask_bytes: bytes,
     bound: float,
-    data_range: float,
 ) -> bytes:
-    """The core quantized at a step proportional to ``bound``, and its outliers."""
+    """The core quantized at a step proportional to ``bound``, and its outliers: since the
+    interpolation coder, only for a bound of 0 on floats (a fine core, the misses exact)."""
     dtype = arr.dtype
     integer = dtype.kind in "iu"
     allowed = math.floor(bound) if integer else bound
@@ -867,6 +879,56 @@ def _encode_bounded(
         core_bytes,
         mask_bytes,
         outliers,
+        measured_rmse,
+        largest,
+    )
+
+
+#: The axes the interpolation coder predicts along, per layout: a volume along all three (its
+#: slices are samples of one field; see :func:`_encode_predictive`), surface points along their
+#: grid's two (the coordinates are separate fields).
+_PREDICTED_AXES = {LAYOUT_FIELD: (0, 1), LAYOUT_VOLUME: (0, 1, 2), LAYOUT_POINTS: (0, 1)}
+
+
+def _encode_predictive(
+    arr: np.ndarray,
+    layout: int,
+    values: np.ndarray,
+    missing: np.ndarray,
+    mask_bytes: bytes,
+    bound: float,
+    axes: tuple[int, ...] | None = None,
+) -> bytes:
+    """The grid under the interpolation coder (:mod:`wavecore.gridpredict`), whose errors are
+    bounded by construction: no outliers to correct.
+
+    On the benchmark's grids it takes 8-35 % fewer bytes than the wavelet core plus outliers
+    at the same bound (docs/benchmarks.md, Grids), and it is several times faster.  A volume is
+    predicted along all three axes: on the benchmark's volume that is 9-13 % smaller than
+    predicting its slices apart (``axes=(1, 2)``), for the same reason a 3-D transform beats 2-D
+    slices: neighbouring slices are as alike as neighbouring rows.
+    """
+    dtype = arr.dtype
+    known = np.where(missing, 0.0, values) if missing.any() else values
+    stream, final = encode_predictive(
+        known, missing, dtype, bound, _PREDICTED_AXES[layout] if axes is None else axes
+    )
+    finite_count = max(int(np.count_nonzero(~missing)), 1)
+    measured_rmse, largest = _measure(final, values, missing, finite_count)
+    allowed = math.floor(bound) if dtype.kind in "iu" else bound
+    if largest > allowed:  # cannot happen: every sample that missed was stored exactly
+        msg = f"internal error: the bound {bound!r} was missed ({largest!r})"
+        raise AssertionError(msg)
+    return _assemble(
+        arr,
+        layout,
+        _FLAG_BOUND | _FLAG_PREDICTIVE,
+        float(allowed),
+        0.0,
+        0,
+        stream,
+        mask_bytes,
+        b"",
         measured_rmse,
         largest,
     )
@@ -954,7 +1016,8 @@ def _assemble(
     largest: float,
 ) -> bytes:
     flags |= (_FLAG_MASK if mask else 0) | (_FLAG_OUTLIERS if outliers else 0)
-    head = _HEAD.pack(MAGIC, VERSION, layout, _DTYPES.index(arr.dtype.name), flags, arr.ndim)
+    version = PREDICTIVE_VERSION if flags & _FLAG_PREDICTIVE else VERSION
+    head = _HEAD.pack(MAGIC, version, layout, _DTYPES.index(arr.dtype.name), flags, arr.ndim)
     shape = struct.pack(f"<{arr.ndim}I", *arr.shape)
     tail = _TAIL.pack(bound, unit, offset, rmse, largest, len(core), len(mask), len(outliers))
     body = head + shape + tail + core + mask + outliers
@@ -985,8 +1048,14 @@ class _Parsed:
             msg = "grid bundle is corrupt or truncated (its CRC-32 does not match)"
             raise BundleError(msg)
         _, version, layout, dtype_code, flags, ndim = _HEAD.unpack_from(data)
-        if version != VERSION:
-            msg = f"grid bundle version {version} is not supported (this reader knows {VERSION})"
+        if version not in (VERSION, PREDICTIVE_VERSION):
+            msg = (
+                f"grid bundle version {version} is not supported (this reader knows {VERSION} "
+                f"and {PREDICTIVE_VERSION})"
+            )
+            raise BundleError(msg)
+        if (version == PREDICTIVE_VERSION) != bool(flags & _FLAG_PREDICTIVE):
+            msg = f"grid bundle version {version} does not match its flags {flags}"
             raise BundleError(msg)
         if layout not in (LAYOUT_FIELD, LAYOUT_VOLUME, LAYOUT_POINTS) or dtype_code >= len(_DTYPES):
             msg = f"grid bundle has an unknown layout {layout} or dtype code {dtype_code}"
@@ -1027,6 +1096,10 @@ class _Parsed:
     @property
     def lossless(self) -> bool:
         return bool(self.flags & _FLAG_LOSSLESS)
+
+    @property
+    def predictive(self) -> bool:
+        return bool(self.flags & _FLAG_PREDICTIVE)
 
 
 def decode_grid(
@@ -1084,6 +1157,8 @@ def _window(out: np.ndarray, window: Any) -> np.ndarray:
 
 def _decode(parsed: _Parsed, level: int, keep: float | None) -> np.ndarray:
     dtype, shape, layout = parsed.dtype, tuple(parsed.shape), parsed.layout
+    if parsed.predictive:
+        return _decode_predictive(parsed, level, keep)
     if parsed.lossless:
         if level and layout == LAYOUT_VOLUME:
             msg = "a lossless volume decodes at level 0 only (its slices share one picture)"
@@ -1130,6 +1205,27 @@ def _decode(parsed: _Parsed, level: int, keep: float | None) -> np.ndarray:
     return out
 
 
+def _decode_predictive(parsed: _Parsed, level: int, keep: float | None) -> np.ndarray:
+    """An interpolation-coded grid.  A coarse level is its lattice of stride ``2**level`` on
+    the 2-D axes (a volume keeps its slices, as the wavelet core's levels do): samples of the
+    grid itself, within the bound; a coarse cell is NaN where every cell of its block is.
+    ``keep`` keeps that fraction of the largest interpolation residuals."""
+    shape = tuple(parsed.shape)
+    out = decode_predictive(parsed.core, shape, parsed.dtype, keep)
+    if level:
+        stride = 1 << min(level, 62)
+        spatial: tuple[slice, ...] = (slice(None, None, stride), slice(None, None, stride))
+        if parsed.layout == LAYOUT_VOLUME:
+            spatial = (slice(None), *spatial)
+        out = np.ascontiguousarray(out[spatial])
+    if parsed.mask:
+        mask = decode_mask(parsed.mask, shape)
+        if level:
+            mask = _coarse_mask(mask, level, parsed.layout, out.shape)
+        out[mask] = np.nan
+    return out
+
+
 def _coarse_mask(mask: np.ndarray, level: int, layout: int, shape: tuple[int, ...]) -> np.ndarray:
     """A coarse cell is missing where every cell of its ``2**level`` block is."""
     block = 2**level
@@ -1173,7 +1269,29 @@ def inspect_grid(bundle: Any) -> dict[str, Any]:
     from .codec import inspect
 
     parsed = _Parsed(bundle)
-    core = inspect(parsed.core)
+    core: dict[str, Any]
+    if parsed.predictive:
+        # The keys a wavelet core gives, for tools that print them (the CLI's inspect).
+        core = {
+            "version": f"grid {PREDICTIVE_VERSION}",
+            "wavelet": "interpolation",
+            "boundary": ["open", "open"],
+            "colour": "none",
+            "quantizer": "uniform, in the loop",
+            "levels": 0,
+            "psnr": math.nan,  # no peak is stored; rmse and largest_error are
+            "chunks": [
+                {
+                    "level": 0,
+                    "bands": ["residuals"],
+                    "shapes": [list(parsed.shape)],
+                    "bytes": len(parsed.core),
+                    "present": True,
+                }
+            ],
+        }
+    else:
+        core = inspect(parsed.core)
     names = {LAYOUT_FIELD: "field", LAYOUT_VOLUME: "volume", LAYOUT_POINTS: "points"}
     total = len(bytes(bundle))
     payload = sum(c["bytes"] or 0 for c in core["chunks"])
