@@ -63,11 +63,13 @@ __all__ = ["decode_predictive", "encode_predictive"]
 
 _HEAD = struct.Struct("<dBBIII")
 _FLAG_INTEGER = 1
-#: Zigzagged residuals below this are symbols of their own; larger ones are a magnitude class
-#: (their bit length) followed by their low bits.
+#: A class is a bit length ``b + 1`` (``b`` = 4 … 53) and the two bits after the leading one,
+#: so that a class spans a quarter of an octave: uniform low bits inside so narrow a class lose
+#: little (a whole octave per class cost 1.3 % more on the benchmark's field).
 _DIRECT = 16
-_FIRST_CLASS_BITS = 5  # 2**4 = 16 = _DIRECT: the first class holds 16..31
-_CLASSES = 50  # bit lengths 5..54: zigzagged residuals below 2**54
+_FIRST_CLASS_BITS = 4  # 2**4 = _DIRECT: the first classes hold 16..31
+_TOP_BITS = 2
+_CLASSES = (54 - _FIRST_CLASS_BITS) << _TOP_BITS  # zigzagged residuals below 2**54
 _EXACT = _DIRECT + _CLASSES  # the symbol of a sample stored exactly
 _CHUNK_BITS = 20  # low bits are range coded in uniform pieces of at most this many bits
 #: Residuals beyond this many steps are stored exactly (float64 keeps integers exact to 2**53).
@@ -227,9 +229,11 @@ def _encode_group(
                     b = 0
                     while (z >> (b + 1)) > 0:
                         b += 1
-                    symbols[k] = _DIRECT + b - (_FIRST_CLASS_BITS - 1)
-                    bits[k] = b
-                    remainders[k] = z - (np.int64(1) << b)
+                    low = b - _TOP_BITS
+                    top = (z >> low) & ((1 << _TOP_BITS) - 1)
+                    symbols[k] = _DIRECT + ((b - _FIRST_CLASS_BITS) << _TOP_BITS) + top
+                    bits[k] = low
+                    remainders[k] = z & ((np.int64(1) << low) - 1)
                 k += 1
     return exact_count
 
@@ -300,18 +304,6 @@ def _to_dtype(values: np.ndarray, dtype: np.dtype[Any]) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 # Symbols
 # --------------------------------------------------------------------------------------------
-
-
-def _symbols(zigzag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Symbols and the number of low bits that follow each (0 for direct ones)."""
-    bits = np.zeros(zigzag.size, dtype=np.int64)
-    large = zigzag >= _DIRECT
-    if large.any():
-        # Bit length without float rounding: frexp is exact for integers below 2**53.
-        lengths = np.frexp(zigzag[large].astype(np.float64))[1].astype(np.int64)
-        bits[large] = lengths - 1
-    symbols = np.where(large, _DIRECT + bits - (_FIRST_CLASS_BITS - 1), zigzag)
-    return symbols.astype(np.int32), bits
 
 
 def _write_varints(values: Any) -> bytes:
@@ -556,8 +548,10 @@ def decode_predictive(
         large = (symbols >= _DIRECT) & ~exact
         zigzag = np.where(large, 0, symbols)
         if large.any():
-            bits = symbols[large] - _DIRECT + _FIRST_CLASS_BITS - 1
-            zigzag[large] = (np.int64(1) << bits) + _decode_low_bits(decoder, bits)
+            classes = symbols[large] - _DIRECT
+            low = (classes >> _TOP_BITS) + _FIRST_CLASS_BITS - _TOP_BITS
+            top = (classes & ((1 << _TOP_BITS) - 1)) + (1 << _TOP_BITS)
+            zigzag[large] = (top << low) + _decode_low_bits(decoder, low)
         multiples = np.where(zigzag & 1, -(zigzag >> 1) - 1, zigzag >> 1)
         values = np.zeros(size, dtype=np.float64)
         n = int(np.count_nonzero(exact))
