@@ -563,7 +563,9 @@ class _Core:
     def __init__(self, wavelet: str, level: int | None, boundary: tuple[str, str]) -> None:
         self.wavelet, self.level, self.boundary = wavelet, level, boundary
 
-    def at_step(self, core: np.ndarray, step: float) -> tuple[bytes, np.ndarray]:
+    def at_step(
+        self, core: np.ndarray, step: float, rounding: float = _BOUNDED_ROUNDING
+    ) -> tuple[bytes, np.ndarray]:
         """The core bundle quantized at ``step``, and what decoding it returns."""
         from .codec.encode import encode_surface_at_step
 
@@ -573,7 +575,7 @@ class _Core:
             level=self.level,
             wavelet=self.wavelet,
             boundary=self.boundary,
-            rounding=_BOUNDED_ROUNDING,
+            rounding=rounding,
         )
 
     def encode(self, core: np.ndarray, *, quality: float | None, bpp: float | None) -> bytes:
@@ -804,6 +806,11 @@ def encode_layout(
             *_measure(final, original, core_missing, finite_count),
         )
     assert rmse_target is not None
+    fast = _encode_rmse_at_steps(
+        arr, layout, core, core_values, original, core_missing, mask_bytes, rmse_target
+    )
+    if fast is not None:
+        return fast
     aim = rmse_target * math.sqrt(finite_count / core_values.size)
     for _ in range(_RETRIES):
         core_bytes = core.encode(core_values, quality=_quality_for(peak, aim), bpp=None)
@@ -826,6 +833,57 @@ def encode_layout(
         aim *= 0.95 * rmse_target / measured_rmse
     msg = f"rmse {rmse_target!r} could not be reached for this grid; ask for a larger rmse"
     raise InvalidParameter(msg)
+
+
+#: An RMSE (or PSNR) target is met by quantizing at a step this many times the target first:
+#: about what the dead-zone quantizer's error comes to at the rates such targets ask for (the
+#: measured ratio was 2.9-3.6 on the benchmark's grids), then at the step scaled by the
+#: target over what was measured (the RMSE is nearly proportional to the step).
+_STEP_PER_RMSE = 3.2
+_RMSE_TRIES = 4
+
+
+def _encode_rmse_at_steps(
+    arr: np.ndarray,
+    layout: int,
+    core: _Core,
+    core_values: np.ndarray,
+    original: np.ndarray,
+    missing: np.ndarray,
+    mask_bytes: bytes,
+    rmse_target: float,
+) -> bytes | None:
+    """An RMSE target met by a few single quantizations (no search over the rate control's
+    PSNR, whose closed-loop refinement cost 8x more on the benchmark's 1024² field for an RMSE
+    within a per cent or two at the same bytes); ``None`` if these tries miss it."""
+    from .quantize import DEFAULT_ROUNDING
+
+    dtype = arr.dtype
+    finite_count = max(int(np.count_nonzero(~missing)), 1)
+    step = rmse_target * _STEP_PER_RMSE
+    for attempt in range(_RMSE_TRIES):
+        core_bytes, decoded = core.at_step(core_values, step, DEFAULT_ROUNDING)
+        final = _to_dtype(decoded, dtype)
+        measured_rmse, largest = _measure(final, original, missing, finite_count)
+        if measured_rmse <= rmse_target and (attempt or measured_rmse > 0.9 * rmse_target):
+            return _assemble(
+                arr,
+                layout,
+                0,
+                math.nan,
+                0.0,
+                0,
+                core_bytes,
+                mask_bytes,
+                b"",
+                measured_rmse,
+                largest,
+            )
+        if not measured_rmse > 0 or not math.isfinite(measured_rmse):
+            return None
+        # Aimed a little below the target, so that the next try lands on its safe side.
+        step *= 0.99 * rmse_target / measured_rmse
+    return None
 
 
 def _measure(
