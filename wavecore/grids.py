@@ -753,8 +753,11 @@ def encode_layout(
     values = arr.astype(np.float64)
     missing = np.isnan(values) if dtype.kind == "f" else np.zeros(arr.shape, dtype=bool)
     has_mask = bool(missing.any())
-    finite = values[~missing]
-    data_range = float(finite.max() - finite.min()) if finite.size else 0.0
+    if has_mask:
+        finite = values[~missing]
+        data_range = float(finite.max() - finite.min()) if finite.size else 0.0
+    else:  # no copy of the values for their range
+        data_range = float(values.max() - values.min())
     if not (bound is not None or rmse_target or psnr_target or bpp_target or lossless):
         bound = DEFAULT_RELATIVE_MAX_ERROR * data_range
     if psnr_target is not None:
