@@ -6,7 +6,7 @@ that adds what gridded data needs beyond a picture:
 * **A pointwise bound.**  With ``max_error=t`` every decoded sample is within ``t`` of the
   original.  Without a wavelet named, the grid is coded by multilevel interpolation quantized
   in the loop (:mod:`wavecore.gridpredict`): each sample's error is its own quantization error,
-  within ``t`` by construction (2-52 % fewer bytes than SZ3 on the benchmark's grids).  With a
+  within ``t`` by construction (2-34 % fewer bytes than SZ3 on the benchmark's grids).  With a
   wavelet named, the core (below) is quantized a little coarser than ``t`` needs on average;
   the samples where it overshoots (the *outliers*, as SPERR calls them) are corrected: their
   positions are coded as Rice codes of the gaps between them, and each correction as a small
@@ -18,7 +18,7 @@ that adds what gridded data needs beyond a picture:
   down a pyramid, interpolated back up), so that the hole costs few bits, and their mask is
   stored as run lengths; they decode as NaN, exactly.
 * **Volumes.**  The interpolation coder predicts a volume ``(D, H, W)`` along all three axes
-  (9-13 % fewer bytes than its slices coded apart, on the benchmark's volume).  The wavelet
+  (3-7 % fewer bytes than its slices coded apart, on the benchmark's volume).  The wavelet
   core (``rmse``, ``psnr``, ``bpp``, a named wavelet) codes it as ``D`` slices under one 2-D
   transform each (the codec's surface of ``(H, W)`` points with ``D`` values), in one core
   bundle: the layout that the codec's two-axis plan, quantizer and context coder take as they
@@ -972,9 +972,9 @@ def _encode_predictive(
     """The grid under the interpolation coder (:mod:`wavecore.gridpredict`), whose errors are
     bounded by construction: no outliers to correct.
 
-    On the benchmark's grids it takes 8-35 % fewer bytes than the wavelet core plus outliers
+    On the benchmark's grids it takes 7-11 % fewer bytes than the wavelet core plus outliers
     at the same bound (docs/benchmarks.md, Grids), and it is several times faster.  A volume is
-    predicted along all three axes: on the benchmark's volume that is 9-13 % smaller than
+    predicted along all three axes: on the benchmark's volume that is 3-7 % smaller than
     predicting its slices apart (``axes=(1, 2)``), for the same reason a 3-D transform beats 2-D
     slices: neighbouring slices are as alike as neighbouring rows.
     """
