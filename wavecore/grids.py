@@ -6,7 +6,7 @@ that adds what gridded data needs beyond a picture:
 * **A pointwise bound.**  With ``max_error=t`` every decoded sample is within ``t`` of the
   original.  Without a wavelet named, the grid is coded by multilevel interpolation quantized
   in the loop (:mod:`wavecore.gridpredict`): each sample's error is its own quantization error,
-  within ``t`` by construction (2-34 % fewer bytes than SZ3 on the benchmark's grids).  With a
+  within ``t`` by construction (2-35 % fewer bytes than SZ3 on the benchmark's grids).  With a
   wavelet named, the core (below) is quantized a little coarser than ``t`` needs on average;
   the samples where it overshoots (the *outliers*, as SPERR calls them) are corrected: their
   positions are coded as Rice codes of the gaps between them, and each correction as a small
@@ -655,7 +655,8 @@ def encode_grid(
         (:func:`wavecore.wavelet_names`).  With ``max_error``, naming one codes the wavelet core
         and its outliers instead of the interpolation coder (which is smaller and faster).
     level : int, optional
-        Decomposition levels; ``None`` picks up to 5.
+        The wavelet core's decomposition levels; ``None`` picks up to 5.  (The interpolation
+        coder of ``max_error`` always goes down to a single sample; any coarse level decodes.)
     max_error : float, optional
         A bound on the absolute error that holds on **every** sample (finite cells; NaN cells
         are exact).  For integer grids it counts in whole units (``0.5`` means exact).
@@ -972,7 +973,7 @@ def _encode_predictive(
     """The grid under the interpolation coder (:mod:`wavecore.gridpredict`), whose errors are
     bounded by construction: no outliers to correct.
 
-    On the benchmark's grids it takes 7-11 % fewer bytes than the wavelet core plus outliers
+    On the benchmark's grids it takes 7-12 % fewer bytes than the wavelet core plus outliers
     at the same bound (docs/benchmarks.md, Grids), and it is several times faster.  A volume is
     predicted along all three axes: on the benchmark's volume that is 3-7 % smaller than
     predicting its slices apart (``axes=(1, 2)``), for the same reason a 3-D transform beats 2-D
