@@ -14,9 +14,10 @@ that adds what gridded data needs beyond a picture:
   ``round(r / 2t) · 2t``).  Either way the encoder checks the bound on exactly what the decoder
   returns (after the cast to the grid's dtype) and stores any sample that a correction cannot
   reach (rounding of huge values, ``t`` below the dtype's resolution) exactly.
-* **Missing cells.**  NaN cells are filled smoothly before the transform (push–pull: averaged
-  down a pyramid, interpolated back up), so that the hole costs few bits, and their mask is
-  stored as run lengths; they decode as NaN, exactly.
+* **Missing cells.**  NaN cells' mask is stored as run lengths; they decode as NaN, exactly.
+  The interpolation coder codes no residual there (the decoder interpolates across the hole);
+  for the wavelet core they are filled smoothly before the transform (push–pull: averaged down
+  a pyramid, interpolated back up), so that the hole costs few bits.
 * **Volumes.**  The interpolation coder predicts a volume ``(D, H, W)`` along all three axes
   (3-7 % fewer bytes than its slices coded apart, on the benchmark's volume).  The wavelet
   core (``rmse``, ``psnr``, ``bpp``, a named wavelet) codes it as ``D`` slices under one 2-D
