@@ -142,3 +142,19 @@ def test_entropy_counts_are_uniques_counts(band: np.ndarray) -> None:
     got = lossless._value_counts(band)
     assert got.dtype == expected.dtype
     assert np.array_equal(got, expected)
+
+
+@pytest.mark.parametrize("source", [np.int64, np.int32, np.uint16, np.uint64, np.int8])
+@pytest.mark.parametrize("target", ["uint8", "uint16", "int16", "int32", "uint32"])
+def test_integer_cast_matches_the_float_route(source: type, target: str) -> None:
+    """The decoder's integer fast path (lossless) gives what rounding through float64 gives."""
+    from wavecore.codec.samples import cast
+
+    info = np.iinfo(source)
+    values = np.random.default_rng(0).integers(info.min, info.max, 5000, source, endpoint=True)
+    values[:4] = [info.min, info.max, 0, 1]
+    bounds = np.iinfo(target)
+    through_floats = np.clip(np.rint(values.astype(np.float64)), bounds.min, bounds.max)
+    got = cast(values.reshape(50, 100), target)
+    assert got.dtype == np.dtype(target)
+    assert np.array_equal(got.reshape(-1), through_floats.astype(target))

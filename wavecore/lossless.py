@@ -196,14 +196,14 @@ def _value_counts(band: np.ndarray) -> np.ndarray:
     when the values span a range not much wider than the band (a band's details do), so the
     entropy, summed over the same counts in the same order, comes out the same to the bit.
     """
-    flat = band.reshape(-1)
+    flat = np.ascontiguousarray(band, dtype=np.int64).reshape(-1)
     if flat.size == 0:
         return np.zeros(0, dtype=np.int64)
-    lo, hi = int(flat.min()), int(flat.max())
+    lo, hi = (int(v) for v in _kernels.value_range(flat))
     if hi - lo > 4 * flat.size + (1 << 16):
         return np.unique(flat, return_counts=True)[1]
-    counts = np.bincount((flat - lo).astype(np.intp, copy=False), minlength=hi - lo + 1)
-    return counts[counts > 0].astype(np.int64, copy=False)
+    counts = _kernels.value_histogram(flat, lo, hi - lo + 1)
+    return counts[counts > 0]
 
 
 def _level_step(coarse: np.ndarray, axes: tuple[int, ...], name: str) -> tuple[np.ndarray, Any]:
