@@ -37,6 +37,7 @@ import math
 import os
 import pstats
 import re
+import resource
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -184,8 +185,8 @@ class OpenJPH(Peer):
 
 #: The stages timed by ``--stages``: (label, module, function).  Each function is replaced,
 #: for the run, in every ``wavecore`` module that holds it, so the table survives the codec
-#: moving between modules.  What is not listed (colour, error metrics, the rate search's
-#: estimates) is the "other" line.
+#: moving between modules (a name that is gone is skipped).  What is not listed is the "other"
+#: line.
 STAGES = (
     ("pad", "wavecore.resample", "pad_to_fit"),
     ("analysis", "wavecore.multilevel", "wavedec2"),
@@ -195,13 +196,23 @@ STAGES = (
     ("dequantize", "wavecore.quantize", "dequantize_bands"),
     ("synthesis", "wavecore.multilevel", "waverec2"),
     ("crop", "wavecore.resample", "crop_padding"),
+    ("colour", "wavecore.codec.samples", "ycbcr_from"),
+    ("colour", "wavecore.codec.samples", "to_integers"),
+    ("error metrics", "wavecore.codec.samples", "measure_errors"),
+    ("rate estimate", "wavecore.codec.ratecontrol", "_log_histogram"),
     ("header", "wavecore.bundle", "write_bundle"),
     ("header", "wavecore.bundle", "read_bundle"),
 )
 
 
+def _kernel_seconds() -> float:
+    """System (kernel) CPU seconds of this process so far: mostly page faults on fresh memory."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_stime
+
+
 def stage_table(run: Callable[[], object], repeat: int) -> list[str]:
-    """Per stage: wall, CPU of all threads, CPU of the calling thread (the serial part), calls.
+    """Per stage: wall, CPU of all threads, CPU of the calling thread (the serial part), the
+    kernel's part of the CPU (``sys``: page faults on fresh memory, mostly), calls.
 
     Medians are not additive, so these are means over ``repeat`` runs.  Only calls made from
     the calling thread and not nested in another timed stage count.
@@ -210,25 +221,27 @@ def stage_table(run: Callable[[], object], repeat: int) -> list[str]:
     import threading
     from collections import defaultdict
 
-    totals: dict[str, list[float]] = defaultdict(lambda: [0.0, 0.0, 0.0, 0.0])
+    totals: dict[str, list[float]] = defaultdict(lambda: [0.0, 0.0, 0.0, 0.0, 0.0])
     inside = [False]
     main = threading.get_ident()
+
+    def clocks() -> tuple[float, float, float, float]:
+        return time.perf_counter(), time.process_time(), time.thread_time(), _kernel_seconds()
 
     def timed(label: str, function: Callable[..., Any]) -> Callable[..., Any]:
         def call(*args: Any, **kwargs: Any) -> Any:
             if inside[0] or threading.get_ident() != main:
                 return function(*args, **kwargs)
             inside[0] = True
-            start = (time.perf_counter(), time.process_time(), time.thread_time())
+            start = clocks()
             try:
                 return function(*args, **kwargs)
             finally:
                 inside[0] = False
                 row = totals[label]
-                row[0] += time.perf_counter() - start[0]
-                row[1] += time.process_time() - start[1]
-                row[2] += time.thread_time() - start[2]
-                row[3] += 1
+                for k, value in enumerate(clocks()):
+                    row[k] += value - start[k]
+                row[4] += 1
 
         return call
 
@@ -245,31 +258,28 @@ def stage_table(run: Callable[[], object], repeat: int) -> list[str]:
                 if value is original:
                     replaced.append((module, attr, value))
                     setattr(module, attr, wrapper)
-    whole = [0.0, 0.0, 0.0]
+    whole = [0.0, 0.0, 0.0, 0.0]
     try:
         for _ in range(repeat):
-            start = (time.perf_counter(), time.process_time(), time.thread_time())
+            start = clocks()
             run()
-            whole[0] += time.perf_counter() - start[0]
-            whole[1] += time.process_time() - start[1]
-            whole[2] += time.thread_time() - start[2]
+            for k, value in enumerate(clocks()):
+                whole[k] += value - start[k]
     finally:
         for module, attr, value in replaced:
             setattr(module, attr, value)
-    lines = [f"  {'stage':16s} {'wall':>7s} {'CPU':>7s} {'serial':>7s} {'calls':>5s}"]
-    listed = [0.0, 0.0, 0.0]
-    for label, (wall, cpu, serial, calls) in sorted(totals.items(), key=lambda kv: -kv[1][1]):
+    lines = [f"  {'stage':16s} {'wall':>7s} {'CPU':>7s} {'serial':>7s} {'sys':>7s} {'calls':>5s}"]
+    listed = [0.0, 0.0, 0.0, 0.0]
+    for label, row in sorted(totals.items(), key=lambda kv: -kv[1][1]):
         lines.append(
-            f"  {label:16s} {wall / repeat:6.3f}s {cpu / repeat:6.3f}s {serial / repeat:6.3f}s "
-            f"{calls / repeat:5.1f}"
+            f"  {label:16s} "
+            + " ".join(f"{value / repeat:6.3f}s" for value in row[:4])
+            + f" {row[4] / repeat:5.1f}"
         )
-        listed = [listed[0] + wall, listed[1] + cpu, listed[2] + serial]
+        listed = [a + b for a, b in zip(listed, row[:4], strict=True)]
     rest = [(w - t) / repeat for w, t in zip(whole, listed, strict=True)]
-    lines.append(f"  {'other':16s} {rest[0]:6.3f}s {rest[1]:6.3f}s {rest[2]:6.3f}s")
-    lines.append(
-        f"  {'total':16s} {whole[0] / repeat:6.3f}s {whole[1] / repeat:6.3f}s "
-        f"{whole[2] / repeat:6.3f}s"
-    )
+    lines.append(f"  {'other':16s} " + " ".join(f"{value:6.3f}s" for value in rest))
+    lines.append(f"  {'total':16s} " + " ".join(f"{value / repeat:6.3f}s" for value in whole))
     return lines
 
 

@@ -40,12 +40,19 @@ DOCS = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
 START, END = "<!-- lossless:start -->", "<!-- lossless:end -->"
 
 
+#: CPU seconds (all threads of this process) of the latest ``median_time``, as a median: on
+#: a shared machine wall time depends on the load, CPU time much less.
+CPU: dict[str, float] = {"last": 0.0}
+
+
 def median_time(function: Callable[[], Any]) -> tuple[float, Any]:
-    times, result = [], None
+    times, cpu, result = [], [], None
     for _ in range(RUNS):
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         result = function()
         times.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - cpu_start)
+    CPU["last"] = statistics.median(cpu)
     return statistics.median(times), result
 
 
@@ -69,10 +76,15 @@ def peer_sizes(image: np.ndarray) -> dict[str, int]:
 def measure(name: str) -> dict[str, Any]:
     image = getattr(data, name)()
     pixels = image.shape[0] * image.shape[1]
+    wavecore.encode_image(image, lossless=True)  # compiled and warm, as for PNG
     encode_time, bundle = median_time(lambda: wavecore.encode_image(image, lossless=True))
+    cpu = CPU["last"]
     decode_time, decoded = median_time(lambda: wavecore.decode(bundle))
+    cpu += CPU["last"]
     png_encode, png = median_time(lambda: png_bytes(image))
+    png_cpu = CPU["last"]
     png_decode, _ = median_time(lambda: np.asarray(Image.open(io.BytesIO(png))))
+    png_cpu += CPU["last"]
     info = wavecore.inspect(bundle)
     others = peer_sizes(image)
     return {
@@ -92,6 +104,8 @@ def measure(name: str) -> dict[str, Any]:
         "decode": decode_time,
         "png_encode": png_encode,
         "png_decode": png_decode,
+        "cpu": cpu,
+        "png_cpu": png_cpu,
     }
 
 
@@ -113,11 +127,26 @@ def table(rows: list[dict[str, Any]]) -> str:
     total_ours = sum(r["ours"] for r in rows)
     total_png = sum(r["png"] for r in rows)
     total_j2k = sum(r["j2k"] for r in rows)
+    times = {key: sum(r[key] for r in rows) for key in ("encode", "decode", "png_encode")}
+    times["png_decode"] = sum(r["png_decode"] for r in rows)
     lines.append(
         f"| **all** | | {total_ours:,} | {total_png:,} | {total_ours / total_png:.3f} | | "
-        f"| {total_j2k:,} | | | | |"
+        f"| {total_j2k:,} | | | {times['encode']:.3f} / {times['png_encode']:.3f} "
+        f"| {times['decode']:.3f} / {times['png_decode']:.3f} |"
     )
     return "\n".join(lines)
+
+
+def time_summary(rows: list[dict[str, Any]]) -> str:
+    """Encode + decode over all the images, ours against PNG's: wall time and CPU time."""
+    ours = sum(r["encode"] + r["decode"] for r in rows)
+    png = sum(r["png_encode"] + r["png_decode"] for r in rows)
+    cpu, png_cpu = sum(r["cpu"] for r in rows), sum(r["png_cpu"] for r in rows)
+    return (
+        f"encode + decode, all images: ours {ours:.3f} s, PNG {png:.3f} s ({ours / png:.2f}x); "
+        f"CPU ours {cpu:.3f} s, PNG {png_cpu:.3f} s ({cpu / png_cpu:.2f}x); "
+        f"load {load_average()}"
+    )
 
 
 def peer_table(rows: list[dict[str, Any]]) -> str:
@@ -191,6 +220,7 @@ def main() -> None:
     rows = [measure(name) for name in IMAGES]
     text = section(rows)
     print(text)
+    print(time_summary(rows))
     if args.write:
         current = DOCS.read_text() if DOCS.exists() else "# Benchmarks\n"
         if START in current and END in current:

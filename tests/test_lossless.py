@@ -21,6 +21,8 @@ int_arrays = hnp.arrays(
 )
 
 
+# No deadline: the liftings are compiled kernels, and the first call of a process loads numba.
+@settings(deadline=None)
 @given(int_arrays, st.sampled_from(lossless.FILTERS))
 def test_one_lift_is_exactly_reversible(x: np.ndarray, name: str) -> None:
     if name == "bspline2" and x.shape[0] % 2:

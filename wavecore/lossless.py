@@ -60,8 +60,9 @@ from typing import Any
 
 import numpy as np
 
-from . import layout
+from . import _kernels, layout
 from .errors import InvalidParameter
+from .transform import normalize_axis, run_rows
 
 __all__ = ["FILTERS", "band_shapes", "choose_filters", "forward", "inverse", "lift", "unlift"]
 
@@ -69,13 +70,27 @@ __all__ = ["FILTERS", "band_shapes", "choose_filters", "forward", "inverse", "li
 FILTERS = ("legall53", "haar", "bspline2")
 
 
-def _neighbours(s: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The symmetric-extension neighbours: s[i+1] for every d, d[i-1] and d[i] for every s."""
-    ns, nd = len(s), len(d)
-    s_right = np.concatenate([s[1:], s[-1:]])[:nd]
-    d_left = np.concatenate([d[:1], d])[:ns]
-    d_right = np.concatenate([d, d[-1:]])[:ns]
-    return s_right, d_left, d_right
+#: The compiled kernels' number for each filter (anything else is lifted as 5/3, as before).
+_KINDS = {"legall53": 0, "haar": 1, "bspline2": 2}
+
+
+def _middle_view(arr: np.ndarray, axis: int) -> np.ndarray:
+    """An ``(outer, n, inner)`` view of a C-contiguous array around ``axis``."""
+    outer = int(np.prod(arr.shape[:axis], dtype=np.int64))
+    inner = int(np.prod(arr.shape[axis + 1 :], dtype=np.int64))
+    return arr.reshape(outer, arr.shape[axis], inner)
+
+
+def _run_steps(kernel: Any, arrays: tuple[np.ndarray, ...], kind: int) -> None:
+    """``kernel(*arrays, kind, ...)`` over the thread pool: split along ``outer`` when there
+    is more than one, else along ``inner``.  Every sample is computed the same way whatever
+    the split, so the result does not depend on the thread count."""
+    outer, inner = arrays[0].shape[0], arrays[0].shape[2]
+    work = sum(a.size for a in arrays)
+    if outer > 1:
+        run_rows(lambda lo, hi: kernel(*arrays, kind, lo, hi, 0, inner), outer, work)
+    else:
+        run_rows(lambda lo, hi: kernel(*arrays, kind, 0, outer, lo, hi), inner, work)
 
 
 def lift(x: np.ndarray, axis: int = 0, filter: str = "legall53") -> tuple[np.ndarray, np.ndarray]:
@@ -92,23 +107,20 @@ def lift(x: np.ndarray, axis: int = 0, filter: str = "legall53") -> tuple[np.nda
     >>> s.tolist(), d.tolist()
     ([10, 14, 18], [0, 0])
     """
-    data = np.moveaxis(np.asarray(x, dtype=np.int64), axis, 0)
+    data = np.ascontiguousarray(np.asarray(x, dtype=np.int64))
+    axis = normalize_axis(axis, data.ndim)
+    n = data.shape[axis]
     if filter == "bspline2":
-        c, d = _bspline2_lift(data)
-        return np.moveaxis(c, 0, axis), np.moveaxis(d, 0, axis)
-    if data.shape[0] < 2:
-        return np.moveaxis(data.copy(), 0, axis), np.moveaxis(data[:0].copy(), 0, axis)
-    s = data[0::2].copy()
-    d = data[1::2].copy()
-    if filter == "haar":
-        d -= s[: len(d)]
-        s[: len(d)] += d >> 1
-        return np.moveaxis(s, 0, axis), np.moveaxis(d, 0, axis)
-    s_right, _, _ = _neighbours(s, d)
-    d -= (s[: len(d)] + s_right) >> 1
-    _, d_left, d_right = _neighbours(s, d)
-    s += (d_left + d_right + 2) >> 2
-    return np.moveaxis(s, 0, axis), np.moveaxis(d, 0, axis)
+        _check_even(n)
+    view = _middle_view(data, axis)
+    coarse = np.empty((view.shape[0], (n + 1) // 2, view.shape[2]), dtype=np.int64)
+    detail = np.empty((view.shape[0], n // 2, view.shape[2]), dtype=np.int64)
+    _run_steps(_kernels.lift_steps, (view, coarse, detail), _KINDS.get(filter, 0))
+    shape = list(data.shape)
+    shape[axis] = coarse.shape[1]
+    c = coarse.reshape(shape)
+    shape[axis] = detail.shape[1]
+    return c, detail.reshape(shape)
 
 
 def _check_even(n: int) -> None:
@@ -117,53 +129,32 @@ def _check_even(n: int) -> None:
         raise InvalidParameter(msg)
 
 
-def _bspline2_lift(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    _check_even(data.shape[0])
-    t = data[0::2] - data[1::2]
-    s = data[1::2] + (t >> 1)
-    e = t - s
-    e_before = np.roll(e, 1, axis=0)
-    c = s + ((e - e_before) >> 1)
-    return c, c + e_before
-
-
-def _bspline2_unlift(c: np.ndarray, d: np.ndarray) -> np.ndarray:
-    if c.shape != d.shape:
-        msg = f"closed bspline2 bands must have equal shapes, not {c.shape} and {d.shape}"
-        raise InvalidParameter(msg)
-    e_before = d - c
-    e = np.roll(e_before, -1, axis=0)
-    s = c - ((e - e_before) >> 1)
-    t = e + s
-    odd = s - (t >> 1)
-    out = np.empty((2 * len(c), *c.shape[1:]), dtype=np.int64)
-    out[0::2] = t + odd
-    out[1::2] = odd
-    return out
-
-
 def unlift(
     coarse: np.ndarray, detail: np.ndarray, axis: int = 0, filter: str = "legall53"
 ) -> np.ndarray:
     """The exact inverse of :func:`lift`."""
-    s = np.moveaxis(np.asarray(coarse, dtype=np.int64), axis, 0).copy()
-    d = np.moveaxis(np.asarray(detail, dtype=np.int64), axis, 0).copy()
-    if filter == "bspline2":
-        return np.moveaxis(_bspline2_unlift(s, d), 0, axis)
-    if d.shape[0] == 0:
-        return np.moveaxis(s, 0, axis)
-    if filter == "haar":
-        s[: len(d)] -= d >> 1
-        d += s[: len(d)]
-    else:
-        _, d_left, d_right = _neighbours(s, d)
-        s -= (d_left + d_right + 2) >> 2
-        s_right, _, _ = _neighbours(s, d)
-        d += (s[: len(d)] + s_right) >> 1
-    out = np.empty((len(s) + len(d), *s.shape[1:]), dtype=np.int64)
-    out[0::2] = s
-    out[1::2] = d
-    return np.moveaxis(out, 0, axis)
+    s = np.ascontiguousarray(np.asarray(coarse, dtype=np.int64))
+    d = np.ascontiguousarray(np.asarray(detail, dtype=np.int64))
+    axis = normalize_axis(axis, s.ndim)
+    ns, nd = s.shape[axis], d.shape[axis] if d.ndim == s.ndim else -1
+    if filter == "bspline2" and s.shape != d.shape:
+        msg = f"closed bspline2 bands must have equal shapes, not {s.shape} and {d.shape}"
+        raise InvalidParameter(msg)
+    same_elsewhere = d.ndim == s.ndim and all(
+        a == b for k, (a, b) in enumerate(zip(s.shape, d.shape, strict=True)) if k != axis
+    )
+    if not same_elsewhere or not (nd == 0 or 0 <= ns - nd <= 1):
+        msg = (
+            f"coarse samples of shape {s.shape} and details of shape {d.shape} do not come "
+            f"from one lifting step along axis {axis}"
+        )
+        raise InvalidParameter(msg)
+    shape = list(s.shape)
+    shape[axis] = ns + nd
+    out = np.empty(shape, dtype=np.int64)
+    views = (_middle_view(s, axis), _middle_view(d, axis), _middle_view(out, axis))
+    _run_steps(_kernels.unlift_steps, views, _KINDS.get(filter, 0))
+    return out
 
 
 def band_shapes(shape: Sequence[int], level: int, axes: Sequence[int] = (0, 1)) -> list[Any]:
@@ -193,9 +184,26 @@ def _filters(filters: Sequence[str] | None, level: int) -> list[str]:
 def _entropy_bits(bands: Sequence[np.ndarray]) -> float:
     total = 0.0
     for band in bands:
-        _, counts = np.unique(band, return_counts=True)
+        counts = _value_counts(band)
         total -= float(np.sum(counts * np.log2(counts / band.size)))
     return total
+
+
+def _value_counts(band: np.ndarray) -> np.ndarray:
+    """How often each distinct value occurs, in increasing order of the values.
+
+    The counts ``np.unique(band, return_counts=True)`` gives, without its sort: a histogram
+    when the values span a range not much wider than the band (a band's details do), so the
+    entropy, summed over the same counts in the same order, comes out the same to the bit.
+    """
+    flat = np.ascontiguousarray(band, dtype=np.int64).reshape(-1)
+    if flat.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo, hi = (int(v) for v in _kernels.value_range(flat))
+    if hi - lo > 4 * flat.size + (1 << 16):
+        return np.unique(flat, return_counts=True)[1]
+    counts = _kernels.value_histogram(flat, lo, hi - lo + 1)
+    return counts[counts > 0]
 
 
 def _level_step(coarse: np.ndarray, axes: tuple[int, ...], name: str) -> tuple[np.ndarray, Any]:
