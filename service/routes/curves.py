@@ -67,6 +67,41 @@ def encode_job(body: bytes | bytearray, settings: Settings) -> tuple[bytes, dict
 #: Curve file media types → the format ``wavecore.encode_curve_file`` reads.
 CURVE_FILE_TYPES = {"application/geo+json": "geojson", "image/svg+xml": "svg"}
 
+#: The GeoJSON body as /docs shows it: a GeoJSON object (RFC 7946) of any type; the reader
+#: checks the rest and names the place of a mistake.
+_GEOJSON_SCHEMA = {
+    "type": "object",
+    "required": ["type"],
+    "properties": {
+        "type": {
+            "type": "string",
+            "enum": [
+                "FeatureCollection",
+                "Feature",
+                "GeometryCollection",
+                "LineString",
+                "MultiLineString",
+                "Polygon",
+                "MultiPolygon",
+            ],
+        }
+    },
+    "description": "A GeoJSON document (RFC 7946): every line and ring becomes one curve.",
+}
+_SVG_SCHEMA = {
+    "type": "string",
+    "description": "An SVG document: every subpath of every shape becomes one curve.",
+}
+
+
+def _encode_body_openapi() -> dict[str, Any]:
+    """The JSON body of one curve, and the two curve-file bodies (GeoJSON and SVG)."""
+    extra = json_body_openapi(CurveEncodeRequest)
+    content = extra["requestBody"]["content"]
+    content["application/geo+json"] = {"schema": _GEOJSON_SCHEMA}
+    content["image/svg+xml"] = {"schema": _SVG_SCHEMA}
+    return extra
+
 
 def curve_file_job(
     body: bytes,
@@ -115,8 +150,8 @@ def curve_file_job(
 @router.post(
     "/encode",
     response_class=Response,
-    summary="Encode a curve into a bundle",
-    openapi_extra=json_body_openapi(CurveEncodeRequest),
+    summary="Encode a curve, or a GeoJSON or SVG file of curves, into a bundle",
+    openapi_extra=_encode_body_openapi(),
     responses={
         200: {"content": {BUNDLE_MEDIA_TYPE: {}}, "description": "The bundle."},
         **problem_responses(413, 415, 422, 503),
