@@ -383,49 +383,213 @@ def simplify_set(points, decoded, offsets, closed, tolerance, chunk):
                     stack[top + 1, 0], stack[top + 1, 1] = where, hi
                     top += 2
             a = b
+        # Douglas-Peucker keeps more than it needs: drop each vertex whose two segments one
+        # segment can replace (spans capped at two windows, so the cost stays linear)
+        before = 0
+        v = _next_kept(keep, first, 0, ring, n)
+        while v < ring - 1:
+            after = _next_kept(keep, first, v, ring, n)
+            if after - before <= 2 * chunk and (after < ring - 1 or closed[c] or after == n - 1):
+                fits = True
+                for k in range(before + 1, after):
+                    end = first + (after % n)
+                    if (
+                        _segment_distance(points, first + k, decoded, first + before, end, d)
+                        > tolerance
+                    ):
+                        fits = False
+                        break
+                if fits and not (v == n - 1 and not closed[c]):
+                    keep[first + v] = False
+                    v = after
+                    continue
+            before = v
+            v = after
     return keep
+
+
+@njit(cache=True, nogil=True)
+def _next_kept(keep, first, v, ring, n):
+    """The ring index of the next kept point after ``v`` (``ring - 1`` at the end)."""
+    k = v + 1
+    while k < ring - 1 and not keep[first + (k % n)]:
+        k += 1
+    return k
+
+
+@njit(cache=True, nogil=True)
+def _to_original(query, q, points, first, n, closed, lo, hi, d):
+    """Distance from ``query[q]`` to the original segments ``lo … hi - 1`` (ring-wise)."""
+    best = np.inf
+    if n == 1:
+        return _segment_distance(query, q, points, first, first, d)
+    for s in range(lo, hi):
+        a = s % n if closed else s
+        b = (s + 1) % n if closed else s + 1
+        if not closed and b >= n:
+            b = n - 1
+        best = min(best, _segment_distance(query, q, points, first + a, first + b, d))
+    return best
 
 
 @njit(cache=True, nogil=True)
 def check_set(points, offsets, closed, keep, decoded):
     """The largest deviation, both ways, of each curve (an upper bound of the true one).
 
-    ``decoded`` holds the decoded vertices (the kept points, in order, as the decoder gives
-    them).  Each original point is measured to the decoded segment between the kept points
-    around it (one segment of the decoded polyline: the true distance is no larger), each
-    decoded vertex to the original point it stands for (ditto).
+    ``decoded`` holds the decoded vertices (those of the kept points, in order, as the decoder
+    gives them).  Each original point strictly between two kept points is measured to the
+    decoded segment between them; a kept point to the nearer of its two decoded segments; each
+    decoded vertex to the original segments between the kept points before and after it.  Each
+    is a minimum over part of a polyline, so no smaller than the true distance.
     """
     d = points.shape[1]
     worst = np.zeros(len(offsets) - 1)
     at = 0
+    index = np.empty(points.shape[0] + 1, dtype=np.int64)
     for c in range(len(offsets) - 1):
         first, stop = offsets[c], offsets[c + 1]
         n = stop - first
-        if n == 0:
-            continue
-        start = at
-        last_vertex = at
-        last_index = 0
-        largest = 0.0
+        m = 0
         for i in range(n):
             if keep[first + i]:
-                gap2 = 0.0
-                for j in range(d):
-                    g = decoded[at, j] - points[first + i, j]
-                    gap2 += g * g
-                largest = max(largest, np.sqrt(gap2))
-                if i > 0:
-                    for k in range(last_index + 1, i):
-                        largest = max(
-                            largest,
-                            _segment_distance(points, first + k, decoded, last_vertex, at, d),
-                        )
-                last_vertex, last_index = at, i
-                at += 1
-        if closed[c] and n > 2:
-            for k in range(last_index + 1, n):
-                largest = max(
-                    largest, _segment_distance(points, first + k, decoded, last_vertex, start, d)
+                index[m] = i
+                m += 1
+        ring = bool(closed[c]) and n > 2
+        largest = 0.0
+        for v in range(m):
+            here = at + v
+            # the segment after vertex v, and the original points it covers
+            if v + 1 < m:
+                after, k_after = at + v + 1, index[v + 1]
+            elif ring:
+                after, k_after = at, n
+            else:
+                after, k_after = -1, n
+            # the kept point itself
+            gap = _segment_distance(points, first + index[v], decoded, here, here, d)
+            if after >= 0:
+                gap = min(gap, _segment_distance(points, first + index[v], decoded, here, after, d))
+            if v > 0 or ring:
+                before = here - 1 if v > 0 else at + m - 1
+                gap = min(
+                    gap, _segment_distance(points, first + index[v], decoded, before, here, d)
                 )
+            largest = max(largest, gap)
+            for k in range(index[v] + 1, k_after):
+                if after >= 0:
+                    gap = _segment_distance(points, first + k, decoded, here, after, d)
+                else:  # an open curve's points after its last vertex (none: it is kept)
+                    gap = _segment_distance(points, first + k, decoded, here, here, d)
+                largest = max(largest, gap)
+            # the decoded vertex to the original polyline around it
+            lo = index[v - 1] if v > 0 else (index[m - 1] - n if ring else 0)
+            hi = index[v + 1] if v + 1 < m else (n + index[0] if ring else n - 1)
+            if m == 1:
+                lo, hi = 0, n if ring else n - 1
+            gap = _to_original(decoded, here, points, first, n, ring, lo, hi, d)
+            own = first + index[v]
+            gap = min(gap, _segment_distance(decoded, here, points, own, own, d))
+            largest = max(largest, gap)
         worst[c] = largest
+        at += m
     return worst
+
+
+@njit(cache=True, nogil=True)
+def _offsets_by_cost(d, radius):
+    """Every residual in ``[-radius, radius]**d``, cheapest to code first."""
+    side = 2 * radius + 1
+    count = side**d
+    table = np.empty((count, d), dtype=np.int64)
+    cost = np.empty(count, dtype=np.int64)
+    for i in range(count):
+        rest = i
+        total = 0
+        for j in range(d):
+            r = rest % side - radius
+            rest //= side
+            table[i, j] = r
+            total += 2 * _bit_length(abs(r)) + (r != 0)
+        cost[i] = total * 64 + min(63, int(np.sum(np.abs(table[i]))))
+    order = np.argsort(cost, kind="mergesort")
+    return table[order], cost[order] // 64
+
+
+@njit(cache=True, nogil=True)
+def _residual_cost(r, d):
+    total = 0
+    for j in range(d):
+        total += 2 * _bit_length(abs(r[j])) + (r[j] != 0)
+    return total
+
+
+@njit(cache=True, nogil=True)
+def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, radius):
+    """Move each kept vertex to the lattice point nearest the coder's prediction that keeps the
+    bound (in place on ``lattice``, the kept vertices in order).
+
+    A vertex may slide along the curve: only the distance across it is bounded.  Vertex ``v``
+    is tried at the prediction plus residuals in order of their coding cost (cheaper than its
+    own residual only), and accepted where it lies within the tolerance of the original
+    polyline around it, the original points before it are within the tolerance of the new
+    segment from vertex ``v - 1``, those after it within the tolerance of the segment to vertex
+    ``v + 1`` as it stands, and its own original point within the tolerance of the first.
+    The next vertex then always still fits, so one pass suffices; the caller measures the
+    bound on the decoded result all the same.
+    """
+    d = points.shape[1]
+    table, costs = _offsets_by_cost(d, radius)
+    index = np.empty(points.shape[0] + 1, dtype=np.int64)
+    seg = np.empty((2, d))
+    cand = np.empty((1, d))
+    predicted = np.empty(d, dtype=np.int64)
+    residual = np.empty(d, dtype=np.int64)
+    at = 0
+    for c in range(len(offsets) - 1):
+        first, stop = offsets[c], offsets[c + 1]
+        n = stop - first
+        m = 0
+        for i in range(n):
+            if keep[first + i]:
+                index[m] = i
+                m += 1
+        ring = bool(closed[c]) and n > 2
+        last = m if ring else m - 1
+        for v in range(1, last):
+            for j in range(d):
+                step_before = lattice[at + v - 1, j] - lattice[at + v - 2, j] if v >= 2 else 0
+                predicted[j] = lattice[at + v - 1, j] + ((order * step_before) >> 1)
+                residual[j] = lattice[at + v, j] - predicted[j]
+            own = _residual_cost(residual, d)
+            after = at + v + 1 if v + 1 < m else at
+            k_before, k_here = index[v - 1], index[v]
+            k_after = index[v + 1] if v + 1 < m else n
+            for t in range(len(table)):
+                if costs[t] >= own:
+                    break
+                for j in range(d):
+                    seg[0, j] = lattice[at + v - 1, j] * step
+                    seg[1, j] = (predicted[j] + table[t, j]) * step
+                    cand[0, j] = seg[1, j]
+                # near the original polyline around it
+                if _to_original(cand, 0, points, first, n, ring, k_before, k_after, d) > tolerance:
+                    continue
+                fits = _segment_distance(points, first + k_here, seg, 0, 1, d) <= tolerance
+                k = k_before + 1
+                while fits and k < k_here:
+                    fits = _segment_distance(points, first + k, seg, 0, 1, d) <= tolerance
+                    k += 1
+                if not fits:
+                    continue
+                for j in range(d):
+                    seg[0, j] = cand[0, j]
+                    seg[1, j] = lattice[after, j] * step
+                k = k_here + 1
+                while fits and k < k_after:
+                    fits = _segment_distance(points, first + (k % n), seg, 0, 1, d) <= tolerance
+                    k += 1
+                if fits:
+                    for j in range(d):
+                        lattice[at + v, j] = predicted[j] + table[t, j]
+                    break
+        at += m

@@ -105,6 +105,9 @@ _VERTEX_LIMIT = 1 << 46
 #: per byte of its stream (the encoder uses the wavelet form for such sets).
 _VERTEX_PER_BYTE = 4096
 _VERTEX_ORDERS = (0, 1, 2)
+#: How far (lattice steps per coordinate, for d = 1, 2, 3) a vertex may move towards its
+#: prediction; curves of more dimensions keep their rounded vertices.
+_REFINE_RADIUS = (64, 7, 3)
 WAVELETS = ("bspline2", "haar", "cdf97")
 DTYPES = (
     "float64",
@@ -826,16 +829,34 @@ def _encode_vertex(
         if not np.all(curvecoder.check_set(points, offsets, closed, keep, kept) <= tolerance):
             continue
         counts = np.add.reduceat(keep, offsets[:-1]).astype(np.int64)
-        vertices = np.ascontiguousarray(lattice[keep])
         again = np.array(repeated, dtype=np.int64)
         # the predictor that writes the fewest bytes: the previous vertex (order 0), a straight
-        # continuation (2; dense smooth curves) or half way (1)
-        streams = [
-            curvecoder.encode_set(vertices, counts, closed, again, closed_mode, order)
-            for order in _VERTEX_ORDERS
-        ]
-        order = min(_VERTEX_ORDERS, key=lambda o: len(streams[o]))
-        stream = streams[order]
+        # continuation (2; dense smooth curves) or half way (1); each with the vertices moved
+        # along the curve towards its predictions
+        stream = b""
+        order = -1
+        for candidate in _VERTEX_ORDERS:
+            vertices = np.ascontiguousarray(lattice[keep])
+            if d <= len(_REFINE_RADIUS):
+                curvecoder.refine_set(
+                    points,
+                    offsets,
+                    closed,
+                    keep,
+                    vertices,
+                    step,
+                    tolerance,
+                    candidate,
+                    _REFINE_RADIUS[d - 1],
+                )
+                moved = _lattice_values(vertices, step, dtype).astype(np.float64)
+                if not np.all(
+                    curvecoder.check_set(points, offsets, closed, keep, moved) <= tolerance
+                ):
+                    vertices = np.ascontiguousarray(lattice[keep])
+            coded = curvecoder.encode_set(vertices, counts, closed, again, closed_mode, candidate)
+            if order < 0 or len(coded) < len(stream):
+                stream, order = coded, candidate
         limit = _VERTEX_PER_BYTE * (len(stream) + 16)
         if len(arrays) > limit or int(counts.sum()) * d > limit:
             return None
