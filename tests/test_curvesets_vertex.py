@@ -158,10 +158,16 @@ def test_inspect_describes_the_vertex_form() -> None:
     assert decoded.metadata == {"k": [1, 2]}
 
 
-def test_tolerance_written_short_comes_back_exactly() -> None:
-    for tolerance in (0.1, 3.0, 1e-7, 0.1 + 0.2, np.pi, 5e-324 * 1e300):
-        bundle = wavecore.encode_curves([_walk(30, 2)], tolerance=tolerance, method="vertex")
+def test_tolerance_is_kept_or_tightened() -> None:
+    curve = _walk(30, 2)
+    for tolerance in (0.1, 3.0, 1e-7, 125e-9):  # short decimals: exactly
+        bundle = wavecore.encode_curves([curve], tolerance=tolerance, method="vertex")
         assert wavecore.decode_curves(bundle).tolerance == tolerance
+    for tolerance in (0.1 + 0.2, np.pi, 1e-300, 7.123456789e39):  # others: never looser
+        bundle = wavecore.encode_curves([curve], tolerance=tolerance, method="vertex")
+        got = wavecore.decode_curves(bundle)
+        assert tolerance * (1 - 2**-23) <= got.tolerance <= tolerance
+        assert _both_ways(curve, got.curves[0], True) <= got.tolerance
 
 
 def test_crafted_vertex_bundles_give_curves_or_bundle_error() -> None:

@@ -70,6 +70,7 @@ import struct
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from decimal import Decimal
 from functools import lru_cache
 from typing import Any
 
@@ -756,23 +757,36 @@ def _encode_wavelet(
 # --- the vertex form (format version 2) ------------------------------------------------------
 
 
-def _pack_tolerance(tolerance: float) -> bytes:
-    """A short decimal (``varint(1 + zz(e)), varint(k)`` for ``k · 10**e``) or a float64."""
-    sign, digits, exponent = __import__("decimal").Decimal(repr(tolerance)).as_tuple()
+def _pack_tolerance(tolerance: float) -> tuple[float, bytes]:
+    """The tolerance the vertex form guarantees, and its bytes.
+
+    A short decimal (``varint(2 + zz(e)), varint(k)`` for ``k · 10**e``) is kept exactly.  Any
+    other value is lowered to the float32 at or below it (head 1, then 4 bytes): a bound at
+    most ``2**-23`` tighter, 4 bytes shorter than a float64 (head 0, then 8 bytes, for values
+    outside float32's normal range).
+    """
+    sign, digits, exponent = Decimal(repr(tolerance)).as_tuple()
     if not sign and isinstance(exponent, int) and len(digits) <= 9:
         mantissa = int("".join(map(str, digits)))
         if float(f"{mantissa}e{exponent}") == tolerance:
-            return encode_varint(1 + zigzag(exponent)) + encode_varint(mantissa)
-    return encode_varint(0) + struct.pack("<d", tolerance)
+            return tolerance, encode_varint(2 + zigzag(exponent)) + encode_varint(mantissa)
+    if 2.0**-126 <= tolerance < 3.0e38:
+        single = np.float32(tolerance)
+        if float(single) > tolerance:
+            single = np.nextafter(single, np.float32(0))
+        return float(single), encode_varint(1) + struct.pack("<f", float(single))
+    return tolerance, encode_varint(0) + struct.pack("<d", tolerance)
 
 
 def _read_tolerance(reader: _Reader) -> float:
     head = reader.varint("tolerance", 1 << 12)
     if head == 0:
         (tolerance,) = struct.unpack("<d", reader.take(8, "tolerance"))
+    elif head == 1:
+        (tolerance,) = struct.unpack("<f", reader.take(4, "tolerance"))
     else:
         mantissa = reader.varint("tolerance", 10**9)
-        tolerance = float(f"{mantissa}e{unzigzag(head - 1)}")
+        tolerance = float(f"{mantissa}e{unzigzag(head - 2)}")
     if not (math.isfinite(tolerance) and tolerance > 0):
         msg = f"curve set tolerance {tolerance!r} is not a positive number"
         raise BundleError(msg)
@@ -802,6 +816,7 @@ def _encode_vertex(
     if not arrays or len({a.shape[1] for a in arrays}) != 1:
         return None
     d = arrays[0].shape[1]
+    tolerance, tolerance_bytes = _pack_tolerance(tolerance)
     repeated = []
     parts = []
     for arr, is_closed in zip(arrays, flags, strict=True):
@@ -865,7 +880,7 @@ def _encode_vertex(
         out += encode_varint((meta_bytes is not None) | closed_mode << 2 | order << 4)
         out.append(DTYPES.index(dtype.name))
         out += encode_varint(d)
-        out += _pack_tolerance(tolerance)
+        out += tolerance_bytes
         out.append(index)
         out += encode_varint(len(arrays))
         if meta_bytes is not None:
