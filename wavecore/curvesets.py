@@ -31,6 +31,10 @@ largest step ``tolerance · 2**(e/4)`` that keeps the bound, and entropy-codes t
 curves together with :func:`wavecore.entropy.encode_levels` (group 0: the coarse points'
 differences; group ``g``: detail level ``g`` counted from the finest, of every curve).
 
+That is the *wavelet form*.  The *vertex form* (format version 2, ``method="vertex"``; by
+default the encoder writes both and keeps the smaller) codes a simplified polyline on a
+lattice instead: see :mod:`wavecore.curvecoder` and ``docs/curves.md`` for its bytes.
+
 Format (version 1)
 ------------------
 All integers are unsigned LEB128 varints unless a size is given; ``zz`` is the zigzag map.
