@@ -594,3 +594,85 @@ def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, r
                         lattice[at + v, j] = predicted[j] + table[t, j]
                     break
         at += m
+
+
+@njit(cache=True, nogil=True)
+def _reach(points, first, n, ring, i, way, length):
+    """The index ``way`` (±1) of point ``i`` where the polyline has run ``length`` (or 32
+    points, or an open curve's end)."""
+    d = points.shape[1]
+    k = i
+    run = 0.0
+    for _ in range(32):
+        if not ring and (k + way < 0 or k + way > n - 1):
+            break
+        a, b = first + (k % n), first + ((k + way) % n)
+        gap2 = 0.0
+        for j in range(d):
+            g = points[b, j] - points[a, j]
+            gap2 += g * g
+        run += np.sqrt(gap2)
+        k += way
+        if run >= length:
+            break
+    return k
+
+
+@njit(cache=True, nogil=True)
+def snap_set(points, offsets, closed, step, tolerance):
+    """Lattice points for a lattice coarser than rounding allows.
+
+    Each point takes, among the ``3**d`` lattice points around its rounded position, the one
+    nearest to it of those within ``tolerance`` of its original polyline (within a lattice
+    step and a half of it along the curve): a vertex may sit off its point along the curve,
+    not across it.  The ends of an open curve take their nearest lattice point.  Returns the
+    lattice and whether every point found one (the ends: within ``tolerance`` of their point).
+    """
+    total, d = points.shape
+    lattice = np.empty((total, d), dtype=np.int64)
+    base = np.empty(d, dtype=np.int64)
+    cand = np.empty((1, d))
+    count = 3**d
+    for c in range(len(offsets) - 1):
+        first, stop = offsets[c], offsets[c + 1]
+        n = stop - first
+        ring = bool(closed[c]) and n > 2
+        for i in range(n):
+            k = first + i
+            for j in range(d):
+                base[j] = np.int64(np.rint(points[k, j] / step))
+                lattice[k, j] = base[j]
+            end = not ring and (i == 0 or i == n - 1)
+            if n == 1 or end:
+                gap2 = 0.0
+                for j in range(d):
+                    g = base[j] * step - points[k, j]
+                    gap2 += g * g
+                if np.sqrt(gap2) > tolerance:
+                    return lattice, False
+                continue
+            best, best_own = np.inf, np.inf
+            # the original polyline around the point: a lattice step and a half each way
+            # (at most 32 segments, so the cost stays linear)
+            lo = _reach(points, first, n, ring, i, -1, 1.5 * step)
+            hi = _reach(points, first, n, ring, i, 1, 1.5 * step)
+            for t in range(count):
+                rest = t
+                own2 = 0.0
+                for j in range(d):
+                    cand[0, j] = (base[j] + rest % 3 - 1) * step
+                    rest //= 3
+                    g = cand[0, j] - points[k, j]
+                    own2 += g * g
+                gap = _to_original(cand, 0, points, first, n, ring, lo, hi, d)
+                if gap > tolerance:
+                    continue
+                if own2 < best_own:
+                    best, best_own = gap, own2
+                    rest = t
+                    for j in range(d):
+                        lattice[k, j] = base[j] + rest % 3 - 1
+                        rest //= 3
+            if best > tolerance:
+                return lattice, False
+    return lattice, True

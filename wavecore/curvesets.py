@@ -100,7 +100,11 @@ METHODS = ("auto", "wavelet", "vertex")
 #: Lattice steps of the vertex form, as multiples of the tolerance (a byte indexes this table).
 #: A vertex moves by at most ``step * sqrt(d) / 2`` when rounded, which must stay within the
 #: tolerance: the encoder tries the coarsest steps that allow it.
-VERTEX_STEPS = (1.4, 1.0, 0.7, 0.5, 0.35, 0.25)
+VERTEX_STEPS = (1.4, 1.0, 0.7, 0.5, 0.35, 0.25, 1.9, 1.7, 1.55)
+#: Steps whose rounding may move a point by more than the tolerance (``step · √d / 2`` up to
+#: this many tolerances) are used with snapped vertices: the lattice point nearest the curve
+#: (across it) rather than nearest the point.
+_SNAP_LIMIT = 1.4
 #: Douglas–Peucker runs within windows of this many points (a vertex is kept at each window's
 #: end), so that its cost stays linear whatever the shape.
 _VERTEX_WINDOW = 512
@@ -835,13 +839,20 @@ def _encode_vertex(
     closed_mode = 2 if len(set(flags)) > 1 else (1 if flags[0] else 0)
     largest = float(np.max(np.abs(points)))
     best: bytes | None = None
-    for index, factor in enumerate(VERTEX_STEPS):
-        if factor * math.sqrt(d) / 2 > 1:
+    for factor in sorted(VERTEX_STEPS, reverse=True):
+        index = VERTEX_STEPS.index(factor)
+        reach = factor * math.sqrt(d) / 2
+        if reach > _SNAP_LIMIT:
             continue
         step = tolerance * factor
         if not largest / step < _VERTEX_LIMIT:
             return None
-        lattice = np.rint(points / step).astype(np.int64)
+        if reach > 1:
+            lattice, snapped = curvecoder.snap_set(points, offsets, closed, step, tolerance)
+            if not snapped:
+                continue
+        else:
+            lattice = np.rint(points / step).astype(np.int64)
         decoded = _lattice_values(lattice, step, dtype).astype(np.float64)
         keep = curvecoder.simplify_set(points, decoded, offsets, closed, tolerance, _VERTEX_WINDOW)
         kept = np.ascontiguousarray(decoded[keep])
