@@ -39,16 +39,15 @@ MAX_BITS = 48  # the largest magnitude coded: 2**48 - 1 lattice steps
 # model layout: [probability, count] pairs, grouped
 _CLASSES = 17  # context classes of a magnitude's bit length (0 … 16)
 _UNARY = MAX_BITS + 1
-# classes: 0 count, 1 first vertex of a curve, 2 … 2+_CLASSES first coordinate, then second
-_KIND_COUNT, _KIND_START = 0, 1
-_FIRST_COORD = 2
+_KIND_COUNT, _KIND_START = 0, 1  # a curve's first vertex: one context set per coordinate (4)
+_FIRST_COORD = _KIND_START + 4
 _OTHER_COORD = _FIRST_COORD + _CLASSES
 _MAG_KINDS = _OTHER_COORD + _CLASSES * 4
 MAG_BASE = 0
 MANT_BASE = MAG_BASE + _MAG_KINDS * _UNARY
 MANT_SIZE = (MAX_BITS + 1) * MAX_BITS
 SIGN_BASE = MANT_BASE + MANT_SIZE
-SIGN_SIZE = 3 * 4
+SIGN_SIZE = 3 * 4 + 4  # by the previous residual's sign and the coordinate; first vertices
 FLAG_BASE = SIGN_BASE + SIGN_SIZE
 FLAG_SIZE = 4
 MODELS = FLAG_BASE + FLAG_SIZE
@@ -203,7 +202,9 @@ def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order,
         # the first vertex: a step from the previous curve's first vertex
         for j in range(d):
             value = 0 if decoding else lattice[at, j] - start[j]
-            value = _signed(st, buf, models, _KIND_START, 0, value, decoding)
+            value = _signed(
+                st, buf, models, _KIND_START + min(j, 3), 12 + min(j, 3), value, decoding
+            )
             if decoding:
                 lattice[at, j] = start[j] + value
             start[j] = lattice[at, j]
@@ -232,7 +233,7 @@ def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order,
                 if j == 0:
                     # how far the first coordinate's size is below the segment's (0 … 3)
                     first_class = max(0, min(3, length_class - k + 1))
-                largest = max(largest, abs(value))
+                largest = max(largest, abs(previous_step[j]))
             length_class = _class(_bit_length(largest))
         at += m
     return at
