@@ -8,12 +8,12 @@ the lattice differences with an adaptive binary range coder and small contexts. 
 runs in compiled loops over the whole set (one call per set, not per curve or per symbol).
 
 The range coder is LZMA's (``low`` with a carry cache, 32-bit ``range``, renormalised by bytes)
-with 15-bit probabilities adapted at a rate that starts fast and settles at ``2**-4`` (1–3 %
-fewer bytes than ``2**-5`` on the glyphs of benchmarks/curves.py): the sets are small (a glyph
-is a few hundred bytes), so the models must learn in a few dozen symbols.  It is written here
-rather than borrowed from ``_blockkernels`` because its contexts are the curve's own and its
-stream format must not move when the image coder's does.  All arithmetic is on integers: every
-machine writes and reads the same bits.
+with 15-bit probabilities adapted at a rate that starts fast and settles at ``2**-4`` (0–1 %
+fewer bytes than ``2**-5``, 1–3 % fewer than ``2**-6``, on the glyphs of benchmarks/curves.py):
+the sets are small (a glyph is a few hundred bytes), so the models must learn in a few dozen
+symbols.  It is written here rather than borrowed from ``_blockkernels`` because its contexts
+are the curve's own and its stream format must not move when the image coder's does.  All
+arithmetic is on integers: every machine writes and reads the same bits.
 
 One function (:func:`_code_set`) both encodes and decodes, so the two cannot drift apart.
 
