@@ -110,6 +110,7 @@ def curve_file_job(
     wavelet: str | None,
     level: int | None,
     settings: Settings,
+    method: str | None = None,
 ) -> tuple[bytes, dict[str, str]]:
     """Read a GeoJSON or SVG body, check its cost, code it as one curve set."""
 
@@ -134,6 +135,7 @@ def curve_file_job(
             level=level,
             check=check,
             max_points=cost.sample_limit(settings) // (3 * cost.CURVE_FACTOR),
+            method=method,
         )
     except wavecore.InvalidParameter as exc:
         raise Problem("invalid-parameter", f"{fmt}: {exc}"[:600]) from None
@@ -170,6 +172,13 @@ async def encode_curve(
     level: Annotated[
         int | None, Query(ge=0, le=24, description="GeoJSON/SVG bodies: the most levels")
     ] = None,
+    method: Annotated[
+        Literal["auto", "wavelet", "vertex"] | None,
+        Query(
+            description="GeoJSON/SVG bodies: the curve-set form (default auto: the smaller of "
+            "the wavelet form and the vertex form; docs/curves.md)"
+        ),
+    ] = None,
 ) -> Response:
     """Without `keep` or `tolerance` the largest point deviation is 1e-3 × the bounding box's
     diagonal.  `X-Wavecore-Max-Error` gives the measured largest deviation.
@@ -183,7 +192,7 @@ async def encode_curve(
         fmt = CURVE_FILE_TYPES[content_type]
         data = await request.body()
         bundle, headers = await run_work(
-            request, curve_file_job, data, fmt, tolerance, wavelet, level, settings
+            request, curve_file_job, data, fmt, tolerance, wavelet, level, settings, method
         )
         return Response(bundle, media_type=BUNDLE_MEDIA_TYPE, headers=headers)
     body = await read_json_bytes(request)

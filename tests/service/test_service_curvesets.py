@@ -173,3 +173,19 @@ async def test_openapi_lists_the_curve_file_bodies(client: httpx.AsyncClient) ->
             headers={"content-type": media_type},
         )
         assert r.status_code == 200, (media_type, r.text)
+
+
+@pytest.mark.parametrize("method", ["wavelet", "vertex"])
+async def test_method_query_picks_the_form(client: httpx.AsyncClient, method: str) -> None:
+    r = await client.post(
+        "/v1/curves/encode",
+        content=json.dumps(FEATURES).encode(),
+        params={"tolerance": 0.05, "method": method},
+        headers={"content-type": GEOJSON},
+    )
+    assert r.status_code == 200, r.text
+    info = (await client.post("/v1/bundles/inspect", content=r.content)).json()
+    assert info["method"] == method
+    back = await client.post("/v1/bundles/reconstruct", content=r.content)
+    assert back.status_code == 200
+    assert back.json()["features"][0]["properties"] == {"name": "field", "crop": "wheat"}
