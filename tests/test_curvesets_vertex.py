@@ -226,3 +226,32 @@ def test_cost_is_linear_for_long_curves_and_many_curves() -> None:
     assert seconds([_walk(50_000, 7)]) < 40 * max(small, 0.005)
     few = min(seconds([_walk(4, seed) for seed in range(1_000)]) for _ in range(2))
     assert seconds([_walk(4, seed) for seed in range(10_000)]) < 40 * max(few, 0.005)
+
+
+# Bundles written by this release (one per form), kept as bytes: every later reader must decode
+# them.  The check is against the curves they were made from (the bound), not against bytes.
+FROZEN = {
+    "wavelet": (
+        "89575643010900007b14ae47e17a843f45020204800128c10112a001041d0607071cffc588d5e886dc"
+        "e8e341906c5259761174dca5eb2224d356c2d5b555053ab1558aa0065e5b79f799e306fe37614bd8ba"
+        "1978daab56ca4bcc4d55b2524a2bcaaf4acd53aa0500343605f0225b9b13"
+    ),
+    "vertex": (
+        "8957564302290002050106021978daab56ca4bcc4d55b2524a2bcaaf4acd53aa0500343605f0be7f7e"
+        "d72560226396195a1105e2dc5116233680dde8687853f2832ebf0bf417bf4e4e5f8ccd2f0e2b3f7efd"
+        "2adca65435f5fd"
+    ),
+}
+
+
+@pytest.mark.parametrize("form", sorted(FROZEN))
+def test_frozen_bundles_of_both_forms_still_decode(form: str) -> None:
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    ring = np.stack([np.cos(t), np.sin(t) * 0.5], 1)
+    walk = np.stack([np.linspace(0, 3, 25), np.sin(np.linspace(0, 3, 25))], 1)
+    got = wavecore.decode_curves(bytes.fromhex(FROZEN[form]))
+    assert got.closed == [True, False] and got.tolerance == 0.01
+    assert got.metadata == {"name": "frozen"}
+    assert wavecore.inspect(bytes.fromhex(FROZEN[form]))["method"] == form
+    for original, back, flag in zip((ring, walk), got.curves, got.closed, strict=True):
+        assert _both_ways(original, back, flag) <= 0.01
