@@ -193,7 +193,7 @@ def test_crafted_vertex_bundles_give_curves_or_bundle_error() -> None:
             continue
         assert isinstance(out, list)
         assert all(isinstance(c, np.ndarray) and c.ndim == 2 for c in out)
-        assert sum(c.size for c in out) <= curvesets._VERTEX_PER_BYTE * (len(crafted) + 16)
+        assert sum(c.size for c in out) <= curvesets.VERTEX_PER_BYTE * (len(crafted) + 16)
 
 
 def test_coder_round_trips_extreme_values() -> None:

@@ -112,7 +112,7 @@ _VERTEX_WINDOW = 512
 _VERTEX_LIMIT = 1 << 46
 #: The decoder refuses a vertex-coded set that declares more curves or values than this many
 #: per byte of its stream (the encoder uses the wavelet form for such sets).
-_VERTEX_PER_BYTE = 4096
+VERTEX_PER_BYTE = 4096
 _VERTEX_ORDERS = (0, 1, 2)
 #: How far (lattice steps per coordinate, for d = 1, 2, 3) a vertex may move towards its
 #: prediction; curves of more dimensions keep their rounded vertices.
@@ -887,7 +887,7 @@ def _encode_vertex(
             coded = curvecoder.encode_set(vertices, counts, closed, again, closed_mode, candidate)
             if order < 0 or len(coded) < len(stream):
                 stream, order = coded, candidate
-        limit = _VERTEX_PER_BYTE * (len(stream) + 16)
+        limit = VERTEX_PER_BYTE * (len(stream) + 16)
         if len(arrays) > limit or int(counts.sum()) * d > limit:
             return None
         out = bytearray(MAGIC)
@@ -942,7 +942,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
             msg = f"curve set metadata is not deflated JSON: {exc}"
             raise BundleError(msg) from exc
     stream = reader.data[reader.at :]
-    limit = min(MAX_POINTS, _VERTEX_PER_BYTE * (len(stream) + 16))
+    limit = min(MAX_POINTS, VERTEX_PER_BYTE * (len(stream) + 16))
     if count > limit:
         msg = f"curve set declares {count} curves in a {len(stream)}-byte stream"
         raise BundleError(msg)
