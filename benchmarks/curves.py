@@ -9,7 +9,10 @@ Data:
 Methods, each swept over the tolerance ``t`` (relative to the glyph size, or to the track's
 bounding-box diagonal):
 
-* ``wavecore``: :func:`wavecore.encode_curves` (the whole file), for each wavelet;
+* ``wavecore``: :func:`wavecore.encode_curves` (the whole file) as it is called by default
+  (``method="auto"``: the smaller of its wavelet and vertex forms);
+* ``wavecore wavelet``: the wavelet form alone (``method="wavelet"``, bspline2: format 1);
+* ``wavecore vertex``: the vertex form alone (``method="vertex"``: format 2);
 * ``dp+zlib``: Douglas–Peucker at ``t - q/√2``, the kept points quantized to ``q = t/2``,
   per-curve varint counts and zigzag varint deltas, zlib level 9 (written here);
 * ``polyline``: the same Douglas–Peucker and quantization, written as Google's encoded polyline
@@ -44,7 +47,12 @@ TEXT = "Wavelets & curves 2026"
 GLYPH_SIZE = 100.0
 SAMPLES_PER_BEZIER = 12
 RELATIVE_TOLERANCES = (0.001, 0.003, 0.01, 0.03, 0.1)
-WAVELETS = ("bspline2", "haar", "cdf97")
+#: wavecore's rows: (name, encode_curves keywords)
+WAVECORE = (
+    ("wavecore", {}),
+    ("wavecore wavelet", {"method": "wavelet"}),
+    ("wavecore vertex", {"method": "vertex"}),
+)
 
 
 # --- data --------------------------------------------------------------------------------------
@@ -207,8 +215,8 @@ def google_polyline(curves: list[np.ndarray], closed: bool, tolerance: float):
     return len(text.encode()) + 8, [q * (tolerance / 2) for q in quantized]
 
 
-def wavecore_curves(curves: list[np.ndarray], closed: bool, tolerance: float, wavelet: str):
-    bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, wavelet=wavelet)
+def wavecore_curves(curves: list[np.ndarray], closed: bool, tolerance: float, options: dict):
+    bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, **options)
     return len(bundle), wavecore.decode(bundle)
 
 
@@ -218,7 +226,8 @@ def wavecore_curves(curves: list[np.ndarray], closed: bool, tolerance: float, wa
 def run_set(name: str, curves: list[np.ndarray], closed: bool, scale: float) -> list[dict]:
     rows = []
     methods = [
-        (f"wavecore {w}", lambda c, t, w=w: wavecore_curves(c, closed, t, w)) for w in WAVELETS
+        (name, lambda c, t, o=options: wavecore_curves(c, closed, t, o))
+        for name, options in WAVECORE
     ]
     methods += [("dp+zlib", lambda c, t: dp_zlib(c, closed, t))]
     methods += [("polyline", lambda c, t: google_polyline(c, closed, t))]
@@ -329,7 +338,7 @@ def main() -> None:
     text = table(rows)
     print(text)
     summary = []
-    for method in [f"wavecore {w}" for w in WAVELETS]:
+    for method, _ in WAVECORE:
         for peer in ("dp+zlib", "polyline"):
             ratios = at_equal_deviation(rows, method, peer)
             glyph = [q for name, _, q in ratios if name != "random walk"]

@@ -7,9 +7,15 @@ Each bundle is encoded once; the same header and chunks are then written in both
 identical and only the overhead differs.  ``header`` is ``inspect(...)["header_bytes"]``:
 everything but the chunks (preamble, header, chunk table and checks).  Prints a Markdown table
 (docs/bundle-format.md quotes it).
+
+A second table gives the same curves as one-curve *curve sets* (``encode_curves([curve])``, at
+the tolerance ``encode_curve`` uses by default: 1e-3 of the bounding-box diagonal): their
+header is everything but the coded stream (magic, fields, CRC), in both forms.
 """
 
 from __future__ import annotations
+
+import os
 
 import numpy as np
 
@@ -41,7 +47,35 @@ def cases() -> dict[str, bytes]:
     return made
 
 
+def curve_points() -> dict[str, np.ndarray]:
+    t8 = np.linspace(0, 1, 8)
+    made = {"curve, 8 points": np.stack([t8, np.sin(3 * t8)], 1)}
+    for n in (50, 200, 1000):
+        t = np.linspace(0, 1, n)
+        made[f"curve, {n} points"] = np.stack([t, np.sin(6 * t) * t], 1)
+    return made
+
+
+def curve_sets() -> None:
+    print()
+    print("| one-curve curve set | form | payload | header | bundle | encode_curve bundle |")
+    print("|---|---|---:|---:|---:|---:|")
+    for name, points in curve_points().items():
+        single = len(wavecore.encode_curve(points))
+        diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
+        for method in ("auto", "wavelet", "vertex"):
+            bundle = wavecore.encode_curves(
+                [points], closed=False, tolerance=1e-3 * diagonal, method=method
+            )
+            info = wavecore.inspect(bundle)
+            print(
+                f"| {name} | {method} ({info['method']}) | {info['payload_bytes']} "
+                f"| {info['header_bytes']} | {len(bundle)} | {single} |"
+            )
+
+
 def main() -> None:
+    print(f"load average {os.getloadavg()[0]:.2f}")
     print("| bundle | levels | payload | header 1.1 | header 2.0 | bundle 1.1 | bundle 2.0 |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     for name, bundle in cases().items():
@@ -56,6 +90,7 @@ def main() -> None:
             f"| {name} | {parsed.header['levels']} | {payload} | {old_header} | {new_header} "
             f"| {len(old)} | {len(bundle)} |"
         )
+    curve_sets()
 
 
 if __name__ == "__main__":

@@ -31,6 +31,10 @@ largest step ``tolerance · 2**(e/4)`` that keeps the bound, and entropy-codes t
 curves together with :func:`wavecore.entropy.encode_levels` (group 0: the coarse points'
 differences; group ``g``: detail level ``g`` counted from the finest, of every curve).
 
+That is the *wavelet form*.  The *vertex form* (format version 2, ``method="vertex"``; by
+default the encoder writes both and keeps the smaller) codes a simplified polyline on a
+lattice instead: see :mod:`wavecore.curvecoder` and ``docs/curves.md`` for its bytes.
+
 Format (version 1)
 ------------------
 All integers are unsigned LEB128 varints unless a size is given; ``zz`` is the zigzag map.
@@ -70,11 +74,13 @@ import struct
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from decimal import Decimal
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
+from . import curvecoder
 from .blockcoder import BLOCK_SIZE
 from .entropy import decode_levels, encode_levels
 from .errors import BundleError, InvalidParameter
@@ -88,6 +94,29 @@ __all__ = ["CurveSet", "decode_curves", "encode_curves", "inspect_curves", "is_c
 
 MAGIC = b"\x89WVC"
 VERSION = 1
+#: The vertex-coded form (format version 2): see :mod:`wavecore.curvecoder` and docs/curves.md.
+VERTEX_VERSION = 2
+METHODS = ("auto", "wavelet", "vertex")
+#: Lattice steps of the vertex form, as multiples of the tolerance (a byte indexes this table).
+#: A vertex moves by at most ``step * sqrt(d) / 2`` when rounded, which must stay within the
+#: tolerance: the encoder tries the coarsest steps that allow it.
+VERTEX_STEPS = (1.4, 1.0, 0.7, 0.5, 0.35, 0.25, 1.9, 1.7, 1.55, 1.8, 1.6, 1.47)
+#: Steps whose rounding may move a point by more than the tolerance (``step · √d / 2`` up to
+#: this many tolerances) are used with snapped vertices: the lattice point nearest the curve
+#: (across it) rather than nearest the point.
+_SNAP_LIMIT = 1.4
+#: Douglas–Peucker runs within windows of this many points (a vertex is kept at each window's
+#: end), so that its cost stays linear whatever the shape.
+_VERTEX_WINDOW = 512
+#: Lattice coordinates beyond this many steps are not vertex-coded (the wavelet form takes them).
+_VERTEX_LIMIT = 1 << 46
+#: The decoder refuses a vertex-coded set that declares more curves or values than this many
+#: per byte of its stream (the encoder uses the wavelet form for such sets).
+VERTEX_PER_BYTE = 4096
+_VERTEX_ORDERS = (0, 1, 2)
+#: How far (lattice steps per coordinate, for d = 1, 2, 3) a vertex may move towards its
+#: prediction; curves of more dimensions keep their rounded vertices.
+_REFINE_RADIUS = (64, 7, 3)
 WAVELETS = ("bspline2", "haar", "cdf97")
 DTYPES = (
     "float64",
@@ -116,7 +145,7 @@ _MIN_POINTS = 8
 _RESAMPLE_SHARE = 0.7
 #: The most points a bundle may declare in all (the decoder's bound on hostile counts).
 MAX_POINTS = 1 << 27
-_MODE_RESAMPLED, _MODE_PADDED, _MODE_RAW = 0, 1, 2
+_MODE_RESAMPLED, _MODE_PADDED, _MODE_RAW, _MODE_VERTEX = 0, 1, 2, 3
 _INDEX_LIMIT = 1 << 29  # quantized integers beyond this would not fit the coder's int32
 
 
@@ -552,6 +581,7 @@ def encode_curves(
     wavelet: str | None = None,
     level: int | None = None,
     metadata: dict[str, Any] | None = None,
+    method: str | None = None,
 ) -> bytes:
     """Encode many curves into one bundle, every point within ``tolerance`` both ways.
 
@@ -577,6 +607,12 @@ def encode_curves(
     metadata : dict, optional, keyword-only
         JSON-serialisable data kept in the bundle and given back by :func:`decode_curves`
         (the file readers of :mod:`wavecore.io` keep structure and properties here).
+    method : {"auto", "wavelet", "vertex"}, optional, keyword-only
+        ``"wavelet"``: the curves' wavelet coefficients, quantized and context-coded (format
+        version 1).  ``"vertex"``: a simplified polyline on a lattice, range-coded (format
+        version 2; used only where it can keep the bound: curves of one dimension and
+        coordinates within ``2**46`` lattice steps, else the wavelet form is written).
+        ``"auto"`` (the default) writes both and keeps the smaller.  Both keep the bound.
 
     Returns
     -------
@@ -639,6 +675,34 @@ def encode_curves(
         except (TypeError, ValueError) as exc:
             msg = f"metadata must be JSON-serialisable: {exc}"
             raise InvalidParameter(msg) from exc
+    if method is None:
+        method = "auto"
+    if method not in METHODS:
+        msg = f"method must be one of {METHODS}, not {method!r}"[:300]
+        raise InvalidParameter(msg)
+    meta = meta_bytes if metadata is not None else None
+    vertex = None
+    if method != "wavelet":
+        vertex = _encode_vertex(arrays, flags, tolerance, dtype, meta)
+        if method == "vertex" and vertex is not None:
+            return vertex
+    wavelet_form = _encode_wavelet(arrays, flags, name, tolerance, cap, level_given, dtype, meta)
+    if vertex is not None and len(vertex) < len(wavelet_form):
+        return vertex
+    return wavelet_form
+
+
+def _encode_wavelet(
+    arrays: list[np.ndarray],
+    flags: list[bool],
+    name: str,
+    tolerance: float,
+    cap: int,
+    level_given: bool,
+    dtype: np.dtype[Any],
+    meta_bytes: bytes | None,
+) -> bytes:
+    """The wavelet form (format version 1)."""
     rounding_byte = round(DEFAULT_ROUNDING * 256)
     coder = _CurveCoder(name, tolerance, rounding_byte / 256, cap, dtype)
     coded: list[_Coded] = []
@@ -653,7 +717,7 @@ def encode_curves(
     dims = [a.shape[1] for a in arrays]
     mixed = len(set(dims)) > 1
     closed_mode = 2 if len(set(flags)) > 1 else (1 if flags and flags[0] else 0)
-    flag_bits = (metadata is not None) | mixed << 1 | closed_mode << 2 | level_given << 4
+    flag_bits = (meta_bytes is not None) | mixed << 1 | closed_mode << 2 | level_given << 4
     out = bytearray(MAGIC)
     out.append(VERSION)
     out += encode_varint(flag_bits)
@@ -692,10 +756,230 @@ def encode_curves(
     for c in coded:
         if c.raw is not None:
             out += c.raw.astype(dtype.newbyteorder("<")).tobytes()
-    if metadata is not None:
+    if meta_bytes is not None:
         out += encode_varint(len(meta_bytes)) + meta_bytes
     out += struct.pack("<I", zlib.crc32(out))
     return bytes(out)
+
+
+# --- the vertex form (format version 2) ------------------------------------------------------
+
+
+def _pack_tolerance(tolerance: float) -> tuple[float, bytes]:
+    """The tolerance the vertex form guarantees, and its bytes.
+
+    A short decimal (``varint(2 + zz(e)), varint(k)`` for ``k · 10**e``) is kept exactly.  Any
+    other value is lowered to the float32 at or below it (head 1, then 4 bytes): a bound at
+    most ``2**-23`` tighter, 4 bytes shorter than a float64 (head 0, then 8 bytes, for values
+    outside float32's normal range).
+    """
+    sign, digits, exponent = Decimal(repr(tolerance)).as_tuple()
+    if not sign and isinstance(exponent, int) and len(digits) <= 9:
+        mantissa = int("".join(map(str, digits)))
+        if float(f"{mantissa}e{exponent}") == tolerance:
+            return tolerance, encode_varint(2 + zigzag(exponent)) + encode_varint(mantissa)
+    if 2.0**-126 <= tolerance < 3.0e38:
+        single = np.float32(tolerance)
+        if float(single) > tolerance:
+            single = np.nextafter(single, np.float32(0))
+        return float(single), encode_varint(1) + struct.pack("<f", float(single))
+    return tolerance, encode_varint(0) + struct.pack("<d", tolerance)
+
+
+def _read_tolerance(reader: _Reader) -> float:
+    head = reader.varint("tolerance", 1 << 12)
+    if head == 0:
+        (tolerance,) = struct.unpack("<d", reader.take(8, "tolerance"))
+    elif head == 1:
+        (tolerance,) = struct.unpack("<f", reader.take(4, "tolerance"))
+    else:
+        mantissa = reader.varint("tolerance", 10**9)
+        tolerance = float(f"{mantissa}e{unzigzag(head - 2)}")
+    if not (math.isfinite(tolerance) and tolerance > 0):
+        msg = f"curve set tolerance {tolerance!r} is not a positive number"
+        raise BundleError(msg)
+    return tolerance
+
+
+def _lattice_values(lattice: np.ndarray, step: float, dtype: np.dtype[Any]) -> np.ndarray:
+    """The decoded coordinates of lattice points (in ``dtype``)."""
+    with np.errstate(all="ignore"):
+        return _finish(lattice.astype(np.float64) * step, dtype)
+
+
+def _encode_vertex(
+    arrays: list[np.ndarray],
+    flags: list[bool],
+    tolerance: float,
+    dtype: np.dtype[Any],
+    meta_bytes: bytes | None,
+) -> bytes | None:
+    """The vertex form (format version 2), or None where it cannot keep the bound.
+
+    Each curve is simplified (Douglas–Peucker, distances to the decoded lattice segments), its
+    kept points rounded to the lattice, and the set range-coded (:mod:`wavecore.curvecoder`).
+    The bound is then measured on the decoded values; a lattice step that misses it anywhere
+    is not used, and the next finer one is tried.
+    """
+    if not arrays or len({a.shape[1] for a in arrays}) != 1:
+        return None
+    d = arrays[0].shape[1]
+    tolerance, tolerance_bytes = _pack_tolerance(tolerance)
+    repeated = []
+    parts = []
+    for arr, is_closed in zip(arrays, flags, strict=True):
+        points = arr.astype(np.float64)
+        repeat = bool(is_closed and len(points) > 2 and np.array_equal(points[0], points[-1]))
+        repeated.append(repeat)
+        parts.append(points[:-1] if repeat else points)
+    points = np.ascontiguousarray(np.concatenate(parts))
+    offsets = np.zeros(len(parts) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum([len(p) for p in parts])
+    closed = np.array(flags, dtype=np.int64)
+    closed_mode = 2 if len(set(flags)) > 1 else (1 if flags[0] else 0)
+    largest = float(np.max(np.abs(points)))
+    best: bytes | None = None
+    for factor in sorted(VERTEX_STEPS, reverse=True):
+        index = VERTEX_STEPS.index(factor)
+        reach = factor * math.sqrt(d) / 2
+        if reach > _SNAP_LIMIT:
+            continue
+        step = tolerance * factor
+        if not largest / step < _VERTEX_LIMIT:
+            return None
+        if reach > 1:
+            lattice, snapped = curvecoder.snap_set(points, offsets, closed, step, tolerance)
+            if not snapped:
+                continue
+        else:
+            lattice = np.rint(points / step).astype(np.int64)
+        decoded = _lattice_values(lattice, step, dtype).astype(np.float64)
+        keep = curvecoder.simplify_set(points, decoded, offsets, closed, tolerance, _VERTEX_WINDOW)
+        kept = np.ascontiguousarray(decoded[keep])
+        if not np.all(curvecoder.check_set(points, offsets, closed, keep, kept) <= tolerance):
+            continue
+        counts = np.add.reduceat(keep, offsets[:-1]).astype(np.int64)
+        again = np.array(repeated, dtype=np.int64)
+        # the predictor that writes the fewest bytes: the previous vertex (order 0), a straight
+        # continuation (2; dense smooth curves) or half way (1); each with the vertices moved
+        # along the curve towards its predictions
+        stream = b""
+        order = -1
+        for candidate in _VERTEX_ORDERS:
+            vertices = np.ascontiguousarray(lattice[keep])
+            if d <= len(_REFINE_RADIUS):
+                curvecoder.refine_set(
+                    points,
+                    offsets,
+                    closed,
+                    keep,
+                    vertices,
+                    step,
+                    tolerance,
+                    candidate,
+                    _REFINE_RADIUS[d - 1],
+                )
+                moved = _lattice_values(vertices, step, dtype).astype(np.float64)
+                if not np.all(
+                    curvecoder.check_set(points, offsets, closed, keep, moved) <= tolerance
+                ):
+                    vertices = np.ascontiguousarray(lattice[keep])
+            coded = curvecoder.encode_set(vertices, counts, closed, again, closed_mode, candidate)
+            if order < 0 or len(coded) < len(stream):
+                stream, order = coded, candidate
+        limit = VERTEX_PER_BYTE * (len(stream) + 16)
+        if len(arrays) > limit or int(counts.sum()) * d > limit:
+            return None
+        out = bytearray(MAGIC)
+        out.append(VERTEX_VERSION)
+        out += encode_varint((meta_bytes is not None) | closed_mode << 2 | order << 4)
+        out.append(DTYPES.index(dtype.name))
+        out += encode_varint(d)
+        out += tolerance_bytes
+        out.append(index)
+        out += encode_varint(len(arrays))
+        if meta_bytes is not None:
+            out += encode_varint(len(meta_bytes)) + meta_bytes
+        out += stream
+        out += struct.pack("<I", zlib.crc32(out))
+        best = bytes(out)
+        break  # the coarsest step that keeps the bound (finer ones measured: never smaller)
+    return best
+
+
+def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
+    """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
+    reader = _Reader(data[:-4])
+    reader.take(5, "magic and version")
+    flags = reader.varint("flags", 63)
+    closed_mode = (flags >> 2) & 3
+    order = flags >> 4
+    if flags & 2 or closed_mode == 3 or order not in _VERTEX_ORDERS:
+        msg = f"curve set flags {flags} are not a vertex form's"
+        raise BundleError(msg)
+    dtype_index = reader.take(1, "dtype")[0]
+    if dtype_index >= len(DTYPES):
+        msg = f"curve set names dtype {dtype_index}, unknown"
+        raise BundleError(msg)
+    dtype = np.dtype(DTYPES[dtype_index])
+    d = reader.varint("d", 1 << 16)
+    if d < 1:
+        msg = "curve set dimension 0 is invalid"
+        raise BundleError(msg)
+    tolerance = _read_tolerance(reader)
+    step_index = reader.take(1, "step")[0]
+    if step_index >= len(VERTEX_STEPS):
+        msg = f"curve set lattice step {step_index} is unknown"
+        raise BundleError(msg)
+    step = tolerance * VERTEX_STEPS[step_index]
+    count = reader.varint("count", MAX_POINTS)
+    metadata = None
+    if flags & 1:
+        size = reader.varint("metadata length", len(data))
+        try:
+            metadata = json.loads(zlib.decompress(reader.take(size, "metadata")))
+        except (zlib.error, ValueError) as exc:
+            msg = f"curve set metadata is not deflated JSON: {exc}"
+            raise BundleError(msg) from exc
+    stream = reader.data[reader.at :]
+    limit = min(MAX_POINTS, VERTEX_PER_BYTE * (len(stream) + 16))
+    if count > limit:
+        msg = f"curve set declares {count} curves in a {len(stream)}-byte stream"
+        raise BundleError(msg)
+    capacity = min(limit // d, 1024 + 64 * len(stream))
+    while True:  # grow the vertex buffer only as far as the stream really goes
+        result = curvecoder.decode_set(
+            stream, count, d, closed_mode, closed_mode == 1, capacity, order
+        )
+        if result is not None or capacity >= limit // d:
+            break
+        capacity = min(limit // d, 4 * capacity)
+    if result is None:
+        msg = f"curve set declares more than {limit} values in a {len(stream)}-byte stream"
+        raise BundleError(msg)
+    lattice, counts, closed, repeated = result
+    if np.any(np.abs(lattice) >= _VERTEX_LIMIT):
+        msg = "curve set coordinate out of range"
+        raise BundleError(msg)
+    values = _lattice_values(lattice, step, dtype)
+    curves = []
+    at = 0
+    for m, again in zip(counts.tolist(), repeated.tolist(), strict=True):
+        points = values[at : at + m]
+        at += m
+        curves.append(np.concatenate([points, points[:1]]) if again else points.copy())
+    flags_out = [bool(c) for c in closed.tolist()]
+    info = {
+        "dtype": dtype,
+        "d": d,
+        "stream": len(stream),
+        "step": step,
+        "repeated": [bool(r) for r in repeated.tolist()],
+    }
+    curve_set = CurveSet(
+        curves, flags_out, tolerance, "none", metadata, [_MODE_VERTEX] * len(curves)
+    )
+    return curve_set, info
 
 
 def is_curve_set(data: Any) -> bool:
@@ -713,7 +997,8 @@ class _Record:
     closed: bool
 
 
-def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Reader]:
+def _checked(data: Any) -> bytes:
+    """The bundle's bytes, once its magic, length and CRC-32 are checked."""
     if not isinstance(data, bytes | bytearray | memoryview):
         msg = f"a bundle must be bytes, not {type(data).__name__}"
         raise BundleError(msg)
@@ -728,11 +1013,23 @@ def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Read
     if zlib.crc32(data[:-4]) != crc:
         msg = "curve set damaged: its CRC-32 does not match"
         raise BundleError(msg)
+    return data
+
+
+def _is_vertex_form(data: bytes) -> bool:
+    return data[len(MAGIC)] == VERTEX_VERSION
+
+
+def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Reader]:
+    data = _checked(data)
     reader = _Reader(data[:-4])
     reader.take(4, "magic")
     version = reader.take(1, "version")[0]
     if version != VERSION:
-        msg = f"curve set version {version} is not supported (this reader reads {VERSION})"
+        msg = (
+            f"curve set version {version} is not supported "
+            f"(this reader reads {VERSION} and {VERTEX_VERSION})"
+        )
         raise BundleError(msg)
     flags = reader.varint("flags", 31)
     wavelet_index = reader.take(1, "wavelet")[0]
@@ -825,7 +1122,10 @@ def decode_curves(bundle: Any) -> CurveSet:
 
 
 def _decode(bundle: Any) -> CurveSet:
-    info, records, chunks, reader = _parse(bundle)
+    data = _checked(bundle)
+    if _is_vertex_form(data):
+        return _decode_vertex(data)[0]
+    info, records, chunks, reader = _parse(data)
     wavelet = info["wavelet"]
     dtype = info["dtype"]
     layouts = [None if r.mode == _MODE_RAW else _layout(info, r) for r in records]
@@ -906,8 +1206,13 @@ def inspect_curves(bundle: Any) -> dict[str, Any]:
     ``kind`` is ``"curves"``; ``count`` curves with their ``points``, ``dims`` and ``closed``
     flags; ``tolerance`` (also as ``max_error``: the guaranteed bound); ``total_bytes`` and
     ``payload_bytes`` (the entropy-coded coefficients; the rest is header and records).
+    A vertex-coded set (format version 2) keeps its records in the coded stream: it is
+    decoded to describe it (``payload_bytes`` is then the stream, records included).
     """
-    info, records, chunks, _ = _parse(bundle)
+    data = _checked(bundle)
+    if _is_vertex_form(data):
+        return _inspect_vertex(data)
+    info, records, chunks, _ = _parse(data)
     total = len(bytes(bundle))
     payload = sum(len(c) for c in chunks)
     return {
@@ -931,5 +1236,37 @@ def inspect_curves(bundle: Any) -> dict[str, Any]:
         "total_points": sum(r.count + r.repeated for r in records),
         "total_bytes": total,
         "payload_bytes": payload,
+        "method": "wavelet",
         "metadata": info["has_metadata"],
+    }
+
+
+def _inspect_vertex(data: bytes) -> dict[str, Any]:
+    curve_set, info = _decode_vertex(data)
+    points = [len(c) for c in curve_set.curves]
+    total = len(data)
+    return {
+        "kind": "curves",
+        "version": f"{VERTEX_VERSION}",
+        "shape": [len(points)],
+        "levels": 0,
+        "boundary": ["closed" if c else "open" for c in curve_set.closed],
+        "colour": "none",
+        "psnr": None,
+        "header_bytes": total - info["stream"],
+        "chunks": [],
+        "count": len(points),
+        "dtype": info["dtype"].name,
+        "wavelet": "none",
+        "method": "vertex",
+        "lattice_step": info["step"],
+        "tolerance": curve_set.tolerance,
+        "max_error": curve_set.tolerance,
+        "closed": curve_set.closed,
+        "points": points,
+        "dims": [info["d"]] * len(points),
+        "total_points": sum(points),
+        "total_bytes": total,
+        "payload_bytes": info["stream"],
+        "metadata": curve_set.metadata is not None,
     }

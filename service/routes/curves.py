@@ -67,6 +67,41 @@ def encode_job(body: bytes | bytearray, settings: Settings) -> tuple[bytes, dict
 #: Curve file media types → the format ``wavecore.encode_curve_file`` reads.
 CURVE_FILE_TYPES = {"application/geo+json": "geojson", "image/svg+xml": "svg"}
 
+#: The GeoJSON body as /docs shows it: a GeoJSON object (RFC 7946) of any type; the reader
+#: checks the rest and names the place of a mistake.
+_GEOJSON_SCHEMA = {
+    "type": "object",
+    "required": ["type"],
+    "properties": {
+        "type": {
+            "type": "string",
+            "enum": [
+                "FeatureCollection",
+                "Feature",
+                "GeometryCollection",
+                "LineString",
+                "MultiLineString",
+                "Polygon",
+                "MultiPolygon",
+            ],
+        }
+    },
+    "description": "A GeoJSON document (RFC 7946): every line and ring becomes one curve.",
+}
+_SVG_SCHEMA = {
+    "type": "string",
+    "description": "An SVG document: every subpath of every shape becomes one curve.",
+}
+
+
+def _encode_body_openapi() -> dict[str, Any]:
+    """The JSON body of one curve, and the two curve-file bodies (GeoJSON and SVG)."""
+    extra = json_body_openapi(CurveEncodeRequest)
+    content = extra["requestBody"]["content"]
+    content["application/geo+json"] = {"schema": _GEOJSON_SCHEMA}
+    content["image/svg+xml"] = {"schema": _SVG_SCHEMA}
+    return extra
+
 
 def curve_file_job(
     body: bytes,
@@ -75,6 +110,7 @@ def curve_file_job(
     wavelet: str | None,
     level: int | None,
     settings: Settings,
+    method: str | None = None,
 ) -> tuple[bytes, dict[str, str]]:
     """Read a GeoJSON or SVG body, check its cost, code it as one curve set."""
 
@@ -99,6 +135,7 @@ def curve_file_job(
             level=level,
             check=check,
             max_points=cost.sample_limit(settings) // (3 * cost.CURVE_FACTOR),
+            method=method,
         )
     except wavecore.InvalidParameter as exc:
         raise Problem("invalid-parameter", f"{fmt}: {exc}"[:600]) from None
@@ -115,8 +152,8 @@ def curve_file_job(
 @router.post(
     "/encode",
     response_class=Response,
-    summary="Encode a curve into a bundle",
-    openapi_extra=json_body_openapi(CurveEncodeRequest),
+    summary="Encode a curve, or a GeoJSON or SVG file of curves, into a bundle",
+    openapi_extra=_encode_body_openapi(),
     responses={
         200: {"content": {BUNDLE_MEDIA_TYPE: {}}, "description": "The bundle."},
         **problem_responses(413, 415, 422, 503),
@@ -135,6 +172,13 @@ async def encode_curve(
     level: Annotated[
         int | None, Query(ge=0, le=24, description="GeoJSON/SVG bodies: the most levels")
     ] = None,
+    method: Annotated[
+        Literal["auto", "wavelet", "vertex"] | None,
+        Query(
+            description="GeoJSON/SVG bodies: the curve-set form (default auto: the smaller of "
+            "the wavelet form and the vertex form; docs/curves.md)"
+        ),
+    ] = None,
 ) -> Response:
     """Without `keep` or `tolerance` the largest point deviation is 1e-3 × the bounding box's
     diagonal.  `X-Wavecore-Max-Error` gives the measured largest deviation.
@@ -148,7 +192,7 @@ async def encode_curve(
         fmt = CURVE_FILE_TYPES[content_type]
         data = await request.body()
         bundle, headers = await run_work(
-            request, curve_file_job, data, fmt, tolerance, wavelet, level, settings
+            request, curve_file_job, data, fmt, tolerance, wavelet, level, settings, method
         )
         return Response(bundle, media_type=BUNDLE_MEDIA_TYPE, headers=headers)
     body = await read_json_bytes(request)

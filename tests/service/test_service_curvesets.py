@@ -152,3 +152,40 @@ async def test_json_contract_unchanged(client: httpx.AsyncClient) -> None:
     assert r.status_code == 200
     r = await client.post("/v1/bundles/reconstruct", content=r.content)
     assert r.json()["kind"] == "curve"
+
+
+async def test_openapi_lists_the_curve_file_bodies(client: httpx.AsyncClient) -> None:
+    """/docs and schema-driven clients learn that /v1/curves/encode takes GeoJSON and SVG."""
+    spec = (await client.get("/openapi.json")).json()
+    content = spec["paths"]["/v1/curves/encode"]["post"]["requestBody"]["content"]
+    assert {"application/json", GEOJSON, SVG_TYPE} <= set(content)
+    assert content[GEOJSON]["schema"]["type"] == "object"
+    assert "FeatureCollection" in content[GEOJSON]["schema"]["properties"]["type"]["enum"]
+    assert content[SVG_TYPE]["schema"]["type"] == "string"
+    # the JSON body of one curve keeps its schema
+    assert "points" in json.dumps(content["application/json"]["schema"])
+    # and what the document advertises is what the route takes
+    for media_type, body in ((GEOJSON, json.dumps(FEATURES).encode()), (SVG_TYPE, SVG)):
+        r = await client.post(
+            "/v1/curves/encode",
+            content=body,
+            params={"tolerance": 0.05},
+            headers={"content-type": media_type},
+        )
+        assert r.status_code == 200, (media_type, r.text)
+
+
+@pytest.mark.parametrize("method", ["wavelet", "vertex"])
+async def test_method_query_picks_the_form(client: httpx.AsyncClient, method: str) -> None:
+    r = await client.post(
+        "/v1/curves/encode",
+        content=json.dumps(FEATURES).encode(),
+        params={"tolerance": 0.05, "method": method},
+        headers={"content-type": GEOJSON},
+    )
+    assert r.status_code == 200, r.text
+    info = (await client.post("/v1/bundles/inspect", content=r.content)).json()
+    assert info["method"] == method
+    back = await client.post("/v1/bundles/reconstruct", content=r.content)
+    assert back.status_code == 200
+    assert back.json()["features"][0]["properties"] == {"name": "field", "crop": "wheat"}

@@ -101,9 +101,11 @@ def encode_file(
     level: int | None = None,
     check: Callable[[CurveData], None] | None = None,
     max_points: int | None = None,
+    method: str | None = None,
 ) -> bytes:
     """Read a curve file and code it into one curve-set bundle.
 
+    ``method`` is :func:`wavecore.encode_curves`' (``"auto"``, ``"wavelet"`` or ``"vertex"``).
     ``check``, when given, sees the curves before they are coded (the service checks their
     cost there); ``max_points`` bounds an SVG's samples (see :func:`read_curves`).
 
@@ -124,6 +126,7 @@ def encode_file(
         wavelet=wavelet,
         level=level,
         metadata=curves.metadata,
+        method=method,
     )
 
 

@@ -1,0 +1,257 @@
+"""The vertex form of curve sets (format version 2) and the choice between the two forms.
+
+The bound is measured here by brute force (every point against every segment), independently
+of the encoder's own check.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+import zlib
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import wavecore
+from wavecore import curvecoder, curvesets
+
+
+def _to_polyline(source: np.ndarray, target: np.ndarray, closed: bool) -> float:
+    nodes = np.concatenate([target, target[:1]]) if closed and len(target) > 2 else target
+    if len(nodes) == 1:
+        return float(np.max(np.linalg.norm(source - nodes[0], axis=1)))
+    a, b = nodes[:-1], nodes[1:]
+    ab = b - a
+    length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300)
+    worst = 0.0
+    for start in range(0, len(source), 512):
+        p = source[start : start + 512, None, :]
+        t = np.clip(np.einsum("pij,ij->pi", p - a, ab) / length2, 0.0, 1.0)
+        gap = p - (a + t[..., None] * ab)
+        worst = max(worst, float(np.sqrt(np.einsum("pij,pij->pi", gap, gap).min(axis=1)).max()))
+    return worst
+
+
+def _both_ways(original: np.ndarray, decoded: np.ndarray, closed: bool) -> float:
+    original = np.asarray(original, dtype=np.float64)
+    decoded = np.asarray(decoded, dtype=np.float64)
+    if closed and len(original) > 2 and np.array_equal(original[0], original[-1]):
+        original = original[:-1]
+    if closed and len(decoded) > 2 and np.array_equal(decoded[0], decoded[-1]):
+        decoded = decoded[:-1]
+    return max(_to_polyline(original, decoded, closed), _to_polyline(decoded, original, closed))
+
+
+def _walk(n: int, seed: int, d: int = 2) -> np.ndarray:
+    return np.cumsum(np.random.default_rng(seed).normal(size=(n, d)), axis=0)
+
+
+def _ring(n: int, radius: float = 1.0) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    r = radius * (1 + 0.3 * np.cos(5 * t))
+    return np.stack([r * np.cos(t), r * np.sin(t)], axis=1)
+
+
+@pytest.mark.parametrize("tolerance", [0.5, 0.05, 0.002, 1e-6])
+@pytest.mark.parametrize("d", [1, 2, 3])
+def test_vertex_form_keeps_the_bound(tolerance: float, d: int) -> None:
+    curves = [_walk(500, 1, d), _walk(30, 2, d), _walk(2, 3, d), _walk(1, 4, d), _walk(3, 5, d)]
+    closed = [False, True, True, False, True]
+    bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
+    assert bundle[4] == curvesets.VERTEX_VERSION
+    out = wavecore.decode_curves(bundle)
+    assert out.closed == closed and out.tolerance == tolerance
+    for original, back, flag in zip(curves, out.curves, closed, strict=True):
+        assert back.shape[1] == d and back.dtype == original.dtype
+        assert _both_ways(original, back, flag) <= tolerance
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    count=st.integers(1, 6),
+    d=st.integers(1, 3),
+    tolerance=st.floats(1e-4, 10.0),
+    scale=st.floats(1e-3, 1e4),
+    dtype=st.sampled_from(["float64", "float32", "int32"]),
+    closed=st.booleans(),
+)
+def test_vertex_bound_property(
+    seed: int, count: int, d: int, tolerance: float, scale: float, dtype: str, closed: bool
+) -> None:
+    rng = np.random.default_rng(seed)
+    curves = []
+    for _ in range(count):
+        n = int(rng.integers(1, 120))
+        steps = rng.normal(size=(n, d)) * rng.choice([0.0, 0.1, 1.0, 10.0], size=(n, 1))
+        curves.append((np.cumsum(steps, axis=0) * scale).astype(dtype))
+    bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
+    out = wavecore.decode(bundle)
+    for original, back in zip(curves, out, strict=True):
+        assert back.dtype == original.dtype
+        assert _both_ways(original, back, closed) <= tolerance
+
+
+def test_repeated_closing_point_comes_back() -> None:
+    ring = _ring(60)
+    again = np.concatenate([ring, ring[:1]])
+    out = wavecore.decode(wavecore.encode_curves([again, ring], tolerance=0.01, method="vertex"))
+    assert np.array_equal(out[0][0], out[0][-1]) and not np.array_equal(out[1][0], out[1][-1])
+
+
+def test_auto_keeps_the_smaller_form() -> None:
+    for curves, tolerance in (([_ring(300)], 1e-5), ([_walk(400, 6)], 0.5)):
+        sizes = {
+            method: len(wavecore.encode_curves(curves, tolerance=tolerance, method=method))
+            for method in ("wavelet", "vertex")
+        }
+        auto = wavecore.encode_curves(curves, tolerance=tolerance)
+        assert len(auto) == min(sizes.values())
+        assert wavecore.encode_curves(curves, tolerance=tolerance, method="auto") == auto
+
+
+def test_vertex_falls_back_to_the_wavelet_form_where_it_cannot() -> None:
+    mixed = [_walk(50, 1, 2), _walk(50, 2, 3)]
+    bundle = wavecore.encode_curves(mixed, closed=False, tolerance=0.01, method="vertex")
+    assert bundle[4] == curvesets.VERSION
+    huge = [np.array([[1e150, 0.0], [1e150, 1.0], [-1e150, 2.0]])]
+    bundle = wavecore.encode_curves(huge, closed=False, tolerance=1e-3, method="vertex")
+    assert bundle[4] == curvesets.VERSION
+    assert _both_ways(huge[0], wavecore.decode(bundle)[0], False) <= 1e-3
+
+
+def test_bad_method_is_named() -> None:
+    with pytest.raises(wavecore.InvalidParameter, match="method"):
+        wavecore.encode_curves([_ring(10)], method="fractal")
+
+
+def test_hundred_curves_header_is_small() -> None:
+    rng = np.random.default_rng(3)
+    curves = [_ring(int(rng.integers(20, 200)), float(rng.uniform(0.5, 3))) for _ in range(100)]
+    bundle = wavecore.encode_curves(curves, tolerance=1e-3, method="vertex")
+    info = wavecore.inspect(bundle)
+    assert info["count"] == 100 and info["total_bytes"] == len(bundle)
+    # everything outside the coded stream (magic, fields, CRC): the records are in the stream
+    assert info["header_bytes"] <= 64
+    alone = sum(
+        wavecore.inspect(wavecore.encode_curves([c], tolerance=1e-3, method="vertex"))[
+            "payload_bytes"
+        ]
+        for c in curves
+    )
+    assert len(bundle) <= alone + 64
+
+
+def test_inspect_describes_the_vertex_form() -> None:
+    curves = [_ring(50), _walk(20, 1)]
+    bundle = wavecore.encode_curves(
+        curves, closed=[True, False], tolerance=0.01, method="vertex", metadata={"k": [1, 2]}
+    )
+    info = wavecore.inspect(bundle)
+    decoded = wavecore.decode_curves(bundle)
+    assert info["method"] == "vertex" and info["count"] == 2
+    assert info["points"] == [len(c) for c in decoded.curves]
+    assert info["closed"] == [True, False] and info["metadata"] is True
+    assert decoded.metadata == {"k": [1, 2]}
+
+
+def test_tolerance_is_kept_or_tightened() -> None:
+    curve = _walk(30, 2)
+    for tolerance in (0.1, 3.0, 1e-7, 125e-9):  # short decimals: exactly
+        bundle = wavecore.encode_curves([curve], tolerance=tolerance, method="vertex")
+        assert wavecore.decode_curves(bundle).tolerance == tolerance
+    for tolerance in (0.1 + 0.2, np.pi, 1e-300, 7.123456789e39):  # others: never looser
+        bundle = wavecore.encode_curves([curve], tolerance=tolerance, method="vertex")
+        got = wavecore.decode_curves(bundle)
+        assert tolerance * (1 - 2**-23) <= got.tolerance <= tolerance
+        assert _both_ways(curve, got.curves[0], True) <= got.tolerance
+
+
+def test_crafted_vertex_bundles_give_curves_or_bundle_error() -> None:
+    bundle = wavecore.encode_curves(
+        [_ring(80), _walk(40, 3), _walk(1, 4)],
+        closed=[True, False, False],
+        tolerance=0.01,
+        method="vertex",
+    )
+    assert bundle[4] == curvesets.VERTEX_VERSION
+    rng = np.random.default_rng(9)
+    for trial in range(300):
+        body = bytearray(bundle[:-4])
+        if trial % 3 == 0:  # cut or extend the stream
+            body = body[: int(rng.integers(5, len(body)))] + bytes(int(rng.integers(0, 9)))
+        for _ in range(int(rng.integers(1, 4))):
+            at = int(rng.integers(5, len(body)))
+            body[at] = int(rng.integers(0, 256))
+        crafted = bytes(body) + struct.pack("<I", zlib.crc32(bytes(body)))
+        try:
+            out = wavecore.decode(crafted)
+        except wavecore.BundleError:
+            continue
+        assert isinstance(out, list)
+        assert all(isinstance(c, np.ndarray) and c.ndim == 2 for c in out)
+        assert sum(c.size for c in out) <= curvesets.VERTEX_PER_BYTE * (len(crafted) + 16)
+
+
+def test_coder_round_trips_extreme_values() -> None:
+    rng = np.random.default_rng(4)
+    limit = (1 << 46) - 1
+    lattice = rng.integers(-limit, limit, size=(300, 2))
+    lattice[100:200] = 0
+    counts = np.array([1, 99, 150, 50])
+    closed = np.array([0, 1, 0, 1])
+    repeated = np.array([0, 1, 0, 0])
+    stream = curvecoder.encode_set(lattice, counts, closed, repeated, 2)
+    back = curvecoder.decode_set(stream, 4, 2, 2, False, 300)
+    assert back is not None
+    for got, want in zip(back, (lattice, counts, closed, repeated), strict=True):
+        assert np.array_equal(got, want)
+    assert curvecoder.decode_set(stream, 4, 2, 2, False, 299) is None  # more than allowed
+
+
+@pytest.mark.slow
+def test_cost_is_linear_for_long_curves_and_many_curves() -> None:
+    def seconds(curves: list[np.ndarray]) -> float:
+        start = time.perf_counter()
+        bundle = wavecore.encode_curves(curves, closed=False, tolerance=0.05, method="vertex")
+        wavecore.decode(bundle)
+        return time.perf_counter() - start
+
+    seconds([_walk(500, 7)])  # compiled code warmed up
+    small = min(seconds([_walk(5_000, 7)]) for _ in range(3))
+    # ten times the points: linear cost is ~10x (a generous margin for a shared machine)
+    assert seconds([_walk(50_000, 7)]) < 40 * max(small, 0.005)
+    few = min(seconds([_walk(4, seed) for seed in range(1_000)]) for _ in range(2))
+    assert seconds([_walk(4, seed) for seed in range(10_000)]) < 40 * max(few, 0.005)
+
+
+# Bundles written by this release (one per form), kept as bytes: every later reader must decode
+# them.  The check is against the curves they were made from (the bound), not against bytes.
+FROZEN = {
+    "wavelet": (
+        "89575643010900007b14ae47e17a843f45020204800128c10112a001041d0607071cffc588d5e886dc"
+        "e8e341906c5259761174dca5eb2224d356c2d5b555053ab1558aa0065e5b79f799e306fe37614bd8ba"
+        "1978daab56ca4bcc4d55b2524a2bcaaf4acd53aa0500343605f0225b9b13"
+    ),
+    "vertex": (
+        "8957564302290002050106021978daab56ca4bcc4d55b2524a2bcaaf4acd53aa0500343605f0be7f7e"
+        "d72560226396195a1105e2dc5116233680dde8687853f2832ebf0bf417bf4e4e5f8ccd2f0e2b3f7efd"
+        "2adca65435f5fd"
+    ),
+}
+
+
+@pytest.mark.parametrize("form", sorted(FROZEN))
+def test_frozen_bundles_of_both_forms_still_decode(form: str) -> None:
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    ring = np.stack([np.cos(t), np.sin(t) * 0.5], 1)
+    walk = np.stack([np.linspace(0, 3, 25), np.sin(np.linspace(0, 3, 25))], 1)
+    got = wavecore.decode_curves(bytes.fromhex(FROZEN[form]))
+    assert got.closed == [True, False] and got.tolerance == 0.01
+    assert got.metadata == {"name": "frozen"}
+    assert wavecore.inspect(bytes.fromhex(FROZEN[form]))["method"] == form
+    for original, back, flag in zip((ring, walk), got.curves, got.closed, strict=True):
+        assert _both_ways(original, back, flag) <= 0.01
