@@ -99,12 +99,11 @@ def _varint(value: int) -> bytes:
 
 
 def assemble2(packed: bytes, chunks: list[bytes]) -> bytes:
-    """A format 2.0 bundle with correct CRCs around whatever binary header it is given."""
-    head = MAGIC + bytes([2, 0]) + _varint(len(packed)) + packed
+    """A format 2.1 bundle with correct CRCs around whatever binary header it is given."""
+    head = MAGIC + bytes([2, 1]) + _varint(len(packed)) + packed
     head += b"".join(_varint(len(c)) for c in chunks)
-    head += b"".join(struct.pack("<H", binascii.crc_hqx(c, 0)) for c in chunks[1:])
-    crc = zlib.crc32(chunks[0] if chunks else b"", zlib.crc32(head))
-    return head + struct.pack("<I", crc) + b"".join(chunks)
+    head += b"".join(struct.pack("<H", binascii.crc_hqx(c, 0)) for c in chunks)
+    return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
 
 
 def either(header: dict[str, Any], chunks: list[bytes], rng: random.Random) -> bytes:

@@ -82,7 +82,7 @@ def test_a_scaled_header_is_labelled_1_2_and_checked() -> None:
     assert parsed.version == (1, 2)
     assert parsed.header["scale"] == -1070
     parsed = read_bundle(write_bundle(header, CHUNKS))
-    assert parsed.version == FORMAT_VERSION == (2, 0) and parsed.header == header
+    assert parsed.version == FORMAT_VERSION == (2, 1) and parsed.header == header
     for bad in (True, 1.5, "3", None, 5000, -5000):
         with pytest.raises(BundleError, match="'scale'"):
             write_bundle({**make_header(), "scale": bad}, CHUNKS)
@@ -99,7 +99,7 @@ def _varint(value: int) -> bytes:
 def test_layout_2_0_matches_the_spec() -> None:
     """docs/bundle-format.md, byte by byte: preamble, header, lengths, CRC-16s, CRC-32, chunks."""
     header = make_header()
-    data = write_bundle(header, CHUNKS)
+    data = write_bundle(header, CHUNKS, version=(2, 0))
     packed = binheader.pack(header)
     assert data[:10] == MAGIC + bytes([2, 0])
     assert data[10] == len(packed) < 128  # a one-byte varint
@@ -120,7 +120,7 @@ def test_layout_2_0_matches_the_spec() -> None:
 
 
 def test_a_bundle_cut_inside_chunk_0_or_with_a_bad_chunk_fails_cleanly() -> None:
-    data = write_bundle(make_header(), CHUNKS)
+    data = write_bundle(make_header(), CHUNKS, version=(2, 0))
     start = len(data) - sum(map(len, CHUNKS))
     with pytest.raises(BundleError, match="truncated inside chunk 0"):
         read_bundle(data[: start + 3])

@@ -115,6 +115,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from . import binheader
+from .blockcoder import add_block_checks
 from .errors import BundleError
 
 __all__ = [
@@ -135,7 +136,7 @@ MAGIC = b"\x89WVB\r\n\x1a\n"
 #: header's encoding and the chunk table's layout changed) has the binary header of
 #: :mod:`wavecore.binheader`; every 1.x version is still read.  In 1.x, 1.1 added the dtypes
 #: float16, int8–int64 and uint32, and 1.2 the optional ``scale`` key.
-FORMAT_VERSION = (2, 0)
+FORMAT_VERSION = (2, 1)
 #: The major versions this module reads.
 READ_MAJORS = (1, 2)
 MAX_HEADER_SIZE = 65535
@@ -188,6 +189,8 @@ class Bundle:
     #: How ``crcs`` check the chunks: ``"crc32"`` (1.x) or ``"crc16"`` (2.0: CRC-16/XMODEM,
     #: ``binascii.crc_hqx``; chunk 0 is checked with the header by its CRC-32 instead).
     checksum: str = "crc32"
+    #: Whether block-coded chunks carry a CRC-16 per block after their table (2.1 on).
+    block_checks: bool = False
 
     @property
     def available(self) -> int:
@@ -210,9 +213,18 @@ class Bundle:
             )
             raise BundleError(msg)
         if _chunk_check(data, self.checksum) != self.crcs[index]:
-            msg = f"chunk {index} is corrupt: its CRC-32 does not match the chunk table"
+            name = "CRC-16" if self.checksum == "crc16" else "CRC-32"
+            msg = (
+                f"chunk {index} is corrupt: its {name} does not match the chunk table (decode "
+                "with damaged='zero' to get the rest with its damaged blocks zeroed)"
+            )
             raise BundleError(msg)
         return bytes(data)
+
+    def intact(self, index: int) -> bool:
+        """Whether chunk ``index`` is present and matches its CRC."""
+        data = self.chunks[index]
+        return data is not None and _chunk_check(data, self.checksum) == self.crcs[index]
 
 
 def _chunk_check(data: bytes | memoryview, checksum: str) -> int:
@@ -263,14 +275,21 @@ class _Reader:
 
 
 def write_bundle(
-    header: dict[str, Any], chunks: Sequence[bytes], *, version: tuple[int, int] = FORMAT_VERSION
+    header: dict[str, Any],
+    chunks: Sequence[bytes],
+    *,
+    version: tuple[int, int] = FORMAT_VERSION,
 ) -> bytes:
     """Serialise a header and its chunks (coarse to fine) into bundle bytes.
 
     The header is validated exactly as a reader would, so a writer can never produce a bundle
-    that its own reader refuses.  ``version`` is :data:`FORMAT_VERSION` (2.0, the binary
-    header), or ``(1, 1)`` for the JSON header that wavecore releases before 2.0 read (labelled
-    1.2 when the header has ``scale``).
+    that its own reader refuses.  ``version`` is :data:`FORMAT_VERSION` (2.1: the binary
+    header, a CRC-16 per chunk and per code-block), ``(2, 0)`` (no block checks, chunk 0
+    under the header's CRC-32), or ``(1, 1)`` for the JSON header that wavecore releases
+    before 2.0 read (labelled 1.2 when the header has ``scale``).  ``chunks`` are always as
+    the coder wrote them: for 2.1 the block checks are added here, after each chunk's table
+    of block lengths (the blocks per chunk follow from the header; the band counts come
+    with the coder's chunks, or are found by decoding them).
 
     Examples
     --------
@@ -289,19 +308,42 @@ def write_bundle(
         raise BundleError(msg)
     if version[0] == 1:
         return _write_json(header, chunks)
-    if version != FORMAT_VERSION:
-        msg = f"cannot write bundle format version {version}; use {FORMAT_VERSION} or (1, 1)"
+    if version not in ((2, 0), FORMAT_VERSION):
+        msg = (
+            f"cannot write bundle format version {version}; use {FORMAT_VERSION}, (2, 0) or (1, 1)"
+        )
         raise BundleError(msg)
     packed = binheader.pack(header)
     if len(packed) > MAX_HEADER_SIZE:
         msg = f"header is {len(packed)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
         raise BundleError(msg)
-    parts = [MAGIC, bytes(FORMAT_VERSION), _varint(len(packed)), packed]
+    if version >= (2, 1):
+        chunks = _with_block_checks(header, chunks)
+    parts = [MAGIC, bytes(version), _varint(len(packed)), packed]
     parts += [_varint(len(chunk)) for chunk in chunks]
-    parts += [_U16.pack(binascii.crc_hqx(chunk, 0)) for chunk in chunks[1:]]
+    checked = chunks if version >= (2, 1) else chunks[1:]
+    parts += [_U16.pack(binascii.crc_hqx(chunk, 0)) for chunk in checked]
     head = b"".join(parts)
+    if version >= (2, 1):
+        return b"".join([head, _CRC.pack(zlib.crc32(head)), *chunks])
     crc = zlib.crc32(chunks[0], zlib.crc32(head))
     return b"".join([head, _CRC.pack(crc), *chunks])
+
+
+def _with_block_checks(header: dict[str, Any], chunks: Sequence[bytes]) -> list[bytes]:
+    """The chunks in format 2.1's form: block checks and band counts where the coder codes
+    in blocks (context version 4 on), the chunks as they are otherwise."""
+    # The block structure follows from the plan's band shapes, which the codec package
+    # computes; it imports this module, hence the import here.
+    from .codec.decode import chunk_block_info
+
+    info = chunk_block_info(header, chunks)
+    if info is None:
+        return list(chunks)
+    return [
+        add_block_checks(chunk, count, counts)
+        for chunk, (count, counts) in zip(chunks, info, strict=True)
+    ]
 
 
 def _write_json(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
@@ -373,9 +415,18 @@ def _read_binary(reader: _Reader, minor: int) -> Bundle:
     check_header(header)
     count = header["levels"] + 1
     lengths = [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
-    crcs = [0] + [reader.unpack(_U16, f"the CRC-16 of chunk {i}")[0] for i in range(1, count)]
+    first_crc = 0 if minor >= 1 else 1  # 2.0: chunk 0 is checked by the CRC-32
+    crcs = [0] * first_crc + [
+        reader.unpack(_U16, f"the CRC-16 of chunk {i}")[0] for i in range(first_crc, count)
+    ]
     head_end = reader.offset
     (crc,) = reader.unpack(_CRC, "the header CRC-32")
+    if minor >= 1:
+        if zlib.crc32(reader.view[:head_end]) != crc:
+            msg = "the header or chunk table is corrupt: the header CRC-32 does not match"
+            raise BundleError(msg)
+        chunks = _take_chunks(reader, lengths)
+        return Bundle((2, minor), header, chunks, tuple(crcs), "crc16", block_checks=True)
     remaining = len(reader.view) - reader.offset
     if lengths[0] > remaining:
         msg = (

@@ -1,0 +1,201 @@
+"""Which coefficients a region of a decoded array depends on.
+
+A region decode (``wavecore.decode(bundle, region=...)``) decodes only the code-blocks that
+hold coefficients the region needs, with every other coefficient left zero, and then runs the
+usual inverse transform.  That is exact, not an approximation: each output sample is a sum
+over the synthesis taps that reach it (the lossy filter banks), or an integer lifting of a few
+neighbours (the lossless path), so coefficients outside its support never enter it, whatever
+their value.
+
+The support is worked out one transformed axis and one level at a time, finest first:
+
+* the lossy filter banks (``bspline2``, ``haar``, ``cdf97``; open, closed or symmetric) from
+  their synthesis matrices ``P`` and ``Q`` themselves (:func:`wavecore.filters.step_sparse`):
+  the coarse and detail coefficients a fine sample needs are the columns of its rows, boundary
+  rows and periodic wrap-around included, so no filter length is written down here;
+* the reversible lifting (LeGall 5/3, integer Haar, closed integer B-spline) from its lifting
+  steps: a fine sample ``i`` needs coefficients within ``LIFTING_REACH`` of ``i // 2``, taken
+  modulo the band's length (this covers the periodic B-spline lifting and the mirror at a
+  symmetric edge, whose mirrored neighbours are the edge's own).
+
+A 2-D transform is separable in its supports (each step runs along one axis at a time), so
+the samples a rectangle needs are the product of a row set and a column set in every band.
+Sets are boolean masks as long as the axis, so the cost grows with the sides, not the area.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .errors import InvalidParameter
+from .filters import get_wavelet, step_sparse
+
+__all__ = ["LIFTING_REACH", "band_masks", "check_region"]
+
+#: How far (in coefficients of the coarser level) a reversible lifting step reaches: LeGall
+#: 5/3 reaches one detail either side of a coarse sample and then one coarse sample further;
+#: the closed integer B-spline one neighbour each way.  Three is a safe margin (checked by
+#: tests/test_regions.py against full decodes).
+LIFTING_REACH = 3
+
+
+def check_region(region: Any, shape: Sequence[int], axes: int) -> tuple[slice, ...]:
+    """``region`` as one ``slice`` per transformed axis, checked against the output's ``shape``.
+
+    Parameters
+    ----------
+    region : tuple of slice
+        ``(rows, cols)`` for an image, surface or grid; ``(points,)`` (or one ``slice``) for a
+        curve.  Each item is a ``slice`` (``None`` ends and negative indices as in NumPy, a
+        positive step) or a ``(start, stop)`` pair of integers.  Fewer items than axes leave
+        the last axes whole.
+    shape : sequence of int
+        The shape that the decode without ``region`` would return.
+    axes : int
+        The number of transformed axes (1 for curves, 2 otherwise).
+
+    Returns
+    -------
+    tuple of slice
+        Slices with explicit, non-negative ``start`` and ``stop`` and a positive ``step``,
+        selecting at least one sample on every axis.
+
+    Raises
+    ------
+    InvalidParameter
+        For anything that is not such a region, or one that selects nothing.
+    """
+    if isinstance(region, slice):
+        region = (region,)
+    if not isinstance(region, tuple | list) or not 1 <= len(region) <= axes:
+        msg = (
+            f"region must be a tuple of 1 to {axes} slices (e.g. (slice(0, 256), slice(0, 256))),"
+            f" not {str(region)[:80]}"
+        )
+        raise InvalidParameter(msg)
+    out = []
+    for axis, item in enumerate(region):
+        n = int(shape[axis])
+        if isinstance(item, tuple | list) and len(item) == 2:
+            item = slice(*item)
+        if not isinstance(item, slice):
+            msg = f"region axis {axis} must be a slice or a (start, stop) pair, not {item!r}"
+            raise InvalidParameter(msg[:200])
+        for name in ("start", "stop", "step"):
+            value = getattr(item, name)
+            if value is not None and (
+                isinstance(value, bool) or not isinstance(value, int | np.integer)
+            ):
+                msg = f"region axis {axis}: {name} must be an integer or None, not {value!r}"
+                raise InvalidParameter(msg[:200])
+        if item.step is not None and item.step <= 0:
+            msg = f"region axis {axis}: the step must be positive, not {item.step}"
+            raise InvalidParameter(msg)
+        start, stop, step = item.indices(n)
+        if stop <= start:
+            msg = (
+                f"region axis {axis} selects no samples: {item} of an axis of {n} samples "
+                f"(the decoded shape is {list(shape)})"
+            )
+            raise InvalidParameter(msg)
+        out.append(slice(start, stop, step))
+    out += [slice(0, int(shape[axis]), 1) for axis in range(len(out), axes)]
+    return tuple(out)
+
+
+def _rows_columns(indptr: np.ndarray, indices: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The column indices of the given rows of a compressed-row matrix."""
+    begin, end = indptr[rows], indptr[rows + 1]
+    counts = end - begin
+    total = int(counts.sum())
+    if not total:
+        return np.zeros(0, dtype=np.intp)
+    starts = np.repeat(begin - np.cumsum(counts) + counts, counts)
+    return indices[starts + np.arange(total)]
+
+
+def _step_support(
+    transform: Any, axis: int, m: int, want: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The coarse and detail masks that fine samples ``want`` (a mask of ``m``) need."""
+    fine = np.flatnonzero(want)
+    if getattr(transform, "lossless", False):
+        coarse_len, detail_len = (m + 1) // 2, m // 2
+        near = (fine // 2)[:, None] + np.arange(-LIFTING_REACH, LIFTING_REACH + 1)[None, :]
+        coarse = np.zeros(coarse_len, dtype=bool)
+        coarse[near.ravel() % coarse_len] = True
+        detail = np.zeros(detail_len, dtype=bool)
+        if detail_len:
+            detail[near.ravel() % detail_len] = True
+        return coarse, detail
+    bank = get_wavelet(transform.wavelet)
+    boundary = transform.boundary[axis]
+    rule = bank.rule(boundary)
+    _, _, P, Q = step_sparse(bank.name, boundary, m)
+    coarse = np.zeros(rule.coarse_length(m), dtype=bool)
+    detail = np.zeros(rule.detail_length(m), dtype=bool)
+    coarse[_rows_columns(P.indptr, P.indices, fine)] = True
+    detail[_rows_columns(Q.indptr, Q.indices, fine)] = True
+    return coarse, detail
+
+
+def band_masks(
+    transform: Any,
+    fitted: Sequence[int],
+    levels: int,
+    level: int,
+    window: Sequence[tuple[int, int]],
+) -> list[list[tuple[np.ndarray, ...]]]:
+    """For each band a decode down to ``level`` reads, the rows (and columns) it needs.
+
+    Parameters
+    ----------
+    transform : wavecore.codec.stages.Transform
+        The bundle's transform stage (a filter bank with its boundaries, or the lifting).
+    fitted : sequence of int
+        The transformed lengths (the fitted shape's first one or two sizes).
+    levels : int
+        The bundle's levels ``L``.
+    level : int
+        The level decoded (0: full resolution).
+    window : sequence of (int, int)
+        Per transformed axis, the ``[start, stop)`` wanted in the level-``level``
+        approximation's own coordinates.
+
+    Returns
+    -------
+    list
+        In layout order (``[[cA_L], [bands of level L], …, [bands of level level + 1]]``), one
+        tuple of masks per band: ``(rows,)`` for one axis, ``(rows, cols)`` for two.
+    """
+    axes = len(window)
+    want = []
+    lengths = []
+    for axis, (start, stop) in enumerate(window):
+        n = int(fitted[axis])
+        for _ in range(level):
+            n = _coarse_length(transform, axis, n)
+        mask = np.zeros(n, dtype=bool)
+        mask[start:stop] = True
+        want.append(mask)
+        lengths.append(n)
+    details: list[list[tuple[np.ndarray, ...]]] = []
+    for _ in range(level, levels):
+        steps = [_step_support(transform, axis, lengths[axis], want[axis]) for axis in range(axes)]
+        if axes == 1:
+            details.append([(steps[0][1],)])
+        else:
+            (c0, d0), (c1, d1) = steps
+            details.append([(d0, c1), (c0, d1), (d0, d1)])
+        want = [coarse for coarse, _ in steps]
+        lengths = [len(mask) for mask in want]
+    return [[tuple(want)], *reversed(details)]
+
+
+def _coarse_length(transform: Any, axis: int, n: int) -> int:
+    if getattr(transform, "lossless", False):
+        return (n + 1) // 2
+    return get_wavelet(transform.wavelet).rule(transform.boundary[axis]).coarse_length(n)
