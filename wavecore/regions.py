@@ -32,8 +32,9 @@ import numpy as np
 
 from .errors import InvalidParameter
 from .filters import get_wavelet, step_sparse
+from .transform import synthesis_step
 
-__all__ = ["LIFTING_REACH", "band_masks", "check_region"]
+__all__ = ["LIFTING_REACH", "band_masks", "check_region", "windowed_inverse"]
 
 #: How far (in coefficients of the coarser level) a reversible lifting step reaches: LeGall
 #: 5/3 reaches one detail either side of a coarse sample and then one coarse sample further;
@@ -171,6 +172,18 @@ def band_masks(
         In layout order (``[[cA_L], [bands of level L], …, [bands of level level + 1]]``), one
         tuple of masks per band: ``(rows,)`` for one axis, ``(rows, cols)`` for two.
     """
+    return _supports(transform, fitted, levels, level, window)[0]
+
+
+def _supports(
+    transform: Any,
+    fitted: Sequence[int],
+    levels: int,
+    level: int,
+    window: Sequence[tuple[int, int]],
+) -> tuple[list[list[tuple[np.ndarray, ...]]], list[list[np.ndarray]]]:
+    """:func:`band_masks`, and the approximation samples wanted at each level (``level``
+    first, then coarser), one mask per axis."""
     axes = len(window)
     want = []
     lengths = []
@@ -182,6 +195,7 @@ def band_masks(
         mask[start:stop] = True
         want.append(mask)
         lengths.append(n)
+    wants = [want]
     details: list[list[tuple[np.ndarray, ...]]] = []
     for _ in range(level, levels):
         steps = [_step_support(transform, axis, lengths[axis], want[axis]) for axis in range(axes)]
@@ -191,8 +205,97 @@ def band_masks(
             (c0, d0), (c1, d1) = steps
             details.append([(d0, c1), (c0, d1), (d0, d1)])
         want = [coarse for coarse, _ in steps]
+        wants.append(want)
         lengths = [len(mask) for mask in want]
-    return [[tuple(want)], *reversed(details)]
+    return [[tuple(want)], *reversed(details)], wants
+
+
+def windowed_inverse(
+    transform: Any,
+    coeffs: list[Any],
+    fitted: Sequence[int],
+    levels: int,
+    level: int,
+    window: Sequence[tuple[int, int]],
+) -> np.ndarray:
+    """The inverse transform of ``coeffs`` (down to ``level``) at ``window`` only.
+
+    Equal, to the last bit, to ``transform.inverse(coeffs)`` cropped to ``window`` (the
+    synthesis steps are the library's own, one axis at a time as the fused pass computes
+    them; each step runs only on the rows or columns the window needs, with every other
+    sample zero, which no needed output reads).  The cost of a level is the window's span
+    along one axis times the level's length along the other, not the level's area.
+
+    Only for the filter banks (``transform.lossless`` is False).
+    """
+    bank = get_wavelet(transform.wavelet)
+    _, wants = _supports(transform, fitted, levels, level, window)
+    wants.reverse()  # coarsest first, like coeffs
+    picks = [[np.flatnonzero(mask) for mask in want] for want in wants]
+    if len(window) == 1:
+        sub = np.asarray(coeffs[0])[picks[0][0]]
+        for index, detail in enumerate(coeffs[1:], start=1):
+            boundary = transform.boundary[0]
+            rule = bank.rule(boundary)
+            coarse_rows, fine_rows = picks[index - 1][0], picks[index][0]
+            detail = np.asarray(detail)
+            m = rule.fine_length(len(wants[index - 1][0]), detail.shape[0])
+            _, detail_mask = _step_support(transform, 0, m, wants[index][0])
+            detail_rows = np.flatnonzero(detail_mask)
+            low = np.zeros((rule.coarse_length(m), *detail.shape[1:]))
+            low[coarse_rows] = sub
+            high = np.zeros(detail.shape)
+            high[detail_rows] = detail[detail_rows]
+            sub = synthesis_step(low, high, bank, boundary, 0)[fine_rows]
+        return sub
+    sub = np.asarray(coeffs[0])[np.ix_(*picks[0])]
+    b0, b1 = transform.boundary
+    rule0, rule1 = bank.rule(b0), bank.rule(b1)
+    for index, bands in enumerate(coeffs[1:], start=1):
+        cH, cV, cD = (np.asarray(band) for band in bands)
+        rows, cols = picks[index - 1]
+        fine_rows, fine_cols = picks[index]
+        m0 = rule0.fine_length(cV.shape[0], cH.shape[0])
+        m1 = rule1.fine_length(cH.shape[1], cV.shape[1])
+        detail_rows = np.flatnonzero(_step_support(transform, 0, m0, wants[index][0])[1])
+        detail_cols = np.flatnonzero(_step_support(transform, 1, m1, wants[index][1])[1])
+        trail = cH.shape[2:]
+        # Along axis 1 first (as the fused pass and waverec2 do), on the rows needed only.
+        aa = np.zeros((len(rows), cH.shape[1], *trail))
+        aa[:, cols] = sub
+        ad = np.zeros((len(rows), cV.shape[1], *trail))
+        ad[:, detail_cols] = cV[np.ix_(rows, detail_cols)]
+        da = np.zeros((len(detail_rows), cH.shape[1], *trail))
+        da[:, cols] = cH[np.ix_(detail_rows, cols)]
+        dd = np.zeros((len(detail_rows), cV.shape[1], *trail))
+        dd[:, detail_cols] = cD[np.ix_(detail_rows, detail_cols)]
+        # Then along axis 0, on the columns needed only (and a few more when they are so few
+        # that the step would take its narrow path, whose sums are ordered differently).
+        columns = _wide_enough(fine_cols, m1, int(np.prod(trail, dtype=np.int64)))
+        low_rows = synthesis_step(aa, ad, bank, b1, 1)[:, columns]
+        high_rows = synthesis_step(da, dd, bank, b1, 1)[:, columns]
+        low = np.zeros((cV.shape[0], len(columns), *trail))
+        low[rows] = low_rows
+        high = np.zeros((cH.shape[0], len(columns), *trail))
+        high[detail_rows] = high_rows
+        sub = synthesis_step(low, high, bank, b0, 0)[fine_rows, : len(fine_cols)]
+    return sub
+
+
+#: Values per row that a step along axis 0 is given at least (or the whole level): the
+#: transform takes a narrow path, whose sums run in another order, for a few trailing values
+#: per row (up to 4 today), so a window of one or two columns must not be stepped alone.
+WIDE_ENOUGH = 64
+
+
+def _wide_enough(columns: np.ndarray, n: int, inner: int) -> np.ndarray:
+    """``columns``, then more of the ``n`` until they hold :data:`WIDE_ENOUGH` values per
+    row (or all ``n``): the step along axis 0 then runs as it does on the whole level."""
+    if len(columns) * inner >= WIDE_ENOUGH or len(columns) == n:
+        return columns
+    need = min(n, -(-WIDE_ENOUGH // inner))
+    others = np.setdiff1d(np.arange(n), columns)[: need - len(columns)]
+    return np.concatenate([columns, others])
 
 
 def _coarse_length(transform: Any, axis: int, n: int) -> int:

@@ -4,6 +4,7 @@ and ``inspect`` (a bundle described without decoding it)."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
@@ -22,7 +23,7 @@ from ..blockcoder import (
 from ..bundle import Bundle, read_bundle
 from ..errors import BundleError, InvalidParameter
 from ..layout import band_names, is_band_group
-from ..regions import band_masks, check_region
+from ..regions import band_masks, check_region, windowed_inverse
 from ..resample import coarse_extent
 from ..threshold import check_share
 from .plan import Plan, plan_from_header
@@ -330,6 +331,16 @@ def _decode(
         coeffs = stages.quantizer.decode(qcoeffs, plan)
         if keep is not None and keep < 1.0 and len(coeffs) > 1:
             coeffs = stages.transform.keep(coeffs, keep, plan)
+        if masks is not None and not stages.transform.lossless:
+            # Synthesize the window only, then finish it as a picture of its own: nothing
+            # left to crop, the colour and dtype steps work sample by sample.
+            assert slices is not None
+            samples = windowed_inverse(
+                stages.transform, coeffs, plan.fitted, plan.levels, level, window
+            )
+            steps = tuple(slice(None, None, s.step) for s in slices)
+            unpadded = dataclasses.replace(plan, pads=((0, 0),) * len(plan.axes))
+            return np.ascontiguousarray(finish(unpadded, samples[steps], 0))
         out = finish(plan, stages.transform.inverse(coeffs, plan), level)
     if slices is not None:
         out = np.ascontiguousarray(out[slices])
