@@ -281,6 +281,14 @@ def _output_shape(plan: Plan, level: int) -> list[int]:
     ]
 
 
+def _level_shape(plan: Plan, level: int) -> list[int]:
+    """The shape ``decode(level=level)`` returns."""
+    shape = list(plan.shape)
+    for axis, n in enumerate(_output_shape(plan, level)):
+        shape[axis] = n
+    return shape
+
+
 def _output_offsets(plan: Plan, level: int) -> list[int]:
     """Where a decode's first sample sits in the level's approximation, per axis (the
     padding before it: the fine data only, coarse levels are never padded before)."""
@@ -475,7 +483,8 @@ def inspect(bundle: Any) -> dict[str, Any]:
         ``colour``, ``lossless``, ``quantizer``, ``coder``, ``psnr`` (the encoder's measured
         PSNR in dB, ``None`` when exact), ``max_error``, ``total_bytes``, ``header_bytes``,
         ``peak`` (in the original's units), ``scale`` (the power of two the values were
-        coded under, ``0`` for all but huge or tiny floats), ``bpp`` (images), ``chunks``
+        coded under, ``0`` for all but huge or tiny floats), ``bpp`` (images),
+        ``level_shapes`` (the shape ``decode(level=k)`` returns, for each ``k``), ``chunks``
         (one entry per chunk, coarse to fine: its resolution ``level``, its subband
         ``shapes``, its ``bytes`` and whether it is ``present``), and ``header`` (the raw
         header).
@@ -534,6 +543,7 @@ def inspect(bundle: Any) -> dict[str, Any]:
         "total_bytes": total,
         "header_bytes": total - payload,
         "chunks": chunks,
+        "level_shapes": [_level_shape(plan, k) for k in range(plan.levels + 1)],
         "header": header,
     }
     if plan.kind == "image":
