@@ -65,10 +65,39 @@ def checks_overhead(bundle: bytes) -> int:
     return len(bundle) - len(write_bundle(parsed.header, chunks, version=(2, 0)))
 
 
+def block_check_sizes() -> None:
+    """What format 2.1 adds to the 512² pictures of benchmarks/header_sizes.py."""
+    pictures = {
+        "image 512² grey (camera)": data.camera(),
+        "image 512² RGB (astronaut)": data.astronaut(),
+    }
+    print("| bundle | bytes 2.0 | bytes 2.1 | added | blocks in chunks of several |")
+    print("|---|---:|---:|---:|---:|")
+    for name, image in pictures.items():
+        for label, options in (("default", {}), ("lossless", {"lossless": True})):
+            bundle = wavecore.encode_image(image, **options)
+            extra = checks_overhead(bundle)
+            parsed = read_bundle(bundle)
+            plan = plan_from_header(parsed.header)
+            shapes = plan.band_shapes()
+            entries = [[tuple(shapes[0])]] + [[tuple(b) for b in e] for e in shapes[1:]]
+            cparams = parsed.header["cparams"]
+            counts = block_counts(entries, cparams["two_d"], cparams["block"])
+            several = sum(n for n in counts if n > 1)
+            print(
+                f"| {name}, {label} | {len(bundle) - extra} | {len(bundle)} | {extra} | "
+                f"{several} |"
+            )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--sizes-only", action="store_true", help="only the 512² byte counts")
     args = parser.parse_args()
+    block_check_sizes()
+    if args.sizes_only:
+        return
     rgb = picture()
     grey = np.asarray(Image.fromarray(rgb).convert("L"))
     cases = {

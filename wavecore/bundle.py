@@ -1,25 +1,30 @@
 """The coefficient bundle: a versioned binary container, coarse to fine.
 
-This docstring summarises format version 2.0, and 1.x, which is still read;
+This docstring summarises format version 2.1, and 2.0 and 1.x, which are still read;
 ``docs/bundle-format.md`` is the specification.  Like NumPy's ``.npy`` format, a bundle is a
 fixed preamble, a bounded self-describing header, then the payload.  All integers are
 little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
 
-Layout (2.0)
-------------
+Layout (2.1; 2.0 where it says so)
+----------------------------------
 ==========  ===========  ========================================================================
 offset      size         field
 ==========  ===========  ========================================================================
 0           8            magic ``b"\\x89WVB\\r\\n\\x1a\\n"`` (PNG-style: catches 7-bit and newline
                          mangling, stops ``type`` on DOS)
 8           1            major version (``2``); a reader refuses a major version it does not know
-9           1            minor version (``0``); a reader accepts any minor version of its majors
+9           1            minor version (``1``; ``0`` for 2.0)
 10          v            header length ``H``, a varint, at most ``MAX_HEADER_SIZE``
 …           H            the binary header of :mod:`wavecore.binheader` (the same dict as 1.x)
 …           v · N        each chunk's byte length, a varint; ``N = levels + 1``
-…           2 · (N - 1)  CRC-16/XMODEM (``binascii.crc_hqx(chunk, 0)``) of chunks 1 … N - 1
-…           4            CRC-32 of every byte before it *and then chunk 0*
-…           ...          the chunks, concatenated; nothing may follow the last one
+…           2 · N        CRC-16/XMODEM (``binascii.crc_hqx(chunk, 0)``) of every chunk (2.0:
+                         of chunks 1 … N - 1 only)
+…           4            CRC-32 of every byte before it (2.0: *and then chunk 0*)
+…           ...          the chunks, concatenated; nothing may follow the last one.  2.1: a
+                         chunk of several code-blocks (context coder version 4 on) carries,
+                         after its table of block lengths, a CRC-16 per block, its bands'
+                         ``(ones, more)`` counts (detail chunks) and a CRC-16 of all that
+                         (see :func:`wavecore.blockcoder.add_block_checks`)
 ==========  ===========  ========================================================================
 
 Layout (1.x)
