@@ -85,8 +85,7 @@ def block_check_sizes() -> None:
             counts = block_counts(entries, cparams["two_d"], cparams["block"])
             several = sum(n for n in counts if n > 1)
             print(
-                f"| {name}, {label} | {len(bundle) - extra} | {len(bundle)} | {extra} | "
-                f"{several} |"
+                f"| {name}, {label} | {len(bundle) - extra} | {len(bundle)} | {extra} | {several} |"
             )
 
 

@@ -44,6 +44,7 @@ __all__ = [
     "band_counts",
     "block_counts",
     "block_table",
+    "decode_block_windows",
     "decode_blocks",
     "encode_blocks",
     "fill_stand_ins",
@@ -259,6 +260,18 @@ def decode_blocks(
         For a block table that does not add up to its chunk, or a block that decodes to
         something impossible.
     """
+    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip)
+    return _bands_out(flat, planes, layout, two_d, total)
+
+
+def _decode_flat(
+    chunks: list[bytes],
+    layout: list[list[tuple[int, ...]]],
+    two_d: bool,
+    block: int,
+    skip: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Every plane decoded into one flat ``int32`` array: ``(flat, plane table, size)``."""
     if block not in BLOCK_SIZES:
         msg = f"context coder block size {block!r} is not one of {BLOCK_SIZES}"
         raise BundleError(msg)
@@ -301,24 +314,107 @@ def decode_blocks(
     if sum(bad):
         msg = f"{sum(bad)} code-block(s) of the context-coded chunks are corrupt"
         raise BundleError(msg)
+    return flat, planes, int(total)
+
+
+def _bands_out(
+    flat: np.ndarray,
+    planes: np.ndarray,
+    layout: list[list[tuple[int, ...]]],
+    two_d: bool,
+    total: int,
+    windows: Sequence[Sequence[tuple[int, int, int, int]]] | None = None,
+) -> list[list[np.ndarray]]:
+    """The bands (or the ``(row0, row1, col0, col1)`` windows of their planes) from ``flat``."""
     levels = []
     sources, targets = [], []
     p = 0
-    for band_shapes in layout:
+    for index, band_shapes in enumerate(layout):
         dims = [_plane_dims(shape, two_d) for shape in band_shapes]
-        arrays = [np.empty((r, c, n), dtype=np.int32) for r, c, n in dims]
+        cuts = (
+            windows[index]
+            if windows is not None
+            else [(0, rows, 0, cols) for rows, cols, _ in dims]
+        )
+        arrays = [
+            np.empty((r1 - r0, c1 - c0, n), dtype=np.int32)
+            for (r0, r1, c0, c1), (_, _, n) in zip(cuts, dims, strict=True)
+        ]
         channels = max((d[2] for d in dims), default=0)
         for channel, k in itertools.product(range(channels), range(len(dims))):
             rows, cols, count = dims[k]
             if channel >= count:
                 continue
             start = planes[p, kernels.P_OFFSET]
-            sources.append(flat[start : start + rows * cols].reshape(rows, cols))
+            r0, r1, c0, c1 = cuts[k]
+            plane = flat[start : start + rows * cols].reshape(rows, cols)
+            sources.append(plane[r0:r1, c0:c1])
             targets.append(arrays[k][:, :, channel])
             p += 1
-        levels.append([a.reshape(shape) for a, shape in zip(arrays, band_shapes, strict=True)])
-    _copy_planes(sources, targets, int(total))
+        levels.append(
+            [
+                a.reshape(_window_shape(shape, a.shape[:2], two_d))
+                for a, shape in zip(arrays, band_shapes, strict=True)
+            ]
+        )
+    _copy_planes(sources, targets, sum(a.size for a in targets))
     return levels
+
+
+def _window_shape(shape: tuple[int, ...], window: tuple[int, ...], two_d: bool) -> tuple:
+    """A band's shape with its plane's rows and columns those of a window of it."""
+    if two_d and len(shape) >= 2:
+        return (window[0], window[1], *shape[2:])
+    return (window[1], *shape[1:])
+
+
+def decode_block_windows(
+    chunks: list[bytes],
+    layout: list[list[tuple[int, ...]]],
+    two_d: bool,
+    block: int,
+    skip: np.ndarray,
+    windows: Sequence[Sequence[tuple[int, int, int, int]]],
+    totals_for: Sequence[int] = (),
+) -> tuple[list[list[np.ndarray]], dict[int, list[tuple[int, int]]]]:
+    """:func:`decode_blocks` for a region: only ``windows`` of each band, and no more.
+
+    Parameters
+    ----------
+    chunks, layout, two_d, block, skip
+        As for :func:`decode_blocks` (the skipped blocks are neither read nor touched).
+    windows : sequence
+        Per chunk, per band, ``(row0, row1, col0, col1)`` of its planes to return (1-D bands:
+        rows ``(0, 1)``, the samples as columns).
+    totals_for : sequence of int
+        Chunks whose bands' :func:`band_counts` over the whole band are wanted too (the
+        chunks that do not store them: they are decoded whole, or not at all).
+
+    Returns
+    -------
+    list, dict
+        The windows, shaped like their bands but for the window's sizes, and the counts.
+    """
+    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip)
+    totals: dict[int, list[tuple[int, int]]] = {}
+    p = 0
+    for index, band_shapes in enumerate(layout):
+        dims = [_plane_dims(shape, two_d) for shape in band_shapes]
+        channels = max((d[2] for d in dims), default=0)
+        sums = [[0, 0] for _ in dims]
+        for channel, k in itertools.product(range(channels), range(len(dims))):
+            rows, cols, count = dims[k]
+            if channel >= count:
+                continue
+            if index in totals_for:
+                start = planes[p, kernels.P_OFFSET]
+                ones, more = band_counts(flat[start : start + rows * cols])
+                sums[k][0] += ones
+                sums[k][1] += more
+            p += 1
+        if index in totals_for:
+            totals[index] = [(ones, more) for ones, more in sums]
+    return _bands_out(flat, planes, layout, two_d, total, windows), totals
 
 
 #: Rows of planes per copy task: about this many values, so that the tasks balance.

@@ -217,6 +217,7 @@ def windowed_inverse(
     levels: int,
     level: int,
     window: Sequence[tuple[int, int]],
+    origins: Sequence[Any] | None = None,
 ) -> np.ndarray:
     """The inverse transform of ``coeffs`` (down to ``level``) at ``window`` only.
 
@@ -226,57 +227,70 @@ def windowed_inverse(
     sample zero, which no needed output reads).  The cost of a level is the window's span
     along one axis times the level's length along the other, not the level's area.
 
-    Only for the filter banks (``transform.lossless`` is False).
+    ``coeffs`` may hold only a part of each band (what :func:`band_masks` needs, or more):
+    ``origins`` then gives the index of each part's first sample in its band, in the layout
+    of ``coeffs`` (a tuple per band: one index per transformed axis).  Only for the filter
+    banks (``transform.lossless`` is False).
     """
     bank = get_wavelet(transform.wavelet)
     _, wants = _supports(transform, fitted, levels, level, window)
     wants.reverse()  # coarsest first, like coeffs
     picks = [[np.flatnonzero(mask) for mask in want] for want in wants]
-    if len(window) == 1:
-        sub = np.asarray(coeffs[0])[picks[0][0]]
+    axes = len(window)
+    if origins is None:
+        zero = (0,) * axes
+        origins = [zero] + [[zero] * (3 if axes == 2 else 1)] * (len(coeffs) - 1)
+    first: Any = origins[0]
+    if axes == 1:
+        boundary = transform.boundary[0]
+        rule = bank.rule(boundary)
+        sub = np.asarray(coeffs[0])[picks[0][0] - first[0]]
         for index, detail in enumerate(coeffs[1:], start=1):
-            boundary = transform.boundary[0]
-            rule = bank.rule(boundary)
-            coarse_rows, fine_rows = picks[index - 1][0], picks[index][0]
+            origin: Any = origins[index][0]
+            m = len(wants[index][0])
+            detail_rows = np.flatnonzero(_step_support(transform, 0, m, wants[index][0])[1])
             detail = np.asarray(detail)
-            m = rule.fine_length(len(wants[index - 1][0]), detail.shape[0])
-            _, detail_mask = _step_support(transform, 0, m, wants[index][0])
-            detail_rows = np.flatnonzero(detail_mask)
-            low = np.zeros((rule.coarse_length(m), *detail.shape[1:]))
-            low[coarse_rows] = sub
-            high = np.zeros(detail.shape)
-            high[detail_rows] = detail[detail_rows]
-            sub = synthesis_step(low, high, bank, boundary, 0)[fine_rows]
+            trail = detail.shape[1:]
+            low = np.zeros((rule.coarse_length(m), *trail))
+            low[picks[index - 1][0]] = sub
+            high = np.zeros((rule.detail_length(m), *trail))
+            high[detail_rows] = detail[detail_rows - origin[0]]
+            sub = synthesis_step(low, high, bank, boundary, 0)[picks[index][0]]
         return sub
-    sub = np.asarray(coeffs[0])[np.ix_(*picks[0])]
+    sub = np.asarray(coeffs[0])[np.ix_(picks[0][0] - first[0], picks[0][1] - first[1])]
     b0, b1 = transform.boundary
     rule0, rule1 = bank.rule(b0), bank.rule(b1)
     for index, bands in enumerate(coeffs[1:], start=1):
         cH, cV, cD = (np.asarray(band) for band in bands)
+        oH: Any
+        oV: Any
+        oD: Any
+        oH, oV, oD = origins[index]
         rows, cols = picks[index - 1]
         fine_rows, fine_cols = picks[index]
-        m0 = rule0.fine_length(cV.shape[0], cH.shape[0])
-        m1 = rule1.fine_length(cH.shape[1], cV.shape[1])
+        m0, m1 = len(wants[index][0]), len(wants[index][1])
+        r0, s0 = rule0.coarse_length(m0), rule0.detail_length(m0)
+        r1, s1 = rule1.coarse_length(m1), rule1.detail_length(m1)
         detail_rows = np.flatnonzero(_step_support(transform, 0, m0, wants[index][0])[1])
         detail_cols = np.flatnonzero(_step_support(transform, 1, m1, wants[index][1])[1])
         trail = cH.shape[2:]
         # Along axis 1 first (as the fused pass and waverec2 do), on the rows needed only.
-        aa = np.zeros((len(rows), cH.shape[1], *trail))
+        aa = np.zeros((len(rows), r1, *trail))
         aa[:, cols] = sub
-        ad = np.zeros((len(rows), cV.shape[1], *trail))
-        ad[:, detail_cols] = cV[np.ix_(rows, detail_cols)]
-        da = np.zeros((len(detail_rows), cH.shape[1], *trail))
-        da[:, cols] = cH[np.ix_(detail_rows, cols)]
-        dd = np.zeros((len(detail_rows), cV.shape[1], *trail))
-        dd[:, detail_cols] = cD[np.ix_(detail_rows, detail_cols)]
+        ad = np.zeros((len(rows), s1, *trail))
+        ad[:, detail_cols] = cV[np.ix_(rows - oV[0], detail_cols - oV[1])]
+        da = np.zeros((len(detail_rows), r1, *trail))
+        da[:, cols] = cH[np.ix_(detail_rows - oH[0], cols - oH[1])]
+        dd = np.zeros((len(detail_rows), s1, *trail))
+        dd[:, detail_cols] = cD[np.ix_(detail_rows - oD[0], detail_cols - oD[1])]
         # Then along axis 0, on the columns needed only (and a few more when they are so few
         # that the step would take its narrow path, whose sums are ordered differently).
         columns = _wide_enough(fine_cols, m1, int(np.prod(trail, dtype=np.int64)))
         low_rows = synthesis_step(aa, ad, bank, b1, 1)[:, columns]
         high_rows = synthesis_step(da, dd, bank, b1, 1)[:, columns]
-        low = np.zeros((cV.shape[0], len(columns), *trail))
+        low = np.zeros((r0, len(columns), *trail))
         low[rows] = low_rows
-        high = np.zeros((cH.shape[0], len(columns), *trail))
+        high = np.zeros((s0, len(columns), *trail))
         high[detail_rows] = high_rows
         sub = synthesis_step(low, high, bank, b0, 0)[fine_rows, : len(fine_cols)]
     return sub

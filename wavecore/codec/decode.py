@@ -15,6 +15,7 @@ from ..blockcoder import (
     BLOCK_SIZES,
     band_counts,
     block_counts,
+    decode_block_windows,
     decode_blocks,
     fill_stand_ins,
     needed_blocks,
@@ -329,6 +330,22 @@ def _decode(
     stages = pipeline(parsed.header)
     shapes = plan.band_shapes()[:count]
     coder = _block_coder(parsed.header)
+    compact = (
+        masks is not None
+        and coder is not None
+        and parsed.block_checks
+        and not stages.transform.lossless
+        and coder[0] == (len(plan.axes) == 2)
+    )
+    if compact:  # a 2.1 bundle of a filter bank: nothing of the whole band's size is made
+        assert slices is not None and masks is not None and coder is not None
+        with np.errstate(all="ignore"):
+            samples = _decode_window_blocks(
+                parsed, plan, stages, _entries(shapes), coder, masks, window, level, damaged
+            )
+            steps = tuple(slice(None, None, s.step) for s in slices)
+            unpadded = dataclasses.replace(plan, pads=((0, 0),) * len(plan.axes))
+            return np.ascontiguousarray(finish(unpadded, samples[steps], 0))
     with np.errstate(all="ignore"):
         if coder is not None and (masks is not None or damaged != "strict" or parsed.block_checks):
             qcoeffs = _decode_blocks(parsed, _entries(shapes), coder, masks, damaged)
@@ -412,6 +429,25 @@ def _decode_blocks(
         if masks is not None
         else np.ones(sum(counts), dtype=bool)
     )
+    chunks, skip, stored = _read_chunks(parsed, entries, counts, wanted, damaged)
+    levels = decode_blocks(chunks, entries, two_d, block, skip=skip)
+    if parsed.header["quantizer"] == "deadzone" and skip.any():
+        fill_stand_ins(levels, entries, two_d, block, skip, stored)
+    out: list[Any] = []
+    for index, arrays in enumerate(levels):
+        out.append(tuple(arrays) if index > 0 and len(arrays) > 1 else arrays[0])
+    return out
+
+
+def _read_chunks(
+    parsed: Bundle,
+    entries: list[list[tuple[int, ...]]],
+    counts: list[int],
+    wanted: np.ndarray,
+    damaged: str,
+) -> tuple[list[bytes], np.ndarray, list[list[tuple[int, int]] | None]]:
+    """The chunks in the coder's form, the blocks to skip (unwanted or lost), and each
+    chunk's stored band counts (None where it stores none or they are lost)."""
     skip = ~wanted
     chunks: list[bytes] = []
     stored: list[list[tuple[int, int]] | None] = []
@@ -424,13 +460,76 @@ def _decode_blocks(
         chunks.append(chunk)
         stored.append(band_counts)
         first += count
-    levels = decode_blocks(chunks, entries, two_d, block, skip=skip)
-    if parsed.header["quantizer"] == "deadzone" and skip.any():
-        fill_stand_ins(levels, entries, two_d, block, skip, stored)
-    out: list[Any] = []
-    for index, arrays in enumerate(levels):
-        out.append(tuple(arrays) if index > 0 and len(arrays) > 1 else arrays[0])
-    return out
+    return chunks, skip, stored
+
+
+def _decode_window_blocks(
+    parsed: Bundle,
+    plan: Plan,
+    stages: Any,
+    entries: list[list[tuple[int, ...]]],
+    coder: tuple[bool, int],
+    masks: list[list[tuple[np.ndarray, ...]]],
+    window: list[tuple[int, int]],
+    level: int,
+    damaged: str,
+) -> np.ndarray:
+    """A region of a 2.1 bundle of a filter bank, in samples: only the needed blocks are
+    decoded, only the part of each band they need is kept, dequantized and synthesized."""
+    two_d, block = coder
+    counts = block_counts(entries, two_d, block)
+    wanted = needed_blocks(entries, two_d, block, masks)
+    chunks, skip, stored = _read_chunks(parsed, entries, counts, wanted, damaged)
+    cuts: list[list[tuple[int, int, int, int]]] = []
+    origins: list[Any] = []
+    for band_masks_ in masks:
+        entry_cuts, entry_origins = [], []
+        for mask in band_masks_:
+            spans = [_span(m) for m in mask]
+            (r0, r1), (c0, c1) = spans if len(spans) == 2 else [(0, 1), spans[0]]
+            entry_cuts.append((r0, r1, c0, c1))
+            entry_origins.append(tuple(lo for lo, _ in spans))
+        cuts.append(entry_cuts)
+        origins.append(entry_origins)
+    missing = [i for i in range(1, len(entries)) if stored[i] is None]
+    parts, totals = decode_block_windows(chunks, entries, two_d, block, skip, cuts, missing)
+    deadzone = parsed.header["quantizer"] == "deadzone"
+    qcoeffs: list[Any] = [parts[0][0]]
+    for index, bands in enumerate(parts[1:], start=1):
+        known = stored[index] or totals[index]
+        given = [
+            _with_stand_ins(part, *counts_) if deadzone else part
+            for part, counts_ in zip(bands, known, strict=True)
+        ]
+        qcoeffs.append(tuple(given) if len(given) > 1 else given[0])
+    coeffs = stages.quantizer.decode(qcoeffs, plan)
+    for index, bands in enumerate(parts[1:], start=1):
+        values = coeffs[index] if isinstance(coeffs[index], tuple) else (coeffs[index],)
+        shaped = [v[: p.size].reshape(p.shape) for v, p in zip(values, bands, strict=True)]
+        coeffs[index] = tuple(shaped) if len(shaped) > 1 else shaped[0]
+    origins = [origins[0][0], *origins[1:]]
+    return windowed_inverse(
+        stages.transform, coeffs, plan.fitted, plan.levels, level, window, origins
+    )
+
+
+def _span(mask: np.ndarray) -> tuple[int, int]:
+    """``[first, last + 1)`` of a mask's True values (``(0, 0)`` for none)."""
+    where = np.flatnonzero(mask)
+    return (int(where[0]), int(where[-1]) + 1) if where.size else (0, 0)
+
+
+def _with_stand_ins(part: np.ndarray, ones: int, more: int) -> np.ndarray:
+    """``part``'s values, flat, then stand-ins (1s, then 2s) up to the band's counts, so the
+    dequantizer places them as it does in the whole band (see ``fill_stand_ins``)."""
+    have_ones, have_more = band_counts(part)
+    if have_ones > ones or have_more > more:
+        msg = "a chunk's band counts are fewer than its decoded blocks hold"
+        raise BundleError(msg)
+    extra = np.concatenate(
+        [np.ones(ones - have_ones, dtype=np.int32), np.full(more - have_more, 2, np.int32)]
+    )
+    return np.concatenate([part.ravel(), extra])
 
 
 def _checked_chunk(
