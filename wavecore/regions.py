@@ -32,6 +32,7 @@ import numpy as np
 
 from .errors import InvalidParameter
 from .filters import get_wavelet, step_sparse
+from .lossless import unlift
 from .transform import synthesis_step
 
 __all__ = ["LIFTING_REACH", "band_masks", "check_region", "windowed_inverse"]
@@ -229,10 +230,10 @@ def windowed_inverse(
 
     ``coeffs`` may hold only a part of each band (what :func:`band_masks` needs, or more):
     ``origins`` then gives the index of each part's first sample in its band, in the layout
-    of ``coeffs`` (a tuple per band: one index per transformed axis).  Only for the filter
-    banks (``transform.lossless`` is False).
+    of ``coeffs`` (a tuple per band: one index per transformed axis).  The reversible lifting
+    is not linear (it rounds), but it is local just the same, so zeros stand for the samples
+    no needed output reads there too.
     """
-    bank = get_wavelet(transform.wavelet)
     _, wants = _supports(transform, fitted, levels, level, window)
     wants.reverse()  # coarsest first, like coeffs
     picks = [[np.flatnonzero(mask) for mask in want] for want in wants]
@@ -241,25 +242,33 @@ def windowed_inverse(
         zero = (0,) * axes
         origins = [zero] + [[zero] * (3 if axes == 2 else 1)] * (len(coeffs) - 1)
     first: Any = origins[0]
+    lossless = bool(getattr(transform, "lossless", False))
+    dtype = np.int64 if lossless else np.float64
+
+    def step(low: np.ndarray, high: np.ndarray, axis: int, index: int) -> np.ndarray:
+        """One synthesis step of the level of ``coeffs[index]`` along ``axis``."""
+        if lossless:
+            names = transform.lifting
+            return unlift(low, high, axis, names[len(names) - index])
+        bank = get_wavelet(transform.wavelet)
+        return synthesis_step(low, high, bank, transform.boundary[axis], axis)
+
     if axes == 1:
-        boundary = transform.boundary[0]
-        rule = bank.rule(boundary)
         sub = np.asarray(coeffs[0])[picks[0][0] - first[0]]
         for index, detail in enumerate(coeffs[1:], start=1):
             origin: Any = origins[index][0]
             m = len(wants[index][0])
+            r, s = _split(transform, 0, m)
             detail_rows = np.flatnonzero(_step_support(transform, 0, m, wants[index][0])[1])
             detail = np.asarray(detail)
             trail = detail.shape[1:]
-            low = np.zeros((rule.coarse_length(m), *trail))
+            low = np.zeros((r, *trail), dtype=dtype)
             low[picks[index - 1][0]] = sub
-            high = np.zeros((rule.detail_length(m), *trail))
+            high = np.zeros((s, *trail), dtype=dtype)
             high[detail_rows] = detail[detail_rows - origin[0]]
-            sub = synthesis_step(low, high, bank, boundary, 0)[picks[index][0]]
+            sub = step(low, high, 0, index)[picks[index][0]]
         return sub
     sub = np.asarray(coeffs[0])[np.ix_(picks[0][0] - first[0], picks[0][1] - first[1])]
-    b0, b1 = transform.boundary
-    rule0, rule1 = bank.rule(b0), bank.rule(b1)
     for index, bands in enumerate(coeffs[1:], start=1):
         cH, cV, cD = (np.asarray(band) for band in bands)
         oH: Any
@@ -269,31 +278,40 @@ def windowed_inverse(
         rows, cols = picks[index - 1]
         fine_rows, fine_cols = picks[index]
         m0, m1 = len(wants[index][0]), len(wants[index][1])
-        r0, s0 = rule0.coarse_length(m0), rule0.detail_length(m0)
-        r1, s1 = rule1.coarse_length(m1), rule1.detail_length(m1)
+        r0, s0 = _split(transform, 0, m0)
+        r1, s1 = _split(transform, 1, m1)
         detail_rows = np.flatnonzero(_step_support(transform, 0, m0, wants[index][0])[1])
         detail_cols = np.flatnonzero(_step_support(transform, 1, m1, wants[index][1])[1])
         trail = cH.shape[2:]
-        # Along axis 1 first (as the fused pass and waverec2 do), on the rows needed only.
-        aa = np.zeros((len(rows), r1, *trail))
+        # Along axis 1 first (as the fused pass, waverec2 and the lifting do), on the rows
+        # needed only.
+        aa = np.zeros((len(rows), r1, *trail), dtype=dtype)
         aa[:, cols] = sub
-        ad = np.zeros((len(rows), s1, *trail))
+        ad = np.zeros((len(rows), s1, *trail), dtype=dtype)
         ad[:, detail_cols] = cV[np.ix_(rows - oV[0], detail_cols - oV[1])]
-        da = np.zeros((len(detail_rows), r1, *trail))
+        da = np.zeros((len(detail_rows), r1, *trail), dtype=dtype)
         da[:, cols] = cH[np.ix_(detail_rows - oH[0], cols - oH[1])]
-        dd = np.zeros((len(detail_rows), s1, *trail))
+        dd = np.zeros((len(detail_rows), s1, *trail), dtype=dtype)
         dd[:, detail_cols] = cD[np.ix_(detail_rows - oD[0], detail_cols - oD[1])]
         # Then along axis 0, on the columns needed only (and a few more when they are so few
         # that the step would take its narrow path, whose sums are ordered differently).
         columns = _wide_enough(fine_cols, m1, int(np.prod(trail, dtype=np.int64)))
-        low_rows = synthesis_step(aa, ad, bank, b1, 1)[:, columns]
-        high_rows = synthesis_step(da, dd, bank, b1, 1)[:, columns]
-        low = np.zeros((r0, len(columns), *trail))
+        low_rows = step(aa, ad, 1, index)[:, columns]
+        high_rows = step(da, dd, 1, index)[:, columns]
+        low = np.zeros((r0, len(columns), *trail), dtype=dtype)
         low[rows] = low_rows
-        high = np.zeros((s0, len(columns), *trail))
+        high = np.zeros((s0, len(columns), *trail), dtype=dtype)
         high[detail_rows] = high_rows
-        sub = synthesis_step(low, high, bank, b0, 0)[fine_rows, : len(fine_cols)]
+        sub = step(low, high, 0, index)[fine_rows, : len(fine_cols)]
     return sub
+
+
+def _split(transform: Any, axis: int, m: int) -> tuple[int, int]:
+    """``(coarse, detail)`` lengths of one step from ``m`` fine samples along ``axis``."""
+    if getattr(transform, "lossless", False):
+        return (m + 1) // 2, m // 2
+    rule = get_wavelet(transform.wavelet).rule(transform.boundary[axis])
+    return rule.coarse_length(m), rule.detail_length(m)
 
 
 #: Values per row that a step along axis 0 is given at least (or the whole level): the

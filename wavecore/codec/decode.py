@@ -333,11 +333,10 @@ def _decode(
     compact = (
         masks is not None
         and coder is not None
-        and parsed.block_checks
-        and not stages.transform.lossless
+        and (parsed.block_checks or stages.transform.lossless)
         and coder[0] == (len(plan.axes) == 2)
     )
-    if compact:  # a 2.1 bundle of a filter bank: nothing of the whole band's size is made
+    if compact:  # nothing of the whole band's size is made
         assert slices is not None and masks is not None and coder is not None
         with np.errstate(all="ignore"):
             samples = _decode_window_blocks(
@@ -356,7 +355,7 @@ def _decode(
         coeffs = stages.quantizer.decode(qcoeffs, plan)
         if keep is not None and keep < 1.0 and len(coeffs) > 1:
             coeffs = stages.transform.keep(coeffs, keep, plan)
-        if masks is not None and not stages.transform.lossless:
+        if masks is not None:
             # Synthesize the window only, then finish it as a picture of its own: nothing
             # left to crop, the colour and dtype steps work sample by sample.
             assert slices is not None
@@ -474,8 +473,8 @@ def _decode_window_blocks(
     level: int,
     damaged: str,
 ) -> np.ndarray:
-    """A region of a 2.1 bundle of a filter bank, in samples: only the needed blocks are
-    decoded, only the part of each band they need is kept, dequantized and synthesized."""
+    """A region of a 2.1 bundle (or a lossless 2.0 one), in samples: only the needed blocks
+    are decoded, only the part of each band they need is kept, dequantized and synthesized."""
     two_d, block = coder
     counts = block_counts(entries, two_d, block)
     wanted = needed_blocks(entries, two_d, block, masks)
@@ -491,14 +490,14 @@ def _decode_window_blocks(
             entry_origins.append(tuple(lo for lo, _ in spans))
         cuts.append(entry_cuts)
         origins.append(entry_origins)
-    missing = [i for i in range(1, len(entries)) if stored[i] is None]
-    parts, totals = decode_block_windows(chunks, entries, two_d, block, skip, cuts, missing)
     deadzone = parsed.header["quantizer"] == "deadzone"
+    missing = [i for i in range(1, len(entries)) if stored[i] is None] if deadzone else []
+    parts, totals = decode_block_windows(chunks, entries, two_d, block, skip, cuts, missing)
     qcoeffs: list[Any] = [parts[0][0]]
     for index, bands in enumerate(parts[1:], start=1):
-        known = stored[index] or totals[index]
+        known = (stored[index] or totals[index]) if deadzone else [None] * len(bands)
         given = [
-            _with_stand_ins(part, *counts_) if deadzone else part
+            part if counts_ is None else _with_stand_ins(part, *counts_)
             for part, counts_ in zip(bands, known, strict=True)
         ]
         qcoeffs.append(tuple(given) if len(given) > 1 else given[0])
