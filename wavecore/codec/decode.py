@@ -302,8 +302,8 @@ def _region_slices(plan: Plan, level: int, region: Any) -> tuple[slice, ...]:
     """``region`` checked against what a decode at ``level`` returns (InvalidParameter)."""
     try:
         shape = _output_shape(plan, level)
-    except InvalidParameter as exc:  # a header whose padding does not fit its levels
-        msg = f"header: the padding does not fit the levels ({exc})"
+    except Exception as exc:  # a crafted header whose padding does not fit its levels
+        msg = f"header: the padding does not fit the levels ({type(exc).__name__}: {exc})"
         raise BundleError(msg[:300]) from exc
     return check_region(region, shape, len(plan.axes))
 
