@@ -187,7 +187,7 @@ def test_the_checks_cost_a_few_bytes_per_block() -> None:
     assert extra <= 2 * sum(several) + 2 * len(several) + 2 + 3 * 2 * 3 * len(several)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
+@settings(max_examples=25, deadline=None, suppress_health_check=list(HealthCheck))
 @given(data=st.data())
 def test_any_damage_gives_an_array_or_a_bundle_error(data: st.DataObject) -> None:
     """Flipped bytes anywhere, with the container's CRCs recomputed half the time (so that the

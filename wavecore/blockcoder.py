@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from . import _blockkernels as kernels
+from . import _kernels as sample_kernels
 from .errors import BundleError
 from .transform import run_rows
 from .varints import encode_varint
@@ -213,9 +214,9 @@ def band_counts(band: np.ndarray) -> tuple[int, int]:
     (:func:`wavecore.quantize.reconstruction_offset`), so a decode that reads only some
     blocks of a band needs them for the whole band.
     """
-    nonzero = int(np.count_nonzero(band))
-    ones = int(np.count_nonzero(band == 1)) + int(np.count_nonzero(band == -1))
-    return ones, nonzero - ones
+    # The dequantizer's own count (one compiled pass), so the two can never disagree.
+    ones, more = sample_kernels.count_ones_and_more(np.ravel(band))
+    return int(ones), int(more)
 
 
 def _plane_views(entries: list[list[np.ndarray]], two_d: bool) -> list[np.ndarray]:
