@@ -5,7 +5,7 @@ plus a little noise, coded at 1 bpp (RGB, and its grey version), with the defaul
 with bspline2, and losslessly.  For each bundle: the median time of ``wavecore.decode(bundle)``
 and of ``wavecore.decode(bundle, region=...)`` for a 256² window in the middle and at a corner,
 their ratio, and a check that the window equals the full decode cropped.  Also the bytes that
-format 2.1's block checks add (against the same chunks written as 2.0).
+format 3.0's block checks add (against the same chunks written as 2.0).
 
 Run: ``python benchmarks/region_decode.py [--repeat 5]``.  One process; the machine may be
 shared, so the load average is printed with the figures.
@@ -49,7 +49,7 @@ def median_time(run: Callable[[], Any], repeat: int) -> float:
 
 
 def checks_overhead(bundle: bytes) -> int:
-    """Bytes of a 2.1 bundle beyond the same coded chunks written as 2.0."""
+    """Bytes of a 3.0 bundle beyond the same coded chunks written as 2.0."""
     parsed = read_bundle(bundle)
     plan = plan_from_header(parsed.header)
     shapes = plan.band_shapes()
@@ -66,12 +66,12 @@ def checks_overhead(bundle: bytes) -> int:
 
 
 def block_check_sizes() -> None:
-    """What format 2.1 adds to the 512² pictures of benchmarks/header_sizes.py."""
+    """What format 3.0 adds to the 512² pictures of benchmarks/header_sizes.py."""
     pictures = {
         "image 512² grey (camera)": data.camera(),
         "image 512² RGB (astronaut)": data.astronaut(),
     }
-    print("| bundle | bytes 2.0 | bytes 2.1 | added | blocks in chunks of several |")
+    print("| bundle | bytes 2.0 | bytes 3.0 | added | blocks in chunks of several |")
     print("|---|---:|---:|---:|---:|")
     for name, image in pictures.items():
         for label, options in (("default", {}), ("lossless", {"lossless": True})):

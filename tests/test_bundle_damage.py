@@ -1,4 +1,4 @@
-"""A damaged code-block loses only itself (bundle format 2.1, ``decode(..., damaged="zero")``).
+"""A damaged code-block loses only itself (bundle format 3.0, ``decode(..., damaged="zero")``).
 
 Bytes are flipped inside one block of one chunk; the strict decode refuses the bundle naming the
 chunk and block, and ``damaged="zero"`` gives the clean decode everywhere except where that
@@ -37,7 +37,7 @@ def _entries(header: dict) -> list[list[tuple[int, ...]]]:
 
 
 def _block_span(bundle: bytes, chunk: int, block: int) -> tuple[int, int]:
-    """Where block ``block`` of chunk ``chunk`` lies in the bundle's bytes (format 2.1)."""
+    """Where block ``block`` of chunk ``chunk`` lies in the bundle's bytes (format 3.0)."""
     parsed = read_bundle(bundle)
     cparams = parsed.header["cparams"]
     entries = _entries(parsed.header)
@@ -81,7 +81,7 @@ BUNDLES = {
 def test_a_damaged_block_loses_only_itself(name: str, block: int) -> None:
     bundle = BUNDLES[name]
     parsed = read_bundle(bundle)
-    assert parsed.version == (2, 1)
+    assert parsed.version == (3, 0)
     finest = len(parsed.chunks) - 1
     start, stop = _block_span(bundle, finest, block)
     damaged = bytearray(bundle)
@@ -169,7 +169,7 @@ def test_damaged_must_be_strict_or_zero() -> None:
 
 
 def test_the_checks_cost_a_few_bytes_per_block() -> None:
-    """2.1 against 2.0 for the same chunks: 2 B per block, the band counts, 2 B per chunk."""
+    """3.0 against 2.0 for the same chunks: 2 B per block, the band counts, 2 B per chunk."""
     bundle = BUNDLES["grey lossy"]
     parsed = read_bundle(bundle)
     entries = _entries(parsed.header)

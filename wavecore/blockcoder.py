@@ -192,7 +192,7 @@ def encode_blocks(
         stop = int(ends[last - 1]) if count else start
         table = kernels.write_varints(lengths[first:last])
         chunk = CodedChunk(table.tobytes() + payload[start:stop].tobytes())
-        if count > 1 and chunks:  # what bundle format 2.1 stores for a region decode
+        if count > 1 and chunks:  # what bundle format 3.0 stores for a region decode
             chunk.band_counts = [band_counts(band) for band in bands]
         chunks.append(chunk)
         first = last
@@ -201,7 +201,7 @@ def encode_blocks(
 
 class CodedChunk(bytes):
     """A chunk of :func:`encode_blocks`: bytes, plus ``band_counts`` for detail chunks of
-    several blocks (see :func:`band_counts`), which bundle format 2.1 stores beside the
+    several blocks (see :func:`band_counts`), which bundle format 3.0 stores beside the
     blocks; plain bytes work too (the counts are then found by decoding the chunk)."""
 
     band_counts: list[tuple[int, int]] | None = None
@@ -443,7 +443,7 @@ def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: in
 
 
 # --------------------------------------------------------------------------------------------
-# Finding blocks: which a region needs, and the per-block checks of bundle format 2.1
+# Finding blocks: which a region needs, and the per-block checks of bundle format 3.0
 # --------------------------------------------------------------------------------------------
 
 
@@ -494,7 +494,7 @@ def block_table(chunk: bytes | memoryview, count: int) -> tuple[int, np.ndarray]
     """``(table bytes, block lengths)`` of a block-coded chunk of ``count`` blocks.
 
     The table is the varint length of each block at the start of the chunk; the lengths must
-    fit in the chunk (with the 2.1 block checks, they add up to less than it).
+    fit in the chunk (with the 3.0 block checks, they add up to less than it).
 
     Raises
     ------
@@ -519,7 +519,7 @@ CHECK_BYTES = 2
 def add_block_checks(
     chunk: bytes, count: int, counts: Sequence[tuple[int, int]] | None = None
 ) -> bytes:
-    """Bundle format 2.1's form of a block-coded chunk of ``count`` blocks.
+    """Bundle format 3.0's form of a block-coded chunk of ``count`` blocks.
 
     A chunk of one block is left as it is (the chunk's own CRC-16 checks that block).  A chunk
     of several gets, between its table of block lengths and the blocks: a CRC-16 of each
@@ -543,12 +543,12 @@ def add_block_checks(
 def strip_block_checks(
     chunk: bytes | memoryview, count: int, bands: int, verify: np.ndarray | None = None
 ) -> tuple[bytes, np.ndarray, list[tuple[int, int]] | None]:
-    """The coder's form of a 2.1 block-coded chunk, which blocks fail, and its band counts.
+    """The coder's form of a 3.0 block-coded chunk, which blocks fail, and its band counts.
 
     Parameters
     ----------
     chunk : bytes
-        The chunk as stored in a 2.1 bundle.
+        The chunk as stored in a 3.0 bundle.
     count : int
         Its number of blocks (a chunk of one block has no block checks).
     bands : int

@@ -90,7 +90,7 @@ def decode(
     damaged : {"strict", "zero"}
         ``"strict"`` (the default): any damaged chunk the decode needs is a
         :class:`~wavecore.errors.BundleError` naming it.  ``"zero"``: decode what is intact and
-        set the coefficients of what is damaged or missing to zero.  From format 2.1 on, a
+        set the coefficients of what is damaged or missing to zero.  From format 3.0 on, a
         damaged code-block loses only itself (each block has its own CRC-16); in 2.0 bundles
         a damaged chunk loses its level's details; with the older coders (zlib, context
         versions 2 and 3) the damaged level and every finer one.  The header, the chunk
@@ -238,7 +238,7 @@ def chunk_block_info(
     header: dict[str, Any], chunks: Sequence[bytes]
 ) -> list[tuple[int, list[tuple[int, int]] | None]] | None:
     """Per chunk, its number of blocks and (detail chunks of several blocks) the band counts
-    that format 2.1 stores; None when the header's coder does not code in blocks.
+    that format 3.0 stores; None when the header's coder does not code in blocks.
 
     What :func:`wavecore.bundle.write_bundle` needs.  The counts come with the chunks of
     :func:`wavecore.blockcoder.encode_blocks`; chunks without them are decoded to find them.
@@ -411,7 +411,7 @@ def _decode_blocks(
 ) -> list[Any]:
     """Decode block-coded chunks, reading only the blocks ``masks`` needs (all without).
 
-    Checks what it reads: a chunk of several blocks of a 2.1 bundle block by block (the needed
+    Checks what it reads: a chunk of several blocks of a 3.0 bundle block by block (the needed
     blocks only), any other chunk whole.  ``damaged="zero"`` zeroes what fails its check
     instead of raising.
     """
@@ -420,7 +420,7 @@ def _decode_blocks(
     if masks is not None and two_d != (len(masks[0][0]) == 2):
         masks = None  # a layout the masks do not describe: decode every block
     if not parsed.block_checks and parsed.header["quantizer"] == "deadzone":
-        # Before 2.1 the band counts that place dequantized values are not stored: they
+        # Before 3.0 the band counts that place dequantized values are not stored: they
         # come from every block of the band (see fill_stand_ins).
         masks = None
     wanted = (
@@ -473,7 +473,7 @@ def _decode_window_blocks(
     level: int,
     damaged: str,
 ) -> np.ndarray:
-    """A region of a 2.1 bundle (or a lossless 2.0 one), in samples: only the needed blocks
+    """A region of a 3.0 bundle (or a lossless 2.0 one), in samples: only the needed blocks
     are decoded, only the part of each band they need is kept, dequantized and synthesized."""
     two_d, block = coder
     counts = block_counts(entries, two_d, block)
@@ -535,7 +535,7 @@ def _checked_chunk(
     parsed: Bundle, index: int, count: int, bands: int, need: np.ndarray, damaged: str
 ) -> tuple[bytes, np.ndarray, list[tuple[int, int]] | None]:
     """Chunk ``index`` in the coder's form, which of its blocks to zero as damaged, and the
-    band counts it stores (format 2.1, chunks of several blocks)."""
+    band counts it stores (format 3.0, chunks of several blocks)."""
     lost = np.zeros(count, dtype=bool)
     empty = bytes(count)  # a table of zero lengths: every block decodes as zeros
     data = parsed.chunks[index]
