@@ -92,11 +92,12 @@ class TransferRequest(TransferOptions):
 
 
 class ReconstructParams(_Body):
-    """``keep``, ``level`` and ``format`` of a reconstruction."""
+    """``keep``, ``level``, ``format`` and ``region`` of a reconstruction."""
 
     keep: float | None = Field(default=None, ge=0, le=1)
     level: int = Field(default=0, ge=0)
     format: Literal["png", "webp", "tiff", "npy", "json", "geojson", "svg"] | None = None
+    region: str | None = Field(default=None, max_length=200)
 
 
 class PointsResult(BaseModel):

@@ -10,7 +10,7 @@ huge floats in the scaled domain, and every golden bundle in ``tests/golden``) i
 seeded loop: byte flips (CRCs left as they are, or recomputed as an attacker would),
 truncations, inserted and deleted bytes, chunk damage behind valid CRCs, and header edits
 (values replaced, removed, nudged, chunk tables reshuffled), written as format 1.1 JSON or
-2.0 binary headers, and binary header bytes damaged behind valid CRCs (huge varints, cut
+3.0 binary headers, and binary header bytes damaged behind valid CRCs (huge varints, cut
 fields).  Each mutant is decoded at a random level, with and without ``keep``, and inspected.
 Acceptable outcomes: an array, a ``BundleError``, or an ``InvalidParameter`` for a level
 deeper than the (crafted) bundle says it has.  A ``BundleError`` that wraps an ``IndexError``
@@ -99,16 +99,15 @@ def _varint(value: int) -> bytes:
 
 
 def assemble2(packed: bytes, chunks: list[bytes]) -> bytes:
-    """A format 2.0 bundle with correct CRCs around whatever binary header it is given."""
-    head = MAGIC + bytes([2, 0]) + _varint(len(packed)) + packed
+    """A format 3.0 bundle with correct CRCs around whatever binary header it is given."""
+    head = MAGIC + bytes([3, 0]) + _varint(len(packed)) + packed
     head += b"".join(_varint(len(c)) for c in chunks)
-    head += b"".join(struct.pack("<H", binascii.crc_hqx(c, 0)) for c in chunks[1:])
-    crc = zlib.crc32(chunks[0] if chunks else b"", zlib.crc32(head))
-    return head + struct.pack("<I", crc) + b"".join(chunks)
+    head += b"".join(struct.pack("<H", binascii.crc_hqx(c, 0)) for c in chunks)
+    return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
 
 
 def either(header: dict[str, Any], chunks: list[bytes], rng: random.Random) -> bytes:
-    """The crafted bundle in format 2.0 (binary header) or 1.1 (JSON), with valid CRCs."""
+    """The crafted bundle in format 3.0 (binary header) or 1.1 (JSON), with valid CRCs."""
     if rng.random() < 0.5:
         try:
             return assemble2(binheader.pack(header), chunks)

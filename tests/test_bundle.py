@@ -82,7 +82,7 @@ def test_a_scaled_header_is_labelled_1_2_and_checked() -> None:
     assert parsed.version == (1, 2)
     assert parsed.header["scale"] == -1070
     parsed = read_bundle(write_bundle(header, CHUNKS))
-    assert parsed.version == FORMAT_VERSION == (2, 0) and parsed.header == header
+    assert parsed.version == FORMAT_VERSION == (3, 0) and parsed.header == header
     for bad in (True, 1.5, "3", None, 5000, -5000):
         with pytest.raises(BundleError, match="'scale'"):
             write_bundle({**make_header(), "scale": bad}, CHUNKS)
@@ -99,7 +99,7 @@ def _varint(value: int) -> bytes:
 def test_layout_2_0_matches_the_spec() -> None:
     """docs/bundle-format.md, byte by byte: preamble, header, lengths, CRC-16s, CRC-32, chunks."""
     header = make_header()
-    data = write_bundle(header, CHUNKS)
+    data = write_bundle(header, CHUNKS, version=(2, 0))
     packed = binheader.pack(header)
     assert data[:10] == MAGIC + bytes([2, 0])
     assert data[10] == len(packed) < 128  # a one-byte varint
@@ -120,7 +120,7 @@ def test_layout_2_0_matches_the_spec() -> None:
 
 
 def test_a_bundle_cut_inside_chunk_0_or_with_a_bad_chunk_fails_cleanly() -> None:
-    data = write_bundle(make_header(), CHUNKS)
+    data = write_bundle(make_header(), CHUNKS, version=(2, 0))
     start = len(data) - sum(map(len, CHUNKS))
     with pytest.raises(BundleError, match="truncated inside chunk 0"):
         read_bundle(data[: start + 3])
@@ -194,10 +194,25 @@ def test_a_corrupt_chunk_fails_only_when_it_is_used() -> None:
 
 
 def test_unknown_major_version_is_refused_clearly() -> None:
+    """A 3.0 bundle whose major version byte says 4: refused by the version, not by a CRC
+    (the CRC-32 covers the preamble, so it no longer matches either)."""
     data = bytearray(write_bundle(make_header(), CHUNKS))
-    data[8], data[9] = 3, 0
-    with pytest.raises(BundleError, match=r"unsupported bundle format version 3\.0"):
+    assert data[8:10] == bytes([3, 0])
+    data[8] = 4
+    with pytest.raises(BundleError, match=r"unsupported bundle format version 4\.0") as error:
         read_bundle(bytes(data))
+    assert "CRC" not in str(error.value)
+
+
+def test_a_2_x_bundle_of_a_later_minor_version_is_read_in_the_2_0_layout() -> None:
+    """Minor versions only add optional keys or values, so any 2.x is laid out as 2.0 is."""
+    data = bytearray(write_bundle(make_header(), CHUNKS, version=(2, 0)))
+    data[9] = 1
+    at = len(data) - sum(map(len, CHUNKS)) - 4  # the CRC-32, over the head and chunk 0
+    data[at : at + 4] = struct.pack("<I", zlib.crc32(data[:at] + CHUNKS[0]))
+    parsed = read_bundle(bytes(data))
+    assert parsed.version == (2, 1) and not parsed.block_checks
+    assert [parsed.chunk(i) for i in range(3)] == CHUNKS
 
 
 def test_a_newer_minor_version_with_extra_keys_is_read() -> None:

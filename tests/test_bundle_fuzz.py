@@ -83,18 +83,22 @@ def _varint(value: int) -> bytes:
     return bytes(out + bytes([value]))
 
 
-def assemble2(packed: bytes, chunks: list[bytes], minor: int = 0) -> bytes:
-    """A format 2.0 bundle with correct CRCs around whatever binary header bytes it is given."""
-    head = MAGIC + bytes([2, minor]) + _varint(len(packed)) + packed
+def assemble2(packed: bytes, chunks: list[bytes], version: tuple[int, int] = (3, 0)) -> bytes:
+    """A format 3.0 or 2.0 bundle with correct CRCs around whatever binary header bytes it is
+    given (3.0: a CRC-16 per chunk, the CRC-32 over the head; 2.0: chunk 0 under the CRC-32)."""
+    head = MAGIC + bytes(version) + _varint(len(packed)) + packed
     head += b"".join(_varint(len(c)) for c in chunks)
-    head += b"".join(struct.pack("<H", binascii.crc_hqx(c, 0)) for c in chunks[1:])
+    checked = chunks if version >= (3, 0) else chunks[1:]
+    head += b"".join(struct.pack("<H", binascii.crc_hqx(c, 0)) for c in checked)
+    if version >= (3, 0):
+        return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
     crc = zlib.crc32(chunks[0] if chunks else b"", zlib.crc32(head))
     return head + struct.pack("<I", crc) + b"".join(chunks)
 
 
 def packed_header(data: bytes) -> bytes:
-    """The binary header of a 2.0 bundle, as stored."""
-    assert data[8] == 2 and data[10] < 128
+    """The binary header of a 2.x or 3.x bundle, as stored."""
+    assert data[8] in (2, 3) and data[10] < 128
     return data[11 : 11 + data[10]]
 
 

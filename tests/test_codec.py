@@ -390,7 +390,9 @@ def test_the_public_signatures_are_the_issues_contract() -> None:
         # Issue 13 gave surfaces the grids' targets, after the old parameters.
         "encode_surface": "(grid, *, closed=None, level=None, keep=None, quality=None, "
         "wavelet='bspline2', boundary=None, max_error=None, rmse=None, psnr=None, bpp=None)",
-        "decode": "(bundle, *, keep=None, level=0, drop_levels=None)",
+        # Issue 11 added ``region`` and ``damaged`` after the old parameters.
+        "decode": "(bundle, *, keep=None, level=0, drop_levels=None, region=None, "
+        "damaged='strict')",
         "inspect": "(bundle)",
     }
     for name, signature in expected.items():

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from . import cdf97 as _cdf97  # noqa: F401  (importing it registers "cdf97")
 from .adjoint import synthesis_adjoint, synthesis_step_adjoint
-from .codec import decode, encode_curve, encode_image, encode_surface, inspect
+from .codec import decode, decode_region, encode_curve, encode_image, encode_surface, inspect
 from .curves import CurveDecomposition, decompose_curve, fitting_length, transfer_details
 from .curvesets import CurveSet, decode_curves, encode_curves
 from .errors import (
@@ -74,6 +74,7 @@ __all__ = [
     "decode_curve_file",
     "decode_curves",
     "decode_grid",
+    "decode_region",
     "decompose_curve",
     "decompose_image",
     "decompose_surface",

@@ -24,16 +24,34 @@ The bit-level specification is in ``docs/bundle-format.md`` (context coder versi
 
 from __future__ import annotations
 
+import binascii
 import itertools
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from . import _blockkernels as kernels
+from . import _kernels as sample_kernels
 from .errors import BundleError
 from .transform import run_rows
+from .varints import encode_varint
 
-__all__ = ["BLOCK_SIZE", "BLOCK_SIZES", "decode_blocks", "encode_blocks"]
+__all__ = [
+    "BLOCK_SIZE",
+    "BLOCK_SIZES",
+    "CodedChunk",
+    "add_block_checks",
+    "band_counts",
+    "block_counts",
+    "block_table",
+    "decode_block_windows",
+    "decode_blocks",
+    "encode_blocks",
+    "fill_stand_ins",
+    "needed_blocks",
+    "strip_block_checks",
+]
 
 #: The block side: 128 × 128 positions per band.  Each block learns its statistics afresh,
 #: so small blocks cost bits: against version 3 on scikit-image's pictures, 32 × 32 blocks
@@ -179,16 +197,39 @@ def encode_blocks(
     payload = np.concatenate([r[0] for r in results])
     lengths = np.concatenate([r[1] for r in results])
     ends = np.cumsum(lengths)
-    chunks = []
+    chunks: list[bytes] = []
     first = 0
-    for count in per_chunk:
+    for bands, count in zip(entries, per_chunk, strict=True):
         last = first + count
         start = int(ends[first - 1]) if first else 0
         stop = int(ends[last - 1]) if count else start
         table = kernels.write_varints(lengths[first:last])
-        chunks.append(table.tobytes() + payload[start:stop].tobytes())
+        chunk = CodedChunk(table.tobytes() + payload[start:stop].tobytes())
+        if count > 1 and chunks:  # what bundle format 3.0 stores for a region decode
+            chunk.band_counts = [band_counts(band) for band in bands]
+        chunks.append(chunk)
         first = last
     return chunks
+
+
+class CodedChunk(bytes):
+    """A chunk of :func:`encode_blocks`: bytes, plus ``band_counts`` for detail chunks of
+    several blocks (see :func:`band_counts`), which bundle format 3.0 stores beside the
+    blocks; plain bytes work too (the counts are then found by decoding the chunk)."""
+
+    band_counts: list[tuple[int, int]] | None = None
+
+
+def band_counts(band: np.ndarray) -> tuple[int, int]:
+    """``(ones, more)``: how many values of a band have magnitude 1, and how many 2 or more.
+
+    The dead-zone dequantizer places every nonzero value in its bin from these two counts
+    (:func:`wavecore.quantize.reconstruction_offset`), so a decode that reads only some
+    blocks of a band needs them for the whole band.
+    """
+    # The dequantizer's own count (one compiled pass), so the two can never disagree.
+    ones, more = sample_kernels.count_ones_and_more(np.ravel(band))
+    return int(ones), int(more)
 
 
 def _plane_views(entries: list[list[np.ndarray]], two_d: bool) -> list[np.ndarray]:
@@ -208,9 +249,24 @@ def _plane_views(entries: list[list[np.ndarray]], two_d: bool) -> list[np.ndarra
 
 
 def decode_blocks(
-    chunks: list[bytes], layout: list[list[tuple[int, ...]]], two_d: bool, block: int
+    chunks: list[bytes],
+    layout: list[list[tuple[int, ...]]],
+    two_d: bool,
+    block: int,
+    *,
+    skip: np.ndarray | None = None,
 ) -> list[list[np.ndarray]]:
     """Decode the chunks of :func:`encode_blocks` into ``int32`` bands of the ``layout``'s shapes.
+
+    Parameters
+    ----------
+    chunks, layout, two_d, block
+        The chunks (a prefix of the bundle's), the band shapes of each, and the coder's
+        ``two_d`` and ``block`` parameters.
+    skip : numpy.ndarray of bool, optional
+        One flag per block of these chunks (in :func:`needed_blocks`' order): a flagged block is
+        not decoded, its coefficients are zero (a region decode's unneeded blocks, or the
+        damaged blocks of ``decode(..., damaged="zero")``).
 
     Raises
     ------
@@ -218,10 +274,23 @@ def decode_blocks(
         For a block table that does not add up to its chunk, or a block that decodes to
         something impossible.
     """
+    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip)
+    return _bands_out(flat, planes, layout, two_d, total)
+
+
+def _decode_flat(
+    chunks: list[bytes],
+    layout: list[list[tuple[int, ...]]],
+    two_d: bool,
+    block: int,
+    skip: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Every plane decoded into one flat ``int32`` array: ``(flat, plane table, size)``."""
     if block not in BLOCK_SIZES:
         msg = f"context coder block size {block!r} is not one of {BLOCK_SIZES}"
         raise BundleError(msg)
     planes, blocks, per_chunk, total = _structure(layout, two_d, block)
+    per_chunk = per_chunk[: len(chunks)]
     parts, starts, lengths = [], [], []
     offset = 0
     for chunk, count in zip(chunks, per_chunk, strict=True):
@@ -242,6 +311,8 @@ def decode_blocks(
     data = np.concatenate(parts) if parts else np.zeros(0, dtype=np.uint8)
     block_starts = np.concatenate(starts).astype(np.int64)
     block_lengths = np.concatenate(lengths).astype(np.int64)
+    if skip is not None:
+        block_lengths = np.where(skip[: len(block_lengths)], 0, block_lengths)
     flat = np.zeros(total, dtype=np.int32)
     sizes = np.where(block_lengths > 0, _block_sizes(planes, blocks), 0)
     spans = _span_count(int(sizes.sum()))
@@ -258,24 +329,107 @@ def decode_blocks(
     if sum(bad):
         msg = f"{sum(bad)} code-block(s) of the context-coded chunks are corrupt"
         raise BundleError(msg)
+    return flat, planes, int(total)
+
+
+def _bands_out(
+    flat: np.ndarray,
+    planes: np.ndarray,
+    layout: list[list[tuple[int, ...]]],
+    two_d: bool,
+    total: int,
+    windows: Sequence[Sequence[tuple[int, int, int, int]]] | None = None,
+) -> list[list[np.ndarray]]:
+    """The bands (or the ``(row0, row1, col0, col1)`` windows of their planes) from ``flat``."""
     levels = []
     sources, targets = [], []
     p = 0
-    for band_shapes in layout:
+    for index, band_shapes in enumerate(layout):
         dims = [_plane_dims(shape, two_d) for shape in band_shapes]
-        arrays = [np.empty((r, c, n), dtype=np.int32) for r, c, n in dims]
+        cuts = (
+            windows[index]
+            if windows is not None
+            else [(0, rows, 0, cols) for rows, cols, _ in dims]
+        )
+        arrays = [
+            np.empty((r1 - r0, c1 - c0, n), dtype=np.int32)
+            for (r0, r1, c0, c1), (_, _, n) in zip(cuts, dims, strict=True)
+        ]
         channels = max((d[2] for d in dims), default=0)
         for channel, k in itertools.product(range(channels), range(len(dims))):
             rows, cols, count = dims[k]
             if channel >= count:
                 continue
             start = planes[p, kernels.P_OFFSET]
-            sources.append(flat[start : start + rows * cols].reshape(rows, cols))
+            r0, r1, c0, c1 = cuts[k]
+            plane = flat[start : start + rows * cols].reshape(rows, cols)
+            sources.append(plane[r0:r1, c0:c1])
             targets.append(arrays[k][:, :, channel])
             p += 1
-        levels.append([a.reshape(shape) for a, shape in zip(arrays, band_shapes, strict=True)])
-    _copy_planes(sources, targets, int(total))
+        levels.append(
+            [
+                a.reshape(_window_shape(shape, a.shape[:2], two_d))
+                for a, shape in zip(arrays, band_shapes, strict=True)
+            ]
+        )
+    _copy_planes(sources, targets, sum(a.size for a in targets))
     return levels
+
+
+def _window_shape(shape: tuple[int, ...], window: tuple[int, ...], two_d: bool) -> tuple:
+    """A band's shape with its plane's rows and columns those of a window of it."""
+    if two_d and len(shape) >= 2:
+        return (window[0], window[1], *shape[2:])
+    return (window[1], *shape[1:])
+
+
+def decode_block_windows(
+    chunks: list[bytes],
+    layout: list[list[tuple[int, ...]]],
+    two_d: bool,
+    block: int,
+    skip: np.ndarray,
+    windows: Sequence[Sequence[tuple[int, int, int, int]]],
+    totals_for: Sequence[int] = (),
+) -> tuple[list[list[np.ndarray]], dict[int, list[tuple[int, int]]]]:
+    """:func:`decode_blocks` for a region: only ``windows`` of each band, and no more.
+
+    Parameters
+    ----------
+    chunks, layout, two_d, block, skip
+        As for :func:`decode_blocks` (the skipped blocks are neither read nor touched).
+    windows : sequence
+        Per chunk, per band, ``(row0, row1, col0, col1)`` of its planes to return (1-D bands:
+        rows ``(0, 1)``, the samples as columns).
+    totals_for : sequence of int
+        Chunks whose bands' :func:`band_counts` over the whole band are wanted too (the
+        chunks that do not store them: they are decoded whole, or not at all).
+
+    Returns
+    -------
+    list, dict
+        The windows, shaped like their bands but for the window's sizes, and the counts.
+    """
+    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip)
+    totals: dict[int, list[tuple[int, int]]] = {}
+    p = 0
+    for index, band_shapes in enumerate(layout):
+        dims = [_plane_dims(shape, two_d) for shape in band_shapes]
+        channels = max((d[2] for d in dims), default=0)
+        sums = [[0, 0] for _ in dims]
+        for channel, k in itertools.product(range(channels), range(len(dims))):
+            rows, cols, count = dims[k]
+            if channel >= count:
+                continue
+            if index in totals_for:
+                start = planes[p, kernels.P_OFFSET]
+                ones, more = band_counts(flat[start : start + rows * cols])
+                sums[k][0] += ones
+                sums[k][1] += more
+            p += 1
+        if index in totals_for:
+            totals[index] = [(ones, more) for ones, more in sums]
+    return _bands_out(flat, planes, layout, two_d, total, windows), totals
 
 
 #: Rows of planes per copy task: about this many values, so that the tasks balance.
@@ -300,3 +454,217 @@ def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: in
             targets[k][row_lo:row_hi] = sources[k][row_lo:row_hi]
 
     run_rows(run, len(tasks), total)
+
+
+# --------------------------------------------------------------------------------------------
+# Finding blocks: which a region needs, and the per-block checks of bundle format 3.0
+# --------------------------------------------------------------------------------------------
+
+
+def block_counts(layout: list[list[tuple[int, ...]]], two_d: bool, block: int) -> list[int]:
+    """How many blocks each chunk of this layout holds."""
+    return _structure(layout, two_d, block)[2]
+
+
+def needed_blocks(
+    layout: list[list[tuple[int, ...]]],
+    two_d: bool,
+    block: int,
+    masks: Sequence[Sequence[tuple[np.ndarray, ...]]],
+) -> np.ndarray:
+    """Which blocks hold at least one wanted coefficient (one flag per block, chunk by chunk).
+
+    ``masks`` gives, per band of the layout, its wanted rows and columns as boolean masks:
+    ``(rows, cols)`` for 2-D bands, ``(samples,)`` for the bands of one transformed axis (the
+    layout of :func:`wavecore.regions.band_masks`).  A block is needed when one of its bands
+    has a wanted row and a wanted column inside it.
+    """
+    _, blocks, per_chunk, _ = _structure(layout, two_d, block)
+    out = np.zeros(len(blocks), dtype=bool)
+    first = 0
+    for band_shapes, band_masks, count in zip(layout, masks, per_chunk, strict=False):
+        table = blocks[first : first + count]
+        for shape, mask in zip(band_shapes, band_masks, strict=True):
+            rows_mask, cols_mask = mask if len(mask) == 2 else (np.ones(1, dtype=bool), *mask)
+            rows, cols, _ = _plane_dims(shape, two_d)
+            if len(rows_mask) != rows or len(cols_mask) != cols:
+                msg = f"band masks of {len(rows_mask)} × {len(cols_mask)} for a {shape} band"
+                raise ValueError(msg)
+            out[first : first + count] |= _hits(
+                rows_mask, table[:, kernels.B_ROW0], table[:, kernels.B_ROW1]
+            ) & _hits(cols_mask, table[:, kernels.B_COL0], table[:, kernels.B_COL1])
+        first += count
+    return out
+
+
+def _hits(mask: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Whether ``mask`` has a True in ``[lo, hi)`` (clipped to its length), per pair."""
+    total = np.concatenate([[0], np.cumsum(mask, dtype=np.int64)])
+    n = len(mask)
+    return total[np.minimum(hi, n)] > total[np.minimum(lo, n)]
+
+
+def block_table(chunk: bytes | memoryview, count: int) -> tuple[int, np.ndarray]:
+    """``(table bytes, block lengths)`` of a block-coded chunk of ``count`` blocks.
+
+    The table is the varint length of each block at the start of the chunk; the lengths must
+    fit in the chunk (with the 3.0 block checks, they add up to less than it).
+
+    Raises
+    ------
+    BundleError
+        For a table cut short or one whose lengths do not fit.
+    """
+    data = np.frombuffer(chunk, dtype=np.uint8)
+    values, read = kernels.read_varints(data, count, data.size + 1)
+    if read < 0 or read + int(values.sum()) > data.size:
+        msg = (
+            f"block-coded chunk of {data.size} bytes: its table of {count} block lengths "
+            "does not fit in it"
+        )
+        raise BundleError(msg)
+    return int(read), values.astype(np.int64)
+
+
+#: Bytes of one block check (a CRC-16/XMODEM, little-endian).
+CHECK_BYTES = 2
+
+
+def add_block_checks(
+    chunk: bytes, count: int, counts: Sequence[tuple[int, int]] | None = None
+) -> bytes:
+    """Bundle format 3.0's form of a block-coded chunk of ``count`` blocks.
+
+    A chunk of one block is left as it is (the chunk's own CRC-16 checks that block).  A chunk
+    of several gets, between its table of block lengths and the blocks: a CRC-16 of each
+    block; for a detail chunk (``counts`` given), the :func:`band_counts` of each band as two
+    varints; then a CRC-16 of everything before it in the chunk (the *prefix check*).
+    """
+    if count <= 1:
+        return bytes(chunk)
+    read, lengths = block_table(chunk, count)
+    ends = read + np.cumsum(lengths)
+    starts = ends - lengths
+    prefix = bytearray(chunk[:read])
+    for s, e in zip(starts.tolist(), ends.tolist(), strict=True):
+        prefix += binascii.crc_hqx(chunk[s:e], 0).to_bytes(CHECK_BYTES, "little")
+    for ones, more in counts or ():
+        prefix += encode_varint(ones) + encode_varint(more)
+    prefix += binascii.crc_hqx(prefix, 0).to_bytes(CHECK_BYTES, "little")
+    return bytes(prefix) + bytes(chunk[read:])
+
+
+def strip_block_checks(
+    chunk: bytes | memoryview, count: int, bands: int, verify: np.ndarray | None = None
+) -> tuple[bytes, np.ndarray, list[tuple[int, int]] | None]:
+    """The coder's form of a 3.0 block-coded chunk, which blocks fail, and its band counts.
+
+    Parameters
+    ----------
+    chunk : bytes
+        The chunk as stored in a 3.0 bundle.
+    count : int
+        Its number of blocks (a chunk of one block has no block checks).
+    bands : int
+        The number of bands whose counts it stores (0 for chunk 0).
+    verify : numpy.ndarray of bool, optional
+        Check only these blocks (the ones a region needs); by default every block.
+
+    Returns
+    -------
+    bytes, numpy.ndarray, list or None
+        The chunk without its checks (what :func:`decode_blocks` reads); one flag per block,
+        True where the block's bytes do not match its CRC-16 (never for a block that was not
+        verified); the ``(ones, more)`` counts of each band (None for a chunk of one block).
+
+    Raises
+    ------
+    BundleError
+        If the prefix (table, checks, counts) fails its CRC-16 or does not add up.
+    """
+    chunk = bytes(chunk)
+    bad = np.zeros(count, dtype=bool)
+    if count <= 1:
+        return chunk, bad, None
+    read, lengths = block_table(chunk, count)
+    data = np.frombuffer(chunk, dtype=np.uint8)
+    position = read + CHECK_BYTES * count
+    values, used = kernels.read_varints(data[position:], 2 * bands, 2**62)
+    if used < 0:
+        msg = f"block-coded chunk of {len(chunk)} bytes: its band counts are cut short"
+        raise BundleError(msg)
+    position += int(used)
+    payload = position + CHECK_BYTES
+    if payload + int(lengths.sum()) != len(chunk):
+        msg = (
+            f"block-coded chunk of {len(chunk)} bytes: its {count} block lengths, checks and "
+            "band counts do not add up to it"
+        )
+        raise BundleError(msg)
+    if binascii.crc_hqx(chunk[:position], 0) != int.from_bytes(chunk[position:payload], "little"):
+        msg = "block-coded chunk: its table of block lengths and checks fails its CRC-16"
+        raise BundleError(msg)
+    checks = np.frombuffer(chunk, dtype="<u2", count=count, offset=read)
+    ends = payload + np.cumsum(lengths)
+    starts = ends - lengths
+    indices = range(count) if verify is None else np.flatnonzero(verify[:count]).tolist()
+    for b in indices:
+        bad[b] = binascii.crc_hqx(chunk[starts[b] : ends[b]], 0) != int(checks[b])
+    counts = [(int(values[2 * k]), int(values[2 * k + 1])) for k in range(bands)]
+    return chunk[:read] + chunk[payload:], bad, counts or None
+
+
+def fill_stand_ins(
+    levels: list[list[np.ndarray]],
+    layout: list[list[tuple[int, ...]]],
+    two_d: bool,
+    block: int,
+    skip: np.ndarray,
+    counts: Sequence[Sequence[tuple[int, int]] | None],
+) -> None:
+    """Put stand-in values (1s, then 2s) into skipped blocks so each band has its counts.
+
+    A decode that skips blocks (a region's unneeded ones, or damaged ones) leaves them zero,
+    which changes each band's :func:`band_counts` and with them where the dead-zone
+    dequantizer places every nonzero value of the band.  The blocks a region skips hold no
+    coefficient that reaches it, so what they hold is free: stand-ins that restore the stored
+    counts make the dequantizer treat the band exactly as a full decode does.  ``counts``
+    gives each chunk's stored band counts (None: not stored, nothing to restore).
+
+    Raises
+    ------
+    BundleError
+        If the stored counts are fewer than the decoded blocks already hold, or more than the
+        skipped blocks can take (a crafted chunk: its prefix check passed).
+    """
+    _, blocks, per_chunk, _ = _structure(layout, two_d, block)
+    first = 0
+    for index, (bands, shapes, count) in enumerate(zip(levels, layout, per_chunk, strict=False)):
+        stored = counts[index] if index < len(counts) else None
+        skipped = blocks[first : first + count][skip[first : first + count]]
+        first += count
+        if stored is None or not len(skipped):
+            continue
+        for band, shape, (ones, more) in zip(bands, shapes, stored, strict=True):
+            view = band.reshape(_plane_dims(shape, two_d))
+            have_ones, have_more = band_counts(band)
+            ones, more = ones - have_ones, more - have_more
+            if ones < 0 or more < 0:
+                msg = f"chunk {index}: its band counts are fewer than its decoded blocks hold"
+                raise BundleError(msg)
+            for r0, c0, r1, c1 in skipped[
+                :, [kernels.B_ROW0, kernels.B_COL0, kernels.B_ROW1, kernels.B_COL1]
+            ].tolist():
+                if not ones and not more:
+                    break
+                part = view[r0:r1, c0:c1]
+                values = np.zeros(part.size, dtype=band.dtype)
+                take_ones = min(ones, part.size)
+                take_more = min(more, part.size - take_ones)
+                values[:take_ones] = 1
+                values[take_ones : take_ones + take_more] = 2
+                part[...] = values.reshape(part.shape)
+                ones, more = ones - take_ones, more - take_more
+            if ones or more:
+                msg = f"chunk {index}: its band counts are more than its skipped blocks hold"
+                raise BundleError(msg)

@@ -1,25 +1,31 @@
 """The coefficient bundle: a versioned binary container, coarse to fine.
 
-This docstring summarises format version 2.0, and 1.x, which is still read;
+This docstring summarises format version 3.0, and 2.0 and 1.x, which are still read;
 ``docs/bundle-format.md`` is the specification.  Like NumPy's ``.npy`` format, a bundle is a
 fixed preamble, a bounded self-describing header, then the payload.  All integers are
 little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
 
-Layout (2.0)
-------------
+Layout (3.0; 2.0 where it says so)
+----------------------------------
 ==========  ===========  ========================================================================
 offset      size         field
 ==========  ===========  ========================================================================
 0           8            magic ``b"\\x89WVB\\r\\n\\x1a\\n"`` (PNG-style: catches 7-bit and newline
                          mangling, stops ``type`` on DOS)
-8           1            major version (``2``); a reader refuses a major version it does not know
-9           1            minor version (``0``); a reader accepts any minor version of its majors
+8           1            major version (``3``; ``2`` for 2.0); a reader refuses a major version it
+                         does not know
+9           1            minor version (``0``)
 10          v            header length ``H``, a varint, at most ``MAX_HEADER_SIZE``
 …           H            the binary header of :mod:`wavecore.binheader` (the same dict as 1.x)
 …           v · N        each chunk's byte length, a varint; ``N = levels + 1``
-…           2 · (N - 1)  CRC-16/XMODEM (``binascii.crc_hqx(chunk, 0)``) of chunks 1 … N - 1
-…           4            CRC-32 of every byte before it *and then chunk 0*
-…           ...          the chunks, concatenated; nothing may follow the last one
+…           2 · N        CRC-16/XMODEM (``binascii.crc_hqx(chunk, 0)``) of every chunk (2.0:
+                         of chunks 1 … N - 1 only)
+…           4            CRC-32 of every byte before it (2.0: *and then chunk 0*)
+…           ...          the chunks, concatenated; nothing may follow the last one.  3.0: a
+                         chunk of several code-blocks (context coder version 4 on) carries,
+                         after its table of block lengths, a CRC-16 per block, its bands'
+                         ``(ones, more)`` counts (detail chunks) and a CRC-16 of all that
+                         (see :func:`wavecore.blockcoder.add_block_checks`)
 ==========  ===========  ========================================================================
 
 Layout (1.x)
@@ -43,14 +49,16 @@ does: minor versions only add optional header keys (ignored by older readers) or
 of an enumerated field (refused clearly by older readers, naming the field; 1.1 added six
 ``dtype`` values, 1.2 ``scale`` and ``opaque``).  Anything else — a new meaning for a field, a
 new layout, an entropy coder whose old bitstreams no longer decode — is a new major version, or
-a new coder *name* (which older readers refuse clearly).  2.0 is such a new layout.  The golden
+a new coder *name* (which older readers refuse clearly).  2.0 is such a new layout, and so is
+3.0 (chunk 0 leaves the CRC-32, block checks inside chunks): a 2.x reader refuses it by its
+major version.  The golden
 bundles in ``tests/golden`` are decoded in every test run to hold this promise.
 
 Header
 ------
-A dict (1.x: a JSON object, stored deflated; 2.0: the binary header, whose extension holds keys
-it has no field for) with these keys; readers ignore unknown keys, so a minor version may add
-some.
+A dict (1.x: a JSON object, stored deflated; 2.0 and 3.0: the binary header, whose extension
+holds keys it has no field for) with these keys; readers ignore unknown keys, so a minor
+version may add some.
 
 ``kind``        ``"image"``, ``"curve"`` or ``"surface"``
 ``shape``       the original array's shape (list of positive ints)
@@ -94,7 +102,7 @@ A reader checks, in this order and before it allocates anything sized by the bun
 the major version, the header length (at most ``MAX_HEADER_SIZE`` bytes; 1.x: compressed and
 inflated, inflation stops at that size, so no "deflate bomb" gets through), the binary header's
 fields or the JSON, every header field's type and range (the declared element count is at
-most ``MAX_ELEMENTS``), the header and table CRC (2.0: with chunk 0), and that the chunk
+most ``MAX_ELEMENTS``), the header and table CRC (2.x: with chunk 0), and that the chunk
 table's lengths fit in the bytes that are actually present.  Every
 failure is a :class:`~wavecore.errors.BundleError` whose message names the field being read.
 The codec then checks the kind-specific consistency (``fitted`` = ``shape`` + ``pads``, each
@@ -115,6 +123,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from . import binheader
+from .blockcoder import add_block_checks
 from .errors import BundleError
 
 __all__ = [
@@ -134,10 +143,12 @@ MAGIC = b"\x89WVB\r\n\x1a\n"
 #: The version this module writes, and the newest it reads.  2.0 (a new major version: the
 #: header's encoding and the chunk table's layout changed) has the binary header of
 #: :mod:`wavecore.binheader`; every 1.x version is still read.  In 1.x, 1.1 added the dtypes
-#: float16, int8–int64 and uint32, and 1.2 the optional ``scale`` key.
-FORMAT_VERSION = (2, 0)
+#: float16, int8–int64 and uint32, and 1.2 the optional ``scale`` key.  3.0 (again a new major
+#: version: chunk 0 is no longer under the CRC-32, and block-coded chunks carry block checks)
+#: keeps the binary header and adds a CRC-16 per chunk and per code-block.
+FORMAT_VERSION = (3, 0)
 #: The major versions this module reads.
-READ_MAJORS = (1, 2)
+READ_MAJORS = (1, 2, 3)
 MAX_HEADER_SIZE = 65535
 MAX_CHUNKS = 64
 #: Largest element count (samples × channels) a bundle may declare: 2**27, about a 6700 × 6700
@@ -185,9 +196,12 @@ class Bundle:
     header: dict[str, Any]
     chunks: tuple[memoryview | None, ...]
     crcs: tuple[int, ...]
-    #: How ``crcs`` check the chunks: ``"crc32"`` (1.x) or ``"crc16"`` (2.0: CRC-16/XMODEM,
-    #: ``binascii.crc_hqx``; chunk 0 is checked with the header by its CRC-32 instead).
+    #: How ``crcs`` check the chunks: ``"crc32"`` (1.x) or ``"crc16"`` (2.0 and 3.0:
+    #: CRC-16/XMODEM, ``binascii.crc_hqx``; in 2.0 chunk 0 is checked with the header by its
+    #: CRC-32 instead).
     checksum: str = "crc32"
+    #: Whether block-coded chunks carry a CRC-16 per block after their table (3.0 on).
+    block_checks: bool = False
 
     @property
     def available(self) -> int:
@@ -210,9 +224,18 @@ class Bundle:
             )
             raise BundleError(msg)
         if _chunk_check(data, self.checksum) != self.crcs[index]:
-            msg = f"chunk {index} is corrupt: its CRC-32 does not match the chunk table"
+            name = "CRC-16" if self.checksum == "crc16" else "CRC-32"
+            msg = (
+                f"chunk {index} is corrupt: its {name} does not match the chunk table (decode "
+                "with damaged='zero' to get the rest with its damaged blocks zeroed)"
+            )
             raise BundleError(msg)
         return bytes(data)
+
+    def intact(self, index: int) -> bool:
+        """Whether chunk ``index`` is present and matches its CRC."""
+        data = self.chunks[index]
+        return data is not None and _chunk_check(data, self.checksum) == self.crcs[index]
 
 
 def _chunk_check(data: bytes | memoryview, checksum: str) -> int:
@@ -263,14 +286,21 @@ class _Reader:
 
 
 def write_bundle(
-    header: dict[str, Any], chunks: Sequence[bytes], *, version: tuple[int, int] = FORMAT_VERSION
+    header: dict[str, Any],
+    chunks: Sequence[bytes],
+    *,
+    version: tuple[int, int] = FORMAT_VERSION,
 ) -> bytes:
     """Serialise a header and its chunks (coarse to fine) into bundle bytes.
 
     The header is validated exactly as a reader would, so a writer can never produce a bundle
-    that its own reader refuses.  ``version`` is :data:`FORMAT_VERSION` (2.0, the binary
-    header), or ``(1, 1)`` for the JSON header that wavecore releases before 2.0 read (labelled
-    1.2 when the header has ``scale``).
+    that its own reader refuses.  ``version`` is :data:`FORMAT_VERSION` (3.0: the binary
+    header, a CRC-16 per chunk and per code-block), ``(2, 0)`` (no block checks, chunk 0
+    under the header's CRC-32), or ``(1, 1)`` for the JSON header that wavecore releases
+    before 2.0 read (labelled 1.2 when the header has ``scale``).  ``chunks`` are always as
+    the coder wrote them: for 3.0 the block checks are added here, after each chunk's table
+    of block lengths (the blocks per chunk follow from the header; the band counts come
+    with the coder's chunks, or are found by decoding them).
 
     Examples
     --------
@@ -289,19 +319,42 @@ def write_bundle(
         raise BundleError(msg)
     if version[0] == 1:
         return _write_json(header, chunks)
-    if version != FORMAT_VERSION:
-        msg = f"cannot write bundle format version {version}; use {FORMAT_VERSION} or (1, 1)"
+    if version not in ((2, 0), FORMAT_VERSION):
+        msg = (
+            f"cannot write bundle format version {version}; use {FORMAT_VERSION}, (2, 0) or (1, 1)"
+        )
         raise BundleError(msg)
     packed = binheader.pack(header)
     if len(packed) > MAX_HEADER_SIZE:
         msg = f"header is {len(packed)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
         raise BundleError(msg)
-    parts = [MAGIC, bytes(FORMAT_VERSION), _varint(len(packed)), packed]
+    if version >= (3, 0):
+        chunks = _with_block_checks(header, chunks)
+    parts = [MAGIC, bytes(version), _varint(len(packed)), packed]
     parts += [_varint(len(chunk)) for chunk in chunks]
-    parts += [_U16.pack(binascii.crc_hqx(chunk, 0)) for chunk in chunks[1:]]
+    checked = chunks if version >= (3, 0) else chunks[1:]
+    parts += [_U16.pack(binascii.crc_hqx(chunk, 0)) for chunk in checked]
     head = b"".join(parts)
+    if version >= (3, 0):
+        return b"".join([head, _CRC.pack(zlib.crc32(head)), *chunks])
     crc = zlib.crc32(chunks[0], zlib.crc32(head))
     return b"".join([head, _CRC.pack(crc), *chunks])
+
+
+def _with_block_checks(header: dict[str, Any], chunks: Sequence[bytes]) -> list[bytes]:
+    """The chunks in format 3.0's form: block checks and band counts where the coder codes
+    in blocks (context version 4 on), the chunks as they are otherwise."""
+    # The block structure follows from the plan's band shapes, which the codec package
+    # computes; it imports this module, hence the import here.
+    from .codec.decode import chunk_block_info
+
+    info = chunk_block_info(header, chunks)
+    if info is None:
+        return list(chunks)
+    return [
+        add_block_checks(chunk, count, counts)
+        for chunk, (count, counts) in zip(chunks, info, strict=True)
+    ]
 
 
 def _write_json(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
@@ -342,7 +395,7 @@ def read_bundle(data: Any) -> Bundle:
     data : bytes-like
         The bundle.  It may be truncated inside the chunks (the missing chunks come back as
         ``None``); a bundle truncated before the end of its chunk table is an error, and so
-        (from version 2.0 on, whose header CRC covers chunk 0) is one cut inside chunk 0.
+        (in version 2.x, whose header CRC covers chunk 0) is one cut inside chunk 0.
     """
     try:
         reader = _Reader(data)
@@ -363,19 +416,33 @@ def read_bundle(data: Any) -> Bundle:
         raise BundleError(msg)
     if major == 1:
         return _read_json(reader, minor)
-    return _read_binary(reader, minor)
+    return _read_binary(reader, major, minor)
 
 
-def _read_binary(reader: _Reader, minor: int) -> Bundle:
-    """Format 2.x: the binary header, varint chunk lengths, CRC-16s, then one CRC-32."""
+def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
+    """Formats 2.x and 3.x: the binary header, varint chunk lengths, CRC-16s, then one CRC-32.
+
+    Every 2.x minor version is read in 2.0's layout (a minor version may only add optional
+    header keys or enumerated values); 3.x checks every chunk by its CRC-16 and carries block
+    checks.
+    """
     header_size = reader.varint("the header length", MAX_HEADER_SIZE)
     header = binheader.unpack(reader.take(header_size, "the header"))
     check_header(header)
     count = header["levels"] + 1
     lengths = [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
-    crcs = [0] + [reader.unpack(_U16, f"the CRC-16 of chunk {i}")[0] for i in range(1, count)]
+    first_crc = 0 if major >= 3 else 1  # 2.x: chunk 0 is checked by the CRC-32
+    crcs = [0] * first_crc + [
+        reader.unpack(_U16, f"the CRC-16 of chunk {i}")[0] for i in range(first_crc, count)
+    ]
     head_end = reader.offset
     (crc,) = reader.unpack(_CRC, "the header CRC-32")
+    if major >= 3:
+        if zlib.crc32(reader.view[:head_end]) != crc:
+            msg = "the header or chunk table is corrupt: the header CRC-32 does not match"
+            raise BundleError(msg)
+        chunks = _take_chunks(reader, lengths)
+        return Bundle((major, minor), header, chunks, tuple(crcs), "crc16", block_checks=True)
     remaining = len(reader.view) - reader.offset
     if lengths[0] > remaining:
         msg = (
@@ -389,7 +456,7 @@ def _read_binary(reader: _Reader, minor: int) -> Bundle:
         raise BundleError(msg)
     crcs[0] = binascii.crc_hqx(first, 0)
     chunks = _take_chunks(reader, lengths)
-    return Bundle((2, minor), header, chunks, tuple(crcs), "crc16")
+    return Bundle((major, minor), header, chunks, tuple(crcs), "crc16")
 
 
 def _take_chunks(reader: _Reader, lengths: Sequence[int]) -> tuple[memoryview | None, ...]:

@@ -601,10 +601,12 @@ class _Core:
         )
 
 
-def _decode_core(core: bytes, level: int, keep: float | None = None) -> np.ndarray:
+def _decode_core(
+    core: bytes, level: int, keep: float | None = None, region: Any = None
+) -> np.ndarray:
     from .codec import decode
 
-    return decode(core, level=level, keep=keep)
+    return decode(core, level=level, keep=keep, region=region)
 
 
 def _inspect_core(core: bytes) -> dict[str, Any]:
@@ -1201,8 +1203,11 @@ def decode_grid(
         slices), decoded from the core's first chunks; a coarse cell is NaN where all the cells
         it covers are.
     window : tuple of slice, optional
-        A window of the result, ``(slice(r0, r1), slice(c0, c1))`` (a volume takes a third);
-        the same as slicing the result.
+        A window of the result, ``(slice(r0, r1), slice(c0, c1))`` (a volume takes
+        ``(depth, rows, cols)``); the same as slicing the result, but only the core's
+        code-blocks that reach the window are decoded, and only the window is synthesized
+        (a lossless volume, and a window with a negative step or nothing in it, are decoded
+        whole and then sliced).
     keep : float, optional
         Keep only this fraction of the core's details (as :func:`wavecore.decode` does for any
         bundle): a smoother grid, without the outlier corrections, so the bound no longer holds.
@@ -1216,7 +1221,12 @@ def decode_grid(
         msg = f"level must be an integer >= 0, not {level!r}"
         raise InvalidParameter(msg)
     parsed = _Parsed(bundle)
+    if window is not None:
+        _window_items(window, len(parsed.shape))  # checked before anything is decoded
+    split = _split_window(window, parsed) if window is not None else None
     try:
+        if split is not None:
+            return _decode_window(parsed, int(level), keep, *split)
         out = _decode(parsed, int(level), keep)
     except (BundleError, InvalidParameter):
         raise
@@ -1228,15 +1238,121 @@ def decode_grid(
     return out
 
 
-def _window(out: np.ndarray, window: Any) -> np.ndarray:
-    if not isinstance(window, tuple | list) or len(window) > out.ndim:
-        msg = f"window must be a tuple of at most {out.ndim} slices, not {window!r}"
+def _window_items(window: Any, ndim: int) -> list[slice]:
+    if not isinstance(window, tuple | list) or len(window) > ndim:
+        msg = f"window must be a tuple of at most {ndim} slices, not {window!r}"
         raise InvalidParameter(msg)
     for item in window:
         if not isinstance(item, slice):
             msg = f"window must hold slices (e.g. slice(0, 100)), not {item!r}"
             raise InvalidParameter(msg)
-    return np.ascontiguousarray(out[tuple(window)])
+    return list(window)
+
+
+def _split_window(window: Any, parsed: _Parsed) -> tuple[tuple[slice, ...], slice] | None:
+    """``(spatial window, depth slice)`` for a region decode of the core, or None to decode
+    whole (the interpolation coder has no code-blocks; a lossless volume stacks its slices in
+    one picture; a negative step or a window
+    that selects nothing keeps NumPy's slicing of the whole result)."""
+    items = _window_items(window, len(parsed.shape))
+    if parsed.predictive:  # the interpolation coder predicts every sample from coarser ones
+        return None
+    if parsed.lossless and parsed.layout == LAYOUT_VOLUME:
+        return None
+    for item in items:
+        if not all(v is None or isinstance(v, int | np.integer) for v in (item.start, item.stop)):
+            return None
+        if item.step is not None and (
+            not isinstance(item.step, int | np.integer) or item.step <= 0
+        ):
+            return None
+    depth = slice(None)
+    if parsed.layout == LAYOUT_VOLUME and items:
+        depth, items = items[0], items[1:]
+        count = parsed.shape[0]
+        if len(range(*depth.indices(count))) == 0:
+            return None
+    return tuple(items), depth
+
+
+def _decode_window(
+    parsed: _Parsed, level: int, keep: float | None, spatial: tuple[slice, ...], depth: slice
+) -> np.ndarray:
+    """The grid's window, decoding only the core's blocks that reach it (see decode_grid)."""
+    dtype, shape, layout = parsed.dtype, tuple(parsed.shape), parsed.layout
+    if not spatial:  # only a depth range: the whole spatial extent
+        spatial = (slice(None),)
+    expected = shape if parsed.lossless else _to_core(np.empty(shape, dtype=np.bool_), layout).shape
+    core_shape = tuple(_inspect_core(parsed.core)["shape"])
+    if core_shape != tuple(expected):
+        msg = f"grid core holds {list(core_shape)}, not the grid's {list(expected)}"
+        raise BundleError(msg)
+    try:
+        decoded = _decode_core(parsed.core, level, keep, spatial)
+    except InvalidParameter as exc:
+        if "selects no samples" in str(exc):  # NumPy's slicing of the whole: an empty window
+            out = _decode(parsed, level, keep)
+            return _window(out, (depth, *spatial) if layout == LAYOUT_VOLUME else spatial)
+        raise
+    if parsed.lossless:
+        return _to_dtype(decoded.astype(np.int64).astype(np.float64) + parsed.offset, dtype)
+    rows, cols = _spatial_shape(shape, layout)
+    bounds = [item.indices(n) for item, n in zip(spatial, (rows, cols), strict=False)]
+    bounds += [(0, cols, 1)] * (2 - len(bounds))
+    smoothed = keep is not None and keep < 1.0
+    final = _to_dtype(decoded, dtype)
+    if level == 0 and not smoothed and parsed.outliers:
+        flags, multiples, exact, exact_values = decode_outliers(
+            parsed.outliers, math.prod(core_shape), dtype
+        )
+        if exact_values.size != int(np.count_nonzero(exact)):
+            msg = "grid outlier section has the wrong number of exact values"
+            raise BundleError(msg)
+        positions = np.flatnonzero(flags)
+        depth_count = core_shape[2] if len(core_shape) == 3 else 1
+        r, rest = np.divmod(positions, cols * depth_count)
+        c, d = np.divmod(rest, depth_count)
+        inside = np.ones(positions.size, dtype=bool)
+        local = []
+        for index, (start, stop, step) in zip((r, c), bounds, strict=True):
+            inside &= (index >= start) & (index < stop) & ((index - start) % step == 0)
+            local.append((index - start) // step)
+        flat = final.reshape(-1)
+        width = final.shape[1]
+        target = (local[0] * width + local[1]) * depth_count + d
+        chosen = np.flatnonzero(inside)
+        flat[target[chosen]] = _corrected(
+            decoded.reshape(-1)[target[chosen]], multiples[chosen], parsed.unit, dtype
+        )
+        exact_rank = np.cumsum(exact) - 1
+        exact_chosen = chosen[exact[chosen]]
+        flat[target[exact_chosen]] = exact_values[exact_rank[exact_chosen]]
+    out = _from_core(final, layout)
+    window = (depth, *spatial) if layout == LAYOUT_VOLUME else spatial
+    if layout == LAYOUT_VOLUME:
+        out = out[depth]
+    if parsed.mask:
+        mask = decode_mask(parsed.mask, shape)
+        if level:
+            coarse_shape = _from_core(
+                np.empty(_decode_core_shape(parsed.core, level), dtype=np.bool_), layout
+            ).shape
+            mask = _coarse_mask(mask, level, layout, coarse_shape)
+        out[mask[tuple(_full(window, len(shape)))]] = np.nan
+    return np.ascontiguousarray(out)
+
+
+def _full(window: Sequence[slice], ndim: int) -> list[slice]:
+    return list(window) + [slice(None)] * (ndim - len(window))
+
+
+def _decode_core_shape(core: bytes, level: int) -> tuple[int, ...]:
+    """The shape the core decodes to at ``level``, without decoding it."""
+    return tuple(_inspect_core(core)["level_shapes"][level])
+
+
+def _window(out: np.ndarray, window: Any) -> np.ndarray:
+    return np.ascontiguousarray(out[tuple(_window_items(window, out.ndim))])
 
 
 def _decode(parsed: _Parsed, level: int, keep: float | None) -> np.ndarray:

@@ -164,6 +164,27 @@ def _check_declared_size(info: dict[str, Any], settings: Settings) -> None:
         raise Problem("bundle-too-large", msg)
 
 
+def parse_region(text: str | None) -> tuple[slice, ...] | None:
+    """``"Y0:Y1,X0:X1"`` (NumPy's slice syntax per axis, a step allowed, ends optional) as
+    slices; a ``Problem`` naming the part that is not one."""
+    if text is None:
+        return None
+    out = []
+    for part in text.split(","):
+        bounds = part.strip().split(":")
+        try:
+            if not 2 <= len(bounds) <= 3:
+                raise ValueError(part)
+            out.append(slice(*[int(b) if b.strip() else None for b in bounds]))
+        except ValueError:
+            msg = (
+                f"region {text[:80]!r}: {part.strip()[:40]!r} is not start:stop or "
+                "start:stop:step with whole numbers (e.g. region=0:256,512:768)"
+            )
+            raise Problem("invalid-parameter", msg) from None
+    return tuple(out)
+
+
 def reconstruct_job(
     bundle: bytes,
     keep: float | None,
@@ -171,6 +192,7 @@ def reconstruct_job(
     requested: str | None,
     accept: str,
     settings: Settings,
+    region: tuple[slice, ...] | None = None,
 ) -> tuple[bytes, str, dict[str, str]]:
     info = wavecore.inspect(bundle)
     if info["kind"] == "curves":
@@ -179,7 +201,7 @@ def reconstruct_job(
     cost.check_bundle(info, settings)
     kind = info["kind"]
     fmt = _choose_format(requested, kind, accept)
-    arr = wavecore.decode(bundle, keep=keep, level=level)
+    arr = wavecore.decode(bundle, keep=keep, level=level, region=region)
     headers = {
         "X-Wavecore-Kind": kind,
         "X-Wavecore-Shape": "x".join(str(s) for s in arr.shape),
@@ -230,21 +252,39 @@ async def reconstruct(
             "from), or by the Accept header"
         ),
     ] = None,
+    region: Annotated[
+        str | None,
+        Query(
+            max_length=200,
+            description="Only this part of the result, as rows,cols in NumPy's slice syntax "
+            "(e.g. 0:256,512:768; a grid volume takes depth,rows,cols) at the given level: "
+            "only the code-blocks that reach it are decoded",
+        ),
+    ] = None,
 ) -> Response:
     """`keep` drops the smallest stored details at decode time (0.4 removes the smallest
     60 %); `level=k` returns the coarse approximation after k levels (about n / 2^k per side),
-    from the bundle's first chunks only."""
+    from the bundle's first chunks only; `region=Y0:Y1,X0:X1` returns that window of it,
+    decoding only the code-blocks it needs."""
     bundle, fields = await _read_bundle(request)
     if fields:
         params = parse_model(
             ReconstructParams,
-            {"keep": keep, "level": level, "format": format}
+            {"keep": keep, "level": level, "format": format, "region": region}
             | {k: v for k, v in fields.items() if k in ReconstructParams.model_fields},
         )
-        keep, level, format = params.keep, params.level, params.format
+        keep, level, format, region = params.keep, params.level, params.format, params.region
     accept = request.headers.get("accept", "")
     body, media_type, headers = await run_work(
-        request, reconstruct_job, bundle, keep, level, format, accept, settings_of(request)
+        request,
+        reconstruct_job,
+        bundle,
+        keep,
+        level,
+        format,
+        accept,
+        settings_of(request),
+        parse_region(region),
     )
     return Response(body, media_type=media_type, headers=headers)
 

@@ -108,6 +108,15 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
         "v2_image_rgba_u16_lossless": ("image", rgba16, {"lossless": True}),
         "v2_surface_closed_open": ("surface", surface, {"closed": (True, False)}),
         "v2_surface_scaled": ("surface", surface * 1e300, {"quality": 40.0}),
+        # Format 3.0 (a CRC-16 per chunk and per code-block, band counts for region decodes):
+        # a grey picture whose finest bands span several blocks, lossy and lossless, colour at
+        # a set rate, a surface and a curve (one block per chunk: as in 2.0).  Committed as "2.1"
+        # on the branch that made them, renumbered 3.0 before any release (a new layout).
+        "v3_0_image_grey_u8_blocks": ("image", blocks_picture, {"quality": 38.0}),
+        "v3_0_image_grey_u8_lossless": ("image", blocks_picture, {"lossless": True}),
+        "v3_0_image_rgb_u8_bpp": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 6.0}),
+        "v3_0_surface_closed_open": ("surface", surface, {"closed": (True, False)}),
+        "v3_0_curve_default": ("curve", open_curve, {}),
         # Format 1.2 (the JSON header with ``scale``), written by the 1.x writer that
         # ``write_bundle(..., version=(1, 1))`` keeps: no earlier golden bundle had it.
         "surface_scaled_v1_2": (

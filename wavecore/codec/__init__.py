@@ -49,7 +49,7 @@ The coefficient layout lives in :mod:`wavecore.layout`, the default level in
 
 from __future__ import annotations
 
-from .decode import decode, inspect
+from .decode import decode, decode_region, inspect
 from .encode import DEFAULT_RELATIVE_TOLERANCE as DEFAULT_RELATIVE_TOLERANCE
 from .encode import encode_curve, encode_image, encode_surface
 from .plan import DEFAULT_CODER as DEFAULT_CODER
@@ -62,4 +62,4 @@ from .samples import to_integers as _to_integers  # noqa: F401
 from .samples import ycbcr_from as _ycbcr_from  # noqa: F401
 from .stages import LOSSLESS_WAVELET as LOSSLESS_WAVELET
 
-__all__ = ["decode", "encode_curve", "encode_image", "encode_surface", "inspect"]
+__all__ = ["decode", "decode_region", "encode_curve", "encode_image", "encode_surface", "inspect"]
