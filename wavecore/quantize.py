@@ -23,6 +23,7 @@ end so that a prefix of the layout (a coarse decode) can be dequantized on its o
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -75,6 +76,14 @@ def _fine_lengths(levels: list[list[np.ndarray]], axes: Sequence[int]) -> list[i
     return lengths
 
 
+@functools.lru_cache(maxsize=512)
+def _rms_norms(n: int, wavelet: str, boundary: str, level: int) -> tuple[float, float]:
+    """RMS coarse and detail basis norms of one axis and level: the rate searches ask for the
+    same ones at every trial step (a few milliseconds each time at 512²)."""
+    norms = basis_norms(n, wavelet, boundary, level)
+    return float(np.sqrt(np.mean(norms[0] ** 2))), float(np.sqrt(np.mean(norms[1] ** 2)))
+
+
 def _band_norms(
     levels: list[list[np.ndarray]],
     wavelet: str,
@@ -90,12 +99,7 @@ def _band_norms(
     lengths = _fine_lengths(levels, axes)
     rms = []  # per axis and level (coarse first): (RMS coarse norm, RMS detail norm)
     for n, b in zip(lengths, bounds, strict=True):
-        per_level = []
-        for lvl in range(count, 0, -1):
-            norms = basis_norms(n, wavelet, b, lvl)
-            per_level.append(
-                (float(np.sqrt(np.mean(norms[0] ** 2))), float(np.sqrt(np.mean(norms[1] ** 2))))
-            )
+        per_level = [_rms_norms(int(n), wavelet, str(b), lvl) for lvl in range(count, 0, -1)]
         rms.append(per_level)
     if count == 0:
         return [[1.0]]
@@ -470,24 +474,35 @@ def _deadzone_error_terms(values, channels, inverse_step, rounding, largest):
     offset, which the decoder derives from the counts, as well.
     """
     sums = np.zeros((4, channels))
-    ones = 0
-    more = 0
-    for k in range(values.size):
-        c = k % channels
-        scaled = abs(values[k]) * inverse_step
-        q = min(np.floor(scaled + rounding), largest)
-        if q == 0.0:
-            sums[0, c] += scaled * scaled
-        else:
-            r = scaled - q
-            sums[1, c] += r
-            sums[2, c] += r * r
-            sums[3, c] += 1.0
-            if q == 1.0:
-                ones += 1
-            else:
-                more += 1
-    return ones, more, sums
+    ones = 0.0
+    more = 0.0
+    for c in range(channels):
+        dropped = 0.0
+        residual = 0.0
+        residual2 = 0.0
+        nonzero = 0.0
+        for k in range(c, values.size, channels):
+            scaled = abs(values[k]) * inverse_step
+            q = min(np.floor(scaled + rounding), largest)
+            # Selects rather than branches, so that the loop vectorises.
+            kept = 1.0 if q > 0.0 else 0.0
+            r = (scaled - q) * kept
+            dropped += scaled * scaled * (1.0 - kept)
+            residual += r
+            residual2 += r * r
+            nonzero += kept
+            ones += 1.0 if q == 1.0 else 0.0
+        sums[0, c] = dropped
+        sums[1, c] = residual
+        sums[2, c] = residual2
+        sums[3, c] = nonzero
+        more += nonzero
+    more -= ones
+    return int(ones), int(more), sums
+
+
+#: Bands smaller than this are summed on the calling thread (a thread hand-off costs more).
+_THREADED_TERMS = 1 << 17
 
 
 def _band_error_terms(
@@ -501,7 +516,10 @@ def _band_error_terms(
         chunk = values[lo * channels : hi * channels]
         parts.append(_deadzone_error_terms(chunk, channels, 1.0 / band_step, rounding, MAX_INDEX))
 
-    run_rows(run, values.size // channels, values.size)
+    if values.size < _THREADED_TERMS:
+        run(0, values.size // channels)
+    else:
+        run_rows(run, values.size // channels, values.size)
     sums = np.zeros((4, channels))
     for part in parts:
         sums += part[2]

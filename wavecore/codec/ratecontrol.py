@@ -62,7 +62,7 @@ _QUALITY_SLACK_DB = 0.02  # quality searches stop within this much above the tar
 #: window than the searches' own, so that one closed loop hits it more often).
 _QUALITY_ACCEPT_DB = 0.04
 _QUALITY_AIM_DB = 0.015
-_QUALITY_MODEL_WINDOW_DB = 0.005
+_QUALITY_MODEL_WINDOW_DB = 0.008
 #: The tolerance search's closed loops after the first, bisecting up from the open loop's step
 #: (to this relative width): the closed loop's largest error is lower, so the step can grow.
 _TOLERANCE_CLOSED_LOOPS = 4
@@ -140,6 +140,7 @@ class _LossyEncoder:
         )
         self._refines = total <= REFINE_MAX_COEFFICIENTS and plan.wavelet not in _OPEN_LOOP_WAVELETS
         self._distortion: tuple[float, OpenLoopDistortion] | None = None
+        self._predicted: dict[tuple[float, float], float] = {}
         self._quantized: dict[bool, tuple[tuple[float, float], list[Any], dict[str, Any]]] = {}
         self._coded: dict[bool, tuple[tuple[float, float], list[bytes], dict[str, Any]]] = {}
         self._estimates: dict[tuple[float, float], float] = {}
@@ -181,7 +182,14 @@ class _LossyEncoder:
                     channel_gains=gains,
                 ),
             )
-        return self._distortion[1](step)
+        key = (step, self.kept_fraction)
+        if key not in self._predicted:
+            self._predicted[key] = self._distortion[1](step)
+        return self._predicted[key]
+
+    def predictions(self) -> list[tuple[float, float]]:
+        """The ``(step, predicted_sse)`` pairs computed so far for the kept fraction."""
+        return [(k[0], v) for k, v in self._predicted.items() if k[1] == self.kept_fraction]
 
     def measured_samples(self) -> int:
         """How many samples the PSNR averages over (an opaque alpha channel left out)."""
@@ -537,20 +545,10 @@ def _predicted_quality_step(
 
     step = first
     for _ in range(2 if encoder.refines() else _QUALITY_OPEN_VERIFIES):
-        model = _Search(
-            functools.partial(_predicted_mse, encoder, ratio / samples, noise),
-            bound_at(target + _QUALITY_AIM_DB - _QUALITY_MODEL_WINDOW_DB),
-            bound_at(target + _QUALITY_AIM_DB + _QUALITY_MODEL_WINDOW_DB),
-            2.0,
-            low,
-            high,
-            aim=bound_at(target + _QUALITY_AIM_DB),
-            resolution=_QUALITY_STEP_RESOLUTION,
-        )
-        model.run(step, _MODEL_EVALUATIONS)
-        if model.within is None:
+        aim = (bound_at(target + _QUALITY_AIM_DB) - noise) * samples / ratio
+        if aim <= 0:
             return None
-        step = model.within[0]
+        step = _solve_predicted(encoder, aim, step, low, high)
         psnr = encoder.quality(step)[0]
         if target <= psnr <= target + _QUALITY_ACCEPT_DB:
             return step
@@ -559,6 +557,42 @@ def _predicted_quality_step(
             return None
         ratio = measured / predicted
     return None
+
+
+def _solve_predicted(
+    encoder: _LossyEncoder, aim: float, start: float, low: float, high: float
+) -> float:
+    """The step whose predicted squared error is ``aim`` (within ``_QUALITY_MODEL_WINDOW_DB``).
+
+    Every prediction made so far is kept (by the encoder), so a correction with a new ratio
+    starts from the known points: log-log interpolation between the two that bracket the aim,
+    else extrapolation from the nearest with the uniform quantizer's exponent 2.
+    """
+    tolerance = math.log(10.0) * _QUALITY_MODEL_WINDOW_DB / 10.0
+    step = start
+    for _ in range(_MODEL_EVALUATIONS):
+        value = encoder.predicted_sse(step)
+        if value > 0 and abs(math.log(value / aim)) <= tolerance:
+            return step
+        known = [(s, v) for s, v in encoder.predictions() if v > 0]
+        below = [p for p in known if p[1] < aim]
+        above = [p for p in known if p[1] > aim]
+        if below and above:
+            (s0, v0), (s1, v1) = max(below, key=lambda p: p[1]), min(above, key=lambda p: p[1])
+            t = math.log(aim / v0) / math.log(v1 / v0)
+            following = math.exp(math.log(s0) + min(max(t, 0.05), 0.95) * math.log(s1 / s0))
+        else:
+            s0, v0 = min(known, key=lambda p: abs(math.log(p[1] / aim)), default=(step, 0.0))
+            if v0 <= 0:
+                following = step * 2.0
+            else:
+                exponent = min(max(math.log(aim / v0) / 2.0, -math.log(16)), math.log(16))
+                following = s0 * math.exp(exponent)
+        following = min(max(following, low), high)
+        if following == step or abs(math.log(following / step)) <= _QUALITY_STEP_RESOLUTION:
+            return step
+        step = following
+    return step
 
 
 def _predicted_mse(encoder: _LossyEncoder, ratio: float, noise: float, step: float) -> float:
