@@ -33,7 +33,7 @@ from . import _blockkernels as kernels
 from .errors import BundleError
 from .transform import run_rows
 
-__all__ = ["BLOCK_SIZE", "BLOCK_SIZES", "decode_blocks", "encode_blocks"]
+__all__ = ["BLOCK_SIZE", "BLOCK_SIZES", "CodedBlocks", "decode_blocks", "encode_blocks"]
 
 #: The block side: 128 × 128 positions per band.  Each block learns its statistics afresh,
 #: so small blocks cost bits: against version 3 on scikit-image's pictures, 32 × 32 blocks
@@ -176,6 +176,90 @@ def encode_blocks(
         chunks.append(table.tobytes() + payload[start:stop].tobytes())
         first = last
     return chunks
+
+
+class CodedBlocks:
+    """The chunks of :func:`encode_blocks`, held block by block, so that rate control can code
+    some blocks again (say, with details removed) without coding the others.
+
+    ``CodedBlocks(chunks, layout, two_d, block)`` splits chunks made by :func:`encode_blocks`
+    (their tables of block lengths say where each block's bytes are); :meth:`recode` codes the
+    given blocks again from new integer bands, by the same compiled coder, so a block's bytes
+    are exactly what :func:`encode_blocks` writes for its values; :meth:`chunks` puts the
+    chunks back together.  ``regions[b]`` is block ``b``'s ``(entry, row0, col0, row1, col1)``:
+    the positions it holds in every band (and channel) of layout entry ``entry``.
+    """
+
+    def __init__(
+        self, chunks: list[bytes], layout: list[list[tuple[int, ...]]], two_d: bool, block: int
+    ) -> None:
+        self.layout, self.two_d, self.block = layout, two_d, block
+        self._planes, self._blocks, self._per_chunk, self._total = _structure(layout, two_d, block)
+        self.payloads: list[bytes] = []
+        for chunk, count in zip(chunks, self._per_chunk, strict=True):
+            data = np.frombuffer(chunk, dtype=np.uint8)
+            lengths, read = kernels.read_varints(data, count, data.size + 1)
+            if read < 0 or read + int(lengths.sum()) != data.size:
+                msg = f"a chunk of {data.size} bytes does not hold its {count} blocks"
+                raise BundleError(msg)
+            ends = read + np.cumsum(lengths)
+            starts = ends - lengths
+            self.payloads.extend(chunk[int(a) : int(b)] for a, b in zip(starts, ends, strict=True))
+        entry_of = np.repeat(np.arange(len(self._per_chunk)), self._per_chunk)
+        self.regions = np.column_stack(
+            [
+                entry_of,
+                self._blocks[:, kernels.B_ROW0],
+                self._blocks[:, kernels.B_COL0],
+                self._blocks[:, kernels.B_ROW1],
+                self._blocks[:, kernels.B_COL1],
+            ]
+        )
+
+    def recode(self, entries: list[list[np.ndarray]], indices: np.ndarray) -> None:
+        """Code blocks ``indices`` again from ``entries`` (integer bands of the same layout)."""
+        indices = np.asarray(indices, dtype=np.int64)
+        if indices.size == 0:
+            return
+        flat = np.empty(self._total, dtype=np.int32)
+        views = _plane_views(entries, self.two_d)
+        targets = [
+            flat[start : start + view.size].reshape(view.shape)
+            for start, view in zip(self._planes[:, kernels.P_OFFSET], views, strict=True)
+        ]
+        _copy_planes(views, targets, int(self._total))
+        chosen = np.ascontiguousarray(self._blocks[indices])
+        cuts = _cuts(_block_sizes(self._planes, chosen))
+        results: list[Any] = [None] * _SPANS
+
+        def run(lo: int, hi: int) -> None:
+            for span in range(lo, hi):
+                results[span] = kernels.encode_span(
+                    flat, self._planes, chosen, cuts[span], cuts[span + 1]
+                )
+
+        run_rows(run, _SPANS, int(_block_sizes(self._planes, chosen).sum()), pieces=_SPANS)
+        payload = np.concatenate([r[0] for r in results])
+        lengths = np.concatenate([r[1] for r in results])
+        ends = np.cumsum(lengths)
+        for k, index in enumerate(indices):
+            start = int(ends[k - 1]) if k else 0
+            self.payloads[int(index)] = payload[start : int(ends[k])].tobytes()
+
+    def chunks(self) -> list[bytes]:
+        """The chunks, as :func:`encode_blocks` writes them for the blocks' current values."""
+        out = []
+        first = 0
+        for count in self._per_chunk:
+            parts = self.payloads[first : first + count]
+            lengths = np.array([len(p) for p in parts], dtype=np.int64)
+            out.append(kernels.write_varints(lengths).tobytes() + b"".join(parts))
+            first += count
+        return out
+
+    def lengths(self) -> np.ndarray:
+        """Each block's coded bytes."""
+        return np.array([len(p) for p in self.payloads], dtype=np.int64)
 
 
 def _plane_views(entries: list[list[np.ndarray]], two_d: bool) -> list[np.ndarray]:
