@@ -81,3 +81,15 @@ def test_channel_gains_weight_each_channel() -> None:
     second = OpenLoopDistortion(coeffs, wavelet="cdf97", boundary="open", channel_gains=[0, 1])
     assert first(3.0) + second(3.0) == pytest.approx(plain(3.0), rel=1e-12)
     assert math.isclose(first(3.0), second(3.0), rel_tol=0.2)  # the same noise in each
+
+
+def test_block_lengths_are_those_of_the_full_coding() -> None:
+    from wavecore.blockcoder import block_lengths
+
+    entries = _entries(np.random.default_rng(5), 300, 2)
+    layout = [[band.shape for band in bands] for bands in entries]
+    full = CodedBlocks(encode_blocks(entries, True, 128), layout, True, 128)
+    chosen = np.array([0, 3, len(full.regions) - 1])
+    lengths, regions = block_lengths(entries, True, 128, chosen)
+    assert np.array_equal(lengths, full.lengths()[chosen])
+    assert np.array_equal(regions, full.regions)

@@ -261,3 +261,18 @@ def test_trimmed_bundles_decode_to_what_the_header_says(calls: Calls) -> None:
         bundle = encode_image(image, bpp=bpp)
         assert inspect(bundle)["psnr"] == pytest.approx(psnr(decode(bundle), image), abs=6e-4)
     assert calls.blocks_recoded > 0  # at least one of them was trimmed
+
+
+def test_a_large_picture_is_coded_once(calls: Calls) -> None:
+    # 1024² RGB: 30 code-blocks, enough to calibrate the prediction on a sample of them
+    # (the coarse levels whole, a few fine blocks) before the one full coding; before, the
+    # first full coding only calibrated the second.
+    rng = np.random.default_rng(11)
+    y, x = np.mgrid[:1024, :1024]
+    waves = [np.sin(x / (17.0 + 5 * c)) * np.cos(y / (23.0 - 3 * c)) for c in range(3)]
+    edges = 40.0 * ((x // 96 + y // 80) % 2)
+    image = np.stack([60 * w + edges for w in waves], -1) + 128 + rng.normal(0, 6, (1024, 1024, 3))
+    image = np.clip(image, 0, 255).astype(np.uint8)
+    bundle = encode_image(image, bpp=1.0)
+    assert 0.975 <= 8 * len(bundle) / 1024**2 <= 1.0
+    assert calls.trial_codings == 1 and calls.closed_loops == 0

@@ -33,7 +33,14 @@ from . import _blockkernels as kernels
 from .errors import BundleError
 from .transform import run_rows
 
-__all__ = ["BLOCK_SIZE", "BLOCK_SIZES", "CodedBlocks", "decode_blocks", "encode_blocks"]
+__all__ = [
+    "BLOCK_SIZE",
+    "BLOCK_SIZES",
+    "CodedBlocks",
+    "block_lengths",
+    "decode_blocks",
+    "encode_blocks",
+]
 
 #: The block side: 128 × 128 positions per band.  Each block learns its statistics afresh,
 #: so small blocks cost bits: against version 3 on scikit-image's pictures, 32 × 32 blocks
@@ -221,26 +228,7 @@ class CodedBlocks:
         indices = np.asarray(indices, dtype=np.int64)
         if indices.size == 0:
             return
-        flat = np.empty(self._total, dtype=np.int32)
-        views = _plane_views(entries, self.two_d)
-        targets = [
-            flat[start : start + view.size].reshape(view.shape)
-            for start, view in zip(self._planes[:, kernels.P_OFFSET], views, strict=True)
-        ]
-        _copy_planes(views, targets, int(self._total))
-        chosen = np.ascontiguousarray(self._blocks[indices])
-        cuts = _cuts(_block_sizes(self._planes, chosen))
-        results: list[Any] = [None] * _SPANS
-
-        def run(lo: int, hi: int) -> None:
-            for span in range(lo, hi):
-                results[span] = kernels.encode_span(
-                    flat, self._planes, chosen, cuts[span], cuts[span + 1]
-                )
-
-        run_rows(run, _SPANS, int(_block_sizes(self._planes, chosen).sum()), pieces=_SPANS)
-        payload = np.concatenate([r[0] for r in results])
-        lengths = np.concatenate([r[1] for r in results])
+        payload, lengths = _code_some(entries, self.two_d, self._planes, self._blocks, indices)
         ends = np.cumsum(lengths)
         for k, index in enumerate(indices):
             start = int(ends[k - 1]) if k else 0
@@ -260,6 +248,59 @@ class CodedBlocks:
     def lengths(self) -> np.ndarray:
         """Each block's coded bytes."""
         return np.array([len(p) for p in self.payloads], dtype=np.int64)
+
+
+def _code_some(
+    entries: list[list[np.ndarray]],
+    two_d: bool,
+    planes: np.ndarray,
+    blocks: np.ndarray,
+    indices: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Blocks ``indices`` of the tables coded from ``entries``: their bytes and lengths."""
+    total = int((planes[:, kernels.P_ROWS] * planes[:, kernels.P_COLS]).sum())
+    flat = np.empty(total, dtype=np.int32)
+    views = _plane_views(entries, two_d)
+    targets = [
+        flat[start : start + view.size].reshape(view.shape)
+        for start, view in zip(planes[:, kernels.P_OFFSET], views, strict=True)
+    ]
+    _copy_planes(views, targets, total)
+    chosen = np.ascontiguousarray(blocks[indices])
+    sizes = _block_sizes(planes, chosen)
+    cuts = _cuts(sizes)
+    results: list[Any] = [None] * _SPANS
+
+    def run(lo: int, hi: int) -> None:
+        for span in range(lo, hi):
+            results[span] = kernels.encode_span(flat, planes, chosen, cuts[span], cuts[span + 1])
+
+    run_rows(run, _SPANS, int(sizes.sum()), pieces=_SPANS)
+    return np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results])
+
+
+def block_lengths(
+    entries: list[list[np.ndarray]], two_d: bool, block: int, indices: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The coded bytes of blocks ``indices`` alone (what :func:`encode_blocks` would write for
+    them), and every block's region ``(entry, row0, col0, row1, col1)``: for rate control to
+    sample the coder on a few blocks."""
+    layout = [[band.shape for band in bands] for bands in entries]
+    planes, blocks, per_chunk, _ = _structure(layout, two_d, block)
+    entry_of = np.repeat(np.arange(len(per_chunk)), per_chunk)
+    regions = np.column_stack(
+        [
+            entry_of,
+            blocks[:, kernels.B_ROW0],
+            blocks[:, kernels.B_COL0],
+            blocks[:, kernels.B_ROW1],
+            blocks[:, kernels.B_COL1],
+        ]
+    )
+    indices = np.asarray(indices, dtype=np.int64)
+    if indices.size == 0:
+        return np.zeros(0, dtype=np.int64), regions
+    return _code_some(entries, two_d, planes, blocks, indices)[1], regions
 
 
 def _plane_views(entries: list[list[np.ndarray]], two_d: bool) -> list[np.ndarray]:

@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from .._kernels import largest_scaled, log_histogram_counts, top_octave
-from ..blockcoder import CodedBlocks
+from ..blockcoder import BLOCK_SIZE as DEFAULT_BLOCK
+from ..blockcoder import CodedBlocks, block_lengths
 from ..bundle import write_bundle
 from ..colour import YCBCR_INVERSE_MATRIX
 from ..entropy import encode_levels
@@ -127,6 +128,11 @@ _TYPICAL_COLOUR_RATIO = 0.70
 #: Removing a detail of magnitude 1 from a block saves about this share of the block's mean
 #: bits per nonzero detail (the first trim's guess; later ones use what the coder measured).
 _TRIM_SAVING_SHARE = 0.7
+#: Pictures of at least this many code-blocks calibrate the bpp prediction on a sample of
+#: about ``_SAMPLED_BLOCKS`` of them (``_sampled_ratio``) before their one full coding.
+_SAMPLING_MIN_BLOCKS = 24
+_SAMPLED_BLOCKS = 12
+_WHOLE_LEVEL_BLOCKS = 4
 _TRIM_ROUNDS = 6
 #: Where in the window the trim aims, from the budget down (bytes left unused cost PSNR).
 _TRIM_AIM = 0.3
@@ -872,6 +878,9 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         return size
 
     colour = encoder.plan.colour != "none"
+    ratio = _TYPICAL_COLOUR_RATIO if colour else _TYPICAL_GREY_RATIO
+    if not encoder.refines() and start is None:
+        ratio = _sampled_ratio(encoder, ratio, _BPP_AIM * budget, low, high) or ratio
     step = _fit_budget(
         encoder,
         size_or_trimmed,
@@ -881,7 +890,7 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         low,
         high,
         start,
-        _TYPICAL_COLOUR_RATIO if colour else _TYPICAL_GREY_RATIO,
+        ratio,
     )
     if trimmed:
         return trimmed[0]
@@ -893,6 +902,86 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         )
         raise InvalidParameter(msg)
     return encoder.bundle(step)
+
+
+def _sampled_ratio(
+    encoder: _LossyEncoder, ratio: float, aim: float, low: float, high: float
+) -> float | None:
+    """The coder's size over the first-order estimate, measured on a sample of the blocks.
+
+    On pictures of many code-blocks, every ``k``-th block (about ``_SAMPLED_BLOCKS`` of them)
+    is coded at the step the typical ratio predicts, and each block's first-order entropy is
+    computed (a histogram of its magnitudes): the sample's ratio of the two, applied to all
+    blocks' entropies, predicts the whole coding, for a fraction of a coding's time.  None
+    where there are too few blocks (a coding is cheap there) or the layout is not the block
+    coder's.
+    """
+    shapes = as_levels(encoder.kept)  # (only the shapes count here)
+    if len(shapes) < 2 or any(len(bands) != 3 for bands in shapes[1:]):
+        return None
+    _, regions = block_lengths(shapes, True, DEFAULT_BLOCK, np.zeros(0, dtype=np.int64))
+    if len(regions) < _SAMPLING_MIN_BLOCKS:
+        return None
+    model = _Search(
+        functools.partial(_times, encoder.size_estimate, ratio),
+        aim * 1.004,
+        aim * 0.996,
+        -1.0,
+        low,
+        high,
+        aim=aim,
+    )
+    model.run(encoder.plan.peak / 16.0, _MODEL_EVALUATIONS)
+    found = model.within or model.last
+    if found is None:
+        return None
+    step = found[0]
+    levels = as_levels(encoder.quantize(step, closed=False)[0])
+    entropies = _block_entropies(levels, regions)
+    # Levels of few blocks (the coarse ones, small and dense) are coded whole; the others
+    # (the fine ones, most of the bytes) one block in ``stride``, each level by its own ratio.
+    entry_of = regions[:, 0]
+    counts = np.bincount(entry_of)
+    sampled = counts[entry_of] > _WHOLE_LEVEL_BLOCKS
+    stride = max(1, int(sampled.sum()) // _SAMPLED_BLOCKS)
+    rank = np.arange(len(regions)) - np.searchsorted(entry_of, entry_of)  # index in its level
+    chosen = ~sampled | (rank % stride == stride // 2)
+    sample = np.flatnonzero(chosen)
+    lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample)
+    coded = 0.0
+    for entry in range(len(counts)):
+        mine = entry_of[sample] == entry
+        level_coded = float(lengths[mine].sum())
+        if counts[entry] <= _WHOLE_LEVEL_BLOCKS:
+            coded += level_coded
+            continue
+        level_entropy = float(entropies[sample[mine]].sum())
+        if level_entropy <= 0:
+            coded += float(entropies[entry_of == entry].sum()) * ratio
+        else:
+            coded += level_coded / level_entropy * float(entropies[entry_of == entry].sum())
+    # The chunks' tables of block lengths and the header, as the estimate counts them.
+    predicted = coded + 2.0 * len(regions) + _HEADER_GUESS
+    return predicted / encoder.size_estimate(step)
+
+
+def _block_entropies(levels: list[list[np.ndarray]], regions: np.ndarray) -> np.ndarray:
+    """Each code-block's first-order entropy in bytes (magnitudes up to 15, larger ones by
+    their bit length, a bit per sign), in the block coder's order."""
+    out = np.zeros(len(regions))
+    for b, (entry, row0, col0, row1, col1) in enumerate(regions):
+        bits = 0.0
+        for band in levels[entry]:
+            part = np.abs(band[row0:row1, col0:col1].reshape(-1)).astype(np.int64)
+            if part.size == 0:
+                continue
+            counts = np.bincount(np.minimum(part, 16), minlength=17).astype(np.float64)
+            present = counts[counts > 0]
+            bits -= float(np.sum(present * np.log2(present / part.size)))
+            large = part[part >= 16]
+            bits += float(np.sum(np.log2(large))) + float(np.count_nonzero(part))
+        out[b] = bits / 8.0
+    return out
 
 
 def _predicted_bpp(
