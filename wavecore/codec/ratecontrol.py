@@ -1,15 +1,23 @@
 """Rate control: the searches for the quantizer step that meets a ``quality``, ``bpp`` or
 ``tolerance`` target (or codes ``keep``), over one decomposition held by :class:`_LossyEncoder`.
 
-Small decompositions are quantized in closed loop (a least-squares refit of the kept
-coefficients, about ten times an open-loop quantization).  The searches therefore run their
-trials in open loop, from which the closed loop's result is predicted (its squared error, its
-coded size and its largest error are the open loop's times a ratio close to one), run the
-closed loop once where the prediction meets the target, and once more with the ratio it
-measured if it missed; only if both miss does the old search on closed-loop results alone
-run.  The final bundle is coded once per closed loop (``bpp`` also codes its open-loop
-trials, 20-40 ms each at 512 × 512, since the first-order size estimate misses the real coder
-by a few per cent and the budget's window is 2.5 % wide).
+They predict rather than try:
+
+* ``quality``: the open loop's squared error at any step is computed from the coefficients
+  (``quantize.OpenLoopDistortion``: one compiled pass, weighted by the basis norms, no
+  synthesis); the step it gives is quantized and verified by one synthesis, and a miss is
+  corrected with the ratio measured (or, once verifications bracket the target, by their
+  secant).  ``cdf97`` runs no closed loop (it does not pay for that nearly orthogonal
+  wavelet); ``bspline2``'s small decompositions run it at the predicted step.
+* ``bpp``: the coded size is predicted from a first-order estimate scaled by the coder's
+  ratio to it, measured on a sample of code-blocks where there are many; the one full coding
+  aims 1 % above the budget, and one that lands a little above is trimmed into the window by
+  removing details from a few blocks and coding only those again
+  (``blockcoder.CodedBlocks``).  A prediction far off costs a second full coding.
+* ``tolerance``: bisection in open loop, then a few closed loops upwards.
+
+The old searches on measured results stay as fallbacks for pictures whose error or size jumps
+with the step.  ``tests/test_ratecontrol.py`` counts the codings and closed loops.
 """
 
 from __future__ import annotations
@@ -745,10 +753,6 @@ def _searched_quality(
     else:
         step = search.within[0]
     return step
-
-
-def _scaled_open_mse(encoder: _LossyEncoder, ratio: float, step: float) -> float:
-    return encoder.mse(step, closed=False) * ratio
 
 
 def _times(measure: Callable[[float], float], factor: float, step: float) -> float:
