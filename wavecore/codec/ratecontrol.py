@@ -139,7 +139,7 @@ _TRIM_SAVING_SHARE = 0.7
 #: Pictures of at least this many code-blocks calibrate the bpp prediction on a sample of
 #: about ``_SAMPLED_BLOCKS`` of them (``_sampled_ratio``) before their one full coding.
 _SAMPLING_MIN_BLOCKS = 24
-_SAMPLED_BLOCKS = 12
+_SAMPLED_BLOCKS = 20
 _WHOLE_LEVEL_BLOCKS = 4
 _TRIM_ROUNDS = 6
 #: Where in the window the trim aims, from the budget down (bytes left unused cost PSNR).
