@@ -40,10 +40,12 @@ from .varints import encode_varint
 __all__ = [
     "BLOCK_SIZE",
     "BLOCK_SIZES",
+    "CodedBlocks",
     "CodedChunk",
     "add_block_checks",
     "band_counts",
     "block_counts",
+    "block_lengths",
     "block_table",
     "decode_block_windows",
     "decode_blocks",
@@ -230,6 +232,132 @@ def band_counts(band: np.ndarray) -> tuple[int, int]:
     # The dequantizer's own count (one compiled pass), so the two can never disagree.
     ones, more = sample_kernels.count_ones_and_more(np.ravel(band))
     return int(ones), int(more)
+
+
+class CodedBlocks:
+    """The chunks of :func:`encode_blocks`, held block by block, so that rate control can code
+    some blocks again (say, with details removed) without coding the others.
+
+    ``CodedBlocks(chunks, layout, two_d, block)`` splits chunks made by :func:`encode_blocks`
+    (their tables of block lengths say where each block's bytes are); :meth:`recode` codes the
+    given blocks again from new integer bands, by the same compiled coder, so a block's bytes
+    are exactly what :func:`encode_blocks` writes for its values; :meth:`chunks` puts the
+    chunks back together.  ``regions[b]`` is block ``b``'s ``(entry, row0, col0, row1, col1)``:
+    the positions it holds in every band (and channel) of layout entry ``entry``.
+    """
+
+    def __init__(
+        self, chunks: list[bytes], layout: list[list[tuple[int, ...]]], two_d: bool, block: int
+    ) -> None:
+        self.layout, self.two_d, self.block = layout, two_d, block
+        self._planes, self._blocks, self._per_chunk, self._total = _structure(layout, two_d, block)
+        self.payloads: list[bytes] = []
+        # Bundle format 3.0 stores each detail band's counts beside its blocks (see CodedChunk).
+        self.band_counts = [getattr(chunk, "band_counts", None) for chunk in chunks]
+        for chunk, count in zip(chunks, self._per_chunk, strict=True):
+            data = np.frombuffer(chunk, dtype=np.uint8)
+            lengths, read = kernels.read_varints(data, count, data.size + 1)
+            if read < 0 or read + int(lengths.sum()) != data.size:
+                msg = f"a chunk of {data.size} bytes does not hold its {count} blocks"
+                raise BundleError(msg)
+            ends = read + np.cumsum(lengths)
+            starts = ends - lengths
+            self.payloads.extend(chunk[int(a) : int(b)] for a, b in zip(starts, ends, strict=True))
+        entry_of = np.repeat(np.arange(len(self._per_chunk)), self._per_chunk)
+        self.regions = np.column_stack(
+            [
+                entry_of,
+                self._blocks[:, kernels.B_ROW0],
+                self._blocks[:, kernels.B_COL0],
+                self._blocks[:, kernels.B_ROW1],
+                self._blocks[:, kernels.B_COL1],
+            ]
+        )
+
+    def recode(self, entries: list[list[np.ndarray]], indices: np.ndarray) -> None:
+        """Code blocks ``indices`` again from ``entries`` (integer bands of the same layout)."""
+        indices = np.asarray(indices, dtype=np.int64)
+        if indices.size == 0:
+            return
+        payload, lengths = _code_some(entries, self.two_d, self._planes, self._blocks, indices)
+        ends = np.cumsum(lengths)
+        for k, index in enumerate(indices):
+            start = int(ends[k - 1]) if k else 0
+            self.payloads[int(index)] = payload[start : int(ends[k])].tobytes()
+        for entry, bands in enumerate(entries):
+            if self.band_counts[entry] is not None:
+                self.band_counts[entry] = [band_counts(band) for band in bands]
+
+    def chunks(self) -> list[bytes]:
+        """The chunks, as :func:`encode_blocks` writes them for the blocks' current values."""
+        out: list[bytes] = []
+        first = 0
+        for count, counts in zip(self._per_chunk, self.band_counts, strict=True):
+            parts = self.payloads[first : first + count]
+            lengths = np.array([len(p) for p in parts], dtype=np.int64)
+            chunk = CodedChunk(kernels.write_varints(lengths).tobytes() + b"".join(parts))
+            chunk.band_counts = counts
+            out.append(chunk)
+            first += count
+        return out
+
+    def lengths(self) -> np.ndarray:
+        """Each block's coded bytes."""
+        return np.array([len(p) for p in self.payloads], dtype=np.int64)
+
+
+def _code_some(
+    entries: list[list[np.ndarray]],
+    two_d: bool,
+    planes: np.ndarray,
+    blocks: np.ndarray,
+    indices: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Blocks ``indices`` of the tables coded from ``entries``: their bytes and lengths."""
+    total = int((planes[:, kernels.P_ROWS] * planes[:, kernels.P_COLS]).sum())
+    flat = np.empty(total, dtype=np.int32)
+    views = _plane_views(entries, two_d)
+    targets = [
+        flat[start : start + view.size].reshape(view.shape)
+        for start, view in zip(planes[:, kernels.P_OFFSET], views, strict=True)
+    ]
+    _copy_planes(views, targets, total)
+    chosen = np.ascontiguousarray(blocks[indices])
+    sizes = _block_sizes(planes, chosen)
+    spans = _span_count(int(sizes.sum()))
+    cuts = _cuts(sizes, spans)
+    results: list[Any] = [None] * spans
+
+    def run(lo: int, hi: int) -> None:
+        for span in range(lo, hi):
+            results[span] = kernels.encode_span(flat, planes, chosen, cuts[span], cuts[span + 1])
+
+    run_rows(run, spans, pieces=spans)
+    return np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results])
+
+
+def block_lengths(
+    entries: list[list[np.ndarray]], two_d: bool, block: int, indices: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The coded bytes of blocks ``indices`` alone (what :func:`encode_blocks` would write for
+    them), and every block's region ``(entry, row0, col0, row1, col1)``: for rate control to
+    sample the coder on a few blocks."""
+    layout = [[band.shape for band in bands] for bands in entries]
+    planes, blocks, per_chunk, _ = _structure(layout, two_d, block)
+    entry_of = np.repeat(np.arange(len(per_chunk)), per_chunk)
+    regions = np.column_stack(
+        [
+            entry_of,
+            blocks[:, kernels.B_ROW0],
+            blocks[:, kernels.B_COL0],
+            blocks[:, kernels.B_ROW1],
+            blocks[:, kernels.B_COL1],
+        ]
+    )
+    indices = np.asarray(indices, dtype=np.int64)
+    if indices.size == 0:
+        return np.zeros(0, dtype=np.int64), regions
+    return _code_some(entries, two_d, planes, blocks, indices)[1], regions
 
 
 def _plane_views(entries: list[list[np.ndarray]], two_d: bool) -> list[np.ndarray]:
