@@ -97,7 +97,8 @@ def encode_image(
     level : int, optional
         Decomposition levels; ``None`` picks up to 5, keeping the coarsest band at least about
         4 pixels a side.  Any image size works: the image is edge-padded to a size that fits,
-        and the padding is recorded and cropped again.
+        and the padding is recorded and cropped again.  Lossless: ``None`` codes 2 and 3
+        levels (fewer if the image is small) and keeps the smaller bundle.
     keep : float, optional
         Fraction of detail coefficients kept (the smallest ``1 - keep`` by their effect on the
         reconstruction are removed), quantized finely (about 60 dB).
