@@ -55,7 +55,7 @@ everywhere.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -64,10 +64,29 @@ from . import _kernels, layout
 from .errors import InvalidParameter
 from .transform import normalize_axis, run_rows
 
-__all__ = ["FILTERS", "band_shapes", "choose_filters", "forward", "inverse", "lift", "unlift"]
+__all__ = [
+    "FILTERS",
+    "LOSSLESS_DEPTHS",
+    "band_shapes",
+    "best_depth",
+    "choose_filters",
+    "forward",
+    "inverse",
+    "lift",
+    "unlift",
+]
 
 #: The reversible filters, by the names the bundle header uses.
 FILTERS = ("legall53", "haar", "bspline2")
+#: The depths (levels) a lossless encode tries when none is given (:func:`best_depth`): the
+#: context coder's prediction of the coarse band (LOCO-I's median edge detector) codes it
+#: better than further 5/3 levels do.  On scikit-image's pictures, bytes at depths
+#: 1 / 2 / 3 / 5: camera 124,826 / 124,811 / 124,985 / 125,148; coins 68,456 / 68,252 / 68,437
+#: / 68,530; brick 94,216 / 95,560 / 96,581 / 96,808; astronaut 339,960 / 338,449 / 338,936 /
+#: 339,376; moon, a pixel-repeated enlargement, 28,955 / 28,335 / 28,093 / 28,124.  Depth 1
+#: would cost a coding of a quarter of the samples more; depth 3 costs a sixteenth.
+#: First-order entropy ranks the depths wrongly, so they are coded.
+LOSSLESS_DEPTHS = (2, 3)
 
 
 #: The compiled kernels' number for each filter (anything else is lifted as 5/3, as before).
@@ -316,3 +335,32 @@ def inverse(
         high = unlift(cH, cD, axes[1], name)
         coarse = unlift(low, high, axes[0], name)
     return coarse
+
+
+def best_depth(
+    data: np.ndarray,
+    filters: Sequence[str],
+    code: Callable[[list[Any]], list[bytes]],
+    depths: Sequence[int] = LOSSLESS_DEPTHS,
+    axes: Sequence[int] = (0, 1),
+) -> tuple[int, list[bytes]]:
+    """Of ``depths`` (each at most ``len(filters)``), the one whose coding is smallest, and its
+    chunks (``code`` turns a :func:`forward` list into one chunk per entry).
+
+    The shallowest depth is coded whole; a deeper one only re-codes what changes, the coarse
+    band split further: each level's chunk of the context coder is coded on its own (its blocks
+    hold one level), so the finer chunks are the same.  The result is exactly the coding of
+    ``forward(data, depth, axes, filters[:depth])``.
+    """
+    ordered = sorted(set(depths))
+    first = ordered[0]
+    coeffs = forward(data, first, axes, filters[:first])
+    chunks = code(coeffs)
+    best, best_size, chosen = chunks, sum(map(len, chunks)), first
+    for depth in ordered[1:]:
+        part = code(forward(coeffs[0], depth - first, axes, filters[first:depth]))
+        candidate = [*part, *chunks[1:]]
+        size = sum(map(len, candidate))
+        if size < best_size:
+            best, best_size, chosen = candidate, size, depth
+    return chosen, best

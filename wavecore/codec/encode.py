@@ -97,7 +97,8 @@ def encode_image(
     level : int, optional
         Decomposition levels; ``None`` picks up to 5, keeping the coarsest band at least about
         4 pixels a side.  Any image size works: the image is edge-padded to a size that fits,
-        and the padding is recorded and cropped again.
+        and the padding is recorded and cropped again.  Lossless: ``None`` codes 2 and 3
+        levels (fewer if the image is small) and keeps the smaller bundle.
     keep : float, optional
         Fraction of detail coefficients kept (the smallest ``1 - keep`` by their effect on the
         reconstruction are removed), quantized finely (about 60 dB).
@@ -177,8 +178,10 @@ def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
     data = get_colour({"id": colour}).forward(arr).astype(np.int64, copy=False)
     # At most as many levels as leave every subband non-empty (5/3 fits any size unpadded).
     deepest = min(arr.shape[:2]).bit_length() - 1
-    if level is None:
+    search = level is None
+    if level is None:  # the depths of LOSSLESS_DEPTHS that fit, tried by _lossless_bundle
         level = min(default_level(arr.shape[:2], MAX_IMAGE_LEVELS), deepest)
+        level = min(level, max(_lossless.LOSSLESS_DEPTHS))
     elif level > deepest:
         msg = (
             f"level {level} is too deep for a lossless {arr.shape[0]}×{arr.shape[1]} image: "
@@ -192,13 +195,35 @@ def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
         lifting = _lossless.choose_filters(data, level, (0, 1), candidates)
         if lifting not in choices:
             choices.append(lifting)
-    bundles = [_lossless_bundle(arr, data, dtype, colour, level, lifting) for lifting in choices]
+    bundles = [
+        _lossless_bundle(arr, data, dtype, colour, level, lifting, search=search)
+        for lifting in choices
+    ]
     return min(bundles, key=len)
 
 
 def _lossless_bundle(
-    arr: np.ndarray, data: np.ndarray, dtype: str, colour: str, level: int, lifting: list[str]
+    arr: np.ndarray,
+    data: np.ndarray,
+    dtype: str,
+    colour: str,
+    level: int,
+    lifting: list[str],
+    search: bool = False,
 ) -> bytes:
+    coder = get_coder({"id": DEFAULT_CODER})
+    coded: list[dict[str, Any]] = []
+
+    def code(coeffs: list[Any]) -> list[bytes]:
+        chunks, params = coder.encode(coeffs)
+        coded.append(params)
+        return chunks
+
+    # No level given: the depth that codes smallest (wavecore.lossless.LOSSLESS_DEPTHS).
+    depths = tuple(d for d in _lossless.LOSSLESS_DEPTHS if d <= level) if search else ()
+    level, chunks = _lossless.best_depth(data, lifting, code, depths or (level,))
+    lifting = lifting[:level]
+    cparams = coded[0]
     plan = Plan(
         "image",
         arr.shape,
@@ -212,9 +237,6 @@ def _lossless_bundle(
         peak_of(arr, dtype, "image"),
         tuple(lifting),
     )
-    coeffs = plan.transform.forward(data, level)
-    coder = get_coder({"id": DEFAULT_CODER})
-    chunks, cparams = coder.encode(coeffs)
     header = plan.header()
     header.update(
         quantizer=NoQuantizer.codec_id,

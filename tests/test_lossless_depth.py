@@ -1,0 +1,65 @@
+"""Lossless depth choice (wavecore.lossless.best_depth, LOSSLESS_DEPTHS)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import wavecore
+from wavecore import lossless
+
+
+def _texture(shape: tuple[int, ...], seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    rows = np.arange(shape[0])[:, None]
+    cols = np.arange(shape[1])[None, :]
+    base = 120 + 60 * np.sin(rows / 3.0) * np.cos(cols / 5.0)
+    noise = rng.normal(0, 6, shape)
+    if len(shape) == 3:
+        base = base[..., None]
+    return np.clip(base + noise, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("shape", [(96, 80), (64, 72, 3)])
+def test_default_is_the_smallest_tried_depth_and_exact(shape: tuple[int, ...]) -> None:
+    image = _texture(shape, 1)
+    bundle = wavecore.encode_image(image, lossless=True)
+    assert np.array_equal(wavecore.decode(bundle), image)
+    depth = wavecore.inspect(bundle)["levels"]
+    assert depth in lossless.LOSSLESS_DEPTHS
+    # best_depth re-codes only the coarse part of a deeper depth: its bundle must be the very
+    # bundle a whole coding at that depth gives, and no tried depth may code much smaller.
+    direct = {
+        d: wavecore.encode_image(image, lossless=True, level=d) for d in lossless.LOSSLESS_DEPTHS
+    }
+    assert bundle == direct[depth]
+    # The choice compares the coded chunks; headers differ by a byte per level of the lifting.
+    assert len(bundle) <= min(len(b) for b in direct.values()) + len(lossless.LOSSLESS_DEPTHS)
+
+
+def test_an_explicit_level_is_kept() -> None:
+    image = _texture((96, 80), 2)
+    bundle = wavecore.encode_image(image, lossless=True, level=4)
+    assert wavecore.inspect(bundle)["levels"] == 4
+    assert np.array_equal(wavecore.decode(bundle), image)
+
+
+def test_best_depth_chunks_match_a_whole_coding() -> None:
+    from wavecore.entropy import encode_levels
+
+    data = _texture((64, 64), 3).astype(np.int64)
+    filters = ["legall53", "haar", "legall53"]
+
+    def code(coeffs: list) -> list[bytes]:
+        return encode_levels(coeffs)[0]
+
+    depth, chunks = lossless.best_depth(data, filters, code, (1, 2, 3))
+    whole = {d: code(lossless.forward(data, d, (0, 1), filters[:d])) for d in (1, 2, 3)}
+    assert chunks == whole[depth]
+    assert sum(map(len, chunks)) == min(sum(map(len, c)) for c in whole.values())
+
+
+def test_tiny_images_stay_exact() -> None:
+    for shape in [(1, 1), (2, 3), (5, 4, 3), (3, 9)]:
+        image = _texture(shape, 4)
+        assert np.array_equal(wavecore.decode(wavecore.encode_image(image, lossless=True)), image)
