@@ -45,6 +45,8 @@ import numpy as np
 import zarr
 from dask.distributed import Client, LocalCluster
 
+from wavecore.scale import local_cluster
+
 SEED = 20261122
 WAVES = 40
 
@@ -64,10 +66,14 @@ def field_block(template: np.ndarray, size: int, chunk: int, block_id: tuple[int
     y0, x0 = block_id[0] * chunk, block_id[1] * chunk
     y = (y0 + np.arange(template.shape[0]))[:, None] / size
     x = (x0 + np.arange(template.shape[1]))[None, :] / size
-    out = np.zeros(template.shape, dtype=np.float64)
-    for fy, fx, phase, amplitude in _waves(SEED):
-        out += amplitude * np.sin(2 * np.pi * (fy * y + fx * x) + phase)
-    return out.astype(np.float32)
+    fy, fx, phase, amplitude = (np.array(v) for v in zip(*_waves(SEED), strict=True))
+    # sin(Y + X) = sin Y cos X + cos Y sin X: each wave is separable, and the sum of the 40
+    # waves is one (rows × 80) @ (80 × cols) product, ~100x faster than 40 full-size sines.
+    wave_y = 2 * np.pi * fy * y + phase  # (rows, waves)
+    wave_x = 2 * np.pi * fx[:, None] * x  # (waves, cols)
+    rows = np.hstack([amplitude * np.sin(wave_y), amplitude * np.cos(wave_y)])
+    cols = np.vstack([np.cos(wave_x), np.sin(wave_x)])
+    return (rows @ cols).astype(np.float32)
 
 
 def make_field(size: int, chunk: int) -> Any:
@@ -165,13 +171,7 @@ def peer_chunk(source: str, chunk: int, block_id: tuple[int, int], bound: float)
 
 
 def cluster(workers: int) -> tuple[LocalCluster, Client]:
-    c = LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        memory_limit=None,
-    )
+    c = local_cluster(workers, memory_limit=None)
     return c, Client(c)
 
 
