@@ -540,14 +540,12 @@ class _DaskWorkers:
     def __enter__(self) -> _DaskWorkers:
         if self.workers is None and self.scheduler is None:
             return self  # Dask's own local threads
-        from dask.distributed import Client, LocalCluster
+        from dask.distributed import Client
 
         if self.scheduler is not None:
             self.client = Client(self.scheduler)
         else:
-            self.cluster = LocalCluster(
-                n_workers=self.workers, threads_per_worker=1, dashboard_address=None
-            )
+            self.cluster = _scale_module().local_cluster(self.workers)
             self.client = Client(self.cluster)
         return self
 

@@ -908,7 +908,8 @@ def _measure(
 ) -> tuple[float, float]:
     """(RMSE, largest error) of the decoded samples over the finite cells."""
     with np.errstate(over="ignore", invalid="ignore"):
-        diff = np.where(missing, 0.0, final.astype(np.float64) - original)
+        diff = np.subtract(final, original, dtype=np.float64)  # no float64 copy of final
+        diff[missing] = 0.0
         largest = float(np.max(np.abs(diff))) if diff.size else 0.0
         scale = largest if largest > 0 and math.isfinite(largest) else 1.0
         rmse = scale * math.sqrt(float(np.sum((diff / scale) ** 2)) / finite_count)
@@ -939,6 +940,7 @@ def _encode_bounded(
     core_bytes, decoded = core.at_step(core_values, step)
     finite_count = max(int(np.count_nonzero(~missing)), 1)
     outliers, final = _outliers(decoded, original, missing, dtype, allowed, unit)
+    del decoded  # a full-size float64 array: not held while _measure makes its own
     measured_rmse, largest = _measure(final, original, missing, finite_count)
     if largest > allowed:  # cannot happen: every violation was stored exactly
         msg = f"internal error: the bound {bound!r} was missed ({largest!r})"
@@ -1031,7 +1033,8 @@ def _outliers(
     """The outlier section for ``decoded`` (core layout), and the grid the decoder will return."""
     final = _to_dtype(decoded, dtype)
     with np.errstate(over="ignore", invalid="ignore"):
-        error = np.abs(final.astype(np.float64) - original)
+        error = np.subtract(final, original, dtype=np.float64)  # in place: peak memory
+        np.abs(error, out=error)
         flags = (error > allowed) | ~np.isfinite(error)
     flags &= ~missing
     if not flags.any():

@@ -10,8 +10,8 @@ both as a codec and builds no scheduler of its own.  Two classes, one chunk form
   the ``zarr.codecs`` entry point): ``zarr.create_array(..., serializer={"name": "wavecore",
   "configuration": {"max_error": 0.01}})``.
 
-Configuration (both): ``wavelet`` (default ``"bspline2"``: in a spot check on one smooth
-field, about half cdf97's bytes at the same bound), ``level`` (default automatic) and at most
+Configuration (both): ``wavelet`` (default none: ``max_error`` by the interpolation coder,
+the other targets by ``cdf97``), ``level`` (default automatic) and at most
 one target: ``max_error`` (an absolute bound that holds on every value), ``psnr`` (dB against
 each chunk's range, met or exceeded), ``bpp`` (bits per value of each coded slice's bundle) or
 ``lossless=True`` (integer data, bit-exact).  No target: ``psnr=60``.
@@ -30,11 +30,12 @@ The chunk format (little-endian)::
     mode 2 (constant): one value in dtype             (every value the same: empty chunks)
     mode 3 (grid):     a wavecore.encode_grid bundle  (max_error on finite or NaN values)
 
-``max_error`` is coded by :func:`wavecore.encode_grid` (mode 3): one quantization at a step
-from the bound, the values it leaves past the bound corrected (SPERR's outliers), NaN cells
-kept; 30-40x faster than mode 0's search for a PSNR, for about twice the bytes of that search
-on a smooth field (still above SZ3's ratio at the same bound: docs/scale.md). Chunks with
-infinite values keep mode 0. In mode 0 the bound is guaranteed the same way: the chunk is
+``max_error`` is coded by :func:`wavecore.encode_grid` (mode 3), NaN cells kept exactly.
+Without a named wavelet that is its interpolation coder (multilevel interpolation quantized in
+the loop, the bound held by construction: the fastest path, ~80 MB per CPU-second on the
+benchmark's 512² float32 chunks); with one, one quantization of that wavelet's bands at a step
+from the bound, the values past the bound corrected (SPERR's outliers). Chunks with infinite
+values keep mode 0. In mode 0 the bound is guaranteed the same way: the chunk is
 coded, decoded, and every value
 whose error exceeds the bound gets a correction, a whole number of steps of ``2 × max_error``
 (``2 × floor(max_error) + 1`` for integers); a value that still misses after the cast to its
@@ -83,7 +84,9 @@ __all__ = [
 
 MAGIC = b"WZC1"
 MODE_WAVELET, MODE_RAW, MODE_CONSTANT, MODE_GRID = 0, 1, 2, 3
-DEFAULT_WAVELET = "cdf97"  # encode_grid's default; 4-5x faster than bspline2 on max_error
+# The wavelet of the psnr and bpp targets when none is named (max_error chunks without a named
+# wavelet go to encode_grid's interpolation coder instead: see the module's docstring).
+DEFAULT_WAVELET = "cdf97"
 DEFAULT_PSNR = 60.0
 # The bundle is coded to an RMSE of max_error / RMS_SHARE and the values past the bound are
 # corrected.  On two 512 × 512 chunks of benchmarks/zarr_scale.py's field at 1e-3 × range, the
@@ -101,8 +104,10 @@ class CodecConfig:
 
     Attributes
     ----------
-    wavelet : str
-        The wavelet's name (see :func:`wavecore.wavelet_names`).
+    wavelet : str or None
+        The wavelet's name (see :func:`wavecore.wavelet_names`); ``None`` (the default): a
+        ``max_error`` chunk is coded by :func:`wavecore.encode_grid`'s interpolation coder, the
+        other targets by ``cdf97``.
     level : int or None
         Decomposition levels; ``None`` for automatic.
     max_error, psnr, bpp : float or None
@@ -111,7 +116,7 @@ class CodecConfig:
         Bit-exact coding of integer data.
     """
 
-    wavelet: str = DEFAULT_WAVELET
+    wavelet: str | None = None
     level: int | None = None
     max_error: float | None = None
     psnr: float | None = None
@@ -126,11 +131,12 @@ class CodecConfig:
         if unknown:
             msg = f"unknown wavecore codec setting(s) {unknown}; accepted: {sorted(known)}"
             raise InvalidParameter(msg)
-        wavelet = config.get("wavelet") or DEFAULT_WAVELET
-        if not isinstance(wavelet, str):
+        wavelet = config.get("wavelet") or None
+        if wavelet is not None and not isinstance(wavelet, str):
             msg = f"wavelet must be a name such as 'cdf97' or 'bspline2', not {wavelet!r}"
             raise InvalidParameter(msg)
-        wavelet = get_wavelet(wavelet).name  # an unknown name raises InvalidParameter
+        if wavelet is not None:
+            wavelet = get_wavelet(wavelet).name  # an unknown name raises InvalidParameter
         level = config.get("level")
         if level is not None and (
             isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 1
@@ -166,7 +172,7 @@ class CodecConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """The settings that differ from the defaults, as JSON-ready values."""
-        out: dict[str, Any] = {"wavelet": self.wavelet}
+        out: dict[str, Any] = {} if self.wavelet is None else {"wavelet": self.wavelet}
         if self.level is not None:
             out["level"] = self.level
         for name in ("max_error", "psnr", "bpp"):
@@ -301,8 +307,9 @@ def _lossless_level(plane: np.ndarray, level: int | None) -> int | None:
 
 def _code_slice(plane: np.ndarray, cfg: CodecConfig) -> bytes:
     """One 2-D slice (float64, finite) into a bundle of today's public API."""
+    wavelet = cfg.wavelet or DEFAULT_WAVELET
     if cfg.bpp is not None:
-        return encode_image(plane, wavelet=cfg.wavelet, level=cfg.level, bpp=cfg.bpp)
+        return encode_image(plane, wavelet=wavelet, level=cfg.level, bpp=cfg.bpp)
     if cfg.psnr is not None:
         psnr = cfg.psnr
     else:
@@ -313,7 +320,7 @@ def _code_slice(plane: np.ndarray, cfg: CodecConfig) -> bytes:
             psnr = 20.0
         else:
             psnr = min(20.0 * math.log10(span * RMS_SHARE / cfg.max_error), MAX_PSNR)
-    return encode_surface(plane, wavelet=cfg.wavelet, level=cfg.level, quality=psnr)
+    return encode_surface(plane, wavelet=wavelet, level=cfg.level, quality=psnr)
 
 
 def _decode_slice(bundle: bytes) -> np.ndarray:
@@ -535,7 +542,8 @@ class WavecoreCodec(_NumcodecsCodec):
     Parameters
     ----------
     wavelet : str, optional
-        Default ``"bspline2"``.
+        Default none: ``max_error`` by :func:`wavecore.encode_grid`'s interpolation coder,
+        the other targets by ``cdf97``.
     level : int, optional
         Default automatic.
     max_error, psnr, bpp : float, optional

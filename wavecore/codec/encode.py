@@ -476,7 +476,8 @@ def encode_surface_at_step(
     level = level_arg(level)
     dtype = dtype_name(arr, "grid")
     arr, scale = scaled(arr)
-    data = arr.astype(np.float64)
+    # No copy of float64 data (the transform only reads it); a Zarr chunk's peak memory.
+    data = np.asarray(arr, dtype=np.float64)
     bank = get_wavelet(wavelet)
     fitted, pads, levels = fit(data, level, bank.name, boundary, MAX_IMAGE_LEVELS)
     plan = Plan(
@@ -504,11 +505,16 @@ def encode_surface_at_step(
         rounding=rounding,
         refine=0,
     )
+    del coeffs  # each full-size temporary is let go once used: peak memory per Zarr chunk
     chunks, cparams = encode_levels(quantized, coder=DEFAULT_CODER)
     dequantized = dequantize_bands(
         quantized, qparams, wavelet=plan.wavelet, boundary=bounds, axes=plan.axes
     )
-    output = finish(plan, reconstruct(plan, dequantized), 0)
+    del quantized
+    samples = reconstruct(plan, dequantized)
+    del dequantized
+    output = finish(plan, samples, 0)
+    del samples
     decoded = np.ldexp(output, -scale) if scale else output
     psnr, largest = measure_errors(plan, arr, decoded)
     header = plan.header()

@@ -167,7 +167,7 @@ def cast(data: np.ndarray, dtype: str) -> np.ndarray:
         # it: saturate, rather than turn it into infinity.
         largest = float(np.finfo(target).max)
         values = np.clip(values, -largest, largest)
-    return values.astype(target)
+    return values.astype(target, copy=False)  # values is already a new array
 
 
 #: Dtypes the compiled loops do not take (NumPy handles them instead).

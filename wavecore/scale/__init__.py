@@ -5,6 +5,7 @@ Needs the zarr extra (``pip install 'wavecore[zarr]'``); ``import wavecore`` nev
 
 from __future__ import annotations
 
+from .cluster import WORKER_CONFIG, local_cluster
 from .pyramid import (
     PyramidInfo,
     open_image_source,
@@ -13,4 +14,12 @@ from .pyramid import (
     write_pyramid,
 )
 
-__all__ = ["PyramidInfo", "open_image_source", "read_region", "synthetic_rgb", "write_pyramid"]
+__all__ = [
+    "WORKER_CONFIG",
+    "PyramidInfo",
+    "local_cluster",
+    "open_image_source",
+    "read_region",
+    "synthetic_rgb",
+    "write_pyramid",
+]

@@ -1,0 +1,38 @@
+"""wavecore.scale.local_cluster: worker processes spawned without Dask's malloc trim setting."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+pytest.importorskip("zarr", reason="the Zarr tests need the zarr extra (pip install '.[zarr]')")
+distributed = pytest.importorskip("dask.distributed", reason="the zarr extra installs it")
+
+from wavecore.scale import WORKER_CONFIG, local_cluster  # noqa: E402
+
+
+def _worker_environ() -> tuple[str | None, int]:
+    return os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.getpid()
+
+
+@pytest.mark.skipif(
+    "MALLOC_TRIM_THRESHOLD_" in os.environ,
+    reason="the variable set in this shell reaches the workers whatever the configuration",
+)
+def test_local_cluster_workers_keep_glibc_thresholds() -> None:
+    # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in every worker by default, which fixes
+    # glibc's mmap threshold and made the codec ~2x slower per CPU-second (docs/scale.md).
+    with local_cluster(1) as cluster, distributed.Client(cluster) as client:
+        seen = list(client.run(_worker_environ).values())
+        info = client.scheduler_info()
+    assert len(seen) == 1
+    value, pid = seen[0]
+    assert value is None
+    assert pid != os.getpid()  # a worker process, not a thread of this one
+    assert all(w["nthreads"] == 1 for w in info["workers"].values())
+    # The setting applies only while the cluster is made: the caller's configuration is intact.
+    import dask
+
+    key = next(iter(WORKER_CONFIG))
+    assert dask.config.get(key) is not None
