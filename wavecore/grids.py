@@ -810,16 +810,11 @@ def encode_layout(
         )
         decoded = _decode_core(core_bytes, 0)
         final = _to_dtype(decoded, dtype)
-        return _assemble(
+        return _assemble_core(
             arr,
             layout,
-            0,
-            math.nan,
-            0.0,
-            0,
             core_bytes,
             mask_bytes,
-            b"",
             *_measure(final, original, core_missing, finite_count),
         )
     assert rmse_target is not None
@@ -834,19 +829,7 @@ def encode_layout(
         final = _to_dtype(_decode_core(core_bytes, 0), dtype)
         measured_rmse, largest = _measure(final, original, core_missing, finite_count)
         if measured_rmse <= rmse_target:
-            return _assemble(
-                arr,
-                layout,
-                0,
-                math.nan,
-                0.0,
-                0,
-                core_bytes,
-                mask_bytes,
-                b"",
-                measured_rmse,
-                largest,
-            )
+            return _assemble_core(arr, layout, core_bytes, mask_bytes, measured_rmse, largest)
         aim *= 0.95 * rmse_target / measured_rmse
     msg = f"rmse {rmse_target!r} could not be reached for this grid; ask for a larger rmse"
     raise InvalidParameter(msg)
@@ -883,19 +866,7 @@ def _encode_rmse_at_steps(
         final = _to_dtype(decoded, dtype)
         measured_rmse, largest = _measure(final, original, missing, finite_count)
         if measured_rmse <= rmse_target and (attempt or measured_rmse > 0.9 * rmse_target):
-            return _assemble(
-                arr,
-                layout,
-                0,
-                math.nan,
-                0.0,
-                0,
-                core_bytes,
-                mask_bytes,
-                b"",
-                measured_rmse,
-                largest,
-            )
+            return _assemble_core(arr, layout, core_bytes, mask_bytes, measured_rmse, largest)
         if not measured_rmse > 0 or not math.isfinite(measured_rmse):
             return None
         # Aimed a little below the target, so that the next try lands on its safe side.
@@ -1089,6 +1060,13 @@ def _encode_lossless(arr: np.ndarray, layout: int, level: int | None) -> bytes:
     return _assemble(
         arr, layout, _FLAG_LOSSLESS | _FLAG_BOUND, 0.0, 1.0, offset, core_bytes, b"", b"", 0.0, 0.0
     )
+
+
+def _assemble_core(
+    arr: np.ndarray, layout: int, core: bytes, mask: bytes, rmse: float, largest: float
+) -> bytes:
+    """A grid bundle of the wavelet core alone: no bound, no outliers (rmse, psnr, bpp)."""
+    return _assemble(arr, layout, 0, math.nan, 0.0, 0, core, mask, b"", rmse, largest)
 
 
 def _assemble(
