@@ -406,113 +406,208 @@ def analysis_2d(x, a0, b0, a1, b1, aa, ad, da, dd, inner, outer_lo, outer_hi, ro
 
 
 @njit(nogil=True, cache=True)
+def _ring_row(
+    aa, ad, da, dd, p0, q0, p1, q1, inner, ring_rows, o, r, scratch, slots, weights, counts, out
+):
+    """Fine row ``r`` of outer index ``o`` into ``out``, from the axis-1 syntheses kept in the
+    ring buffers of ``scratch`` (made by :func:`_ring_scratch`; updated as rows come in)."""
+    rings, tags, chan_c, chan_d, f_buf, tap_cols, tap_ws = scratch
+    width = rings.shape[2]
+    n1 = width // inner
+    for half in range(2):
+        taps = _taps(p0 if half == 0 else q0, r, 2, 1, tap_cols, tap_ws)
+        coarse = aa[o] if half == 0 else da[o]
+        detail = ad[o] if half == 0 else dd[o]
+        n = 0
+        for k in range(taps):
+            i = tap_cols[k]
+            slot = i % ring_rows
+            if tags[half, slot] != i:
+                ring = rings[half, slot]
+                for ch in range(inner):
+                    if inner > 1:
+                        for j in range(chan_c.shape[0]):
+                            chan_c[j] = coarse[i, j * inner + ch]
+                        for j in range(chan_d.shape[0]):
+                            chan_d[j] = detail[i, j * inner + ch]
+                    _row_synthesis(
+                        coarse[i] if inner == 1 else chan_c,
+                        detail[i] if inner == 1 else chan_d,
+                        p1,
+                        q1,
+                        ring if inner == 1 else f_buf,
+                    )
+                    if inner > 1:
+                        for j in range(n1):
+                            ring[j * inner + ch] = f_buf[j]
+                tags[half, slot] = i
+            slots[half, n] = slot
+            weights[half, n] = tap_ws[k]
+            n += 1
+        counts[half] = n
+    if counts[0] == 2 and counts[1] == 2:
+        l0, l1 = rings[0, slots[0, 0]], rings[0, slots[0, 1]]
+        h0, h1 = rings[1, slots[1, 0]], rings[1, slots[1, 1]]
+        u0, u1, v0, v1 = weights[0, 0], weights[0, 1], weights[1, 0], weights[1, 1]
+        for j in range(width):
+            out[j] = u0 * l0[j] + u1 * l1[j] + v0 * h0[j] + v1 * h1[j]
+        return
+    if counts[0] == 3 and counts[1] == 4:
+        # cdf97's even rows: one pass (not one per tap), each sum in the order of the
+        # general loop below, so the same bits.
+        l0, l1, l2 = rings[0, slots[0, 0]], rings[0, slots[0, 1]], rings[0, slots[0, 2]]
+        h0, h1 = rings[1, slots[1, 0]], rings[1, slots[1, 1]]
+        h2, h3 = rings[1, slots[1, 2]], rings[1, slots[1, 3]]
+        u0, u1, u2 = weights[0, 0], weights[0, 1], weights[0, 2]
+        v0, v1, v2, v3 = weights[1, 0], weights[1, 1], weights[1, 2], weights[1, 3]
+        for j in range(width):
+            out[j] = (
+                u0 * l0[j]
+                + u1 * l1[j]
+                + u2 * l2[j]
+                + v0 * h0[j]
+                + v1 * h1[j]
+                + v2 * h2[j]
+                + v3 * h3[j]
+            )
+        return
+    if counts[0] == 4 and counts[1] == 5:  # cdf97's odd rows
+        l0, l1 = rings[0, slots[0, 0]], rings[0, slots[0, 1]]
+        l2, l3 = rings[0, slots[0, 2]], rings[0, slots[0, 3]]
+        h0, h1 = rings[1, slots[1, 0]], rings[1, slots[1, 1]]
+        h2, h3, h4 = rings[1, slots[1, 2]], rings[1, slots[1, 3]], rings[1, slots[1, 4]]
+        u0, u1, u2, u3 = weights[0, 0], weights[0, 1], weights[0, 2], weights[0, 3]
+        v0, v1, v2 = weights[1, 0], weights[1, 1], weights[1, 2]
+        v3, v4 = weights[1, 3], weights[1, 4]
+        for j in range(width):
+            out[j] = (
+                u0 * l0[j]
+                + u1 * l1[j]
+                + u2 * l2[j]
+                + u3 * l3[j]
+                + v0 * h0[j]
+                + v1 * h1[j]
+                + v2 * h2[j]
+                + v3 * h3[j]
+                + v4 * h4[j]
+            )
+        return
+    for j in range(width):
+        out[j] = 0
+    for half in range(2):
+        for k in range(counts[half]):
+            wk = weights[half, k]
+            src = rings[half, slots[half, k]]
+            for j in range(width):
+                out[j] += wk * src[j]
+
+
+@njit(nogil=True, cache=True)
+def _ring_scratch(aa, ad, width, inner, ring_rows, dtype_of):
+    """The ring buffers (two bands of ``ring_rows`` rows), their tags and the row scratch."""
+    rings = np.empty((2, ring_rows, width), dtype=dtype_of.dtype)
+    tags = np.full((2, ring_rows), -1, dtype=np.intp)
+    chan_c = np.empty(aa.shape[2] // inner, dtype=dtype_of.dtype)
+    chan_d = np.empty(ad.shape[2] // inner, dtype=dtype_of.dtype)
+    f_buf = np.empty(width // inner, dtype=dtype_of.dtype)
+    tap_cols = np.empty(MAX_TAPS, dtype=np.intp)
+    tap_ws = np.empty(MAX_TAPS, dtype=dtype_of.dtype)
+    return rings, tags, chan_c, chan_d, f_buf, tap_cols, tap_ws
+
+
+@njit(nogil=True, cache=True)
 def synthesis_2d(
     aa, ad, da, dd, p0, q0, p1, q1, f, inner, ring_rows, outer_lo, outer_hi, row_lo, row_hi
 ):
     # ``ring_rows``: axis-1 syntheses kept per band, chosen by the caller so that the taps of
     # one row never share a slot; a slot that holds another row only costs a recomputation.
-    width = f.shape[2]
-    n1 = width // inner
-    rings = np.empty((2, ring_rows, width), dtype=f.dtype)
-    tags = np.empty((2, ring_rows), dtype=np.intp)
-    chan_c = np.empty(aa.shape[2] // inner, dtype=f.dtype)
-    chan_d = np.empty(ad.shape[2] // inner, dtype=f.dtype)
-    f_buf = np.empty(n1, dtype=f.dtype)
+    scratch = _ring_scratch(aa, ad, f.shape[2], inner, ring_rows, f)
     slots = np.empty((2, 32), dtype=np.intp)  # up to 32 taps per row and half (checked by callers)
     weights = np.empty((2, 32), dtype=f.dtype)
     counts = np.zeros(2, dtype=np.intp)
-    tap_cols = np.empty(MAX_TAPS, dtype=np.intp)
-    tap_ws = np.empty(MAX_TAPS, dtype=f.dtype)
     for o in range(outer_lo, outer_hi):
-        tags[:] = -1
+        scratch[1][:] = -1
         for r in range(row_lo, row_hi):
-            for half in range(2):
-                taps = _taps(p0 if half == 0 else q0, r, 2, 1, tap_cols, tap_ws)
-                coarse = aa[o] if half == 0 else da[o]
-                detail = ad[o] if half == 0 else dd[o]
-                n = 0
-                for k in range(taps):
-                    i = tap_cols[k]
-                    slot = i % ring_rows
-                    if tags[half, slot] != i:
-                        ring = rings[half, slot]
-                        for ch in range(inner):
-                            if inner > 1:
-                                for j in range(chan_c.shape[0]):
-                                    chan_c[j] = coarse[i, j * inner + ch]
-                                for j in range(chan_d.shape[0]):
-                                    chan_d[j] = detail[i, j * inner + ch]
-                            _row_synthesis(
-                                coarse[i] if inner == 1 else chan_c,
-                                detail[i] if inner == 1 else chan_d,
-                                p1,
-                                q1,
-                                ring if inner == 1 else f_buf,
-                            )
-                            if inner > 1:
-                                for j in range(n1):
-                                    ring[j * inner + ch] = f_buf[j]
-                        tags[half, slot] = i
-                    slots[half, n] = slot
-                    weights[half, n] = tap_ws[k]
-                    n += 1
-                counts[half] = n
-            out = f[o, r]
-            if counts[0] == 2 and counts[1] == 2:
-                l0, l1 = rings[0, slots[0, 0]], rings[0, slots[0, 1]]
-                h0, h1 = rings[1, slots[1, 0]], rings[1, slots[1, 1]]
-                u0, u1, v0, v1 = weights[0, 0], weights[0, 1], weights[1, 0], weights[1, 1]
-                for j in range(width):
-                    out[j] = u0 * l0[j] + u1 * l1[j] + v0 * h0[j] + v1 * h1[j]
-                continue
-            if counts[0] == 3 and counts[1] == 4:
-                # cdf97's even rows: one pass (not one per tap), each sum in the order of the
-                # general loop below, so the same bits.
-                l0, l1, l2 = rings[0, slots[0, 0]], rings[0, slots[0, 1]], rings[0, slots[0, 2]]
-                h0, h1 = rings[1, slots[1, 0]], rings[1, slots[1, 1]]
-                h2, h3 = rings[1, slots[1, 2]], rings[1, slots[1, 3]]
-                u0, u1, u2 = weights[0, 0], weights[0, 1], weights[0, 2]
-                v0, v1, v2, v3 = weights[1, 0], weights[1, 1], weights[1, 2], weights[1, 3]
-                for j in range(width):
-                    out[j] = (
-                        u0 * l0[j]
-                        + u1 * l1[j]
-                        + u2 * l2[j]
-                        + v0 * h0[j]
-                        + v1 * h1[j]
-                        + v2 * h2[j]
-                        + v3 * h3[j]
-                    )
-                continue
-            if counts[0] == 4 and counts[1] == 5:  # cdf97's odd rows
-                l0, l1 = rings[0, slots[0, 0]], rings[0, slots[0, 1]]
-                l2, l3 = rings[0, slots[0, 2]], rings[0, slots[0, 3]]
-                h0, h1 = rings[1, slots[1, 0]], rings[1, slots[1, 1]]
-                h2, h3, h4 = rings[1, slots[1, 2]], rings[1, slots[1, 3]], rings[1, slots[1, 4]]
-                u0, u1, u2, u3 = weights[0, 0], weights[0, 1], weights[0, 2], weights[0, 3]
-                v0, v1, v2 = weights[1, 0], weights[1, 1], weights[1, 2]
-                v3, v4 = weights[1, 3], weights[1, 4]
-                for j in range(width):
-                    out[j] = (
-                        u0 * l0[j]
-                        + u1 * l1[j]
-                        + u2 * l2[j]
-                        + u3 * l3[j]
-                        + v0 * h0[j]
-                        + v1 * h1[j]
-                        + v2 * h2[j]
-                        + v3 * h3[j]
-                        + v4 * h4[j]
-                    )
-                continue
-            for j in range(width):
-                out[j] = 0
-            for half in range(2):
-                for k in range(counts[half]):
-                    wk = weights[half, k]
-                    src = rings[half, slots[half, k]]
-                    for j in range(width):
-                        out[j] += wk * src[j]
+            _ring_row(
+                aa,
+                ad,
+                da,
+                dd,
+                p0,
+                q0,
+                p1,
+                q1,
+                inner,
+                ring_rows,
+                o,
+                r,
+                scratch,
+                slots,
+                weights,
+                counts,
+                f[o, r],
+            )
+
+
+@njit(nogil=True, cache=True)
+def synthesis_2d_integers(
+    aa,
+    ad,
+    da,
+    dd,
+    p0,
+    q0,
+    p1,
+    q1,
+    width,
+    inner,
+    ring_rows,
+    matrix,
+    use_matrix,
+    lo,
+    hi,
+    out,
+    row0,
+    col0,
+    row_lo,
+    row_hi,
+):
+    """:func:`synthesis_2d` (one outer index) fused with :func:`colour_to_integers`: fine rows
+    ``row0 + [row_lo, row_hi)``, columns from ``col0``, go through the colour matrix and the
+    rounding straight into ``out`` (``(rows, cols, channels)``), one row buffer at a time, so
+    the full-size float picture is never stored (nor its fresh pages touched).  The same
+    values as the two passes one after the other.  ``width`` is the fine row's length
+    (samples × ``inner`` channels)."""
+    scratch = _ring_scratch(aa, ad, width, inner, ring_rows, aa)
+    slots = np.empty((2, 32), dtype=np.intp)
+    weights = np.empty((2, 32), dtype=aa.dtype)
+    counts = np.zeros(2, dtype=np.intp)
+    row = np.empty(width, dtype=aa.dtype)
+    row3 = row.reshape(1, width // inner, inner)
+    cols = out.shape[1]
+    for r in range(row_lo, row_hi):
+        _ring_row(
+            aa,
+            ad,
+            da,
+            dd,
+            p0,
+            q0,
+            p1,
+            q1,
+            inner,
+            ring_rows,
+            0,
+            row0 + r,
+            scratch,
+            slots,
+            weights,
+            counts,
+            row,
+        )
+        colour_to_integers(
+            row3[:, col0 : col0 + cols], matrix, use_matrix, lo, hi, out[r : r + 1], 0, 1
+        )
 
 
 # --------------------------------------------------------------------------------------------

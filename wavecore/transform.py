@@ -459,14 +459,13 @@ def analysis_2d(
     return aa, ad, da, dd
 
 
-def synthesis_2d(
+def _fused_synthesis(
     bands: tuple[Any, Any, Any, Any], bank: FilterBank, boundaries: tuple[str, str], axis: int
-) -> np.ndarray | None:
-    """The inverse of :func:`analysis_2d` in one pass, or ``None`` if it cannot run fused.
-
-    ``None`` also when the bands' shapes do not fit together: the per-axis path then raises
-    the precise error.
-    """
+) -> tuple[Any, ...] | None:
+    """What :func:`synthesis_2d` and :func:`synthesis_2d_integers` hand the kernels: the
+    bands as contiguous ``(outer, rows, cols * inner)`` views, the four synthesis matrices,
+    ``(outer, m0, m1, inner)``, the ring size, the leading and trailing shape and the dtype;
+    or ``None`` when the level cannot run fused."""
     if any(band is None for band in bands):
         return None
     aa, ad, da, dd = (as_float_array(band) for band in bands)
@@ -497,10 +496,83 @@ def synthesis_2d(
         np.ascontiguousarray(band, dtype=dtype).reshape(outer, band.shape[axis], -1)
         for band in (aa, ad, da, dd)
     ]
+    matrices = (mats0["P+"], mats0["Q+"], mats1["P+"], mats1["Q+"])
+    return views, matrices, (outer, m0, m1, inner), ring, lead, trail, dtype
+
+
+def synthesis_2d(
+    bands: tuple[Any, Any, Any, Any], bank: FilterBank, boundaries: tuple[str, str], axis: int
+) -> np.ndarray | None:
+    """The inverse of :func:`analysis_2d` in one pass, or ``None`` if it cannot run fused.
+
+    ``None`` also when the bands' shapes do not fit together: the per-axis path then raises
+    the precise error.
+    """
+    fused = _fused_synthesis(bands, bank, boundaries, axis)
+    if fused is None:
+        return None
+    views, matrices, (outer, m0, m1, inner), ring, lead, trail, dtype = fused
     f = np.empty((outer, m0, m1 * inner), dtype=dtype)
-    args = (*views, mats0["P+"], mats0["Q+"], mats1["P+"], mats1["Q+"], f, inner, ring)
+    args = (*views, *matrices, f, inner, ring)
     # Each block fills its ring buffers afresh (a few coarse rows' syntheses along axis 1), so
     # a block of a handful of rows would mostly redo its neighbours' work: the 8 rows of a
     # padded 1 × N image took 4 times the work in 8 blocks.
     _run_blocks(_kernels.synthesis_2d, args, outer, m0, f.size, rows_even=True, min_rows=32)
     return f.reshape((*lead, m0, m1, *trail))
+
+
+def synthesis_2d_integers(
+    bands: tuple[Any, Any, Any, Any],
+    bank: FilterBank,
+    boundaries: tuple[str, str],
+    window: tuple[tuple[int, int], tuple[int, int]],
+    dtype: np.dtype[Any],
+    matrix: np.ndarray | None,
+) -> np.ndarray | None:
+    """The last level of an image's synthesis (axes 0 and 1) straight into integers.
+
+    The same values as :func:`synthesis_2d` followed by cropping to ``window`` (``(start,
+    stop)`` of the fine rows and columns) and the decoder's colour pass (``matrix`` on the
+    first three channels when given, then rounding and clipping into ``dtype``, NaN → 0), in
+    one pass: the fine picture in floats (eight bytes a sample, all of it fresh memory) is
+    never made.  ``None`` when the level cannot run fused, or the bands are not float64.
+    """
+    fused = _fused_synthesis(bands, bank, boundaries, 0)
+    if fused is None:
+        return None
+    views, matrices, (outer, m0, m1, inner), ring, _, trail, work = fused
+    (row0, row1), (col0, col1) = window
+    if (
+        work != np.float64
+        or outer != 1
+        or len(trail) > 1
+        or not (0 <= row0 < row1 <= m0 and 0 <= col0 < col1 <= m1)
+        or (matrix is not None and inner < 3)
+    ):
+        return None
+    info = np.iinfo(dtype)
+    out = np.empty((row1 - row0, col1 - col0, inner), dtype=dtype)
+    colours = np.ascontiguousarray(matrix if matrix is not None else np.eye(3), dtype=np.float64)
+    args = (
+        *views,
+        *matrices,
+        m1 * inner,
+        inner,
+        ring,
+        colours,
+        matrix is not None,
+        float(info.min),
+        float(info.max),
+        out,
+        row0,
+        col0,
+    )
+    kernel: Callable[..., None] = _kernels.synthesis_2d_integers
+    # Blocks of at least 32 rows, as in synthesis_2d (each block refills its ring buffers).
+    run_rows(
+        lambda lo, hi: kernel(*args, lo, hi),
+        row1 - row0,
+        (row1 - row0) * m1 * inner,
+        pieces=max(1, min(_thread_count() * 2, (row1 - row0) // 32)),
+    )
+    return out.reshape(out.shape[:2] + trail)

@@ -28,7 +28,7 @@ from ..regions import band_masks, check_region, windowed_inverse
 from ..resample import coarse_extent
 from ..threshold import check_share
 from .plan import Plan, plan_from_header
-from .samples import finish, unscaled
+from .samples import finish, reconstruct_finished, unscaled
 from .stages import pipeline
 
 #: The values of ``decode``'s ``damaged`` argument.
@@ -365,7 +365,7 @@ def _decode(
             steps = tuple(slice(None, None, s.step) for s in slices)
             unpadded = dataclasses.replace(plan, pads=((0, 0),) * len(plan.axes))
             return np.ascontiguousarray(finish(unpadded, samples[steps], 0))
-        out = finish(plan, stages.transform.inverse(coeffs, plan), level)
+        out = reconstruct_finished(plan, coeffs, level, stages.transform)
     if slices is not None:
         out = np.ascontiguousarray(out[slices])
     return out

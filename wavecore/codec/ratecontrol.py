@@ -53,9 +53,8 @@ from .decode import decode
 from .plan import DEFAULT_CODER
 from .plan import Plan as _Plan
 from .samples import decompose as _decompose
-from .samples import finish as _finish
 from .samples import measure_errors as _errors
-from .samples import reconstruct as _reconstruct
+from .samples import reconstruct_finished
 from .samples import unscaled as _unscaled
 
 #: Without ``keep``/``quality``/``bpp``, images and surfaces are coded to this PSNR (dB).
@@ -307,7 +306,7 @@ class _LossyEncoder:
             boundary=list(self.plan.boundary),
             axes=self.plan.axes,
         )
-        decoded = _finish(self.plan, _reconstruct(self.plan, coeffs), 0)
+        decoded = reconstruct_finished(self.plan, coeffs)
         if self.plan.scale:
             # Measured on exactly what decode returns (subnormals rounded, the largest values
             # saturated), brought back to the coded units, where the squares cannot overflow.

@@ -11,9 +11,10 @@ import numpy as np
 from .._kernels import colour_to_floats, colour_to_integers, squared_and_largest_error
 from ..colour import YCBCR_INVERSE_MATRIX, YCBCR_MATRIX, ycbcr_forward
 from ..errors import InvalidParameter
-from ..transform import run_rows
+from ..filters import get_wavelet
+from ..transform import run_rows, synthesis_2d_integers
 from .plan import Plan
-from .stages import get_colour
+from .stages import Transform, WaveletTransform, get_colour
 
 #: Float data whose largest magnitude lies outside ``[2**-256, 2**256]`` is coded in a scaled
 #: domain, multiplied by an exact power of two (recorded as the header's ``scale``), so that
@@ -31,6 +32,66 @@ def decompose(plan: Plan, data: np.ndarray) -> list[Any]:
 def reconstruct(plan: Plan, coeffs: list[Any]) -> np.ndarray:
     """The plan's inverse transform (before cropping and the inverse colour transform)."""
     return plan.transform.inverse(coeffs, plan)
+
+
+def reconstruct_finished(
+    plan: Plan, coeffs: list[Any], level: int = 0, transform: Transform | None = None
+) -> np.ndarray:
+    """``finish(plan, transform.inverse(coeffs, plan), level)``: the decoded samples.
+
+    ``transform`` defaults to the plan's.  For the common picture (an integer dtype, a wavelet
+    transform over both axes, the full resolution) the last level's synthesis runs fused with
+    the crop and the colour and rounding pass, and writes the integers directly: the fine
+    picture in float64 (a 2048² RGB one is 100 MB of fresh pages, faulted in on every call)
+    is never made.  The same values either way.
+    """
+    transform = plan.transform if transform is None else transform
+    coeffs = list(coeffs)
+    fused = _fused_last_level(plan, coeffs, level, transform)
+    if fused is not None:
+        return fused
+    return finish(plan, transform.inverse(coeffs, plan), level)
+
+
+def _fused_last_level(
+    plan: Plan, coeffs: list[Any], level: int, transform: Any
+) -> np.ndarray | None:
+    colour = get_colour({"id": plan.colour})
+    if (
+        level != 0
+        or plan.kind != "image"
+        or plan.scale
+        or not isinstance(transform, WaveletTransform)
+        or len(transform.boundary) != 2
+        or len(coeffs) < 2
+        or np.dtype(plan.dtype).kind not in "iu"
+        or (colour.inverse_matrix is None and plan.colour != "none")
+    ):
+        return None
+    last = coeffs[-1]
+    if not isinstance(last, tuple | list) or len(last) != 3 or any(b is None for b in last):
+        return None
+    # The coarser levels as the transform does them; then the finest level, fused.
+    coarse = coeffs[0] if len(coeffs) == 2 else transform.inverse(coeffs[:-1], plan)
+    coarse = np.asarray(coarse)
+    (before0, after0), (before1, after1) = plan.pads
+    m0, m1 = plan.fitted[0], plan.fitted[1]
+    window = ((before0, m0 - after0), (before1, m1 - after1))
+    out = synthesis_2d_integers(
+        (coarse, last[1], last[0], last[2]),  # (cH, cV, cD) are the (da, ad, dd) bands
+        get_wavelet(transform.wavelet),
+        (transform.boundary[0], transform.boundary[1]),
+        window,
+        np.dtype(plan.dtype),
+        colour.inverse_matrix,
+    )
+    if out is None:  # not fusable after all: the finest level as the transform does it
+        return finish(plan, transform.inverse([coarse, last], plan), level)
+    if out.shape != tuple(plan.shape):
+        return None
+    if plan.opaque:  # as finish does
+        out[..., -1] = _opaque_value(out.dtype)
+    return out
 
 
 def finish(plan: Plan, data: np.ndarray, level: int) -> np.ndarray:
