@@ -195,6 +195,8 @@ STAGES = (
     ("block decoding", "wavecore.entropy", "decode_levels"),
     ("dequantize", "wavecore.quantize", "dequantize_bands"),
     ("synthesis", "wavecore.multilevel", "waverec2"),
+    # The last level fused with crop, colour and rounding (it holds the coarser levels' waverec2).
+    ("synthesis+colour", "wavecore.codec.samples", "reconstruct_finished"),
     ("crop", "wavecore.resample", "crop_padding"),
     ("colour", "wavecore.codec.samples", "ycbcr_from"),
     ("colour", "wavecore.codec.samples", "to_integers"),
