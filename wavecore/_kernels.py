@@ -583,8 +583,9 @@ def synthesis_2d_integers(
     weights = np.empty((2, 32), dtype=aa.dtype)
     counts = np.zeros(2, dtype=np.intp)
     row = np.empty(width, dtype=aa.dtype)
-    row3 = row.reshape(1, width // inner, inner)
     cols = out.shape[1]
+    # The window's columns as a contiguous (1, cols, channels) array, for the vectorised loop.
+    window = row[col0 * inner : (col0 + cols) * inner].reshape(1, cols, inner)
     for r in range(row_lo, row_hi):
         _ring_row(
             aa,
@@ -605,9 +606,7 @@ def synthesis_2d_integers(
             counts,
             row,
         )
-        colour_to_integers(
-            row3[:, col0 : col0 + cols], matrix, use_matrix, lo, hi, out[r : r + 1], 0, 1
-        )
+        colour_to_integers(window, matrix, use_matrix, lo, hi, out[r : r + 1], 0, 1)
 
 
 # --------------------------------------------------------------------------------------------
