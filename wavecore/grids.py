@@ -18,9 +18,16 @@ that adds what gridded data needs beyond a picture:
   The interpolation coder codes no residual there (the decoder interpolates across the hole);
   for the wavelet core they are filled smoothly before the transform (push–pull: averaged down
   a pyramid, interpolated back up), so that the hole costs few bits.
+* **RMSE, PSNR and bpp.**  Without a wavelet named, a float grid under ``rmse`` (or
+  ``psnr``) is coded by the interpolation coder too, at ``t = sqrt(3) × rmse`` (its errors are
+  nearly uniform in ``[-t, t]``), checked on what the decoder returns; where that comes to
+  under 4 bits a sample the wavelet core codes it as well and the smaller is kept (the
+  transform's coding gain wins at low rates).  A ``bpp`` budget of 4 or more is searched on
+  ``t`` the same way; lower budgets, integer grids and named wavelets use the wavelet core
+  (its step for ``rmse`` found from the coefficients, :mod:`wavecore.gridcore`).
 * **Volumes.**  The interpolation coder predicts a volume ``(D, H, W)`` along all three axes
   (3-7 % fewer bytes than its slices coded apart, on the benchmark's volume).  The wavelet
-  core (``rmse``, ``psnr``, ``bpp``, a named wavelet) codes it as ``D`` slices under one 2-D
+  core (a named wavelet, low ``bpp``) codes it as ``D`` slices under one 2-D
   transform each (the codec's surface of ``(H, W)`` points with ``D`` values), in one core
   bundle: the layout that the codec's two-axis plan, quantizer and context coder take as they
   are, and one whose coarse levels are coarse slices.
@@ -31,7 +38,8 @@ The container (little-endian)::
 
     offset  size  field
     0       4     magic b"WVGD"
-    4       1     version (1; 2 when flag 16 is set)
+    4       1     version (1; 2 when flag 16 is set; 3 when the interpolation stream codes
+                  its fine levels by tiles)
     5       1     layout: 0 height field, 1 volume (slices first), 2 surface points (U, V, d)
     6       1     dtype code (``_DTYPES``)
     7       1     flags: 1 NaN mask, 2 outliers, 4 lossless core, 8 bound held,
@@ -49,7 +57,9 @@ The container (little-endian)::
 
 A wavelet core is an ordinary wavecore bundle (:func:`wavecore.decode` reads it), so a coarse
 level (``decode(bundle, level=k)``) comes from its first chunks, as for any bundle; an
-interpolation core gives the lattice of every ``2**k``-th sample.
+interpolation core gives the lattice of every ``2**k``-th sample.  A window of a wavelet core
+reads only its code-blocks; a window of an interpolation core (version 3) entropy decodes only
+the tiles its predictions reach and reconstructs only those samples.
 """
 
 from __future__ import annotations
@@ -66,7 +76,12 @@ import numpy as np
 from .arguments import as_native
 from .bundle import MAX_ELEMENTS
 from .errors import BundleError, InvalidParameter
-from .gridpredict import decode_predictive, encode_predictive
+from .gridpredict import (
+    decode_predictive,
+    decode_predictive_window,
+    encode_predictive,
+    is_tiled_stream,
+)
 
 __all__ = ["decode_grid", "encode_grid", "inspect_grid", "is_grid_bundle"]
 
@@ -75,6 +90,10 @@ VERSION = 1
 #: The version of bundles whose core is the interpolation stream (flag 16), which a reader of
 #: version 1 would take for a wavecore bundle; version-1 bundles are still written otherwise.
 PREDICTIVE_VERSION = 2
+#: The version of bundles whose interpolation stream codes its fine levels by tiles (the
+#: stream's own flag; a window decodes from its tiles), which a reader of version 2 would
+#: refuse as a corrupt stream.  Grids of one tile still write version 2.
+TILED_VERSION = 3
 LAYOUT_FIELD, LAYOUT_VOLUME, LAYOUT_POINTS = 0, 1, 2
 _FLAG_MASK, _FLAG_OUTLIERS, _FLAG_LOSSLESS, _FLAG_BOUND = 1, 2, 4, 8
 _FLAG_PREDICTIVE = 16
@@ -649,9 +668,10 @@ def encode_grid(
     data : array_like
         Any size, any of ``uint8`` … ``int64`` (64-bit integers up to ±2**53) and ``float16`` …
         ``float64``, any byte order.  NaN cells (missing data) decode as NaN, exactly;
-        infinities are refused.  Under ``max_error`` a volume is predicted along all three
-        axes; under the other targets it is coded slice by slice along its first axis, under
-        one 2-D transform per slice (see the module docstring).
+        infinities are refused.  The interpolation coder (``max_error``; ``rmse``, ``psnr``
+        and ``bpp`` at high rates) predicts a volume along all three axes; the wavelet core
+        codes it slice by slice along its first axis, under one 2-D transform per slice (see
+        the module docstring).
     wavelet : str, optional
         The wavelet core's: ``"cdf97"`` by default (the measured winner on height fields,
         docs/benchmarks.md), ``"bspline2"`` (the paper's), ``"haar"`` or an alias
@@ -1255,6 +1275,8 @@ def _assemble(
 ) -> bytes:
     flags |= (_FLAG_MASK if mask else 0) | (_FLAG_OUTLIERS if outliers else 0)
     version = PREDICTIVE_VERSION if flags & _FLAG_PREDICTIVE else VERSION
+    if flags & _FLAG_PREDICTIVE and is_tiled_stream(core):
+        version = TILED_VERSION
     head = _HEAD.pack(MAGIC, version, layout, _DTYPES.index(arr.dtype.name), flags, arr.ndim)
     shape = struct.pack(f"<{arr.ndim}I", *arr.shape)
     tail = _TAIL.pack(bound, unit, offset, rmse, largest, len(core), len(mask), len(outliers))
@@ -1286,13 +1308,13 @@ class _Parsed:
             msg = "grid bundle is corrupt or truncated (its CRC-32 does not match)"
             raise BundleError(msg)
         _, version, layout, dtype_code, flags, ndim = _HEAD.unpack_from(data)
-        if version not in (VERSION, PREDICTIVE_VERSION):
+        if version not in (VERSION, PREDICTIVE_VERSION, TILED_VERSION):
             msg = (
                 f"grid bundle version {version} is not supported (this reader knows {VERSION} "
-                f"and {PREDICTIVE_VERSION})"
+                f"to {TILED_VERSION})"
             )
             raise BundleError(msg)
-        if (version == PREDICTIVE_VERSION) != bool(flags & _FLAG_PREDICTIVE):
+        if (version != VERSION) != bool(flags & _FLAG_PREDICTIVE):
             msg = f"grid bundle version {version} does not match its flags {flags}"
             raise BundleError(msg)
         if layout not in (LAYOUT_FIELD, LAYOUT_VOLUME, LAYOUT_POINTS) or dtype_code >= len(_DTYPES):
@@ -1322,7 +1344,10 @@ class _Parsed:
         self.core = data[position : position + lengths[0]]
         self.mask = data[position + lengths[0] : position + lengths[0] + lengths[1]]
         self.outliers = data[position + lengths[0] + lengths[1] : position + sum(lengths)]
-        self.layout, self.flags = layout, flags
+        self.layout, self.flags, self.version = layout, flags, version
+        if self.predictive and (version == TILED_VERSION) != is_tiled_stream(self.core):
+            msg = f"grid bundle version {version} does not match its interpolation stream"
+            raise BundleError(msg)
         self.dtype = np.dtype(_DTYPES[dtype_code])
         if self.dtype.kind != "f" and self.mask:
             msg = "grid bundle has a NaN mask for an integer grid"
@@ -1357,9 +1382,11 @@ def decode_grid(
     window : tuple of slice, optional
         A window of the result, ``(slice(r0, r1), slice(c0, c1))`` (a volume takes
         ``(depth, rows, cols)``); the same as slicing the result, but only the core's
-        code-blocks that reach the window are decoded, and only the window is synthesized
-        (a lossless volume, and a window with a negative step or nothing in it, are decoded
-        whole and then sliced).
+        code-blocks that reach the window are decoded, and only the window is synthesized;
+        from the interpolation coder only the samples the window's predictions reach are
+        reconstructed, from the tiles they lie in (version 3 bundles; older ones are entropy
+        decoded whole).  A lossless volume, a coarse level of an interpolation-coded grid,
+        and a window with a negative step or nothing in it are decoded whole, then sliced.
     keep : float, optional
         Keep only this fraction of the core's details (as :func:`wavecore.decode` does for any
         bundle): a smoother grid, without the outlier corrections, so the bound no longer holds.
@@ -1376,7 +1403,10 @@ def decode_grid(
     if window is not None:
         _window_items(window, len(parsed.shape))  # checked before anything is decoded
     split = _split_window(window, parsed) if window is not None else None
+    box = _predictive_box(window, parsed, level, keep) if window is not None else None
     try:
+        if box is not None:
+            return _decode_predictive_window(parsed, window, box)
         if split is not None:
             return _decode_window(parsed, int(level), keep, *split)
         out = _decode(parsed, int(level), keep)
@@ -1387,6 +1417,45 @@ def decode_grid(
         raise BundleError(msg[:300]) from exc
     if window is not None:
         out = _window(out, window)
+    return out
+
+
+def _predictive_box(
+    window: Any, parsed: _Parsed, level: int, keep: float | None
+) -> tuple[tuple[int, int], ...] | None:
+    """The samples ``[lo, hi)`` per axis that a window of an interpolation-coded grid spans,
+    for :func:`_decode_predictive_window`; None to decode whole and slice (a coarse level,
+    ``keep``, a negative step or a window of nothing)."""
+    if not parsed.predictive or level or (keep is not None and keep < 1.0):
+        return None
+    items = _full(_window_items(window, len(parsed.shape)), len(parsed.shape))
+    box = []
+    for item, n in zip(items, parsed.shape, strict=True):
+        if not all(v is None or isinstance(v, int | np.integer) for v in (item.start, item.stop)):
+            return None
+        if item.step is not None and (
+            not isinstance(item.step, int | np.integer) or item.step <= 0
+        ):
+            return None
+        chosen = range(*item.indices(n))
+        if len(chosen) == 0:
+            return None
+        box.append((chosen[0], chosen[-1] + 1))
+    return tuple(box)
+
+
+def _decode_predictive_window(
+    parsed: _Parsed, window: Any, box: tuple[tuple[int, int], ...]
+) -> np.ndarray:
+    """A window of an interpolation-coded grid: only the samples its predictions reach, and
+    in a tiled stream (version 3) only the tiles they lie in, are decoded."""
+    shape = tuple(parsed.shape)
+    out = decode_predictive_window(parsed.core, shape, parsed.dtype, box)
+    items = _full(_window_items(window, len(shape)), len(shape))
+    steps = tuple(slice(None, None, item.step) for item in items)
+    out = np.ascontiguousarray(out[steps])
+    if parsed.mask:
+        out[decode_mask(parsed.mask, shape)[tuple(items)]] = np.nan
     return out
 
 
@@ -1625,7 +1694,7 @@ def inspect_grid(bundle: Any) -> dict[str, Any]:
     if parsed.predictive:
         # The keys a wavelet core gives, for tools that print them (the CLI's inspect).
         core = {
-            "version": f"grid {PREDICTIVE_VERSION}",
+            "version": f"grid {parsed.version}",
             "wavelet": "interpolation",
             "boundary": ["open", "open"],
             "colour": "none",
