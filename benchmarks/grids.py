@@ -381,7 +381,7 @@ def window_lines(field: np.ndarray, t: float) -> list[str]:
     bundle = wavecore.encode_grid(field, max_error=t)
     whole_wall, whole_cpu = cpu_timed(lambda: wavecore.decode(bundle), repeats=3)
     lines = [
-        f"Windows of the {' × '.join(map(str, field.shape))} field's `max_error` bundle (grid "
+        f"Windows of the {' × '.join(map(str, field.shape))} field's `max_error` bundle ("
         f"{wavecore.inspect(bundle)['version']}, tiles at the fine levels), best of 3, wall / "
         f"CPU ms; the whole grid decodes in {whole_wall * 1e3:.1f} / {whole_cpu * 1e3:.1f} ms:",
         "",

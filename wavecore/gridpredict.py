@@ -79,6 +79,7 @@ __all__ = [
     "decode_predictive",
     "decode_predictive_window",
     "encode_predictive",
+    "fixed_bytes",
     "is_tiled_stream",
 ]
 
@@ -948,6 +949,13 @@ def decode_predictive(
     coded, or ``BundleError``.  With ``keep`` below 1 only that fraction of the largest
     residuals is kept (:func:`_drop_smallest`)."""
     return _decode_stream(data, tuple(shape), dtype, keep, None)
+
+
+def fixed_bytes(data: bytes) -> int:
+    """The bytes of a stream that do not grow with the samples: its header, fitted weights
+    and tables (what an encoder aiming at a size from a crop leaves out)."""
+    _, _, _, n_weights, n_tables, _, _, _ = _HEAD.unpack_from(data)
+    return int(_HEAD.size + n_weights + n_tables)
 
 
 def is_tiled_stream(data: bytes) -> bool:
