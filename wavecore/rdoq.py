@@ -25,6 +25,7 @@ is not looked ahead), and the decoder does not change: RDOQ only picks other int
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -34,6 +35,7 @@ from numba import njit
 from . import _blockkernels as kernels
 from .layout import as_levels
 from .quantize import reconstruction_offset
+from .transform import run_rows
 
 __all__ = ["ENABLED", "LAMBDA", "TOP_ROUNDING", "optimise_indices"]
 
@@ -127,13 +129,14 @@ def _at(q, planes, p, i, j):
 
 
 @njit(nogil=True, cache=True)
-def _optimise_level(q, x, planes, offsets, lam, zero_start):
-    """RDOQ of one level's detail planes in place (``q`` indices, ``x`` values in step units)."""
-    height = 0
+def _optimise_blocks(q, x, planes, offsets, lam, zero_start, lo, hi):
+    """RDOQ in place of blocks ``lo .. hi - 1`` (row by row over the level's grid of blocks) of
+    one level's detail planes (``q`` indices, ``x`` values in step units).  Blocks touch only
+    their own positions, so runs of blocks go to threads."""
     width = 0
     for p in range(planes.shape[0]):
-        height = max(height, planes[p, _ROWS])
         width = max(width, planes[p, _COLS])
+    grid_cols = (width + BLOCK - 1) // BLOCK
     zero_p = np.empty(_CLASSES, dtype=np.int64)
     zero_n = np.empty(_CLASSES, dtype=np.int64)
     unary_size = (kernels.LOCAL_CLASSES + 1) * kernels.UNARY_INDICES
@@ -143,101 +146,100 @@ def _optimise_level(q, x, planes, offsets, lam, zero_start):
     tiles_across = (BLOCK + kernels.TILE - 1) // kernels.TILE
     live_tiles = np.zeros(tiles_across * tiles_across, dtype=np.bool_)
     tile = kernels.TILE
-    for r0 in range(0, height, BLOCK):
-        for c0 in range(0, width, BLOCK):
-            zero_p[:] = zero_start
-            zero_n[:] = 2
-            unary_p[:] = kernels.PROB_ONE // 2
-            unary_n[:] = 0
-            for p in range(planes.shape[0]):
-                offset, rows, cols = planes[p, _OFFSET], planes[p, _ROWS], planes[p, _COLS]
-                r1 = min(r0 + BLOCK, rows)
-                c1 = min(c0 + BLOCK, cols)
-                if r1 <= r0 or c1 <= c0:
-                    continue
-                delta = offsets[p]
-                # A tile where no candidate is nonzero stays empty, and the coder neither
-                # codes nor adapts on its positions: skipped alike.
-                for t0 in range(r0, r1, tile):
-                    for u0 in range(c0, c1, tile):
-                        live = False
-                        for i in range(t0, min(t0 + tile, r1)):
-                            for j in range(u0, min(u0 + tile, c1)):
-                                if abs(x[offset + i * cols + j]) + TOP_ROUNDING >= 1.0:
-                                    live = True
-                        live_tiles[((t0 - r0) // tile) * tiles_across + (u0 - c0) // tile] = live
-                for i in range(r0, r1):
-                    tile_row = ((i - r0) // tile) * tiles_across
-                    for j in range(c0, c1):
-                        at = offset + i * cols + j
-                        if not live_tiles[tile_row + (j - c0) // tile]:
-                            q[at] = 0
-                            cost[(i - r0) * BLOCK + (j - c0)] = 0.0
-                            continue
-                        # the coder's contexts, from the indices already decided
-                        s = np.int64(0)
+    for b in range(lo, hi):
+        r0 = (b // grid_cols) * BLOCK
+        c0 = (b % grid_cols) * BLOCK
+        zero_p[:] = zero_start
+        zero_n[:] = 2
+        unary_p[:] = kernels.PROB_ONE // 2
+        unary_n[:] = 0
+        for p in range(planes.shape[0]):
+            offset, rows, cols = planes[p, _OFFSET], planes[p, _ROWS], planes[p, _COLS]
+            r1 = min(r0 + BLOCK, rows)
+            c1 = min(c0 + BLOCK, cols)
+            if r1 <= r0 or c1 <= c0:
+                continue
+            delta = offsets[p]
+            # A tile where no candidate is nonzero stays empty, and the coder neither
+            # codes nor adapts on its positions: skipped alike.
+            for t0 in range(r0, r1, tile):
+                for u0 in range(c0, c1, tile):
+                    live = False
+                    for i in range(t0, min(t0 + tile, r1)):
+                        for j in range(u0, min(u0 + tile, c1)):
+                            if abs(x[offset + i * cols + j]) + TOP_ROUNDING >= 1.0:
+                                live = True
+                    live_tiles[((t0 - r0) // tile) * tiles_across + (u0 - c0) // tile] = live
+            for i in range(r0, r1):
+                tile_row = ((i - r0) // tile) * tiles_across
+                for j in range(c0, c1):
+                    at = offset + i * cols + j
+                    if not live_tiles[tile_row + (j - c0) // tile]:
+                        q[at] = 0
+                        cost[(i - r0) * BLOCK + (j - c0)] = 0.0
+                        continue
+                    # the coder's contexts, from the indices already decided
+                    s = np.int64(0)
+                    if j > c0:
+                        s += 4 * abs(np.int64(q[at - 1]))
+                        if j > c0 + 1:
+                            s += abs(np.int64(q[at - 2]))
+                    if i > r0:
+                        up = at - cols
+                        s += 4 * abs(np.int64(q[up]))
+                        if i > r0 + 1:
+                            s += abs(np.int64(q[up - cols]))
                         if j > c0:
-                            s += 4 * abs(np.int64(q[at - 1]))
-                            if j > c0 + 1:
-                                s += abs(np.int64(q[at - 2]))
-                        if i > r0:
-                            up = at - cols
-                            s += 4 * abs(np.int64(q[up]))
-                            if i > r0 + 1:
-                                s += abs(np.int64(q[up - cols]))
-                            if j > c0:
-                                s += 2 * abs(np.int64(q[up - 1]))
-                            if j + 1 < c1:
-                                s += 2 * abs(np.int64(q[up + 1]))
-                        e = 2 * (
-                            _at(q, planes, planes[p, _SIB1], i, j)
-                            + _at(q, planes, planes[p, _SIB2], i, j)
-                        ) + 4 * _at(q, planes, planes[p, _LUMA], i, j)
-                        ctx = kernels.LOCAL_CLASS[s if s < 255 else 255] * kernels.EXTERNAL_CLASSES
-                        ctx += kernels.EXTERNAL_CLASS[min(e, 12)]
-                        unary_base = (
-                            kernels.LOCAL_CLASS[min(s + e, 255)] >> 1
-                        ) * kernels.UNARY_INDICES
-                        value = x[at]
-                        ax = abs(value)
-                        top = np.int64(np.floor(ax + TOP_ROUNDING))
-                        if top > 2147483647:  # leave the quantizer's own saturation alone
-                            top = abs(np.int64(q[at]))
-                        best = np.int64(0)
-                        best_bits = _bits(zero_p[ctx], 0)
-                        best_cost = ax * ax + lam * best_bits
-                        low = top - 1 if top > 1 else np.int64(1)
-                        for v in range(low, top + 1):
-                            err = ax - (v + delta)
-                            bits = _bits(zero_p[ctx], 1) + _magnitude_bits(unary_p, unary_base, v)
-                            total = err * err + lam * bits
-                            if total < best_cost:
-                                best = np.int64(v)
-                                best_bits = bits
-                                best_cost = total
-                        q[at] = -best if value < 0 else best
-                        cost[(i - r0) * BLOCK + (j - c0)] = best_bits
-                        _adapt(zero_p, zero_n, ctx, best != 0)
-                        if best:
-                            _adapt_magnitude(unary_p, unary_n, unary_base, best)
-                # Empty the tiles whose values cost more than the error of dropping them
-                # (an empty tile's positions are not coded at all).
-                for t0 in range(r0, r1, tile):
-                    for u0 in range(c0, c1, tile):
-                        saved = -1.0  # the tile flag costs about as much either way
-                        added = 0.0
+                            s += 2 * abs(np.int64(q[up - 1]))
+                        if j + 1 < c1:
+                            s += 2 * abs(np.int64(q[up + 1]))
+                    e = 2 * (
+                        _at(q, planes, planes[p, _SIB1], i, j)
+                        + _at(q, planes, planes[p, _SIB2], i, j)
+                    ) + 4 * _at(q, planes, planes[p, _LUMA], i, j)
+                    ctx = kernels.LOCAL_CLASS[s if s < 255 else 255] * kernels.EXTERNAL_CLASSES
+                    ctx += kernels.EXTERNAL_CLASS[min(e, 12)]
+                    unary_base = (kernels.LOCAL_CLASS[min(s + e, 255)] >> 1) * kernels.UNARY_INDICES
+                    value = x[at]
+                    ax = abs(value)
+                    top = np.int64(np.floor(ax + TOP_ROUNDING))
+                    if top > 2147483647:  # leave the quantizer's own saturation alone
+                        top = abs(np.int64(q[at]))
+                    best = np.int64(0)
+                    best_bits = _bits(zero_p[ctx], 0)
+                    best_cost = ax * ax + lam * best_bits
+                    low = top - 1 if top > 1 else np.int64(1)
+                    for v in range(low, top + 1):
+                        err = ax - (v + delta)
+                        bits = _bits(zero_p[ctx], 1) + _magnitude_bits(unary_p, unary_base, v)
+                        total = err * err + lam * bits
+                        if total < best_cost:
+                            best = np.int64(v)
+                            best_bits = bits
+                            best_cost = total
+                    q[at] = -best if value < 0 else best
+                    cost[(i - r0) * BLOCK + (j - c0)] = best_bits
+                    _adapt(zero_p, zero_n, ctx, best != 0)
+                    if best:
+                        _adapt_magnitude(unary_p, unary_n, unary_base, best)
+            # Empty the tiles whose values cost more than the error of dropping them
+            # (an empty tile's positions are not coded at all).
+            for t0 in range(r0, r1, tile):
+                for u0 in range(c0, c1, tile):
+                    saved = -1.0  # the tile flag costs about as much either way
+                    added = 0.0
+                    for i in range(t0, min(t0 + tile, r1)):
+                        for j in range(u0, min(u0 + tile, c1)):
+                            at = offset + i * cols + j
+                            saved += cost[(i - r0) * BLOCK + (j - c0)]
+                            if q[at] != 0:
+                                ax = abs(x[at])
+                                err = ax - (abs(np.int64(q[at])) + delta)
+                                added += ax * ax - err * err
+                    if added > 0.0 and added < lam * saved:
                         for i in range(t0, min(t0 + tile, r1)):
                             for j in range(u0, min(u0 + tile, c1)):
-                                at = offset + i * cols + j
-                                saved += cost[(i - r0) * BLOCK + (j - c0)]
-                                if q[at] != 0:
-                                    ax = abs(x[at])
-                                    err = ax - (abs(np.int64(q[at])) + delta)
-                                    added += ax * ax - err * err
-                        if added > 0.0 and added < lam * saved:
-                            for i in range(t0, min(t0 + tile, r1)):
-                                for j in range(u0, min(u0 + tile, c1)):
-                                    q[offset + i * cols + j] = 0
+                                q[offset + i * cols + j] = 0
 
 
 def optimise_indices(
@@ -310,7 +312,12 @@ def optimise_indices(
         q = np.concatenate(flat_q)
         x = np.concatenate(flat_x)
         planes = np.array(table, dtype=np.int64)
-        _optimise_level(q, x, planes, np.array(offsets, dtype=np.float64), float(lam), _ZERO_START)
+        shifts = np.array(offsets, dtype=np.float64)
+        height = max(row[1] for row in table)
+        width = max(row[2] for row in table)
+        count = -(-height // BLOCK) * -(-width // BLOCK)
+        blocks = functools.partial(_optimise_blocks, q, x, planes, shifts, lam, _ZERO_START)
+        run_rows(blocks, count, q.size)
         for k, band in enumerate(bands):
             for channel in range(channels):
                 row = table[channel * len(bands) + k]
