@@ -352,6 +352,37 @@ def coder_bd_rates(names: tuple[str, ...] = GREY, wavelet: str = "bspline2") -> 
     return out
 
 
+def rdoq_bd_rates(names: tuple[str, ...] = IMAGES, wavelet: str = "cdf97") -> dict[str, float]:
+    """BD-rate of ``encode_image(..., bpp=r)`` with RDOQ (``wavecore.rdoq``) against without,
+    over the peers' exact rates (0.25–2 bpp), and the ratio of the encode times (same run)."""
+    from wavecore import rdoq
+
+    out = {}
+    for name in names:
+        image = getattr(data, name)()
+        curves = {}
+        for enabled in (False, True):
+            rdoq.ENABLED = enabled
+            wavecore.encode_image(image[:64, :64], wavelet=wavelet, bpp=1.0)  # compile first
+            start = time.perf_counter()
+            rates, qualities = [], []
+            for rate in peers.EXACT_RATES:
+                bundle = wavecore.encode_image(image, wavelet=wavelet, bpp=rate)
+                rates.append(8 * len(bundle) / (image.shape[0] * image.shape[1]))
+                qualities.append(psnr(wavecore.decode(bundle), image))
+            curves[enabled] = (rates, qualities, time.perf_counter() - start)
+        rdoq.ENABLED = False
+        (r0, q0, t0), (r1, q1, t1) = curves[False], curves[True]
+        out[name] = bd_rate(r0, q0, r1, q1)
+        print(
+            f"{name:10s} {wavelet}: BD-rate of RDOQ (lambda {rdoq.LAMBDA}) {out[name]:+.2f} %, "
+            f"encode time x{t1 / t0:.2f} ({t0:.2f} s -> {t1:.2f} s for 7 rates)",
+            flush=True,
+        )
+    print(f"mean: {np.mean(list(out.values())):+.2f} %", flush=True)
+    return out
+
+
 # ------------------------------------------------------------------------------------------
 # Fair peers and BD-rate (issue 12): every peer configured as its best users configure it
 # (benchmarks/peers.py), each curve interpolated at exact rates over 0.25–2 bpp.
@@ -608,6 +639,11 @@ def main() -> None:
         help="only print the BD-rate of today's context coder against version 3 (grey pictures)",
     )
     parser.add_argument(
+        "--rdoq",
+        action="store_true",
+        help="only print the BD-rate of cdf97 with RDOQ against without (tuning pictures)",
+    )
+    parser.add_argument(
         "--peers",
         action="store_true",
         help="BD-rate of cdf97 and bspline2 against fair peers (benchmarks/peers.py)",
@@ -622,6 +658,9 @@ def main() -> None:
         return
     if args.bd_rate:
         coder_bd_rates()
+        return
+    if args.rdoq:
+        rdoq_bd_rates(("camera",) if args.quick else IMAGES)
         return
     names = ("camera",) if args.quick else IMAGES
     log = Path(args.from_log).read_text() if args.from_log else None

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import rdoq
 from .._kernels import largest_scaled, log_histogram_counts, top_octave
 from ..blockcoder import BLOCK_SIZE as DEFAULT_BLOCK
 from ..blockcoder import CodedBlocks, block_lengths
@@ -268,6 +269,8 @@ class _LossyEncoder:
                 axes=self.plan.axes,
                 refine=REFINE_ITERATIONS if closed else 0,
             )
+            if rdoq.ENABLED and self.plan.kind == "image" and not self._refines:
+                q = rdoq.optimise_indices(self.kept, q, params)  # the closed loop aims alone
             self.closed_loops += closed
             cached = self._quantized[closed] = (key, q, params)
         return cached[1], cached[2]

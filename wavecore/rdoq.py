@@ -1,0 +1,329 @@
+"""Rate–distortion-optimised quantization (RDOQ) of the detail bands of an image.
+
+The dead-zone quantizer decides each coefficient alone, from its magnitude.  What a nonzero
+index costs depends on its neighbourhood, though: in a quiet place the context coder expects a
+zero, and a lone 1 costs its zero flag, its bit length and its sign, some 8 bits; where the
+neighbours are busy the same 1 costs two or three.  RDOQ walks every code-block in the coder's
+own order and, for each coefficient, keeps whichever of ``t = floor(|x| + TOP_ROUNDING)``,
+``t - 1`` and ``0`` minimises ``D + λ R``:
+
+* ``D`` is the squared error in units of the band's step (the band weights make these
+  comparable across bands: a unit of every band costs the same in the picture), measured
+  against where the dequantizer puts each index (``quantize.reconstruction_offset``);
+* ``R`` is the number of bits the coder would spend, from adaptive probabilities that follow
+  the coder's own contexts (``_blockkernels``: the local neighbourhood class times the other
+  bands' class for the zero flag, the unary bit-length contexts; mantissa and sign bits count
+  one bit each), reset at each block as the coder resets them;
+* ``λ = LAMBDA · step²`` in picture units, which is ``LAMBDA`` in the band's units: the slope
+  of an entropy-coded uniform quantizer's distortion–rate curve at high rate is
+  ``ln 2 / 6 · step² ≈ 0.12 step²`` per bit; ``LAMBDA`` was calibrated on the tuning pictures.
+
+Then each ``8 × 8`` tile (the coder's all-zero unit) whose few values cost more bits than the
+error of dropping them is emptied.  Decisions are greedy (a choice's effect on later contexts
+is not looked ahead), and the decoder does not change: RDOQ only picks other integers.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from . import _blockkernels as kernels
+from .layout import as_levels
+from .quantize import reconstruction_offset
+from .transform import run_rows
+
+__all__ = ["ENABLED", "LAMBDA", "TOP_ROUNDING", "optimise_indices"]
+
+#: Whether the image encoder's rate control runs RDOQ after each open-loop quantization.  Off:
+#: on the tuning pictures it saves 1.5 % of the bits at equal PSNR (BD-rate, cdf97, through
+#: ``encode_image(bpp=...)``; ``benchmarks/rate_distortion.py --rdoq``), but costs about as
+#: much time as the block coding itself, per quantization, and the rate searches predict size
+#: and error from the dead-zone quantizer, so they need more codings to land with it (see the
+#: counts in ``tests/test_ratecontrol.py``).  Turn on where bits matter more than time.
+ENABLED = False
+
+#: The Lagrange multiplier in units of the band step squared per bit (see the module text).
+LAMBDA = 0.1
+#: The code-block side of the coder (``blockcoder.BLOCK_SIZE``), where its models restart.
+BLOCK = 128
+#: The largest candidate is ``floor(|x| + TOP_ROUNDING)``: above the dead zone's 0.27, so that
+#: a value just under a bin's edge may round up where its neighbours make that cheap (0.4
+#: measured a little better than plain rounding, 0.5, and much better than 0.27).
+TOP_ROUNDING = 0.4
+
+# Plane table columns: where a plane lives in the level's flat arrays, its shape, and the
+# planes its external context reads (earlier orientations of its channel, and luma).
+_OFFSET, _ROWS, _COLS, _SIB1, _SIB2, _LUMA = range(6)
+
+_CLASSES = kernels.LOCAL_CLASSES * kernels.EXTERNAL_CLASSES
+#: ``_COST[p >> 3]``: bits to code a 0 whose probability is ``p / 2**15``.
+_COST = -np.log2((np.arange(1 << (kernels.PROB_BITS - 3)) * 8 + 4) / kernels.PROB_ONE)
+
+
+def _initial_zero_models() -> np.ndarray:
+    """The coder's starting probabilities of a zero for the detail planes' zero flags."""
+    start = kernels.ZERO_BASE + _CLASSES  # the detail kind follows the approximation's
+    return (kernels.INITIAL_MODELS[start : start + _CLASSES] >> 8).astype(np.int64)
+
+
+_ZERO_START = _initial_zero_models()
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _bits(p, bit):
+    """Bits to code ``bit`` under a probability ``p`` of a zero (15-bit)."""
+    if bit == 0:
+        return _COST[p >> 3]
+    return _COST[(kernels.PROB_ONE - p) >> 3]
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _adapt(p, n, ctx, bit):
+    shift = kernels.RATE[n[ctx]]
+    if bit == 0:
+        p[ctx] += (kernels.PROB_ONE - p[ctx]) >> shift
+    else:
+        p[ctx] -= p[ctx] >> shift
+    if n[ctx] < kernels.COUNT_CAP:
+        n[ctx] += 1
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _magnitude_bits(unary_p, unary_base, v):
+    """Bits of a nonzero magnitude ``v``: its unary bit length under the models, then one bit
+    per bit below the leading one, then the sign."""
+    klass = np.int64(0)
+    t = v
+    while t:
+        t >>= 1
+        klass += 1
+    bits = np.float64(klass)  # the bits below the leading one, and the sign
+    for k in range(1, klass + 1):
+        ctx = unary_base + min(k - 1, kernels.UNARY_INDICES - 1)
+        bits += _bits(unary_p[ctx], 1 if klass > k else 0)
+    return bits
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _adapt_magnitude(unary_p, unary_n, unary_base, v):
+    klass = np.int64(0)
+    t = v
+    while t:
+        t >>= 1
+        klass += 1
+    for k in range(1, klass + 1):
+        _adapt(unary_p, unary_n, unary_base + min(k - 1, kernels.UNARY_INDICES - 1), klass > k)
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _at(q, planes, p, i, j):
+    """``|q|`` of plane ``p`` at ``(i, j)``; 0 for no plane or outside it."""
+    if p < 0 or i >= planes[p, _ROWS] or j >= planes[p, _COLS]:
+        return np.int64(0)
+    return abs(np.int64(q[planes[p, _OFFSET] + i * planes[p, _COLS] + j]))
+
+
+@njit(nogil=True, cache=True)
+def _optimise_blocks(q, x, planes, offsets, lam, zero_start, lo, hi):
+    """RDOQ in place of blocks ``lo .. hi - 1`` (row by row over the level's grid of blocks) of
+    one level's detail planes (``q`` indices, ``x`` values in step units).  Blocks touch only
+    their own positions, so runs of blocks go to threads."""
+    width = 0
+    for p in range(planes.shape[0]):
+        width = max(width, planes[p, _COLS])
+    grid_cols = (width + BLOCK - 1) // BLOCK
+    zero_p = np.empty(_CLASSES, dtype=np.int64)
+    zero_n = np.empty(_CLASSES, dtype=np.int64)
+    unary_size = (kernels.LOCAL_CLASSES + 1) * kernels.UNARY_INDICES
+    unary_p = np.empty(unary_size, dtype=np.int64)
+    unary_n = np.empty(unary_size, dtype=np.int64)
+    cost = np.zeros(BLOCK * BLOCK, dtype=np.float64)
+    tiles_across = (BLOCK + kernels.TILE - 1) // kernels.TILE
+    live_tiles = np.zeros(tiles_across * tiles_across, dtype=np.bool_)
+    tile = kernels.TILE
+    for b in range(lo, hi):
+        r0 = (b // grid_cols) * BLOCK
+        c0 = (b % grid_cols) * BLOCK
+        zero_p[:] = zero_start
+        zero_n[:] = 2
+        unary_p[:] = kernels.PROB_ONE // 2
+        unary_n[:] = 0
+        for p in range(planes.shape[0]):
+            offset, rows, cols = planes[p, _OFFSET], planes[p, _ROWS], planes[p, _COLS]
+            r1 = min(r0 + BLOCK, rows)
+            c1 = min(c0 + BLOCK, cols)
+            if r1 <= r0 or c1 <= c0:
+                continue
+            delta = offsets[p]
+            # A tile where no candidate is nonzero stays empty, and the coder neither
+            # codes nor adapts on its positions: skipped alike.
+            for t0 in range(r0, r1, tile):
+                for u0 in range(c0, c1, tile):
+                    live = False
+                    for i in range(t0, min(t0 + tile, r1)):
+                        for j in range(u0, min(u0 + tile, c1)):
+                            if abs(x[offset + i * cols + j]) + TOP_ROUNDING >= 1.0:
+                                live = True
+                    live_tiles[((t0 - r0) // tile) * tiles_across + (u0 - c0) // tile] = live
+            for i in range(r0, r1):
+                tile_row = ((i - r0) // tile) * tiles_across
+                for j in range(c0, c1):
+                    at = offset + i * cols + j
+                    if not live_tiles[tile_row + (j - c0) // tile]:
+                        q[at] = 0
+                        cost[(i - r0) * BLOCK + (j - c0)] = 0.0
+                        continue
+                    # the coder's contexts, from the indices already decided
+                    s = np.int64(0)
+                    if j > c0:
+                        s += 4 * abs(np.int64(q[at - 1]))
+                        if j > c0 + 1:
+                            s += abs(np.int64(q[at - 2]))
+                    if i > r0:
+                        up = at - cols
+                        s += 4 * abs(np.int64(q[up]))
+                        if i > r0 + 1:
+                            s += abs(np.int64(q[up - cols]))
+                        if j > c0:
+                            s += 2 * abs(np.int64(q[up - 1]))
+                        if j + 1 < c1:
+                            s += 2 * abs(np.int64(q[up + 1]))
+                    e = 2 * (
+                        _at(q, planes, planes[p, _SIB1], i, j)
+                        + _at(q, planes, planes[p, _SIB2], i, j)
+                    ) + 4 * _at(q, planes, planes[p, _LUMA], i, j)
+                    ctx = kernels.LOCAL_CLASS[s if s < 255 else 255] * kernels.EXTERNAL_CLASSES
+                    ctx += kernels.EXTERNAL_CLASS[min(e, 12)]
+                    unary_base = (kernels.LOCAL_CLASS[min(s + e, 255)] >> 1) * kernels.UNARY_INDICES
+                    value = x[at]
+                    ax = abs(value)
+                    top = np.int64(np.floor(ax + TOP_ROUNDING))
+                    if top > 2147483647:  # leave the quantizer's own saturation alone
+                        top = abs(np.int64(q[at]))
+                    best = np.int64(0)
+                    best_bits = _bits(zero_p[ctx], 0)
+                    best_cost = ax * ax + lam * best_bits
+                    low = top - 1 if top > 1 else np.int64(1)
+                    for v in range(low, top + 1):
+                        err = ax - (v + delta)
+                        bits = _bits(zero_p[ctx], 1) + _magnitude_bits(unary_p, unary_base, v)
+                        total = err * err + lam * bits
+                        if total < best_cost:
+                            best = np.int64(v)
+                            best_bits = bits
+                            best_cost = total
+                    q[at] = -best if value < 0 else best
+                    cost[(i - r0) * BLOCK + (j - c0)] = best_bits
+                    _adapt(zero_p, zero_n, ctx, best != 0)
+                    if best:
+                        _adapt_magnitude(unary_p, unary_n, unary_base, best)
+            # Empty the tiles whose values cost more than the error of dropping them
+            # (an empty tile's positions are not coded at all).
+            for t0 in range(r0, r1, tile):
+                for u0 in range(c0, c1, tile):
+                    saved = -1.0  # the tile flag costs about as much either way
+                    added = 0.0
+                    for i in range(t0, min(t0 + tile, r1)):
+                        for j in range(u0, min(u0 + tile, c1)):
+                            at = offset + i * cols + j
+                            saved += cost[(i - r0) * BLOCK + (j - c0)]
+                            if q[at] != 0:
+                                ax = abs(x[at])
+                                err = ax - (abs(np.int64(q[at])) + delta)
+                                added += ax * ax - err * err
+                    if added > 0.0 and added < lam * saved:
+                        for i in range(t0, min(t0 + tile, r1)):
+                            for j in range(u0, min(u0 + tile, c1)):
+                                q[offset + i * cols + j] = 0
+
+
+def optimise_indices(
+    coeffs: Sequence[Any],
+    qcoeffs: Sequence[Any],
+    params: dict[str, Any],
+    *,
+    lam: float | None = None,
+) -> Any:
+    """Re-choose the detail indices of an image's quantization for rate and distortion, in
+    place.
+
+    Parameters
+    ----------
+    coeffs : list
+        The decomposition that was quantized (``wavedec2`` layout, bands ``(H, W)`` or
+        ``(H, W, C)``).
+    qcoeffs : list
+        Its indices from :func:`wavecore.quantize.quantize_bands`, same layout; the detail
+        bands are overwritten.
+    params : dict
+        ``quantize_bands``' parameters (``step``, ``weights``, ``rounding``).
+    lam : float, optional
+        The Lagrange multiplier in units of the band step squared per bit (``LAMBDA`` by
+        default); 0 returns the indices unchanged.
+
+    Returns
+    -------
+    list
+        ``qcoeffs`` itself (the coarse band is left as it is).
+    """
+    lam = LAMBDA if lam is None else float(lam)
+    levels = as_levels(qcoeffs)
+    if lam <= 0 or len(levels) < 2:
+        return qcoeffs
+    values = as_levels(coeffs)
+    step = float(params["step"])
+    rounding = float(params["rounding"])
+    for bands, originals, weights in zip(
+        levels[1:], values[1:], params["weights"][1:], strict=True
+    ):
+        shapes = [band.shape for band in bands]
+        channels = shapes[0][2] if len(shapes[0]) == 3 else 1
+        table: list[list[int]] = []
+        flat_q = []
+        flat_x = []
+        offsets = []
+        offset = 0
+        for channel in range(channels):
+            for k, (band, original, weight) in enumerate(
+                zip(bands, originals, weights, strict=True)
+            ):
+                plane = band[..., channel] if band.ndim == 3 else band
+                source = original[..., channel] if band.ndim == 3 else original
+                me = len(table)
+                table.append(
+                    [
+                        offset,
+                        plane.shape[0],
+                        plane.shape[1],
+                        me - k if k > 0 else -1,
+                        me - k + 1 if k > 1 else -1,
+                        k if channel > 0 else -1,
+                    ]
+                )
+                flat_q.append(np.ascontiguousarray(plane, dtype=np.int32).ravel())
+                flat_x.append(np.asarray(source, dtype=np.float64).ravel() / (step * weight))
+                offsets.append(reconstruction_offset(band, rounding))
+                offset += plane.size
+        q = np.concatenate(flat_q)
+        x = np.concatenate(flat_x)
+        planes = np.array(table, dtype=np.int64)
+        shifts = np.array(offsets, dtype=np.float64)
+        height = max(row[1] for row in table)
+        width = max(row[2] for row in table)
+        count = -(-height // BLOCK) * -(-width // BLOCK)
+        blocks = functools.partial(_optimise_blocks, q, x, planes, shifts, lam, _ZERO_START)
+        run_rows(blocks, count, q.size)
+        for k, band in enumerate(bands):
+            for channel in range(channels):
+                row = table[channel * len(bands) + k]
+                plane = q[row[0] : row[0] + row[1] * row[2]].reshape(row[1], row[2])
+                if band.ndim == 3:
+                    band[..., channel] = plane
+                else:
+                    band[...] = plane
+    return qcoeffs
