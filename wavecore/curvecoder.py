@@ -411,6 +411,80 @@ def simplify_set(points, decoded, offsets, closed, tolerance, chunk):
 
 
 @njit(cache=True, nogil=True)
+def _span_fits(points, decoded, first, n, a, b, tolerance, d):
+    """The largest distance from the points strictly between ``a`` and ``b`` (ring indices)
+    to the decoded segment ``a``–``b``, stopping early once above ``tolerance``."""
+    worst = 0.0
+    end = first + (b % n)
+    for k in range(a + 1, b):
+        gap = _segment_distance(points, first + (k % n), decoded, first + (a % n), end, d)
+        if gap > worst:
+            worst = gap
+            if worst > tolerance:
+                break
+    return worst
+
+
+@njit(cache=True, nogil=True)
+def reach_set(points, decoded, offsets, closed, starts, tolerance, window):
+    """Greedy farthest reach on each curve, distances to the *decoded* (lattice) segments.
+
+    From each kept point the next one is the farthest (within ``window`` points) whose
+    segment keeps every point between within ``tolerance``, found by galloping and bisection
+    (then a few points beyond the first miss), so the cost is ``O(L log L)`` for a segment of
+    ``L`` points: linear-ish whatever the shape.  A closed
+    curve starts at ring index ``starts[c]`` (the caller rotates it there).  Greedy reach
+    keeps fewer vertices than Douglas–Peucker (which splits at the worst point, not where a
+    segment could end).  Returns a mask of the kept points.
+    """
+    total, d = points.shape
+    keep = np.zeros(total, dtype=np.bool_)
+    for c in range(len(offsets) - 1):
+        first, stop = offsets[c], offsets[c + 1]
+        n = stop - first
+        if n == 0:
+            continue
+        ring = n + 1 if closed[c] and n > 2 else n
+        a = starts[c] if ring > n else 0
+        last = a + ring - 1  # ring index of the end (the start again on a closed curve)
+        keep[first + (a % n)] = True
+        keep[first + (last % n)] = True
+        while a < last:
+            top = min(last, a + window)
+            # gallop: spans of 2, 4, 8, … points while they fit, then bisect the last gap
+            best = a + 1
+            span = 2
+            fail = top + 1
+            while a + span <= top:
+                if _span_fits(points, decoded, first, n, a, a + span, tolerance, d) <= tolerance:
+                    best = a + span
+                    span *= 2
+                else:
+                    fail = a + span
+                    break
+            if fail > top and best < top:
+                if _span_fits(points, decoded, first, n, a, top, tolerance, d) <= tolerance:
+                    best = top
+                else:
+                    fail = top
+            while fail - best > 1:
+                middle = (best + fail) // 2
+                if _span_fits(points, decoded, first, n, a, middle, tolerance, d) <= tolerance:
+                    best = middle
+                else:
+                    fail = middle
+            # a span may fit again past a miss (the curve comes back): look a few points on
+            b = best + 2
+            while b <= min(top, best + 4):
+                if _span_fits(points, decoded, first, n, a, b, tolerance, d) <= tolerance:
+                    best = b
+                b += 1
+            keep[first + (best % n)] = True
+            a = best
+    return keep
+
+
+@njit(cache=True, nogil=True)
 def _next_kept(keep, first, v, ring, n):
     """The ring index of the next kept point after ``v`` (``ring - 1`` at the end)."""
     k = v + 1
@@ -652,6 +726,12 @@ def snap_set(points, offsets, closed, step, tolerance):
                 if np.sqrt(gap2) > tolerance:
                     return lattice, False
                 continue
+            own2 = 0.0
+            for j in range(d):
+                g = base[j] * step - points[k, j]
+                own2 += g * g
+            if own2 <= tolerance * tolerance:
+                continue  # the nearest lattice point, and within the tolerance of the polyline
             best, best_own = np.inf, np.inf
             # the original polyline around the point: a lattice step and a half each way
             # (at most 32 segments, so the cost stays linear)

@@ -807,6 +807,48 @@ def _lattice_values(lattice: np.ndarray, step: float, dtype: np.dtype[Any]) -> n
         return _finish(lattice.astype(np.float64) * step, dtype)
 
 
+def _start_rotation(
+    points: np.ndarray,
+    decoded: np.ndarray,
+    offsets: np.ndarray,
+    closed: np.ndarray,
+    tolerance: float,
+) -> np.ndarray:
+    """Row order that starts each closed curve where greedy reach keeps the fewest vertices.
+
+    A closed curve's start is always a vertex, so a start in the middle of a smooth stretch
+    costs one.  Tried: point 0 and the first few vertices that greedy reach from point 0
+    keeps (natural corners); each curve takes the start with the fewest vertices.
+    """
+    count = len(offsets) - 1
+    starts = np.zeros(count, dtype=np.int64)
+    if not np.any(closed):
+        return np.arange(len(points))
+    zeros = np.zeros(count, dtype=np.int64)
+    keep = curvecoder.reach_set(points, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW)
+    best = np.add.reduceat(keep, offsets[:-1]) if count else zeros
+    kept = np.flatnonzero(keep)
+    for nth in (1, 2, 3):
+        trial = zeros.copy()
+        for c in range(count):
+            first, stop = int(offsets[c]), int(offsets[c + 1])
+            inside = kept[np.searchsorted(kept, first) : np.searchsorted(kept, stop)]
+            if closed[c] and len(inside) > nth:
+                trial[c] = inside[nth] - first
+        found = curvecoder.reach_set(
+            points, decoded, offsets, closed, trial, tolerance, _VERTEX_WINDOW
+        )
+        counts = np.add.reduceat(found, offsets[:-1])
+        better = counts < best
+        starts[better] = trial[better]
+        best = np.minimum(best, counts)
+    rows = np.arange(len(points))
+    for rotated in np.flatnonzero(starts).tolist():
+        first, stop = int(offsets[rotated]), int(offsets[rotated + 1])
+        rows[first:stop] = np.roll(rows[first:stop], -int(starts[rotated]))
+    return rows
+
+
 def _encode_vertex(
     arrays: list[np.ndarray],
     flags: list[bool],
@@ -854,9 +896,16 @@ def _encode_vertex(
         else:
             lattice = np.rint(points / step).astype(np.int64)
         decoded = _lattice_values(lattice, step, dtype).astype(np.float64)
-        keep = curvecoder.simplify_set(points, decoded, offsets, closed, tolerance, _VERTEX_WINDOW)
+        order_rows = _start_rotation(points, decoded, offsets, closed, tolerance)
+        points_r = np.ascontiguousarray(points[order_rows])
+        lattice = np.ascontiguousarray(lattice[order_rows])
+        decoded = np.ascontiguousarray(decoded[order_rows])
+        zeros = np.zeros(len(offsets) - 1, dtype=np.int64)
+        keep = curvecoder.reach_set(
+            points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW
+        )
         kept = np.ascontiguousarray(decoded[keep])
-        if not np.all(curvecoder.check_set(points, offsets, closed, keep, kept) <= tolerance):
+        if not np.all(curvecoder.check_set(points_r, offsets, closed, keep, kept) <= tolerance):
             continue
         counts = np.add.reduceat(keep, offsets[:-1]).astype(np.int64)
         again = np.array(repeated, dtype=np.int64)
@@ -869,7 +918,7 @@ def _encode_vertex(
             vertices = np.ascontiguousarray(lattice[keep])
             if d <= len(_REFINE_RADIUS):
                 curvecoder.refine_set(
-                    points,
+                    points_r,
                     offsets,
                     closed,
                     keep,
@@ -881,7 +930,7 @@ def _encode_vertex(
                 )
                 moved = _lattice_values(vertices, step, dtype).astype(np.float64)
                 if not np.all(
-                    curvecoder.check_set(points, offsets, closed, keep, moved) <= tolerance
+                    curvecoder.check_set(points_r, offsets, closed, keep, moved) <= tolerance
                 ):
                     vertices = np.ascontiguousarray(lattice[keep])
             coded = curvecoder.encode_set(vertices, counts, closed, again, closed_mode, candidate)
