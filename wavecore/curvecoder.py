@@ -1,7 +1,7 @@
 """The vertex coder of curve-set format version 2: lattice vertices, predicted and range-coded.
 
 A curve set at a guaranteed tolerance is, at heart, a list of polylines whose vertices may move
-by a bounded amount.  This module keeps a subset of each curve's points (a Douglas–Peucker
+by a bounded amount.  This module keeps a subset of each curve's points (a greedy farthest-reach
 simplification whose distances are measured to the *quantized* segments, so the rounding is
 part of the test, not a margin taken off it), rounds them to a lattice of step ``q``, and codes
 the lattice differences with an adaptive binary range coder and small contexts.  Everything
@@ -16,6 +16,9 @@ are the curve's own and its stream format must not move when the image coder's d
 arithmetic is on integers: every machine writes and reads the same bits.
 
 One function (:func:`_code_set`) both encodes and decodes, so the two cannot drift apart.
+
+Predictors: ``order`` 0–2 predict a step as a multiple of the previous one; 3 and 4 (plane
+curves) code the step along and across a predicted direction (docs/curves.md, step 4).
 
 Integers are coded as a sign and a magnitude; the magnitude as its bit length ``k`` (unary,
 adaptive, in a context) and then its ``k - 1`` lower bits (adaptive per ``(k, position)``).
@@ -42,12 +45,22 @@ _UNARY = MAX_BITS + 1
 _KIND_COUNT, _KIND_START = 0, 1  # a curve's first vertex: one context set per coordinate (4)
 _FIRST_COORD = _KIND_START + 4
 _OTHER_COORD = _FIRST_COORD + _CLASSES
-_MAG_KINDS = _OTHER_COORD + _CLASSES * 4
+_ALONG = _OTHER_COORD + _CLASSES * 4  # frame predictor: along the predicted direction
+_ACROSS = _ALONG + _CLASSES  # and across it
+_MAG_KINDS = _ACROSS + _CLASSES
 MAG_BASE = 0
 MANT_BASE = MAG_BASE + _MAG_KINDS * _UNARY
 MANT_SIZE = (MAX_BITS + 1) * MAX_BITS
 SIGN_BASE = MANT_BASE + MANT_SIZE
-SIGN_SIZE = 3 * 4 + 4  # by the previous residual's sign and the coordinate; first vertices
+SIGN_SIZE = 3 * 4 + 4 + 4  # by the previous residual's sign and the coordinate; first
+# vertices; the frame predictor's along (1) and across (3, by the previous across residual)
+_SIGN_ALONG = 16
+_SIGN_ACROSS = 17
+#: Predictors: 0 the previous vertex, 1 half a step on, 2 a straight continuation; 3 and 4
+#: (two dimensions) code a step in the frame of its predicted direction: the previous step's
+#: (3) or that direction turned again by the previous turn (4).
+FRAME_ORDERS = (3, 4)
+_FRAME_LIMIT = 1 << 20  # steps longer than this (lattice units) are coded without the frame
 FLAG_BASE = SIGN_BASE + SIGN_SIZE
 FLAG_SIZE = 4
 MODELS = FLAG_BASE + FLAG_SIZE
@@ -171,6 +184,60 @@ def _class(k):
 
 
 @njit(cache=True, nogil=True)
+def _frame(lattice, v, first, order):
+    """The predicted direction of the step into vertex ``v`` (two dimensions): ``(x, y)`` in
+    lattice units, ``(0, 0)`` where there is none (the curve's first two steps, or steps too
+    long for exact integer arithmetic)."""
+    if v - first < 2:
+        return 0, 0
+    sx = lattice[v - 1, 0] - lattice[v - 2, 0]
+    sy = lattice[v - 1, 1] - lattice[v - 2, 1]
+    if max(abs(sx), abs(sy)) >= _FRAME_LIMIT:
+        return 0, 0
+    if order == 4 and v - first >= 3:
+        px = lattice[v - 2, 0] - lattice[v - 3, 0]
+        py = lattice[v - 2, 1] - lattice[v - 3, 1]
+        if 0 < max(abs(px), abs(py)) < 1 << 10 and max(abs(sx), abs(sy)) < 1 << 10:
+            # s turned by the angle from p to s: s * s * conj(p), as Gaussian integers
+            ax, ay = sx * sx - sy * sy, 2 * sx * sy
+            return ax * px + ay * py, ay * px - ax * py
+    return sx, sy
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _to_frame(zx, zy, x, y):
+    """``(x, y)`` in the signed-permutation frame that puts ``(zx, zy)`` in the first octant
+    (``zx >= zy >= 0``): a bijection of the integer lattice."""
+    if zx < 0:
+        x = -x
+    if zy < 0:
+        y = -y
+    if abs(zy) > abs(zx):
+        return y, x
+    return x, y
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _from_frame(zx, zy, u, w):
+    if abs(zy) > abs(zx):
+        u, w = w, u
+    if zx < 0:
+        u = -u
+    if zy < 0:
+        w = -w
+    return u, w
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _across_prediction(zx, zy, u):
+    """The across coordinate predicted for the along one ``u``: on the predicted line."""
+    a, b = max(abs(zx), abs(zy)), min(abs(zx), abs(zy))
+    if a == 0 or abs(u) >= _FRAME_LIMIT:
+        return 0
+    return (2 * u * b + a) // (2 * a)
+
+
+@njit(cache=True, nogil=True)
 def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order, decoding):
     """Code (or decode into ``lattice``, ``counts``, ``closed``, ``repeated``) a whole set.
 
@@ -180,6 +247,7 @@ def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order,
     Returns the number of vertices (decoding: those written; -1 if the stream declares more
     than ``lattice`` holds).
     """
+    plain = order if order < 3 else 0  # the frame predictors' steps without a frame
     models = np.empty(2 * MODELS, dtype=np.int64)
     for i in range(MODELS):
         models[2 * i] = PROB_HALF
@@ -212,7 +280,32 @@ def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order,
         for j in range(d):
             previous_step[j] = 0
             previous_residual[j] = 0
+        across_sign = 0
         for v in range(at + 1, at + m):
+            if order >= 3 and d == 2:
+                zx, zy = _frame(lattice, v, at, order)
+                if zx != 0 or zy != 0:
+                    u, w = 0, 0
+                    if not decoding:
+                        u, w = _to_frame(
+                            zx,
+                            zy,
+                            lattice[v, 0] - lattice[v - 1, 0],
+                            lattice[v, 1] - lattice[v - 1, 1],
+                        )
+                    u = _signed(st, buf, models, _ALONG + length_class, _SIGN_ALONG, u, decoding)
+                    predicted = _across_prediction(zx, zy, u)
+                    kind = _ACROSS + _class(_bit_length(abs(u)))
+                    sign_ctx = _SIGN_ACROSS + 1 + across_sign
+                    r = _signed(st, buf, models, kind, sign_ctx, w - predicted, decoding)
+                    across_sign = (r > 0) - (r < 0)
+                    w = predicted + r
+                    x, y = _from_frame(zx, zy, u, w)
+                    if decoding:
+                        lattice[v, 0] = lattice[v - 1, 0] + x
+                        lattice[v, 1] = lattice[v - 1, 1] + y
+                    length_class = _class(_bit_length(max(abs(x), abs(y))))
+                    continue
             first_class = 0
             largest = 0
             for j in range(d):
@@ -222,7 +315,7 @@ def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order,
                     kind = _OTHER_COORD + length_class * 4 + min(first_class, 3)
                 r = previous_residual[j]
                 sign_ctx = 1 + (r > 0) - (r < 0) + 3 * min(j, 3)
-                predicted = lattice[v - 1, j] + ((order * previous_step[j]) >> 1)
+                predicted = lattice[v - 1, j] + ((plain * previous_step[j]) >> 1)
                 value = 0 if decoding else lattice[v, j] - predicted
                 value = _signed(st, buf, models, kind, sign_ctx, value, decoding)
                 if decoding:
@@ -340,77 +433,6 @@ def _segment_distance(points, k, nodes, a, b, d):
 
 
 @njit(cache=True, nogil=True)
-def simplify_set(points, decoded, offsets, closed, tolerance, chunk):
-    """Douglas–Peucker on each curve, distances measured to the *decoded* (lattice) segments.
-
-    ``points`` are the originals and ``decoded`` each point's lattice position, both
-    ``(total, d)``; curve ``c`` is rows ``offsets[c]:offsets[c + 1]``.  Vertices every
-    ``chunk`` points are kept, so the cost is at most ``chunk`` per point (linear), whatever
-    the shape.  Returns a mask of the kept points.
-    """
-    total, d = points.shape
-    keep = np.zeros(total, dtype=np.bool_)
-    stack = np.empty((2 * chunk + 8, 2), dtype=np.int64)
-    for c in range(len(offsets) - 1):
-        first, stop = offsets[c], offsets[c + 1]
-        n = stop - first
-        if n == 0:
-            continue
-        keep[first] = True
-        if not (closed[c] and n > 2):
-            keep[stop - 1] = True
-        ring = n + 1 if closed[c] and n > 2 else n  # index n is point 0 again
-        a = 0
-        while a < ring - 1:
-            b = min(a + chunk, ring - 1)
-            keep[first + (b % n)] = True
-            top = 0
-            stack[0, 0], stack[0, 1] = a, b
-            top = 1
-            while top > 0:
-                top -= 1
-                lo, hi = stack[top, 0], stack[top, 1]
-                if hi - lo < 2:
-                    continue
-                worst, where = -1.0, lo + 1
-                for k in range(lo + 1, hi):
-                    gap = _segment_distance(
-                        points, first + k, decoded, first + lo, first + (hi % n), d
-                    )
-                    if gap > worst:
-                        worst, where = gap, k
-                if worst > tolerance:
-                    keep[first + where] = True
-                    stack[top, 0], stack[top, 1] = lo, where
-                    stack[top + 1, 0], stack[top + 1, 1] = where, hi
-                    top += 2
-            a = b
-        # Douglas-Peucker keeps more than it needs: drop each vertex whose two segments one
-        # segment can replace (spans capped at two windows, so the cost stays linear)
-        before = 0
-        v = _next_kept(keep, first, 0, ring, n)
-        while v < ring - 1:
-            after = _next_kept(keep, first, v, ring, n)
-            if after - before <= 2 * chunk and (after < ring - 1 or closed[c] or after == n - 1):
-                fits = True
-                for k in range(before + 1, after):
-                    end = first + (after % n)
-                    if (
-                        _segment_distance(points, first + k, decoded, first + before, end, d)
-                        > tolerance
-                    ):
-                        fits = False
-                        break
-                if fits and not (v == n - 1 and not closed[c]):
-                    keep[first + v] = False
-                    v = after
-                    continue
-            before = v
-            v = after
-    return keep
-
-
-@njit(cache=True, nogil=True)
 def _span_fits(points, decoded, first, n, a, b, tolerance, d):
     """The largest distance from the points strictly between ``a`` and ``b`` (ring indices)
     to the decoded segment ``a``–``b``, stopping early once above ``tolerance``."""
@@ -482,15 +504,6 @@ def reach_set(points, decoded, offsets, closed, starts, tolerance, window):
             keep[first + (best % n)] = True
             a = best
     return keep
-
-
-@njit(cache=True, nogil=True)
-def _next_kept(keep, first, v, ring, n):
-    """The ring index of the next kept point after ``v`` (``ring - 1`` at the end)."""
-    k = v + 1
-    while k < ring - 1 and not keep[first + (k % n)]:
-        k += 1
-    return k
 
 
 @njit(cache=True, nogil=True)
@@ -600,6 +613,14 @@ def _residual_cost(r, d):
 
 
 @njit(cache=True, nogil=True)
+def _frame_cost(zx, zy, x, y):
+    """About the bits of the step ``(x, y)`` under the frame predictor of direction ``(zx, zy)``."""
+    u, w = _to_frame(zx, zy, x, y)
+    r = w - _across_prediction(zx, zy, u)
+    return 2 * _bit_length(abs(u)) + (u != 0) + 2 * _bit_length(abs(r)) + (r != 0)
+
+
+@njit(cache=True, nogil=True)
 def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, radius):
     """Move each kept vertex to the lattice point nearest the coder's prediction that keeps the
     bound (in place on ``lattice``, the kept vertices in order).
@@ -615,6 +636,10 @@ def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, r
     """
     d = points.shape[1]
     table, costs = _offsets_by_cost(d, radius)
+    frame = order >= 3 and d == 2
+    tried = np.empty((len(table), d), dtype=np.int64)
+    frame_cost = np.empty(len(table), dtype=np.int64)
+    centre = 0  # the table's zero offset comes first (it is the cheapest)
     index = np.empty(points.shape[0] + 1, dtype=np.int64)
     seg = np.empty((2, d))
     cand = np.empty((1, d))
@@ -634,18 +659,40 @@ def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, r
         for v in range(1, last):
             for j in range(d):
                 step_before = lattice[at + v - 1, j] - lattice[at + v - 2, j] if v >= 2 else 0
-                predicted[j] = lattice[at + v - 1, j] + ((order * step_before) >> 1)
+                predicted[j] = lattice[at + v - 1, j] + ((min(order, 2) * step_before) >> 1)
                 residual[j] = lattice[at + v, j] - predicted[j]
             own = _residual_cost(residual, d)
             after = at + v + 1 if v + 1 < m else at
             k_before, k_here = index[v - 1], index[v]
             k_after = index[v + 1] if v + 1 < m else n
-            for t in range(len(table)):
-                if costs[t] >= own:
-                    break
+            tries = 0
+            if frame:
+                zx, zy = _frame(lattice, at + v, at, order)
+                if zx == 0 and zy == 0:
+                    continue
+                for t in range(len(table)):
+                    x = lattice[at + v, 0] + table[t, 0] - lattice[at + v - 1, 0]
+                    y = lattice[at + v, 1] + table[t, 1] - lattice[at + v - 1, 1]
+                    frame_cost[t] = _frame_cost(zx, zy, x, y)
+                ranked = np.argsort(frame_cost, kind="mergesort")
+                own = frame_cost[centre]
+                for t in ranked:
+                    if frame_cost[t] >= own:
+                        break
+                    for j in range(d):
+                        tried[tries, j] = lattice[at + v, j] + table[t, j]
+                    tries += 1
+            else:
+                for t in range(len(table)):
+                    if costs[t] >= own:
+                        break
+                    for j in range(d):
+                        tried[tries, j] = predicted[j] + table[t, j]
+                    tries += 1
+            for t in range(tries):
                 for j in range(d):
                     seg[0, j] = lattice[at + v - 1, j] * step
-                    seg[1, j] = (predicted[j] + table[t, j]) * step
+                    seg[1, j] = tried[t, j] * step
                     cand[0, j] = seg[1, j]
                 # near the original polyline around it
                 if _to_original(cand, 0, points, first, n, ring, k_before, k_after, d) > tolerance:
@@ -666,7 +713,7 @@ def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, r
                     k += 1
                 if fits:
                     for j in range(d):
-                        lattice[at + v, j] = predicted[j] + table[t, j]
+                        lattice[at + v, j] = tried[t, j]
                     break
         at += m
 

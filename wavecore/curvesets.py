@@ -105,15 +105,15 @@ VERTEX_STEPS = (1.4, 1.0, 0.7, 0.5, 0.35, 0.25, 1.9, 1.7, 1.55, 1.8, 1.6, 1.47)
 #: this many tolerances) are used with snapped vertices: the lattice point nearest the curve
 #: (across it) rather than nearest the point.
 _SNAP_LIMIT = 1.4
-#: Douglas–Peucker runs within windows of this many points (a vertex is kept at each window's
-#: end), so that its cost stays linear whatever the shape.
+#: Greedy reach looks at most this many points ahead (a vertex is kept at least this often),
+#: so that its cost stays linear whatever the shape.
 _VERTEX_WINDOW = 512
 #: Lattice coordinates beyond this many steps are not vertex-coded (the wavelet form takes them).
 _VERTEX_LIMIT = 1 << 46
 #: The decoder refuses a vertex-coded set that declares more curves or values than this many
 #: per byte of its stream (the encoder uses the wavelet form for such sets).
 VERTEX_PER_BYTE = 4096
-_VERTEX_ORDERS = (0, 1, 2)
+_VERTEX_ORDERS = (0, 1, 2, 3, 4)
 #: How far (lattice steps per coordinate, for d = 1, 2, 3) a vertex may move towards its
 #: prediction; curves of more dimensions keep their rounded vertices.
 _REFINE_RADIUS = (64, 7, 3)
@@ -858,7 +858,7 @@ def _encode_vertex(
 ) -> bytes | None:
     """The vertex form (format version 2), or None where it cannot keep the bound.
 
-    Each curve is simplified (Douglas–Peucker, distances to the decoded lattice segments), its
+    Each curve is simplified (greedy farthest reach, distances to the decoded lattice segments), its
     kept points rounded to the lattice, and the set range-coded (:mod:`wavecore.curvecoder`).
     The bound is then measured on the decoded values; a lattice step that misses it anywhere
     is not used, and the next finer one is tried.
@@ -915,6 +915,8 @@ def _encode_vertex(
         stream = b""
         order = -1
         for candidate in _VERTEX_ORDERS:
+            if candidate in curvecoder.FRAME_ORDERS and d != 2:
+                continue  # the frame predictors are for plane curves
             vertices = np.ascontiguousarray(lattice[keep])
             if d <= len(_REFINE_RADIUS):
                 curvecoder.refine_set(
@@ -960,7 +962,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
     reader = _Reader(data[:-4])
     reader.take(5, "magic and version")
-    flags = reader.varint("flags", 63)
+    flags = reader.varint("flags", 127)
     closed_mode = (flags >> 2) & 3
     order = flags >> 4
     if flags & 2 or closed_mode == 3 or order not in _VERTEX_ORDERS:
