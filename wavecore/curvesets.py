@@ -114,6 +114,8 @@ _VERTEX_LIMIT = 1 << 46
 #: per byte of its stream (the encoder uses the wavelet form for such sets).
 VERTEX_PER_BYTE = 4096
 _VERTEX_ORDERS = (0, 1, 2, 3, 4)
+#: A closed curve may start at a vertex where it turns by more than this (its cosine): 45°.
+_CORNER_COSINE = 0.7
 #: How far (lattice steps per coordinate, for d = 1, 2, 3) a vertex may move towards its
 #: prediction; curves of more dimensions keep their rounded vertices.
 _REFINE_RADIUS = (64, 7, 3)
@@ -849,6 +851,39 @@ def _start_rotation(
     return rows
 
 
+def _cheapest_starts(
+    lattice: np.ndarray, keep: np.ndarray, offsets: np.ndarray, closed: np.ndarray
+) -> np.ndarray:
+    """Row order that starts each closed curve at the kept vertex nearest (in coded bits) the
+    previous curve's first vertex, from which the coder codes a curve's first vertex.
+
+    The polygon and its vertices stay the same: only which of them comes first changes.
+    """
+    rows = np.arange(len(lattice))
+    previous = np.zeros(lattice.shape[1], dtype=np.int64)
+    for c in range(len(offsets) - 1):
+        first, stop = int(offsets[c]), int(offsets[c + 1])
+        if stop == first:
+            continue
+        kept = np.flatnonzero(keep[first:stop])
+        if closed[c] and stop - first > 2 and len(kept) > 2:
+            vertices = lattice[first + kept].astype(np.float64)
+            before = vertices - np.roll(vertices, 1, axis=0)
+            after = np.roll(vertices, -1, axis=0) - vertices
+            norms = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
+            turn = np.einsum("ij,ij->i", before, after) / np.maximum(norms, 1e-300)
+            # corners only: after a corner the next steps are unpredictable anyway, while a
+            # start inside a smooth run would cost the predictor its first two steps there
+            corners = np.flatnonzero(turn < _CORNER_COSINE)
+            if len(corners):
+                gaps = np.abs(lattice[first + kept[corners]] - previous)
+                bits = np.sum(2 * np.ceil(np.log2(gaps + 1)) + (gaps != 0), axis=1)
+                start = int(kept[corners[int(np.argmin(bits))]])
+                rows[first:stop] = np.roll(rows[first:stop], -start)
+        previous = lattice[rows[first]]
+    return rows
+
+
 def _encode_vertex(
     arrays: list[np.ndarray],
     flags: list[bool],
@@ -903,6 +938,13 @@ def _encode_vertex(
         zeros = np.zeros(len(offsets) - 1, dtype=np.int64)
         keep = curvecoder.reach_set(
             points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW
+        )
+        rows = _cheapest_starts(lattice, keep, offsets, closed)
+        points_r, lattice, decoded, keep = (
+            np.ascontiguousarray(points_r[rows]),
+            np.ascontiguousarray(lattice[rows]),
+            np.ascontiguousarray(decoded[rows]),
+            np.ascontiguousarray(keep[rows]),
         )
         kept = np.ascontiguousarray(decoded[keep])
         if not np.all(curvecoder.check_set(points_r, offsets, closed, keep, kept) <= tolerance):
