@@ -60,6 +60,9 @@ _SIGN_ACROSS = 17
 #: (two dimensions) code a step in the frame of its predicted direction: the previous step's
 #: (3) or that direction turned again by the previous turn (4).
 FRAME_ORDERS = (3, 4)
+#: Refinement tries at most this many positions per vertex (cheapest first), so that its cost
+#: stays within a small multiple of the points' count.
+_REFINE_TRIES = 48
 _FRAME_LIMIT = 1 << 20  # steps longer than this (lattice units) are coded without the frame
 FLAG_BASE = SIGN_BASE + SIGN_SIZE
 FLAG_SIZE = 4
@@ -522,6 +525,22 @@ def _to_original(query, q, points, first, n, closed, lo, hi, d):
 
 
 @njit(cache=True, nogil=True)
+def _near_original(query, q, points, first, n, closed, lo, hi, d, tolerance):
+    """Whether ``query[q]`` lies within ``tolerance`` of the original segments ``lo … hi - 1``
+    (:func:`_to_original`, stopping at the first segment near enough)."""
+    if n == 1:
+        return _segment_distance(query, q, points, first, first, d) <= tolerance
+    for s in range(lo, hi):
+        a = s % n if closed else s
+        b = (s + 1) % n if closed else s + 1
+        if not closed and b >= n:
+            b = n - 1
+        if _segment_distance(query, q, points, first + a, first + b, d) <= tolerance:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
 def check_set(points, offsets, closed, keep, decoded):
     """The largest deviation, both ways, of each curve (an upper bound of the true one).
 
@@ -677,14 +696,14 @@ def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, r
                 ranked = np.argsort(frame_cost, kind="mergesort")
                 own = frame_cost[centre]
                 for t in ranked:
-                    if frame_cost[t] >= own:
+                    if frame_cost[t] >= own or tries == _REFINE_TRIES:
                         break
                     for j in range(d):
                         tried[tries, j] = lattice[at + v, j] + table[t, j]
                     tries += 1
             else:
                 for t in range(len(table)):
-                    if costs[t] >= own:
+                    if costs[t] >= own or tries == _REFINE_TRIES:
                         break
                     for j in range(d):
                         tried[tries, j] = predicted[j] + table[t, j]
@@ -792,11 +811,10 @@ def snap_set(points, offsets, closed, step, tolerance):
                     rest //= 3
                     g = cand[0, j] - points[k, j]
                     own2 += g * g
-                gap = _to_original(cand, 0, points, first, n, ring, lo, hi, d)
-                if gap > tolerance:
+                if not _near_original(cand, 0, points, first, n, ring, lo, hi, d, tolerance):
                     continue
                 if own2 < best_own:
-                    best, best_own = gap, own2
+                    best, best_own = 0.0, own2
                     rest = t
                     for j in range(d):
                         lattice[k, j] = base[j] + rest % 3 - 1
@@ -804,3 +822,220 @@ def snap_set(points, offsets, closed, step, tolerance):
             if best > tolerance:
                 return lattice, False
     return lattice, True
+
+
+@njit(cache=True, nogil=True)
+def _span_to(points, first, n, a, b, seg, tolerance, d):
+    """Whether every point ``a + 1 … b`` (ring indices) lies within ``tolerance`` of the
+    segment ``seg[0]``–``seg[1]``."""
+    for k in range(a + 1, b + 1):
+        if _segment_distance(points, first + (k % n), seg, 0, 1, d) > tolerance:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _end_candidates(points, lattice, first, n, ring, b, step, tolerance, out):
+    """The lattice points around point ``b``'s own within ``tolerance`` of the original
+    polyline near it (a lattice step and a half along it either way); their count."""
+    d = points.shape[1]
+    k = first + (b % n)
+    cand = np.empty((1, d))
+    count = 0
+    lo = _reach(points, first, n, ring, b % n, -1, 1.5 * step)
+    hi = _reach(points, first, n, ring, b % n, 1, 1.5 * step)
+    for t in range(3**d):
+        rest = t
+        for j in range(d):
+            out[count, j] = lattice[k, j] + rest % 3 - 1
+            rest //= 3
+            cand[0, j] = out[count, j] * step
+        if _near_original(cand, 0, points, first, n, ring, lo, hi, d, tolerance):
+            count += 1
+    return count
+
+
+@njit(cache=True, nogil=True)
+def lifted_reach_set(points, lattice, offsets, closed, step, tolerance, window):
+    """Greedy farthest reach whose vertices may sit off the curve (in place on ``lattice``).
+
+    As :func:`reach_set`, but a segment's end may be any lattice point around its point that
+    lies within ``tolerance`` of the original polyline, not only the point's own: on an arc a
+    vertex lifted to the outside lets the chord dip inside, so a segment may bend away from
+    the curve by the tolerance on both sides, not one.  Of the ends that keep the farthest
+    span, the one from which the next span reaches farthest is taken.  The ends of an open
+    curve and the start of a closed one keep their own lattice points.  Returns the mask of
+    kept points; their chosen lattice points are written into ``lattice``.
+    """
+    total, d = points.shape
+    keep = np.zeros(total, dtype=np.bool_)
+    count = 3**d
+    cands = np.empty((count, d), dtype=np.int64)
+    seg = np.empty((2, d))
+    for c in range(len(offsets) - 1):
+        first, stop = offsets[c], offsets[c + 1]
+        n = stop - first
+        if n == 0:
+            continue
+        is_ring = bool(closed[c]) and n > 2
+        last = n if is_ring else n - 1
+        keep[first] = True
+        keep[first + (last % n)] = True
+        a = 0
+        while a < last:
+            top = min(last, a + window)
+            for j in range(d):
+                seg[0, j] = lattice[first + (a % n), j] * step
+
+            best = a + 1
+            span = 1
+            fail = top + 1
+            while a + span <= top:
+                if (
+                    _fits_any(
+                        points,
+                        lattice,
+                        first,
+                        n,
+                        is_ring,
+                        a,
+                        a + span,
+                        last,
+                        step,
+                        tolerance,
+                        seg,
+                        cands,
+                    )
+                    >= 0
+                ):
+                    best = a + span
+                    span *= 2
+                else:
+                    fail = a + span
+                    break
+            if fail > top and best < top:
+                if (
+                    _fits_any(
+                        points,
+                        lattice,
+                        first,
+                        n,
+                        is_ring,
+                        a,
+                        top,
+                        last,
+                        step,
+                        tolerance,
+                        seg,
+                        cands,
+                    )
+                    >= 0
+                ):
+                    best = top
+                else:
+                    fail = top
+            while fail - best > 1:
+                middle = (best + fail) // 2
+                if (
+                    _fits_any(
+                        points,
+                        lattice,
+                        first,
+                        n,
+                        is_ring,
+                        a,
+                        middle,
+                        last,
+                        step,
+                        tolerance,
+                        seg,
+                        cands,
+                    )
+                    >= 0
+                ):
+                    best = middle
+                else:
+                    fail = middle
+            b = best + 2
+            while b <= min(top, best + 4):
+                if (
+                    _fits_any(
+                        points, lattice, first, n, is_ring, a, b, last, step, tolerance, seg, cands
+                    )
+                    >= 0
+                ):
+                    best = b
+                b += 1
+            # the end: of the positions that keep the span, the one the next span reaches
+            # farthest from (its own lattice point first on ties)
+            if best < last:
+                found = _end_candidates(
+                    points, lattice, first, n, is_ring, best, step, tolerance, cands
+                )
+                own = first + (best % n)
+                chosen = -1
+                chosen_reach = -1
+                for t in range(found):
+                    for j in range(d):
+                        seg[1, j] = cands[t, j] * step
+                    if not _span_to(points, first, n, a, best, seg, tolerance, d):
+                        continue
+                    reach = _next_reach(
+                        points, lattice, first, n, best, last, cands[t], step, tolerance, window
+                    )
+                    same = True
+                    for j in range(d):
+                        same = same and cands[t, j] == lattice[own, j]
+                    if reach > chosen_reach or (reach == chosen_reach and same):
+                        chosen, chosen_reach = t, reach
+                if chosen >= 0:
+                    for j in range(d):
+                        lattice[own, j] = cands[chosen, j]
+            keep[first + (best % n)] = True
+            a = best
+    return keep
+
+
+@njit(cache=True, nogil=True)
+def _fits_any(points, lattice, first, n, ring, a, b, last, step, tolerance, seg, cands):
+    """The index of an end position for point ``b`` that keeps the span from ``a`` (whose
+    position is ``seg[0]``), or -1.  The last point of the curve keeps its own position."""
+    d = points.shape[1]
+    if b >= last:
+        for j in range(d):
+            seg[1, j] = lattice[first + (b % n), j] * step
+        return 0 if _span_to(points, first, n, a, b, seg, tolerance, d) else -1
+    own = first + (b % n)
+    for j in range(d):
+        seg[1, j] = lattice[own, j] * step
+    if _span_to(points, first, n, a, b, seg, tolerance, d):
+        return 0
+    found = _end_candidates(points, lattice, first, n, ring, b, step, tolerance, cands)
+    for t in range(found):
+        for j in range(d):
+            seg[1, j] = cands[t, j] * step
+        if _span_to(points, first, n, a, b, seg, tolerance, d):
+            return t
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def _next_reach(points, lattice, first, n, a, last, position, step, tolerance, window):
+    """How far a span from point ``a`` at lattice ``position`` reaches, to the points' own
+    lattice positions (galloping, as :func:`reach_set`)."""
+    d = points.shape[1]
+    seg = np.empty((2, d))
+    for j in range(d):
+        seg[0, j] = position[j] * step
+    top = min(last, a + window)
+    best = a + 1
+    span = 1
+    while a + span <= top:
+        b = a + span
+        for j in range(d):
+            seg[1, j] = lattice[first + (b % n), j] * step
+        if not _span_to(points, first, n, a, b, seg, tolerance, d):
+            break
+        best = b
+        span *= 2
+    return best

@@ -935,20 +935,30 @@ def _encode_vertex(
         points_r = np.ascontiguousarray(points[order_rows])
         lattice = np.ascontiguousarray(lattice[order_rows])
         decoded = np.ascontiguousarray(decoded[order_rows])
-        zeros = np.zeros(len(offsets) - 1, dtype=np.int64)
-        keep = curvecoder.reach_set(
-            points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW
-        )
-        rows = _cheapest_starts(lattice, keep, offsets, closed)
-        points_r, lattice, decoded, keep = (
-            np.ascontiguousarray(points_r[rows]),
-            np.ascontiguousarray(lattice[rows]),
-            np.ascontiguousarray(decoded[rows]),
-            np.ascontiguousarray(keep[rows]),
-        )
-        kept = np.ascontiguousarray(decoded[keep])
-        if not np.all(curvecoder.check_set(points_r, offsets, closed, keep, kept) <= tolerance):
+        # vertices lifted off the curve where that lets a span reach farther; where the
+        # measured bound then fails, the points' own lattice points
+        for lifted in (True, False) if d == 2 else (False,):  # lifting: plane curves only
+            if lifted:
+                moved = lattice.copy()
+                keep = curvecoder.lifted_reach_set(
+                    points_r, moved, offsets, closed, step, tolerance, _VERTEX_WINDOW
+                )
+            else:
+                moved = lattice
+                zeros = np.zeros(len(offsets) - 1, dtype=np.int64)
+                keep = curvecoder.reach_set(
+                    points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW
+                )
+            rows = _cheapest_starts(moved, keep, offsets, closed)
+            trial_points = np.ascontiguousarray(points_r[rows])
+            trial_lattice = np.ascontiguousarray(moved[rows])
+            keep = np.ascontiguousarray(keep[rows])
+            kept = _lattice_values(trial_lattice[keep], step, dtype).astype(np.float64)
+            if np.all(curvecoder.check_set(trial_points, offsets, closed, keep, kept) <= tolerance):
+                break
+        else:
             continue
+        points_r, lattice = trial_points, trial_lattice
         counts = np.add.reduceat(keep, offsets[:-1]).astype(np.int64)
         again = np.array(repeated, dtype=np.int64)
         # the predictor that writes the fewest bytes: the previous vertex (order 0), a straight
