@@ -937,26 +937,29 @@ def _encode_vertex(
         decoded = np.ascontiguousarray(decoded[order_rows])
         # vertices lifted off the curve where that lets a span reach farther; where the
         # measured bound then fails, the points' own lattice points
-        for lifted in (True, False) if d == 2 else (False,):  # lifting: plane curves only
-            if lifted:
-                moved = lattice.copy()
-                keep = curvecoder.lifted_reach_set(
-                    points_r, moved, offsets, closed, step, tolerance, _VERTEX_WINDOW
-                )
-            else:
-                moved = lattice
-                zeros = np.zeros(len(offsets) - 1, dtype=np.int64)
-                keep = curvecoder.reach_set(
-                    points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW
-                )
-            rows = _cheapest_starts(moved, keep, offsets, closed)
-            trial_points = np.ascontiguousarray(points_r[rows])
-            trial_lattice = np.ascontiguousarray(moved[rows])
-            keep = np.ascontiguousarray(keep[rows])
-            kept = _lattice_values(trial_lattice[keep], step, dtype).astype(np.float64)
-            if np.all(curvecoder.check_set(trial_points, offsets, closed, keep, kept) <= tolerance):
-                break
-        else:
+        zeros = np.zeros(len(offsets) - 1, dtype=np.int64)
+        keep = curvecoder.reach_set(
+            points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW
+        )
+        moved = lattice
+        if d == 2:  # lifting costs 3**d positions per end: plane curves only
+            # vertices lifted off the curve where that lets a span reach farther; a curve
+            # whose measured bound then fails keeps its own points' lattice points
+            lifted = lattice.copy()
+            lifted_keep = curvecoder.lifted_reach_set(
+                points_r, lifted, offsets, closed, step, tolerance, _VERTEX_WINDOW
+            )
+            kept = _lattice_values(lifted[lifted_keep], step, dtype).astype(np.float64)
+            fits = curvecoder.check_set(points_r, offsets, closed, lifted_keep, kept) <= tolerance
+            rows_lifted = np.repeat(fits, np.diff(offsets))
+            keep = np.where(rows_lifted, lifted_keep, keep)
+            moved = np.where(rows_lifted[:, None], lifted, lattice)
+        rows = _cheapest_starts(moved, keep, offsets, closed)
+        trial_points = np.ascontiguousarray(points_r[rows])
+        trial_lattice = np.ascontiguousarray(moved[rows])
+        keep = np.ascontiguousarray(keep[rows])
+        kept = _lattice_values(trial_lattice[keep], step, dtype).astype(np.float64)
+        if not np.all(curvecoder.check_set(trial_points, offsets, closed, keep, kept) <= tolerance):
             continue
         points_r, lattice = trial_points, trial_lattice
         counts = np.add.reduceat(keep, offsets[:-1]).astype(np.int64)
