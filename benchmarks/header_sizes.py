@@ -74,6 +74,24 @@ def curve_sets() -> None:
             )
 
 
+def curve_headers() -> None:
+    """``encode_curve``'s overhead (``header_bytes``: everything but the chunks) by length,
+    open and closed, in two and three dimensions, with the levels it chose."""
+    print()
+    print("| encode_curve | 8 points | 50 points | 1000 points | 50 000 points |")
+    print("|---|---:|---:|---:|---:|")
+    for d in (2, 3):
+        for closed in (False, True):
+            cells = []
+            for n in (8, 50, 1000, 50_000):
+                t = np.linspace(0, 1, n)
+                points = np.stack([t, np.sin(6 * t) * t, np.cos(3 * t)][:d], 1)
+                info = wavecore.inspect(wavecore.encode_curve(points, closed=closed))
+                cells.append(f"{info['header_bytes']} B ({info['levels']} levels)")
+            name = f"{d}-D, {'closed' if closed else 'open'}"
+            print(f"| {name} | " + " | ".join(cells) + " |")
+
+
 def main() -> None:
     print(f"load average {os.getloadavg()[0]:.2f}")
     print("| bundle | levels | payload | header 1.1 | header 2.0 | bundle 1.1 | bundle 2.0 |")
@@ -91,6 +109,7 @@ def main() -> None:
             f"| {len(old)} | {len(bundle)} |"
         )
     curve_sets()
+    curve_headers()
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """The vertex coder of curve-set format version 2: lattice vertices, predicted and range-coded.
 
 A curve set at a guaranteed tolerance is, at heart, a list of polylines whose vertices may move
-by a bounded amount.  This module keeps a subset of each curve's points (a Douglas–Peucker
+by a bounded amount.  This module keeps a subset of each curve's points (a greedy farthest-reach
 simplification whose distances are measured to the *quantized* segments, so the rounding is
 part of the test, not a margin taken off it), rounds them to a lattice of step ``q``, and codes
 the lattice differences with an adaptive binary range coder and small contexts.  Everything
@@ -16,6 +16,9 @@ are the curve's own and its stream format must not move when the image coder's d
 arithmetic is on integers: every machine writes and reads the same bits.
 
 One function (:func:`_code_set`) both encodes and decodes, so the two cannot drift apart.
+
+Predictors: ``order`` 0–2 predict a step as a multiple of the previous one; 3 and 4 (plane
+curves) code the step along and across a predicted direction (docs/curves.md, step 4).
 
 Integers are coded as a sign and a magnitude; the magnitude as its bit length ``k`` (unary,
 adaptive, in a context) and then its ``k - 1`` lower bits (adaptive per ``(k, position)``).
@@ -42,12 +45,25 @@ _UNARY = MAX_BITS + 1
 _KIND_COUNT, _KIND_START = 0, 1  # a curve's first vertex: one context set per coordinate (4)
 _FIRST_COORD = _KIND_START + 4
 _OTHER_COORD = _FIRST_COORD + _CLASSES
-_MAG_KINDS = _OTHER_COORD + _CLASSES * 4
+_ALONG = _OTHER_COORD + _CLASSES * 4  # frame predictor: along the predicted direction
+_ACROSS = _ALONG + _CLASSES  # and across it
+_MAG_KINDS = _ACROSS + _CLASSES
 MAG_BASE = 0
 MANT_BASE = MAG_BASE + _MAG_KINDS * _UNARY
 MANT_SIZE = (MAX_BITS + 1) * MAX_BITS
 SIGN_BASE = MANT_BASE + MANT_SIZE
-SIGN_SIZE = 3 * 4 + 4  # by the previous residual's sign and the coordinate; first vertices
+SIGN_SIZE = 3 * 4 + 4 + 4  # by the previous residual's sign and the coordinate; first
+# vertices; the frame predictor's along (1) and across (3, by the previous across residual)
+_SIGN_ALONG = 16
+_SIGN_ACROSS = 17
+#: Predictors: 0 the previous vertex, 1 half a step on, 2 a straight continuation; 3 and 4
+#: (two dimensions) code a step in the frame of its predicted direction: the previous step's
+#: (3) or that direction turned again by the previous turn (4).
+FRAME_ORDERS = (3, 4)
+#: Refinement tries at most this many positions per vertex (cheapest first), so that its cost
+#: stays within a small multiple of the points' count.
+_REFINE_TRIES = 48
+_FRAME_LIMIT = 1 << 20  # steps longer than this (lattice units) are coded without the frame
 FLAG_BASE = SIGN_BASE + SIGN_SIZE
 FLAG_SIZE = 4
 MODELS = FLAG_BASE + FLAG_SIZE
@@ -171,6 +187,60 @@ def _class(k):
 
 
 @njit(cache=True, nogil=True)
+def _frame(lattice, v, first, order):
+    """The predicted direction of the step into vertex ``v`` (two dimensions): ``(x, y)`` in
+    lattice units, ``(0, 0)`` where there is none (the curve's first two steps, or steps too
+    long for exact integer arithmetic)."""
+    if v - first < 2:
+        return 0, 0
+    sx = lattice[v - 1, 0] - lattice[v - 2, 0]
+    sy = lattice[v - 1, 1] - lattice[v - 2, 1]
+    if max(abs(sx), abs(sy)) >= _FRAME_LIMIT:
+        return 0, 0
+    if order == 4 and v - first >= 3:
+        px = lattice[v - 2, 0] - lattice[v - 3, 0]
+        py = lattice[v - 2, 1] - lattice[v - 3, 1]
+        if 0 < max(abs(px), abs(py)) < 1 << 10 and max(abs(sx), abs(sy)) < 1 << 10:
+            # s turned by the angle from p to s: s * s * conj(p), as Gaussian integers
+            ax, ay = sx * sx - sy * sy, 2 * sx * sy
+            return ax * px + ay * py, ay * px - ax * py
+    return sx, sy
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _to_frame(zx, zy, x, y):
+    """``(x, y)`` in the signed-permutation frame that puts ``(zx, zy)`` in the first octant
+    (``zx >= zy >= 0``): a bijection of the integer lattice."""
+    if zx < 0:
+        x = -x
+    if zy < 0:
+        y = -y
+    if abs(zy) > abs(zx):
+        return y, x
+    return x, y
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _from_frame(zx, zy, u, w):
+    if abs(zy) > abs(zx):
+        u, w = w, u
+    if zx < 0:
+        u = -u
+    if zy < 0:
+        w = -w
+    return u, w
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _across_prediction(zx, zy, u):
+    """The across coordinate predicted for the along one ``u``: on the predicted line."""
+    a, b = max(abs(zx), abs(zy)), min(abs(zx), abs(zy))
+    if a == 0 or abs(u) >= _FRAME_LIMIT:
+        return 0
+    return (2 * u * b + a) // (2 * a)
+
+
+@njit(cache=True, nogil=True)
 def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order, decoding):
     """Code (or decode into ``lattice``, ``counts``, ``closed``, ``repeated``) a whole set.
 
@@ -180,6 +250,7 @@ def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order,
     Returns the number of vertices (decoding: those written; -1 if the stream declares more
     than ``lattice`` holds).
     """
+    plain = order if order < 3 else 0  # the frame predictors' steps without a frame
     models = np.empty(2 * MODELS, dtype=np.int64)
     for i in range(MODELS):
         models[2 * i] = PROB_HALF
@@ -212,7 +283,32 @@ def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order,
         for j in range(d):
             previous_step[j] = 0
             previous_residual[j] = 0
+        across_sign = 0
         for v in range(at + 1, at + m):
+            if order >= 3 and d == 2:
+                zx, zy = _frame(lattice, v, at, order)
+                if zx != 0 or zy != 0:
+                    u, w = 0, 0
+                    if not decoding:
+                        u, w = _to_frame(
+                            zx,
+                            zy,
+                            lattice[v, 0] - lattice[v - 1, 0],
+                            lattice[v, 1] - lattice[v - 1, 1],
+                        )
+                    u = _signed(st, buf, models, _ALONG + length_class, _SIGN_ALONG, u, decoding)
+                    predicted = _across_prediction(zx, zy, u)
+                    kind = _ACROSS + _class(_bit_length(abs(u)))
+                    sign_ctx = _SIGN_ACROSS + 1 + across_sign
+                    r = _signed(st, buf, models, kind, sign_ctx, w - predicted, decoding)
+                    across_sign = (r > 0) - (r < 0)
+                    w = predicted + r
+                    x, y = _from_frame(zx, zy, u, w)
+                    if decoding:
+                        lattice[v, 0] = lattice[v - 1, 0] + x
+                        lattice[v, 1] = lattice[v - 1, 1] + y
+                    length_class = _class(_bit_length(max(abs(x), abs(y))))
+                    continue
             first_class = 0
             largest = 0
             for j in range(d):
@@ -222,7 +318,7 @@ def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order,
                     kind = _OTHER_COORD + length_class * 4 + min(first_class, 3)
                 r = previous_residual[j]
                 sign_ctx = 1 + (r > 0) - (r < 0) + 3 * min(j, 3)
-                predicted = lattice[v - 1, j] + ((order * previous_step[j]) >> 1)
+                predicted = lattice[v - 1, j] + ((plain * previous_step[j]) >> 1)
                 value = 0 if decoding else lattice[v, j] - predicted
                 value = _signed(st, buf, models, kind, sign_ctx, value, decoding)
                 if decoding:
@@ -340,83 +436,77 @@ def _segment_distance(points, k, nodes, a, b, d):
 
 
 @njit(cache=True, nogil=True)
-def simplify_set(points, decoded, offsets, closed, tolerance, chunk):
-    """Douglas–Peucker on each curve, distances measured to the *decoded* (lattice) segments.
+def _span_fits(points, decoded, first, n, a, b, tolerance, d):
+    """The largest distance from the points strictly between ``a`` and ``b`` (ring indices)
+    to the decoded segment ``a``–``b``, stopping early once above ``tolerance``."""
+    worst = 0.0
+    end = first + (b % n)
+    for k in range(a + 1, b):
+        gap = _segment_distance(points, first + (k % n), decoded, first + (a % n), end, d)
+        if gap > worst:
+            worst = gap
+            if worst > tolerance:
+                break
+    return worst
 
-    ``points`` are the originals and ``decoded`` each point's lattice position, both
-    ``(total, d)``; curve ``c`` is rows ``offsets[c]:offsets[c + 1]``.  Vertices every
-    ``chunk`` points are kept, so the cost is at most ``chunk`` per point (linear), whatever
-    the shape.  Returns a mask of the kept points.
+
+@njit(cache=True, nogil=True)
+def reach_set(points, decoded, offsets, closed, starts, tolerance, window):
+    """Greedy farthest reach on each curve, distances to the *decoded* (lattice) segments.
+
+    From each kept point the next one is the farthest (within ``window`` points) whose
+    segment keeps every point between within ``tolerance``, found by galloping and bisection
+    (then a few points beyond the first miss), so the cost is ``O(L log L)`` for a segment of
+    ``L`` points: linear-ish whatever the shape.  A closed
+    curve starts at ring index ``starts[c]`` (the caller rotates it there).  Greedy reach
+    keeps fewer vertices than Douglas–Peucker (which splits at the worst point, not where a
+    segment could end).  Returns a mask of the kept points.
     """
     total, d = points.shape
     keep = np.zeros(total, dtype=np.bool_)
-    stack = np.empty((2 * chunk + 8, 2), dtype=np.int64)
     for c in range(len(offsets) - 1):
         first, stop = offsets[c], offsets[c + 1]
         n = stop - first
         if n == 0:
             continue
-        keep[first] = True
-        if not (closed[c] and n > 2):
-            keep[stop - 1] = True
-        ring = n + 1 if closed[c] and n > 2 else n  # index n is point 0 again
-        a = 0
-        while a < ring - 1:
-            b = min(a + chunk, ring - 1)
-            keep[first + (b % n)] = True
-            top = 0
-            stack[0, 0], stack[0, 1] = a, b
-            top = 1
-            while top > 0:
-                top -= 1
-                lo, hi = stack[top, 0], stack[top, 1]
-                if hi - lo < 2:
-                    continue
-                worst, where = -1.0, lo + 1
-                for k in range(lo + 1, hi):
-                    gap = _segment_distance(
-                        points, first + k, decoded, first + lo, first + (hi % n), d
-                    )
-                    if gap > worst:
-                        worst, where = gap, k
-                if worst > tolerance:
-                    keep[first + where] = True
-                    stack[top, 0], stack[top, 1] = lo, where
-                    stack[top + 1, 0], stack[top + 1, 1] = where, hi
-                    top += 2
-            a = b
-        # Douglas-Peucker keeps more than it needs: drop each vertex whose two segments one
-        # segment can replace (spans capped at two windows, so the cost stays linear)
-        before = 0
-        v = _next_kept(keep, first, 0, ring, n)
-        while v < ring - 1:
-            after = _next_kept(keep, first, v, ring, n)
-            if after - before <= 2 * chunk and (after < ring - 1 or closed[c] or after == n - 1):
-                fits = True
-                for k in range(before + 1, after):
-                    end = first + (after % n)
-                    if (
-                        _segment_distance(points, first + k, decoded, first + before, end, d)
-                        > tolerance
-                    ):
-                        fits = False
-                        break
-                if fits and not (v == n - 1 and not closed[c]):
-                    keep[first + v] = False
-                    v = after
-                    continue
-            before = v
-            v = after
+        ring = n + 1 if closed[c] and n > 2 else n
+        a = starts[c] if ring > n else 0
+        last = a + ring - 1  # ring index of the end (the start again on a closed curve)
+        keep[first + (a % n)] = True
+        keep[first + (last % n)] = True
+        while a < last:
+            top = min(last, a + window)
+            # gallop: spans of 2, 4, 8, … points while they fit, then bisect the last gap
+            best = a + 1
+            span = 2
+            fail = top + 1
+            while a + span <= top:
+                if _span_fits(points, decoded, first, n, a, a + span, tolerance, d) <= tolerance:
+                    best = a + span
+                    span *= 2
+                else:
+                    fail = a + span
+                    break
+            if fail > top and best < top:
+                if _span_fits(points, decoded, first, n, a, top, tolerance, d) <= tolerance:
+                    best = top
+                else:
+                    fail = top
+            while fail - best > 1:
+                middle = (best + fail) // 2
+                if _span_fits(points, decoded, first, n, a, middle, tolerance, d) <= tolerance:
+                    best = middle
+                else:
+                    fail = middle
+            # a span may fit again past a miss (the curve comes back): look a few points on
+            b = best + 2
+            while b <= min(top, best + 4):
+                if _span_fits(points, decoded, first, n, a, b, tolerance, d) <= tolerance:
+                    best = b
+                b += 1
+            keep[first + (best % n)] = True
+            a = best
     return keep
-
-
-@njit(cache=True, nogil=True)
-def _next_kept(keep, first, v, ring, n):
-    """The ring index of the next kept point after ``v`` (``ring - 1`` at the end)."""
-    k = v + 1
-    while k < ring - 1 and not keep[first + (k % n)]:
-        k += 1
-    return k
 
 
 @njit(cache=True, nogil=True)
@@ -432,6 +522,22 @@ def _to_original(query, q, points, first, n, closed, lo, hi, d):
             b = n - 1
         best = min(best, _segment_distance(query, q, points, first + a, first + b, d))
     return best
+
+
+@njit(cache=True, nogil=True)
+def _near_original(query, q, points, first, n, closed, lo, hi, d, tolerance):
+    """Whether ``query[q]`` lies within ``tolerance`` of the original segments ``lo … hi - 1``
+    (:func:`_to_original`, stopping at the first segment near enough)."""
+    if n == 1:
+        return _segment_distance(query, q, points, first, first, d) <= tolerance
+    for s in range(lo, hi):
+        a = s % n if closed else s
+        b = (s + 1) % n if closed else s + 1
+        if not closed and b >= n:
+            b = n - 1
+        if _segment_distance(query, q, points, first + a, first + b, d) <= tolerance:
+            return True
+    return False
 
 
 @njit(cache=True, nogil=True)
@@ -526,6 +632,14 @@ def _residual_cost(r, d):
 
 
 @njit(cache=True, nogil=True)
+def _frame_cost(zx, zy, x, y):
+    """About the bits of the step ``(x, y)`` under the frame predictor of direction ``(zx, zy)``."""
+    u, w = _to_frame(zx, zy, x, y)
+    r = w - _across_prediction(zx, zy, u)
+    return 2 * _bit_length(abs(u)) + (u != 0) + 2 * _bit_length(abs(r)) + (r != 0)
+
+
+@njit(cache=True, nogil=True)
 def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, radius):
     """Move each kept vertex to the lattice point nearest the coder's prediction that keeps the
     bound (in place on ``lattice``, the kept vertices in order).
@@ -541,6 +655,10 @@ def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, r
     """
     d = points.shape[1]
     table, costs = _offsets_by_cost(d, radius)
+    frame = order >= 3 and d == 2
+    tried = np.empty((len(table), d), dtype=np.int64)
+    frame_cost = np.empty(len(table), dtype=np.int64)
+    centre = 0  # the table's zero offset comes first (it is the cheapest)
     index = np.empty(points.shape[0] + 1, dtype=np.int64)
     seg = np.empty((2, d))
     cand = np.empty((1, d))
@@ -560,18 +678,40 @@ def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, r
         for v in range(1, last):
             for j in range(d):
                 step_before = lattice[at + v - 1, j] - lattice[at + v - 2, j] if v >= 2 else 0
-                predicted[j] = lattice[at + v - 1, j] + ((order * step_before) >> 1)
+                predicted[j] = lattice[at + v - 1, j] + ((min(order, 2) * step_before) >> 1)
                 residual[j] = lattice[at + v, j] - predicted[j]
             own = _residual_cost(residual, d)
             after = at + v + 1 if v + 1 < m else at
             k_before, k_here = index[v - 1], index[v]
             k_after = index[v + 1] if v + 1 < m else n
-            for t in range(len(table)):
-                if costs[t] >= own:
-                    break
+            tries = 0
+            if frame:
+                zx, zy = _frame(lattice, at + v, at, order)
+                if zx == 0 and zy == 0:
+                    continue
+                for t in range(len(table)):
+                    x = lattice[at + v, 0] + table[t, 0] - lattice[at + v - 1, 0]
+                    y = lattice[at + v, 1] + table[t, 1] - lattice[at + v - 1, 1]
+                    frame_cost[t] = _frame_cost(zx, zy, x, y)
+                ranked = np.argsort(frame_cost, kind="mergesort")
+                own = frame_cost[centre]
+                for t in ranked:
+                    if frame_cost[t] >= own or tries == _REFINE_TRIES:
+                        break
+                    for j in range(d):
+                        tried[tries, j] = lattice[at + v, j] + table[t, j]
+                    tries += 1
+            else:
+                for t in range(len(table)):
+                    if costs[t] >= own or tries == _REFINE_TRIES:
+                        break
+                    for j in range(d):
+                        tried[tries, j] = predicted[j] + table[t, j]
+                    tries += 1
+            for t in range(tries):
                 for j in range(d):
                     seg[0, j] = lattice[at + v - 1, j] * step
-                    seg[1, j] = (predicted[j] + table[t, j]) * step
+                    seg[1, j] = tried[t, j] * step
                     cand[0, j] = seg[1, j]
                 # near the original polyline around it
                 if _to_original(cand, 0, points, first, n, ring, k_before, k_after, d) > tolerance:
@@ -592,7 +732,7 @@ def refine_set(points, offsets, closed, keep, lattice, step, tolerance, order, r
                     k += 1
                 if fits:
                     for j in range(d):
-                        lattice[at + v, j] = predicted[j] + table[t, j]
+                        lattice[at + v, j] = tried[t, j]
                     break
         at += m
 
@@ -652,6 +792,12 @@ def snap_set(points, offsets, closed, step, tolerance):
                 if np.sqrt(gap2) > tolerance:
                     return lattice, False
                 continue
+            own2 = 0.0
+            for j in range(d):
+                g = base[j] * step - points[k, j]
+                own2 += g * g
+            if own2 <= tolerance * tolerance:
+                continue  # the nearest lattice point, and within the tolerance of the polyline
             best, best_own = np.inf, np.inf
             # the original polyline around the point: a lattice step and a half each way
             # (at most 32 segments, so the cost stays linear)
@@ -665,11 +811,10 @@ def snap_set(points, offsets, closed, step, tolerance):
                     rest //= 3
                     g = cand[0, j] - points[k, j]
                     own2 += g * g
-                gap = _to_original(cand, 0, points, first, n, ring, lo, hi, d)
-                if gap > tolerance:
+                if not _near_original(cand, 0, points, first, n, ring, lo, hi, d, tolerance):
                     continue
                 if own2 < best_own:
-                    best, best_own = gap, own2
+                    best, best_own = 0.0, own2
                     rest = t
                     for j in range(d):
                         lattice[k, j] = base[j] + rest % 3 - 1
@@ -677,3 +822,220 @@ def snap_set(points, offsets, closed, step, tolerance):
             if best > tolerance:
                 return lattice, False
     return lattice, True
+
+
+@njit(cache=True, nogil=True)
+def _span_to(points, first, n, a, b, seg, tolerance, d):
+    """Whether every point ``a + 1 … b`` (ring indices) lies within ``tolerance`` of the
+    segment ``seg[0]``–``seg[1]``."""
+    for k in range(a + 1, b + 1):
+        if _segment_distance(points, first + (k % n), seg, 0, 1, d) > tolerance:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _end_candidates(points, lattice, first, n, ring, b, step, tolerance, out):
+    """The lattice points around point ``b``'s own within ``tolerance`` of the original
+    polyline near it (a lattice step and a half along it either way); their count."""
+    d = points.shape[1]
+    k = first + (b % n)
+    cand = np.empty((1, d))
+    count = 0
+    lo = _reach(points, first, n, ring, b % n, -1, 1.5 * step)
+    hi = _reach(points, first, n, ring, b % n, 1, 1.5 * step)
+    for t in range(3**d):
+        rest = t
+        for j in range(d):
+            out[count, j] = lattice[k, j] + rest % 3 - 1
+            rest //= 3
+            cand[0, j] = out[count, j] * step
+        if _near_original(cand, 0, points, first, n, ring, lo, hi, d, tolerance):
+            count += 1
+    return count
+
+
+@njit(cache=True, nogil=True)
+def lifted_reach_set(points, lattice, offsets, closed, step, tolerance, window):
+    """Greedy farthest reach whose vertices may sit off the curve (in place on ``lattice``).
+
+    As :func:`reach_set`, but a segment's end may be any lattice point around its point that
+    lies within ``tolerance`` of the original polyline, not only the point's own: on an arc a
+    vertex lifted to the outside lets the chord dip inside, so a segment may bend away from
+    the curve by the tolerance on both sides, not one.  Of the ends that keep the farthest
+    span, the one from which the next span reaches farthest is taken.  The ends of an open
+    curve and the start of a closed one keep their own lattice points.  Returns the mask of
+    kept points; their chosen lattice points are written into ``lattice``.
+    """
+    total, d = points.shape
+    keep = np.zeros(total, dtype=np.bool_)
+    count = 3**d
+    cands = np.empty((count, d), dtype=np.int64)
+    seg = np.empty((2, d))
+    for c in range(len(offsets) - 1):
+        first, stop = offsets[c], offsets[c + 1]
+        n = stop - first
+        if n == 0:
+            continue
+        is_ring = bool(closed[c]) and n > 2
+        last = n if is_ring else n - 1
+        keep[first] = True
+        keep[first + (last % n)] = True
+        a = 0
+        while a < last:
+            top = min(last, a + window)
+            for j in range(d):
+                seg[0, j] = lattice[first + (a % n), j] * step
+
+            best = a + 1
+            span = 1
+            fail = top + 1
+            while a + span <= top:
+                if (
+                    _fits_any(
+                        points,
+                        lattice,
+                        first,
+                        n,
+                        is_ring,
+                        a,
+                        a + span,
+                        last,
+                        step,
+                        tolerance,
+                        seg,
+                        cands,
+                    )
+                    >= 0
+                ):
+                    best = a + span
+                    span *= 2
+                else:
+                    fail = a + span
+                    break
+            if fail > top and best < top:
+                if (
+                    _fits_any(
+                        points,
+                        lattice,
+                        first,
+                        n,
+                        is_ring,
+                        a,
+                        top,
+                        last,
+                        step,
+                        tolerance,
+                        seg,
+                        cands,
+                    )
+                    >= 0
+                ):
+                    best = top
+                else:
+                    fail = top
+            while fail - best > 1:
+                middle = (best + fail) // 2
+                if (
+                    _fits_any(
+                        points,
+                        lattice,
+                        first,
+                        n,
+                        is_ring,
+                        a,
+                        middle,
+                        last,
+                        step,
+                        tolerance,
+                        seg,
+                        cands,
+                    )
+                    >= 0
+                ):
+                    best = middle
+                else:
+                    fail = middle
+            b = best + 2
+            while b <= min(top, best + 4):
+                if (
+                    _fits_any(
+                        points, lattice, first, n, is_ring, a, b, last, step, tolerance, seg, cands
+                    )
+                    >= 0
+                ):
+                    best = b
+                b += 1
+            # the end: of the positions that keep the span, the one the next span reaches
+            # farthest from (its own lattice point first on ties)
+            if best < last:
+                found = _end_candidates(
+                    points, lattice, first, n, is_ring, best, step, tolerance, cands
+                )
+                own = first + (best % n)
+                chosen = -1
+                chosen_reach = -1
+                for t in range(found):
+                    for j in range(d):
+                        seg[1, j] = cands[t, j] * step
+                    if not _span_to(points, first, n, a, best, seg, tolerance, d):
+                        continue
+                    reach = _next_reach(
+                        points, lattice, first, n, best, last, cands[t], step, tolerance, window
+                    )
+                    same = True
+                    for j in range(d):
+                        same = same and cands[t, j] == lattice[own, j]
+                    if reach > chosen_reach or (reach == chosen_reach and same):
+                        chosen, chosen_reach = t, reach
+                if chosen >= 0:
+                    for j in range(d):
+                        lattice[own, j] = cands[chosen, j]
+            keep[first + (best % n)] = True
+            a = best
+    return keep
+
+
+@njit(cache=True, nogil=True)
+def _fits_any(points, lattice, first, n, ring, a, b, last, step, tolerance, seg, cands):
+    """The index of an end position for point ``b`` that keeps the span from ``a`` (whose
+    position is ``seg[0]``), or -1.  The last point of the curve keeps its own position."""
+    d = points.shape[1]
+    if b >= last:
+        for j in range(d):
+            seg[1, j] = lattice[first + (b % n), j] * step
+        return 0 if _span_to(points, first, n, a, b, seg, tolerance, d) else -1
+    own = first + (b % n)
+    for j in range(d):
+        seg[1, j] = lattice[own, j] * step
+    if _span_to(points, first, n, a, b, seg, tolerance, d):
+        return 0
+    found = _end_candidates(points, lattice, first, n, ring, b, step, tolerance, cands)
+    for t in range(found):
+        for j in range(d):
+            seg[1, j] = cands[t, j] * step
+        if _span_to(points, first, n, a, b, seg, tolerance, d):
+            return t
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def _next_reach(points, lattice, first, n, a, last, position, step, tolerance, window):
+    """How far a span from point ``a`` at lattice ``position`` reaches, to the points' own
+    lattice positions (galloping, as :func:`reach_set`)."""
+    d = points.shape[1]
+    seg = np.empty((2, d))
+    for j in range(d):
+        seg[0, j] = position[j] * step
+    top = min(last, a + window)
+    best = a + 1
+    span = 1
+    while a + span <= top:
+        b = a + span
+        for j in range(d):
+            seg[1, j] = lattice[first + (b % n), j] * step
+        if not _span_to(points, first, n, a, b, seg, tolerance, d):
+            break
+        best = b
+        span *= 2
+    return best

@@ -105,15 +105,17 @@ VERTEX_STEPS = (1.4, 1.0, 0.7, 0.5, 0.35, 0.25, 1.9, 1.7, 1.55, 1.8, 1.6, 1.47)
 #: this many tolerances) are used with snapped vertices: the lattice point nearest the curve
 #: (across it) rather than nearest the point.
 _SNAP_LIMIT = 1.4
-#: Douglas–Peucker runs within windows of this many points (a vertex is kept at each window's
-#: end), so that its cost stays linear whatever the shape.
+#: Greedy reach looks at most this many points ahead (a vertex is kept at least this often),
+#: so that its cost stays linear whatever the shape.
 _VERTEX_WINDOW = 512
 #: Lattice coordinates beyond this many steps are not vertex-coded (the wavelet form takes them).
 _VERTEX_LIMIT = 1 << 46
 #: The decoder refuses a vertex-coded set that declares more curves or values than this many
 #: per byte of its stream (the encoder uses the wavelet form for such sets).
 VERTEX_PER_BYTE = 4096
-_VERTEX_ORDERS = (0, 1, 2)
+_VERTEX_ORDERS = (0, 1, 2, 3, 4)
+#: A closed curve may start at a vertex where it turns by more than this (its cosine): 45°.
+_CORNER_COSINE = 0.7
 #: How far (lattice steps per coordinate, for d = 1, 2, 3) a vertex may move towards its
 #: prediction; curves of more dimensions keep their rounded vertices.
 _REFINE_RADIUS = (64, 7, 3)
@@ -807,6 +809,81 @@ def _lattice_values(lattice: np.ndarray, step: float, dtype: np.dtype[Any]) -> n
         return _finish(lattice.astype(np.float64) * step, dtype)
 
 
+def _start_rotation(
+    points: np.ndarray,
+    decoded: np.ndarray,
+    offsets: np.ndarray,
+    closed: np.ndarray,
+    tolerance: float,
+) -> np.ndarray:
+    """Row order that starts each closed curve where greedy reach keeps the fewest vertices.
+
+    A closed curve's start is always a vertex, so a start in the middle of a smooth stretch
+    costs one.  Tried: point 0 and the first few vertices that greedy reach from point 0
+    keeps (natural corners); each curve takes the start with the fewest vertices.
+    """
+    count = len(offsets) - 1
+    starts = np.zeros(count, dtype=np.int64)
+    if not np.any(closed):
+        return np.arange(len(points))
+    zeros = np.zeros(count, dtype=np.int64)
+    keep = curvecoder.reach_set(points, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW)
+    best = np.add.reduceat(keep, offsets[:-1]) if count else zeros
+    kept = np.flatnonzero(keep)
+    for nth in (1, 2, 3):
+        trial = zeros.copy()
+        for c in range(count):
+            first, stop = int(offsets[c]), int(offsets[c + 1])
+            inside = kept[np.searchsorted(kept, first) : np.searchsorted(kept, stop)]
+            if closed[c] and len(inside) > nth:
+                trial[c] = inside[nth] - first
+        found = curvecoder.reach_set(
+            points, decoded, offsets, closed, trial, tolerance, _VERTEX_WINDOW
+        )
+        counts = np.add.reduceat(found, offsets[:-1])
+        better = counts < best
+        starts[better] = trial[better]
+        best = np.minimum(best, counts)
+    rows = np.arange(len(points))
+    for rotated in np.flatnonzero(starts).tolist():
+        first, stop = int(offsets[rotated]), int(offsets[rotated + 1])
+        rows[first:stop] = np.roll(rows[first:stop], -int(starts[rotated]))
+    return rows
+
+
+def _cheapest_starts(
+    lattice: np.ndarray, keep: np.ndarray, offsets: np.ndarray, closed: np.ndarray
+) -> np.ndarray:
+    """Row order that starts each closed curve at the kept vertex nearest (in coded bits) the
+    previous curve's first vertex, from which the coder codes a curve's first vertex.
+
+    The polygon and its vertices stay the same: only which of them comes first changes.
+    """
+    rows = np.arange(len(lattice))
+    previous = np.zeros(lattice.shape[1], dtype=np.int64)
+    for c in range(len(offsets) - 1):
+        first, stop = int(offsets[c]), int(offsets[c + 1])
+        if stop == first:
+            continue
+        kept = np.flatnonzero(keep[first:stop])
+        if closed[c] and stop - first > 2 and len(kept) > 2:
+            vertices = lattice[first + kept].astype(np.float64)
+            before = vertices - np.roll(vertices, 1, axis=0)
+            after = np.roll(vertices, -1, axis=0) - vertices
+            norms = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
+            turn = np.einsum("ij,ij->i", before, after) / np.maximum(norms, 1e-300)
+            # corners only: after a corner the next steps are unpredictable anyway, while a
+            # start inside a smooth run would cost the predictor its first two steps there
+            corners = np.flatnonzero(turn < _CORNER_COSINE)
+            if len(corners):
+                gaps = np.abs(lattice[first + kept[corners]] - previous)
+                bits = np.sum(2 * np.ceil(np.log2(gaps + 1)) + (gaps != 0), axis=1)
+                start = int(kept[corners[int(np.argmin(bits))]])
+                rows[first:stop] = np.roll(rows[first:stop], -start)
+        previous = lattice[rows[first]]
+    return rows
+
+
 def _encode_vertex(
     arrays: list[np.ndarray],
     flags: list[bool],
@@ -816,7 +893,7 @@ def _encode_vertex(
 ) -> bytes | None:
     """The vertex form (format version 2), or None where it cannot keep the bound.
 
-    Each curve is simplified (Douglas–Peucker, distances to the decoded lattice segments), its
+    Each curve is simplified (greedy farthest reach, distances to the decoded lattice segments), its
     kept points rounded to the lattice, and the set range-coded (:mod:`wavecore.curvecoder`).
     The bound is then measured on the decoded values; a lattice step that misses it anywhere
     is not used, and the next finer one is tried.
@@ -854,10 +931,37 @@ def _encode_vertex(
         else:
             lattice = np.rint(points / step).astype(np.int64)
         decoded = _lattice_values(lattice, step, dtype).astype(np.float64)
-        keep = curvecoder.simplify_set(points, decoded, offsets, closed, tolerance, _VERTEX_WINDOW)
-        kept = np.ascontiguousarray(decoded[keep])
-        if not np.all(curvecoder.check_set(points, offsets, closed, keep, kept) <= tolerance):
+        order_rows = _start_rotation(points, decoded, offsets, closed, tolerance)
+        points_r = np.ascontiguousarray(points[order_rows])
+        lattice = np.ascontiguousarray(lattice[order_rows])
+        decoded = np.ascontiguousarray(decoded[order_rows])
+        # vertices lifted off the curve where that lets a span reach farther; where the
+        # measured bound then fails, the points' own lattice points
+        zeros = np.zeros(len(offsets) - 1, dtype=np.int64)
+        keep = curvecoder.reach_set(
+            points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW
+        )
+        moved = lattice
+        if d == 2:  # lifting costs 3**d positions per end: plane curves only
+            # vertices lifted off the curve where that lets a span reach farther; a curve
+            # whose measured bound then fails keeps its own points' lattice points
+            lifted = lattice.copy()
+            lifted_keep = curvecoder.lifted_reach_set(
+                points_r, lifted, offsets, closed, step, tolerance, _VERTEX_WINDOW
+            )
+            kept = _lattice_values(lifted[lifted_keep], step, dtype).astype(np.float64)
+            fits = curvecoder.check_set(points_r, offsets, closed, lifted_keep, kept) <= tolerance
+            rows_lifted = np.repeat(fits, np.diff(offsets))
+            keep = np.where(rows_lifted, lifted_keep, keep)
+            moved = np.where(rows_lifted[:, None], lifted, lattice)
+        rows = _cheapest_starts(moved, keep, offsets, closed)
+        trial_points = np.ascontiguousarray(points_r[rows])
+        trial_lattice = np.ascontiguousarray(moved[rows])
+        keep = np.ascontiguousarray(keep[rows])
+        kept = _lattice_values(trial_lattice[keep], step, dtype).astype(np.float64)
+        if not np.all(curvecoder.check_set(trial_points, offsets, closed, keep, kept) <= tolerance):
             continue
+        points_r, lattice = trial_points, trial_lattice
         counts = np.add.reduceat(keep, offsets[:-1]).astype(np.int64)
         again = np.array(repeated, dtype=np.int64)
         # the predictor that writes the fewest bytes: the previous vertex (order 0), a straight
@@ -866,10 +970,12 @@ def _encode_vertex(
         stream = b""
         order = -1
         for candidate in _VERTEX_ORDERS:
+            if candidate in curvecoder.FRAME_ORDERS and d != 2:
+                continue  # the frame predictors are for plane curves
             vertices = np.ascontiguousarray(lattice[keep])
             if d <= len(_REFINE_RADIUS):
                 curvecoder.refine_set(
-                    points,
+                    points_r,
                     offsets,
                     closed,
                     keep,
@@ -881,7 +987,7 @@ def _encode_vertex(
                 )
                 moved = _lattice_values(vertices, step, dtype).astype(np.float64)
                 if not np.all(
-                    curvecoder.check_set(points, offsets, closed, keep, moved) <= tolerance
+                    curvecoder.check_set(points_r, offsets, closed, keep, moved) <= tolerance
                 ):
                     vertices = np.ascontiguousarray(lattice[keep])
             coded = curvecoder.encode_set(vertices, counts, closed, again, closed_mode, candidate)
@@ -911,7 +1017,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
     reader = _Reader(data[:-4])
     reader.take(5, "magic and version")
-    flags = reader.varint("flags", 63)
+    flags = reader.varint("flags", 127)
     closed_mode = (flags >> 2) & 3
     order = flags >> 4
     if flags & 2 or closed_mode == 3 or order not in _VERTEX_ORDERS:
