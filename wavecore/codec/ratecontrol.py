@@ -117,6 +117,8 @@ _WARM_ITERATIONS = 3
 #: 0.83-1.7): the first closed loop aims with the open loop's ratio, measured by one
 #: synthesis, times this.
 _AIM_REFINED_RATIO = {"bspline2": 0.84}
+#: How close to its aim (dB) the predicted error at the calibration's step must be.
+_CALIBRATION_WINDOW_DB = 0.05
 #: Where closed loops keep their fit: the verifications (a synthesis each), and the closed
 #: loops they may run before the search on measured errors takes over.
 _QUALITY_FIT_VERIFIES = 6
@@ -685,7 +687,8 @@ def _predicted_quality_step(
         aim = (bound_at(target + _QUALITY_AIM_DB) - noise) * samples
         if aim <= 0:
             return None
-        step = _solve_predicted(encoder, aim, step, low, high)
+        # (The ratio varies little with the step: a step near the target will do.)
+        step = _solve_predicted(encoder, aim, step, low, high, _CALIBRATION_WINDOW_DB)
         error = encoder.mse(step, closed=False) - noise
         predicted = encoder.predicted_sse(step) / samples
         if not (error > 0 and predicted > 0):
@@ -740,15 +743,20 @@ def _bracketed_step(measured: list[tuple[float, float]], aim: float) -> float | 
 
 
 def _solve_predicted(
-    encoder: _LossyEncoder, aim: float, start: float, low: float, high: float
+    encoder: _LossyEncoder,
+    aim: float,
+    start: float,
+    low: float,
+    high: float,
+    window_db: float = _QUALITY_MODEL_WINDOW_DB,
 ) -> float:
-    """The step whose predicted squared error is ``aim`` (within ``_QUALITY_MODEL_WINDOW_DB``).
+    """The step whose predicted squared error is ``aim`` (within ``window_db``).
 
     Every prediction made so far is kept (by the encoder), so a correction with a new ratio
     starts from the known points: log-log interpolation between the two that bracket the aim,
     else extrapolation from the nearest with the uniform quantizer's exponent 2.
     """
-    tolerance = math.log(10.0) * _QUALITY_MODEL_WINDOW_DB / 10.0
+    tolerance = math.log(10.0) * window_db / 10.0
     step = start
     for _ in range(_MODEL_EVALUATIONS):
         value = encoder.predicted_sse(step)
