@@ -33,6 +33,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from .._kernels import largest_scaled, log_histogram_counts, top_octave
 from ..blockcoder import BLOCK_SIZE as DEFAULT_BLOCK
@@ -1064,23 +1065,68 @@ def _sampled_ratio(
     return predicted / encoder.size_estimate(step)
 
 
-def _block_entropies(levels: list[list[np.ndarray]], regions: np.ndarray) -> np.ndarray:
+def _block_entropies(
+    levels: list[list[np.ndarray]], regions: np.ndarray, block: int = DEFAULT_BLOCK
+) -> np.ndarray:
     """Each code-block's first-order entropy in bytes (magnitudes up to 15, larger ones by
-    their bit length, a bit per sign), in the block coder's order."""
+    their bit length, a bit per sign), in the block coder's order: per band, one compiled
+    pass counts the magnitudes of each block (``block`` a side, tiling each level's bands
+    from the top left, row by row, as ``blockcoder`` does); the bands run over the threads."""
     out = np.zeros(len(regions))
-    for b, (entry, row0, col0, row1, col1) in enumerate(regions):
-        bits = 0.0
-        for band in levels[entry]:
-            part = np.abs(band[row0:row1, col0:col1].reshape(-1)).astype(np.int64)
-            if part.size == 0:
+    firsts = np.searchsorted(regions[:, 0], np.arange(len(levels) + 1))
+    tasks = []  # (entry, band, blocks across)
+    for entry, bands in enumerate(levels):
+        count = int(firsts[entry + 1] - firsts[entry])
+        grid_cols = -(-max(band.shape[1] for band in bands) // block)
+        for band in bands:
+            rows, cols = band.shape[0], band.shape[1]
+            if rows == 0 or cols == 0:
                 continue
-            counts = np.bincount(np.minimum(part, 16), minlength=17).astype(np.float64)
-            present = counts[counts > 0]
-            bits -= float(np.sum(present * np.log2(present / part.size)))
-            large = part[part >= 16]
-            bits += float(np.sum(np.log2(large))) + float(np.count_nonzero(part))
-        out[b] = bits / 8.0
+            if ((rows - 1) // block) * grid_cols + (cols - 1) // block >= count:
+                msg = f"the code-blocks of level entry {entry} do not tile its bands"
+                raise ValueError(msg)  # (a layout the block coder would not make)
+            tasks.append((entry, band, grid_cols))
+    counted: list[np.ndarray | None] = [None] * len(tasks)
+
+    def run(lo: int, hi: int) -> None:
+        for index in range(lo, hi):
+            entry, band, grid_cols = tasks[index]
+            plane = np.ascontiguousarray(band, dtype=np.int32)
+            plane = plane.reshape(band.shape[0], band.shape[1], -1)
+            # Per block: magnitudes 0-15 and 16+, then the bit lengths of the 16+.
+            counts = np.zeros((int(firsts[entry + 1] - firsts[entry]), 18))
+            _block_magnitude_counts(plane, block, grid_cols, counts)
+            counted[index] = counts
+
+    run_rows(run, len(tasks), sum(t[1].size for t in tasks), pieces=len(tasks))
+    for (entry, _, _), counts in zip(tasks, counted, strict=True):
+        assert counts is not None
+        histogram = counts[:, :17]
+        sizes = histogram.sum(axis=1, keepdims=True)
+        present = histogram > 0
+        shares = np.divide(histogram, sizes, out=np.ones_like(histogram), where=present)
+        bits = -(histogram * np.log2(shares)).sum(axis=1)
+        bits += counts[:, 17] + sizes[:, 0] - histogram[:, 0]  # the large values, the signs
+        out[firsts[entry] : firsts[entry + 1]] += bits / 8.0
     return out
+
+
+@njit(nogil=True, cache=True)
+def _block_magnitude_counts(plane, block, grid_cols, counts):  # pragma: no cover - compiled
+    """Per block of ``plane`` (rows, cols, channels): the counts of magnitudes 0-15 and 16+
+    (columns 0-16) and the bit lengths of the 16+ (column 17)."""
+    rows, cols, channels = plane.shape
+    for r in range(rows):
+        base = (r // block) * grid_cols
+        for c in range(cols):
+            b = base + c // block
+            for k in range(channels):
+                v = abs(plane[r, c, k])
+                if v >= 16:
+                    counts[b, 16] += 1.0
+                    counts[b, 17] += np.log2(v)
+                else:
+                    counts[b, v] += 1.0
 
 
 def _predicted_bpp(
