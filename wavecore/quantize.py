@@ -360,6 +360,20 @@ def _synthesis(
     return waverec2([levels[0][0], *(tuple(lv) for lv in levels[1:])], wavelet, bounds, axes)
 
 
+@functools.lru_cache(maxsize=256)
+def _adjoint_covers(
+    shape: tuple[int, ...],
+    bank_name: str,
+    bounds: tuple[str, ...],
+    axes: tuple[int, ...],
+    count: int,
+) -> bool:
+    """Whether the adjoint runs on this layout (else it raises): tried once per layout, not
+    once per closed loop (a whole adjoint each time)."""
+    _adjoint(np.zeros(shape), bank_name, list(bounds), axes, count)
+    return True
+
+
 def _refine(
     template: Sequence[Any],
     levels: list[list[np.ndarray]],
@@ -384,7 +398,7 @@ def _refine(
     else:
         try:
             target = _synthesis(levels, bank.name, bounds, axes)
-            _adjoint(np.zeros_like(target), bank.name, bounds, axes, len(levels) - 1)
+            _adjoint_covers(target.shape, bank.name, tuple(bounds), axes, len(levels) - 1)
         except (InvalidLength, InvalidParameter, ValueError):
             return None  # a size the adjoint tables do not cover: keep the open-loop result
     flat_q = [band for level in q_levels for band in level]
