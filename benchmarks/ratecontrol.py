@@ -12,11 +12,12 @@ other, and the table gives both and their ratios.  The pictures:
 * the camera with ``bspline2`` at 40 dB and at 1 bpp (the wavelet whose closed loop gains most),
 * a 5 000-point closed curve at the default tolerance.
 
-For each: the entropy codings and the closed-loop quantizations one encode runs (counted by
-wrapping the library's coder and closed loop), the code-blocks the bpp trims code again, the
-encode and decode times (medians of ``--repeat``), bytes and PSNR; and OpenJPEG (through
-Pillow, raw codestream, irreversible 9/7, colour transform on for RGB) at our bytes, as
-``benchmarks/codec_speed.py`` configures it.  The compression check compares the two sides at
+For each: the entropy codings, the closed-loop quantizations and the syntheses (the searches'
+verifications) one encode runs (counted by wrapping the library's coder, closed loop and
+reconstruction), the code-blocks the bpp trims code again, the encode and decode times
+(medians of ``--repeat``), bytes and PSNR; and OpenJPEG (through Pillow, raw codestream,
+irreversible 9/7, colour transform on for RGB) at our bytes, as ``benchmarks/codec_speed.py``
+configures it.  The compression check compares the two sides at
 equal bytes: the PSNR difference less the local slope of PSNR against log(bytes) (measured on
 the ``--before`` side) times the log of the bytes ratio.  The machine may be shared: the load
 average is printed, and only same-run ratios mean much.
@@ -74,13 +75,15 @@ class Counter:
     them (module attributes of the same function objects), so any layout of the package works."""
 
     def __init__(self) -> None:
+        import wavecore.codec.samples
         import wavecore.entropy
         import wavecore.quantize
 
-        self.counts = {"codings": 0, "closed loops": 0, "blocks recoded": 0}
+        self.counts = {"codings": 0, "closed loops": 0, "syntheses": 0, "blocks recoded": 0}
         targets = {
             "codings": wavecore.entropy.encode_levels,
-            "closed loops": wavecore.quantize._refine,
+            "closed loops": wavecore.quantize._refine,  # warm-started ones included
+            "syntheses": wavecore.codec.samples.reconstruct,  # the searches' verifications
         }
         for name, function in targets.items():
             wrapped = self._wrap(name, function)
@@ -236,7 +239,8 @@ def table(before: dict[str, Any] | None, after: dict[str, Any]) -> list[str]:
             line = (
                 f"  {label:6s} codings {case['codings']:2d} "
                 f"(+{case.get('blocks recoded', 0)} blocks), "
-                f"closed loops {case['closed loops']:2d}, encode {case['encode']:.3f} s "
+                f"closed loops {case['closed loops']:2d}, "
+                f"syntheses {case.get('syntheses', 0):2d}, encode {case['encode']:.3f} s "
                 f"(CPU {case['encode cpu']:.3f} s), "
                 f"decode {case['decode']:.3f} s, "
                 f"{case['bytes']} B"

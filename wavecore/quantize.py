@@ -41,6 +41,7 @@ from .norms import basis_norms
 from .transform import run_rows
 
 __all__ = [
+    "ClosedLoopFit",
     "OpenLoopDistortion",
     "dequantize_bands",
     "quantize_bands",
@@ -230,7 +231,9 @@ def quantize_bands(
         msg = f"refine must be a number of iterations >= 0, not {refine!r}"
         raise InvalidParameter(msg)
     if refine and len(levels) > 1:
-        out_levels = _refine(coeffs, levels, out_levels, params, wavelet, boundary, axes, refine)
+        fitted = _refine(coeffs, levels, out_levels, params, wavelet, boundary, axes, refine)
+        if fitted is not None:
+            out_levels = _requantize(fitted[0], out_levels, params)
     return from_levels(coeffs, out_levels), params
 
 
@@ -357,6 +360,20 @@ def _synthesis(
     return waverec2([levels[0][0], *(tuple(lv) for lv in levels[1:])], wavelet, bounds, axes)
 
 
+@functools.lru_cache(maxsize=256)
+def _adjoint_covers(
+    shape: tuple[int, ...],
+    bank_name: str,
+    bounds: tuple[str, ...],
+    axes: tuple[int, ...],
+    count: int,
+) -> bool:
+    """Whether the adjoint runs on this layout (else it raises): tried once per layout, not
+    once per closed loop (a whole adjoint each time)."""
+    _adjoint(np.zeros(shape), bank_name, list(bounds), axes, count)
+    return True
+
+
 def _refine(
     template: Sequence[Any],
     levels: list[list[np.ndarray]],
@@ -366,17 +383,24 @@ def _refine(
     boundary: str | Sequence[str],
     axes: tuple[int, ...],
     iterations: int,
-) -> list[list[np.ndarray]]:
-    """Least-squares re-fit of the kept coefficients to the reconstruction, then re-quantize."""
+    start: tuple[list[list[np.ndarray]], np.ndarray] | None = None,
+) -> tuple[list[list[np.ndarray]], np.ndarray] | None:
+    """Least-squares re-fit of the kept coefficients to the reconstruction: the fitted values
+    (zero where the dead zone dropped the detail) and the reconstruction they fit, or None
+    where the closed loop cannot run.  ``start``, an earlier result of the same coefficients,
+    is where the iterations start (and its reconstruction is not synthesised again)."""
     bank = get_wavelet(wavelet)
     bounds = [boundary] * len(axes) if isinstance(boundary, str) else list(boundary)
     if len(axes) not in (1, 2) or any(a != i for i, a in enumerate(axes)):
-        return q_levels  # only the leading-axes layouts of wavedec and wavedec2
-    try:
-        target = _synthesis(levels, bank.name, bounds, axes)
-        _adjoint(np.zeros_like(target), bank.name, bounds, axes, len(levels) - 1)
-    except (InvalidLength, InvalidParameter, ValueError):
-        return q_levels  # a size the adjoint tables do not cover: keep the open-loop result
+        return None  # only the leading-axes layouts of wavedec and wavedec2
+    if start is not None:
+        target = start[1]
+    else:
+        try:
+            target = _synthesis(levels, bank.name, bounds, axes)
+            _adjoint_covers(target.shape, bank.name, tuple(bounds), axes, len(levels) - 1)
+        except (InvalidLength, InvalidParameter, ValueError):
+            return None  # a size the adjoint tables do not cover: keep the open-loop result
     flat_q = [band for level in q_levels for band in level]
     shape_of = [len(level) for level in q_levels]
     steps = [params["step"] * w for level in params["weights"] for w in level]
@@ -402,6 +426,10 @@ def _refine(
     def dot(a: list[np.ndarray], b: list[np.ndarray]) -> float:
         return float(sum(float((u * v).sum()) for u, v in zip(a, b, strict=True)))
 
+    if start is not None:
+        # A warm start (a fit at a step close by): its values where it has them.
+        flat_s = [np.asarray(band, dtype=np.float64) for level in start[0] for band in level]
+        flat_c = [np.where(v != 0, v, c) for v, c in zip(flat_s, flat_c, strict=True)]
     coefficients = [c * k for c, k in zip(flat_c, keep, strict=True)]
     current = _synthesis(nest(coefficients), bank.name, bounds, axes)
     gradient = _adjoint(target - current, bank.name, bounds, axes, len(levels) - 1)
@@ -423,16 +451,102 @@ def _refine(
         rz_next = dot(residual, scaled)
         direction = [s + (rz_next / rz) * d for s, d in zip(scaled, direction, strict=True)]
         rz = rz_next
+    return nest(coefficients), target
+
+
+def _requantize(
+    fitted: list[list[np.ndarray]], q_levels: list[list[np.ndarray]], params: dict[str, Any]
+) -> list[list[np.ndarray]]:
+    """The closed loop's integers: ``fitted`` quantized where ``q_levels`` (the dead zone's
+    integers at ``params``' step) is nonzero, with the reconstruction offsets of those."""
     rounding = float(params["rounding"])
-    refined = []
-    for index, (value, step, q, k) in enumerate(
-        zip(coefficients, steps, flat_q, keep, strict=True)
+    out = []
+    for index, (values, q_bands, weights) in enumerate(
+        zip(fitted, q_levels, params["weights"], strict=True)
     ):
-        offset = 0.0 if index == 0 else reconstruction_offset(q, rounding)
-        magnitude = np.maximum(np.round(np.abs(value) / step - offset), 0.0)
-        np.minimum(magnitude, MAX_INDEX, out=magnitude)
-        refined.append(np.where(k, np.copysign(magnitude, value), 0.0).astype(np.int32))
-    return nest(refined)
+        bands = []
+        for value, q, weight in zip(values, q_bands, weights, strict=True):
+            step = params["step"] * weight
+            offset = 0.0 if index == 0 else reconstruction_offset(q, rounding)
+            magnitude = np.maximum(np.round(np.abs(value) / step - offset), 0.0)
+            np.minimum(magnitude, MAX_INDEX, out=magnitude)
+            kept = np.copysign(magnitude, value)
+            bands.append((kept if index == 0 else np.where(q != 0, kept, 0.0)).astype(np.int32))
+        out.append(bands)
+    return out
+
+
+class ClosedLoopFit:
+    """The closed loop (``quantize_bands(..., refine=iterations)``) at one step, kept so that
+    steps close to it can be quantized from the same least-squares fit without running it again.
+
+    At its own step, :meth:`quantize` gives exactly ``quantize_bands``' closed-loop result.  At
+    another step the fitted values are quantized with that step, keeping the details that both
+    the fit and the dead zone at the new step keep: the fit moves little between close steps,
+    so this is close to a closed loop there, for the cost of an open loop.  Rate control uses
+    it to correct a closed loop's small miss of a quality target.
+
+    Parameters
+    ----------
+    coeffs, step, wavelet, boundary, axes, rounding
+        As for :func:`quantize_bands`.
+    iterations : int
+        The closed loop's iterations (``REFINE_ITERATIONS`` by default).
+    start : ClosedLoopFit, optional
+        A fit of the same coefficients at a step close by, to start from (a warm start): its
+        values are most of the way to this step's, so fewer iterations do, and the
+        reconstruction they fit is not synthesised again.
+    """
+
+    def __init__(
+        self,
+        coeffs: Sequence[Any],
+        step: float,
+        *,
+        wavelet: str,
+        boundary: str | Sequence[str],
+        axes: Sequence[int] = (0, 1),
+        rounding: float = DEFAULT_ROUNDING,
+        iterations: int = REFINE_ITERATIONS,
+        start: ClosedLoopFit | None = None,
+    ) -> None:
+        self.coeffs, self.step = coeffs, _check_step(step)
+        self._options: dict[str, Any] = {
+            "wavelet": wavelet,
+            "boundary": boundary,
+            "axes": tuple(int(a) for a in axes),
+            "rounding": rounding,
+        }
+        q, params = quantize_bands(coeffs, self.step, refine=0, **self._options)
+        self._open = (q, params)  # the dead zone at the fit's own step
+        levels, q_levels = as_levels(coeffs), as_levels(q)
+        self._fitted: tuple[list[list[np.ndarray]], np.ndarray] | None = None
+        if iterations and len(levels) > 1:
+            self._fitted = _refine(
+                coeffs, levels, q_levels, params, wavelet, boundary, self._options["axes"],
+                iterations, None if start is None else start._fitted,
+            )  # fmt: skip
+        # Which details the fit kept: at other steps only these may stay (a detail the fit
+        # dropped was compensated by its neighbours, so adding it back would count it twice).
+        self._kept = [[band != 0 for band in bands] for bands in q_levels]
+
+    def quantize(self, step: float) -> tuple[list[Any], dict[str, Any]]:
+        """The integers and parameters at ``step`` (see the class docstring)."""
+        if step == self.step:
+            q, params = self._open
+        else:
+            q, params = quantize_bands(self.coeffs, _check_step(step), refine=0, **self._options)
+        if self._fitted is None:
+            return q, params
+        q_levels = [
+            [
+                band if index == 0 else np.where(kept, band, 0)
+                for band, kept in zip(bands, mask, strict=True)
+            ]
+            for index, (bands, mask) in enumerate(zip(as_levels(q), self._kept, strict=True))
+        ]
+        fitted = _requantize(self._fitted[0], q_levels, params)
+        return from_levels(self.coeffs, fitted), params
 
 
 def _quantize_flat(
