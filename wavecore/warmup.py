@@ -21,6 +21,8 @@ from typing import TextIO
 import numpy as np
 
 from .codec import decode, encode_curve, encode_image, encode_surface
+from .curvesets import encode_curves
+from .grids import decode_grid, encode_grid
 from .multilevel import wavedec, wavedec2, wavedecn, waverec, waverec2, waverecn
 
 IMAGE_DTYPES = ("uint8", "uint16", "int16", "float32", "float64")
@@ -75,6 +77,10 @@ def _images(dtype: str) -> Callable[[], None]:
                 _decode_every_way(encode_image(image, lossless=True))
         _decode_every_way(encode_image(image))  # the default, 40 dB
         decode(encode_image(image[..., :3], bpp=8.0))
+        if dtype == "uint8":
+            # Large enough for the rate search's sample of code-blocks (``_sampled_ratio``).
+            big = (rng.random((320, 320, 3)) * 255).astype(np.uint8)
+            decode(encode_image(big, bpp=1.0))
 
     return run
 
@@ -97,6 +103,28 @@ def _surfaces() -> None:
         _decode_every_way(encode_surface(grid))
 
 
+def _curve_sets() -> None:
+    rng = np.random.default_rng(4)
+    curves = [np.cumsum(rng.normal(size=(80, dims)), axis=0) for dims in (2, 2, 3)]
+    for method in ("vertex", "wavelet"):
+        decode(encode_curves(curves, closed=[True, False, False], tolerance=0.05, method=method))
+
+
+def _grids() -> None:
+    rng = np.random.default_rng(5)
+    smooth = np.cumsum(np.cumsum(rng.normal(size=(300, 280)), axis=0), axis=1)
+    volume = np.cumsum(rng.normal(size=(20, 70, 66)), axis=0)
+    for grid in (smooth, smooth.astype(np.float32), volume):
+        span = float(np.ptp(grid))
+        window = tuple(slice(3, 40) for _ in grid.shape)
+        for target in ({"max_error": 1e-3 * span}, {"rmse": 1e-3 * span}, {"bpp": 6.0}):
+            bundle = encode_grid(grid, **target)
+            decode(bundle)
+            decode_grid(bundle, window=window)
+    decode(encode_grid(np.round(smooth).astype(np.int16), lossless=True))
+    decode(encode_grid(smooth, wavelet="cdf97", max_error=1e-3 * float(np.ptp(smooth))))
+
+
 def steps() -> Iterator[tuple[str, Callable[[], None]]]:
     """The warm-up's steps, each a (label, function) pair."""
     yield "transforms (wavedec, wavedec2, wavedecn; float32, float64)", _transforms
@@ -104,6 +132,8 @@ def steps() -> Iterator[tuple[str, Callable[[], None]]]:
         yield f"images {dtype} (grey, RGB, RGBA; lossy and lossless)", _images(dtype)
     yield "curves (open, closed; 2-D, 3-D)", _curves
     yield "surfaces (height fields, 3-D grids; each boundary)", _surfaces
+    yield "curve sets (vertex and wavelet forms)", _curve_sets
+    yield "grids (max_error, rmse, bpp; 2-D, 3-D; windows; lossless)", _grids
 
 
 def warm_up(stream: TextIO | None = sys.stderr) -> float:
