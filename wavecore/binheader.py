@@ -61,7 +61,7 @@ DTYPE_CODES = (
 #: Code 0 means "the name is in the extension"; code 4 is ``reversible`` with its ``lifting``.
 WAVELET_CODES = ("", "bspline2", "haar", "cdf97", "reversible")
 BOUNDARY_CODES = ("open", "closed", "symmetric")
-LIFTING_CODES = ("legall53", "haar", "bspline2")
+LIFTING_CODES = ("legall53", "haar", "bspline2", "511c")
 #: Code 2 means "the name is in the extension".
 QUANTIZER_CODES = ("none", "deadzone")
 CODER_CODES = ("context", "zlib")

@@ -191,7 +191,7 @@ def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
     # First-order entropy only guides the choice of filters (the context coder ranks them
     # differently), so code the choice with and without the closed bspline2 and keep the smaller.
     choices = []
-    for candidates in (("legall53", "haar"), _lossless.FILTERS):
+    for candidates in _lossless.CANDIDATE_SETS:
         lifting = _lossless.choose_filters(data, level, (0, 1), candidates)
         if lifting not in choices:
             choices.append(lifting)
