@@ -86,6 +86,7 @@ __all__ = [
     "band_shapes",
     "best_depth",
     "choose_filters",
+    "filter_choices",
     "forward",
     "inverse",
     "lift",
@@ -263,7 +264,7 @@ def choose_filters(
 
     First-order entropy is only a guide: a context coder may rank the filters differently
     (it does for ``bspline2`` against 5/3), so the codec codes more than one choice and keeps
-    the smaller bundle.
+    the smaller bundle (:func:`filter_choices`).
 
     Examples
     --------
@@ -272,16 +273,58 @@ def choose_filters(
     >>> choose_filters(np.kron(small, np.ones((2, 2), int)), 2)  # a 2x pixel-repeated image
     ['haar', 'legall53']
     """
-    axes = tuple(axes)
+    return _choose(np.asarray(data).astype(np.int64), level, tuple(axes), candidates, {})
+
+
+def filter_choices(
+    data: np.ndarray,
+    level: int,
+    axes: Sequence[int] = (0, 1),
+    candidate_sets: Sequence[Sequence[str]] = CANDIDATE_SETS,
+) -> list[list[str]]:
+    """:func:`choose_filters` for each candidate set, without repeats, in the sets' order.
+
+    Each filter is lifted and its entropy measured once per level and path of earlier choices,
+    whatever the number of sets that offer it (the encoder's two sets share all but one).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> flat = np.zeros((8, 8), dtype=np.uint8)
+    >>> filter_choices(flat, 2)  # every filter gives zero details: the first one wins
+    [['legall53', 'legall53']]
+    """
     coarse = np.asarray(data).astype(np.int64)
+    memo: dict[tuple[tuple[str, ...], str], tuple[float, np.ndarray]] = {}
+    choices: list[list[str]] = []
+    for candidates in candidate_sets:
+        chosen = _choose(coarse, level, tuple(axes), candidates, memo)
+        if chosen not in choices:
+            choices.append(chosen)
+    return choices
+
+
+def _choose(
+    coarse: np.ndarray,
+    level: int,
+    axes: tuple[int, ...],
+    candidates: Sequence[str],
+    memo: dict[tuple[tuple[str, ...], str], tuple[float, np.ndarray]],
+) -> list[str]:
+    """:func:`choose_filters` on ``int64`` data, with ``memo`` holding each (earlier choices,
+    filter)'s detail entropy and coarse band, so that other candidate sets reuse them."""
     chosen: list[str] = []
     for _ in range(level):
         best: tuple[float, str, np.ndarray] | None = None
         for name in candidates:
             if name == "bspline2" and any(coarse.shape[a] % 2 for a in axes):
                 continue  # periodic pairs need even lengths
-            low, bands = _level_step(coarse, axes, name)
-            bits = _entropy_bits(bands if isinstance(bands, tuple) else (bands,))
+            key = (tuple(chosen), name)
+            if key not in memo:
+                low, bands = _level_step(coarse, axes, name)
+                bits = _entropy_bits(bands if isinstance(bands, tuple) else (bands,))
+                memo[key] = (bits, low)
+            bits, low = memo[key]
             if best is None or bits < best[0]:
                 best = (bits, name, low)
         assert best is not None

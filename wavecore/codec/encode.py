@@ -190,11 +190,7 @@ def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
         raise InvalidParameter(msg)
     # First-order entropy only guides the choice of filters (the context coder ranks them
     # differently), so code the choice with and without the closed bspline2 and keep the smaller.
-    choices = []
-    for candidates in _lossless.CANDIDATE_SETS:
-        lifting = _lossless.choose_filters(data, level, (0, 1), candidates)
-        if lifting not in choices:
-            choices.append(lifting)
+    choices = _lossless.filter_choices(data, level)
     bundles = [
         _lossless_bundle(arr, data, dtype, colour, level, lifting, search=search)
         for lifting in choices
