@@ -235,3 +235,45 @@ def test_5_11_c_lifting_decodes_exactly_whole_and_by_region(shape: tuple[int, ..
     for rows, cols in [(slice(0, 9), slice(50, 57)), (slice(31, 46), slice(3, 4))]:
         region = wavecore.decode_region(bundle, (rows, cols))
         assert np.array_equal(region, image[rows, cols])
+
+
+def _chroma_correlated(seed: int) -> np.ndarray:
+    """RGB whose blue and red differences from green move together (as in photographs)."""
+    rng = np.random.default_rng(seed)
+    rows, cols = np.mgrid[0:48, 0:40]
+    green = 100 + 40 * np.sin(rows / 5.0) + rng.normal(0, 3, rows.shape)
+    chroma = 30 * np.cos(cols / 4.0) * np.sin(rows / 7.0) + rng.normal(0, 2, rows.shape)
+    rgb = np.stack([green + chroma, green, green + chroma / 2], axis=-1)
+    return np.clip(rgb, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("weight", [w for w in lossless.CHROMA_WEIGHTS if w])
+def test_chroma_prediction_is_reversible_at_every_weight(weight: int) -> None:
+    ycc = np.random.default_rng(weight + 8).integers(-70000, 70000, (9, 7, 4))
+    predicted = lossless.predict_chroma(ycc, weight)
+    assert np.array_equal(predicted[..., :2], ycc[..., :2])  # only Cr changes
+    assert np.array_equal(lossless.unpredict_chroma(predicted, weight), ycc)
+
+
+def test_chroma_prediction_is_chosen_recorded_and_decoded_exactly() -> None:
+    image = _chroma_correlated(4)
+    bundle = wavecore.encode_image(image, lossless=True)
+    info = wavecore.inspect(bundle)
+    # Cr = (R - G) is twice Cb = (B - G) here, so the weight is 16 eighths, clipped to 8.
+    assert info["colour"] == "rct-p8"
+    assert np.array_equal(wavecore.decode(bundle), image)
+    region = wavecore.decode_region(bundle, (slice(9, 30), slice(17, 40)))
+    assert np.array_equal(region, image[9:30, 17:40])
+    plain = np.dstack([image[..., 1]] * 3)  # grey as RGB: no chroma to predict
+    assert wavecore.inspect(wavecore.encode_image(plain, lossless=True))["colour"] == "rct"
+
+
+def test_a_predicted_colour_packs_compactly_and_round_trips() -> None:
+    from wavecore import binheader
+
+    header = wavecore.inspect(wavecore.encode_image(_chroma_correlated(5), lossless=True))["header"]
+    plain = binheader.pack({**header, "colour": "rct"})
+    for weight in (-8, -1, 1, 8):
+        packed = binheader.pack({**header, "colour": f"rct-p{weight}"})
+        assert len(packed) == len(plain) + 1  # one varint byte, no extension
+        assert binheader.unpack(packed)["colour"] == f"rct-p{weight}"

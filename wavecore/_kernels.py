@@ -854,3 +854,39 @@ def value_histogram(values, lo, bins):
     for k in range(values.size):
         counts[values[k] - lo] += 1
     return counts
+
+
+# --------------------------------------------------------------------------------------------
+# The lossless colour transform with chroma prediction (``wavecore.lossless``): JPEG 2000's RCT
+# and ``Cr -= floor((w Cb + 4) / 8)`` in one pass per pixel, either way, over pixel rows
+# ``[lo, hi)`` of ``(pixels, channels)`` views (channels past the third are copied).
+# --------------------------------------------------------------------------------------------
+
+
+@njit(nogil=True, cache=True)
+def predicted_rct_forward(rgb, weight, out, lo, hi):
+    """``(R, G, B, ...)`` to ``(Y, Cb, Cr - prediction, ...)`` as int64."""
+    for i in range(lo, hi):
+        r = np.int64(rgb[i, 0])
+        g = np.int64(rgb[i, 1])
+        b = np.int64(rgb[i, 2])
+        cb = b - g
+        out[i, 0] = (r + 2 * g + b) >> 2
+        out[i, 1] = cb
+        out[i, 2] = r - g - ((weight * cb + 4) >> 3)
+        for k in range(3, rgb.shape[1]):
+            out[i, k] = rgb[i, k]
+
+
+@njit(nogil=True, cache=True)
+def predicted_rct_inverse(ycc, weight, out, lo, hi):
+    """The exact inverse of :func:`predicted_rct_forward`."""
+    for i in range(lo, hi):
+        cb = np.int64(ycc[i, 1])
+        cr = np.int64(ycc[i, 2]) + ((weight * cb + 4) >> 3)
+        g = np.int64(ycc[i, 0]) - ((cb + cr) >> 2)
+        out[i, 0] = cr + g
+        out[i, 1] = g
+        out[i, 2] = cb + g
+        for k in range(3, ycc.shape[1]):
+            out[i, k] = ycc[i, k]

@@ -81,16 +81,24 @@ from .transform import normalize_axis, run_rows
 
 __all__ = [
     "CANDIDATE_SETS",
+    "CHROMA_WEIGHTS",
     "FILTERS",
     "LOSSLESS_DEPTHS",
     "band_shapes",
     "best_depth",
     "choose_filters",
+    "chroma_weight",
+    "colour_name",
     "filter_choices",
     "forward",
     "inverse",
     "lift",
+    "lossless_colour",
+    "predict_chroma",
+    "predicted_rct_forward",
+    "predicted_rct_inverse",
     "unlift",
+    "unpredict_chroma",
 ]
 
 #: The reversible filters, by the names the bundle header uses.
@@ -107,6 +115,10 @@ CANDIDATE_SETS = (("legall53", "haar", "511c"), FILTERS)
 #: would cost a coding of a quarter of the samples more; depth 3 costs a sixteenth.
 #: First-order entropy ranks the depths wrongly, so they are coded.
 LOSSLESS_DEPTHS = (2, 3)
+
+
+#: The weights of :func:`predict_chroma`, in eighths: Cr is predicted from Cb as ``w / 8 · Cb``.
+CHROMA_WEIGHTS = tuple(range(-8, 9))
 
 
 #: The compiled kernels' number for each filter (anything else is lifted as 5/3, as before).
@@ -426,3 +438,103 @@ def best_depth(
         if size < best_size:
             best, best_size, chosen = candidate, size, depth
     return chosen, best
+
+
+def predict_chroma(ycc: np.ndarray, weight: int) -> np.ndarray:
+    """The RCT's ``Cr`` less its prediction from ``Cb``: ``Cr - floor((weight * Cb + 4) / 8)``.
+
+    Reversible (``Cb`` is kept, so :func:`unpredict_chroma` adds the same integer back).
+    What RCT leaves of the correlation between its two chroma channels is then coded once
+    instead of twice: on astronaut (weight 2) 3,100 bytes less, 0.9 %.  The codec runs this
+    fused with the RCT (:func:`predicted_rct_forward`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ycc = np.random.default_rng(0).integers(-255, 256, (4, 4, 3))
+    >>> bool(np.array_equal(unpredict_chroma(predict_chroma(ycc, 3), 3), ycc))
+    True
+    """
+    out = np.array(ycc, dtype=np.int64)
+    out[..., 2] -= (weight * out[..., 1] + 4) >> 3
+    return out
+
+
+def unpredict_chroma(ycc: np.ndarray, weight: int) -> np.ndarray:
+    """The exact inverse of :func:`predict_chroma`."""
+    out = np.array(ycc, dtype=np.int64)
+    out[..., 2] += (weight * out[..., 1] + 4) >> 3
+    return out
+
+
+def _per_pixel(kernel: Any, data: np.ndarray, weight: int) -> np.ndarray:
+    """``kernel`` over the pixels of an ``(..., channels)`` array, on the thread pool."""
+    src = np.ascontiguousarray(data)
+    if src.dtype.kind not in "iu":
+        msg = f"the reversible colour transform needs integers, not {src.dtype}"
+        raise InvalidParameter(msg)
+    if src.ndim < 1 or src.shape[-1] < 3:
+        msg = f"the reversible colour transform needs 3 or 4 channels, not shape {src.shape}"
+        raise InvalidParameter(msg)
+    flat = src.reshape(-1, src.shape[-1])
+    out = np.empty(flat.shape, dtype=np.int64)
+    run_rows(lambda lo, hi: kernel(flat, weight, out, lo, hi), flat.shape[0], flat.size)
+    return out.reshape(src.shape)
+
+
+def predicted_rct_forward(rgb: np.ndarray, weight: int) -> np.ndarray:
+    """JPEG 2000's RCT then :func:`predict_chroma`, in one pass: ``int64`` ``(Y, Cb, Cr', ...)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavecore.colour import rct_forward
+    >>> rgb = np.random.default_rng(1).integers(0, 65536, (5, 6, 4))
+    >>> bool(np.array_equal(predicted_rct_forward(rgb, -3), predict_chroma(rct_forward(rgb), -3)))
+    True
+    >>> bool(np.array_equal(predicted_rct_inverse(predicted_rct_forward(rgb, 5), 5), rgb))
+    True
+    """
+    return _per_pixel(_kernels.predicted_rct_forward, rgb, weight)
+
+
+def predicted_rct_inverse(ycc: np.ndarray, weight: int) -> np.ndarray:
+    """The exact inverse of :func:`predicted_rct_forward` (``int64``)."""
+    return _per_pixel(_kernels.predicted_rct_inverse, ycc, weight)
+
+
+def chroma_weight(rgb: np.ndarray) -> int:
+    """The weight of :data:`CHROMA_WEIGHTS` whose prediction leaves the smallest details.
+
+    Measured on the RCT's chroma (``Cb = B - G``, ``Cr = R - G``) at every other pixel, by the
+    5/3 predict residuals along both axes (the finest details, most of what is coded), summing
+    absolute values (the coder's cost follows the logarithm of a magnitude, which the absolute
+    value tracks better than the square: least squares, which large edges dominate, picked 0
+    on astronaut, where 2 codes best).  0 when no weight makes them smaller.
+    """
+    data = np.asarray(rgb)
+    if data.ndim != 3 or data.shape[2] < 3 or min(data.shape[:2]) < 6:
+        return 0
+    sub = data[::2, ::2].astype(np.int32)
+    residuals = []
+    for plane in (sub[..., 2] - sub[..., 1], sub[..., 0] - sub[..., 1]):  # Cb, then Cr
+        rows = plane[1:-1] - ((plane[:-2] + plane[2:]) >> 1)
+        cols = plane[:, 1:-1] - ((plane[:, :-2] + plane[:, 2:]) >> 1)
+        residuals.append(np.concatenate([rows.ravel(), cols.ravel()]))
+    b, r = residuals
+    costs = [int(np.abs(r - ((w * b + 4) >> 3)).sum()) for w in CHROMA_WEIGHTS]
+    best = int(np.argmin(costs))
+    return CHROMA_WEIGHTS[best] if costs[best] < costs[CHROMA_WEIGHTS.index(0)] else 0
+
+
+def colour_name(weight: int) -> str:
+    """The header's colour for the RCT with :func:`predict_chroma` of ``weight`` (0: ``rct``)."""
+    return "rct" if weight == 0 else f"rct-p{weight}"
+
+
+def lossless_colour(image: np.ndarray) -> str:
+    """The colour transform of a lossless encode: ``"none"`` for grey (or two channels), else
+    the RCT, with Cr predicted from Cb at :func:`chroma_weight`'s weight where that pays."""
+    if image.ndim != 3 or image.shape[2] < 3:
+        return "none"
+    return colour_name(chroma_weight(image))
