@@ -1,9 +1,12 @@
-"""A frozen lossless bundle whose header names the 5/11-C lifting at both levels.
+"""Frozen lossless bundles: the 5/11-C lifting at both levels, and the RCT with chroma
+prediction (colour ``rct-p7``).
 
-The bytes below were written once by this branch's encoder (its lossless pipeline with the
-lifting forced to ``["511c", "511c"]``) from the integer image of :func:`_image`.  Decoding
-them must give that image back exactly, in every later version: a change to the 5/11-C
-formulas, their boundary handling, or the header's lifting code 3 would break it.
+The bytes below were written once by this branch's encoder from the integer images of
+:func:`_image` (its lossless pipeline with the lifting forced to ``["511c", "511c"]``) and
+:func:`_colour_image` (``encode_image(..., lossless=True, level=2)``).  Decoding them must give
+those images back exactly, in every later version: a change to the 5/11-C formulas or their
+boundary handling, to the chroma prediction, or to the header's lifting code 3 or colour code 3
+would break it.
 """
 
 from __future__ import annotations
@@ -39,3 +42,28 @@ def test_frozen_5_11_c_bundle_decodes_by_region_and_level() -> None:
     assert np.array_equal(region, image[5:17, 2:11])
     # The coarse level is the 5/3 low-pass (5/11-C shares it): its size is ceil(n / 2).
     assert wavecore.decode(BUNDLE, level=1).shape == (12, 10)
+
+
+COLOUR_BUNDLE = base64.b64decode(
+    "iVdWQg0KGgoDABAsMFQwAg4LAw4CAOg/lAAIHy523J92zbxca8fzbh7/ywqUWM8ZkUgk01Mrw50FpNnLbKJSQ2aa"
+    "mhd+wCQt9jaxfCFDV8cDpsSLT9/RTKUS5zppZNvb44qQvIdqN1gL6CqnX0H2D4r7so82df1lGBDiEzFRMCSpnvCu"
+    "kd7akjjn2cbHR8TbkjC/+0/dUBmhw/GJOaZlHEJnX0H+nhPPzw4d2OlZxuaN/71YZFh4DBX2iehT/uJA7lHXg9z6"
+    "lyo6xflozp8urpzK7YSegqu5eiCRA5dVQA6i8gUJ9agwGMf+oQ=="
+)
+
+
+def _colour_image() -> np.ndarray:
+    """RGB whose red and blue differences from green move together (14 × 11)."""
+    i, j = np.mgrid[0:14, 0:11]
+    green = 90 + (i * j * (14 - i)) // 6 + (i * 7 + j * 3) % 4
+    chroma = (j * (11 - j) * 3 + i * i) // 4 - 20 + (i * 5 + j) % 3
+    rgb = np.stack([green + chroma, green, green + chroma // 2], -1)
+    return np.clip(rgb, 0, 255).astype(np.uint8)
+
+
+def test_frozen_predicted_colour_bundle_decodes_exactly() -> None:
+    assert wavecore.inspect(COLOUR_BUNDLE)["colour"] == "rct-p7"
+    image = _colour_image()
+    assert np.array_equal(wavecore.decode(COLOUR_BUNDLE), image)
+    region = wavecore.decode_region(COLOUR_BUNDLE, (slice(3, 9), slice(4, 11)))
+    assert np.array_equal(region, image[3:9, 4:11])
