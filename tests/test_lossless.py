@@ -277,3 +277,15 @@ def test_a_predicted_colour_packs_compactly_and_round_trips() -> None:
         packed = binheader.pack({**header, "colour": f"rct-p{weight}"})
         assert len(packed) == len(plain) + 1  # one varint byte, no extension
         assert binheader.unpack(packed)["colour"] == f"rct-p{weight}"
+
+
+def test_a_colour_weight_out_of_range_is_refused_by_name() -> None:
+    from wavecore import binheader
+
+    bundle = wavecore.encode_image(_chroma_correlated(6), lossless=True)
+    header = wavecore.inspect(bundle)["header"]
+    for weight in (0, 9, -9, 100):  # "rct-p0" is spelt "rct"; the weights stop at ±8
+        packed = binheader.pack({**header, "colour": f"rct-p{weight}"})
+        assert binheader.unpack(packed)["colour"] == f"rct-p{weight}"
+        with pytest.raises(wavecore.BundleError, match="colour"):
+            wavecore.bundle.check_header(binheader.unpack(packed))
