@@ -200,9 +200,12 @@ def section(rows: list[dict[str, Any]]) -> str:
             peer_table(rows),
             "",
             "The transform is the reversible integer lifting of `wavecore.lossless`: per level "
-            "LeGall 5/3, integer Haar or the closed `bspline2`'s exact integer lifting, chosen "
-            "by first-order entropy and confirmed by coding; JPEG 2000's reversible colour "
-            "transform for RGB; the context entropy coder of `wavecore.entropy`.  Without a "
+            "LeGall 5/3, JPEG 2000 Part 2's 5/11-C (5/3 with one more predict step, from the "
+            "coarse samples' curvature), integer Haar or the closed `bspline2`'s exact integer "
+            "lifting, chosen by first-order entropy and confirmed by coding; JPEG 2000's "
+            "reversible colour transform for RGB, with Cr then predicted from Cb at a weight "
+            "w/8 chosen per picture (colour `rct-p<w>`: astronaut takes w = 2, 0.9 % smaller); "
+            "the context entropy coder of `wavecore.entropy`.  Without a "
             "`level`, the encoder codes 2 and 3 levels and keeps the smaller "
             "(`wavecore.lossless.best_depth`, which re-codes only the coarse part of the "
             "deeper one): the coder's median-edge prediction of the coarse band beats further "

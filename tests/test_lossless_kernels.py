@@ -47,7 +47,24 @@ def reference_lift(x: np.ndarray, axis: int, name: str) -> tuple[np.ndarray, np.
     d -= (s[: len(d)] + s_right) >> 1
     _, d_left, d_right = _neighbours(s, d)
     s += (d_left + d_right + 2) >> 2
+    if name == "511c":
+        d += _curvature(s, len(d), data.shape[0])
     return np.moveaxis(s, 0, axis), np.moveaxis(d, 0, axis)
+
+
+def _curvature(s: np.ndarray, nd: int, n: int) -> np.ndarray:
+    """5/11-C's correction ``(s[i-1] - s[i] - s[i+1] + s[i+2] + 8) >> 4``, with the coarse
+    samples taken from the whole-sample symmetric extension of the ``n`` input samples (coarse
+    sample ``k`` is input sample ``2k``, mirrored about the first and the last input sample),
+    clamped for signals too short to mirror once."""
+
+    def taps(offset: int) -> np.ndarray:
+        position = 2 * (np.arange(nd) + offset)
+        position = np.where(position < 0, -position, position)
+        position = np.where(position > n - 1, 2 * (n - 1) - position, position)
+        return s[np.clip(position // 2, 0, len(s) - 1)]
+
+    return (taps(-1) - taps(0) - taps(1) + taps(2) + 8) >> 4
 
 
 def reference_unlift(coarse: np.ndarray, detail: np.ndarray, axis: int, name: str) -> np.ndarray:
@@ -69,6 +86,8 @@ def reference_unlift(coarse: np.ndarray, detail: np.ndarray, axis: int, name: st
         s[: len(d)] -= d >> 1
         d += s[: len(d)]
     else:
+        if name == "511c":
+            d -= _curvature(s, len(d), len(s) + len(d))
         _, d_left, d_right = _neighbours(s, d)
         s -= (d_left + d_right + 2) >> 2
         s_right, _, _ = _neighbours(s, d)

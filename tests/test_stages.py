@@ -24,6 +24,7 @@ CONFIGS: list[tuple[str, dict[str, Any]]] = [
     ("colour", {"id": "none"}),
     ("colour", {"id": "ycbcr"}),
     ("colour", {"id": "rct"}),
+    *[("colour", {"id": f"rct-p{weight}"}) for weight in range(-8, 9) if weight],
 ]
 
 

@@ -803,7 +803,8 @@ def log_histogram(values, scale, per_octave, octaves):
 # The reversible integer liftings of ``wavecore.lossless`` along the middle axis of
 # ``(outer, n, inner)`` int64 views: the same integer formulas as its docstring, written out
 # per sample (NumPy made a dozen whole-array temporaries per step).  ``kind``: 0 LeGall 5/3,
-# 1 integer Haar, 2 the closed bspline2.  Each fills outer indices ``[o_lo, o_hi)`` and inner
+# 1 integer Haar, 2 the closed bspline2, 3 the 5/11-C of JPEG 2000 Part 2 (5/3 and one more
+# predict step).  Each fills outer indices ``[o_lo, o_hi)`` and inner
 # columns ``[j_lo, j_hi)``; int64 arithmetic wraps as NumPy's does.
 # --------------------------------------------------------------------------------------------
 
@@ -862,6 +863,34 @@ def lift_steps(x, s, d, kind, o_lo, o_hi, j_lo, j_hi):
             right = i if i < nd else nd - 1
             for j in range(j_lo, j_hi):
                 s[o, i, j] = x[o, 2 * i, j] + ((d[o, left, j] + d[o, right, j] + 2) >> 2)
+        if kind == 3:  # 5/11-C: the details corrected by the coarse samples' curvature
+            for i in range(nd):
+                a, b, c, e = _coarse_taps(i, ns, n)
+                for j in range(j_lo, j_hi):
+                    d[o, i, j] += (s[o, a, j] - s[o, b, j] - s[o, c, j] + s[o, e, j] + 8) >> 4
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _coarse_reflect(i, ns, n):
+    """Coarse index ``i`` mirrored as whole-sample symmetric extension of the ``n`` samples
+    mirrors it: about coarse sample 0 on the left; on the right about the last coarse sample
+    (odd ``n``) or half a sample past it (even ``n``); clamped for very short signals."""
+    if i < 0:
+        i = -i
+    if i >= ns:
+        i = 2 * (ns - 1) - i if n % 2 else 2 * ns - 1 - i
+    return min(max(i, 0), ns - 1)
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _coarse_taps(i, ns, n):
+    """The coarse samples ``i - 1, i, i + 1, i + 2`` of the 5/11-C detail correction."""
+    return (
+        _coarse_reflect(i - 1, ns, n),
+        _coarse_reflect(i, ns, n),
+        _coarse_reflect(i + 1, ns, n),
+        _coarse_reflect(i + 2, ns, n),
+    )
 
 
 @njit(nogil=True, cache=True)
@@ -897,6 +926,24 @@ def unlift_steps(s, d, out, kind, o_lo, o_hi, j_lo, j_hi):
                 for j in range(j_lo, j_hi):
                     out[o, 2 * nd, j] = s[o, ns - 1, j]
             continue
+        if kind == 3:  # undo the 5/11-C correction into the odd rows, then 5/3 from them
+            n = ns + nd
+            for i in range(nd):
+                a, b, c, e = _coarse_taps(i, ns, n)
+                for j in range(j_lo, j_hi):
+                    out[o, 2 * i + 1, j] = d[o, i, j] - (
+                        (s[o, a, j] - s[o, b, j] - s[o, c, j] + s[o, e, j] + 8) >> 4
+                    )
+            for i in range(ns):
+                left = 2 * (i - 1 if i > 0 else 0) + 1
+                right = 2 * (i if i < nd else nd - 1) + 1
+                for j in range(j_lo, j_hi):
+                    out[o, 2 * i, j] = s[o, i, j] - ((out[o, left, j] + out[o, right, j] + 2) >> 2)
+            for i in range(nd):
+                right = 2 * i + 2 if i + 1 < ns else 2 * i
+                for j in range(j_lo, j_hi):
+                    out[o, 2 * i + 1, j] += (out[o, 2 * i, j] + out[o, right, j]) >> 1
+            continue
         for i in range(ns):  # undo the 5/3 update into the even rows
             left = i - 1 if i > 0 else 0
             right = i if i < nd else nd - 1
@@ -927,3 +974,39 @@ def value_histogram(values, lo, bins):
     for k in range(values.size):
         counts[values[k] - lo] += 1
     return counts
+
+
+# --------------------------------------------------------------------------------------------
+# The lossless colour transform with chroma prediction (``wavecore.lossless``): JPEG 2000's RCT
+# and ``Cr -= floor((w Cb + 4) / 8)`` in one pass per pixel, either way, over pixel rows
+# ``[lo, hi)`` of ``(pixels, channels)`` views (channels past the third are copied).
+# --------------------------------------------------------------------------------------------
+
+
+@njit(nogil=True, cache=True)
+def predicted_rct_forward(rgb, weight, out, lo, hi):
+    """``(R, G, B, ...)`` to ``(Y, Cb, Cr - prediction, ...)`` as int64."""
+    for i in range(lo, hi):
+        r = np.int64(rgb[i, 0])
+        g = np.int64(rgb[i, 1])
+        b = np.int64(rgb[i, 2])
+        cb = b - g
+        out[i, 0] = (r + 2 * g + b) >> 2
+        out[i, 1] = cb
+        out[i, 2] = r - g - ((weight * cb + 4) >> 3)
+        for k in range(3, rgb.shape[1]):
+            out[i, k] = rgb[i, k]
+
+
+@njit(nogil=True, cache=True)
+def predicted_rct_inverse(ycc, weight, out, lo, hi):
+    """The exact inverse of :func:`predicted_rct_forward`."""
+    for i in range(lo, hi):
+        cb = np.int64(ycc[i, 1])
+        cr = np.int64(ycc[i, 2]) + ((weight * cb + 4) >> 3)
+        g = np.int64(ycc[i, 0]) - ((cb + cr) >> 2)
+        out[i, 0] = cr + g
+        out[i, 1] = g
+        out[i, 2] = cb + g
+        for k in range(3, ycc.shape[1]):
+            out[i, k] = ycc[i, k]

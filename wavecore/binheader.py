@@ -9,7 +9,8 @@ specifies the bytes; in short, in this order:
   ``boundary``, the quantizer and the coder) as small codes, and flags saying which optional
   fields follow and which fields take their implied value (``fitted`` = ``shape`` + ``pads``,
   ``pads`` all zero or zero before, ``rounding`` = 0.27);
-* unsigned LEB128 varints for ``levels``, ``shape``, ``fitted`` and ``pads``;
+* unsigned LEB128 varints for ``levels``, ``shape``, ``fitted`` and ``pads`` (then, for colour
+  code 3, the chroma weight of ``"rct-p<w>"``, zigzagged);
 * numbers in one *number* form (a varint whose low four bits say how to read it: a short
   decimal, an integer, a float32 or a float64, or null) — every value comes back bit for bit,
   except ``max_error``, which may be stored as the float32 at or above it (a diagnostic that
@@ -46,6 +47,9 @@ __all__ = ["MAX_VARINT_BYTES", "pack", "unpack"]
 # (a new value is a new minor version; an older reader refuses the unknown code by name).
 KIND_CODES = ("image", "curve", "surface")
 COLOUR_CODES = ("none", "ycbcr", "rct")
+#: Colour code 3: the lossless RCT with Cr predicted from Cb, ``"rct-p<w>"``; its weight ``w``
+#: follows the pads as a zigzag varint.
+COLOUR_PREDICTED, PREDICTED_PREFIX = 3, "rct-p"
 DTYPE_CODES = (
     "uint8",
     "uint16",
@@ -61,7 +65,7 @@ DTYPE_CODES = (
 #: Code 0 means "the name is in the extension"; code 4 is ``reversible`` with its ``lifting``.
 WAVELET_CODES = ("", "bspline2", "haar", "cdf97", "reversible")
 BOUNDARY_CODES = ("open", "closed", "symmetric")
-LIFTING_CODES = ("legall53", "haar", "bspline2")
+LIFTING_CODES = ("legall53", "haar", "bspline2", "511c")
 #: Code 2 means "the name is in the extension".
 QUANTIZER_CODES = ("none", "deadzone")
 CODER_CODES = ("context", "zlib")
@@ -273,6 +277,16 @@ def _index(table: tuple[str, ...], value: Any, field: str) -> int:
     raise BundleError(msg)
 
 
+def _predicted_weight(colour: Any) -> int | None:
+    """``w`` of a colour ``"rct-p<w>"`` (None for any other colour)."""
+    if not isinstance(colour, str) or not colour.startswith(PREDICTED_PREFIX):
+        return None
+    text = colour[len(PREDICTED_PREFIX) :]
+    if len(text) > 4 or not text.lstrip("-").isdigit():
+        return None
+    return int(text) if f"{PREDICTED_PREFIX}{int(text)}" == colour else None
+
+
 def _sizes(value: Any, field: str) -> list[int]:
     if not isinstance(value, list) or not all(
         isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= _MAX_SIZE for v in value
@@ -321,7 +335,11 @@ def pack(header: dict[str, Any]) -> bytes:
         k: v for k, v in header.items() if k not in _CORE_KEYS + ("opaque", "scale", "lifting")
     }
     kind = _index(KIND_CODES, header["kind"], "kind")
-    colour = _index(COLOUR_CODES, header["colour"], "colour")
+    weight = _predicted_weight(header["colour"])
+    if weight is None:
+        colour = _index(COLOUR_CODES, header["colour"], "colour")
+    else:
+        colour = COLOUR_PREDICTED
     dtype = _index(DTYPE_CODES, header["dtype"], "dtype")
     fit = _index(("none", "pad"), header["fit"], "fit")
     shape = _sizes(header["shape"], "shape")
@@ -424,6 +442,8 @@ def pack(header: dict[str, Any]) -> bytes:
             out += encode_varint(before)
         if pads_mode:
             out += encode_varint(after)
+    if weight is not None:
+        out += encode_varint(zigzag(weight))
     if lifting_compact:
         assert isinstance(lifting, list)
         out += encode_varint(len(lifting))
@@ -567,7 +587,9 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
     reader = _Reader(data)
     flags = [reader.byte("flags") for _ in range(4)]
     kind = reader.code(flags[0] & 3, KIND_CODES, "kind")
-    colour = reader.code(flags[0] >> 2 & 3, COLOUR_CODES, "colour")
+    colour_code = flags[0] >> 2 & 3
+    if colour_code != COLOUR_PREDICTED:
+        colour = reader.code(colour_code, COLOUR_CODES, "colour")
     rank = (flags[0] >> 4 & 3) + 1
     fit = ("none", "pad")[flags[0] >> 6 & 1]
     opaque = bool(flags[0] >> 7)
@@ -623,6 +645,8 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
         header["wavelet"] = WAVELET_CODES[wavelet_code]
     header["boundary"] = boundary
     header["levels"] = levels
+    if colour_code == COLOUR_PREDICTED:
+        colour = f"{PREDICTED_PREFIX}{unzigzag(reader.varint('colour', 255))}"
     header["colour"] = colour
     if wavelet_code == WAVELET_CODES.index("reversible"):
         count = reader.varint("lifting", 255)

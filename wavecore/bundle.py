@@ -77,7 +77,8 @@ version may add some.
                 (periodic) or ``"symmetric"`` (mirror extension: ``legall53``, ``cdf97``) per
                 transformed axis
 ``levels``      ``L``, the number of decomposition levels (``N = L + 1`` chunks)
-``colour``      ``"none"``, ``"ycbcr"`` (irreversible, lossy) or ``"rct"`` (reversible)
+``colour``      ``"none"``, ``"ycbcr"`` (irreversible, lossy) or ``"rct"`` (reversible), or
+                ``"rct-p<w>"`` (reversible, Cr less ``floor((w Cb + 4) / 8)``, ``w`` ±1 … ±8)
 ``quantizer``   the quantizer's name (``"none"`` for lossless) and ``qparams`` its parameters
 ``coder``       the entropy coder's name and ``cparams`` its parameters
 ``peak``        the peak value PSNR is measured against
@@ -178,7 +179,7 @@ DTYPES = (
     "int64",
     "uint32",
 )
-COLOURS = ("none", "ycbcr", "rct")
+COLOURS = ("none", "ycbcr", "rct", *(f"rct-p{w}" for w in range(-8, 9) if w))
 FITS = ("pad", "none")
 BOUNDARIES = ("open", "closed", "symmetric")
 _NAME_MAX = 32

@@ -174,7 +174,7 @@ def encode_image(
 
 def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
     dtype = dtype_name(arr, "image", integer_only=True)
-    colour = "rct" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
+    colour = _lossless.lossless_colour(arr)  # RCT, with Cr predicted from Cb where that pays
     data = get_colour({"id": colour}).forward(arr).astype(np.int64, copy=False)
     # At most as many levels as leave every subband non-empty (5/3 fits any size unpadded).
     deepest = min(arr.shape[:2]).bit_length() - 1
@@ -190,11 +190,7 @@ def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
         raise InvalidParameter(msg)
     # First-order entropy only guides the choice of filters (the context coder ranks them
     # differently), so code the choice with and without the closed bspline2 and keep the smaller.
-    choices = []
-    for candidates in (("legall53", "haar"), _lossless.FILTERS):
-        lifting = _lossless.choose_filters(data, level, (0, 1), candidates)
-        if lifting not in choices:
-            choices.append(lifting)
+    choices = _lossless.filter_choices(data, level)
     bundles = [
         _lossless_bundle(arr, data, dtype, colour, level, lifting, search=search)
         for lifting in choices

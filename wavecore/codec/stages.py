@@ -9,7 +9,8 @@ so decoding dispatches through the registry instead of testing names.  Four kind
   ``"reversible"`` (the integer lifting of lossless bundles: one pipeline among others);
 * quantizers: ``"deadzone"`` and ``"none"`` (integers coded as they are);
 * entropy coders: ``"context"`` and ``"zlib"`` (:mod:`wavecore.entropy`);
-* colour transforms: ``"none"``, ``"ycbcr"`` and ``"rct"`` (:mod:`wavecore.colour`).
+* colour transforms: ``"none"``, ``"ycbcr"`` and ``"rct"`` (:mod:`wavecore.colour`), and
+  ``"rct-p<w>"``, the RCT with Cr predicted from Cb (lossless only, ``w`` in -8 … 8, not 0).
 
 The bundle header (format 1.x) keeps its fields as they are; :func:`pipeline` is the one place
 that maps them to stage configs.  A stage whose bitstream changes gets a new id, so that old
@@ -445,6 +446,30 @@ class ReversibleColour(Colour):
 
     def inverse(self, data: np.ndarray) -> np.ndarray:
         return rct_inverse(data)
+
+
+class PredictedReversibleColour(Colour):
+    """The RCT with Cr predicted from Cb (:func:`wavecore.lossless.predict_chroma`): one
+    registered id per weight, ``rct-p<weight>``, so the header's colour name carries it."""
+
+    weight: ClassVar[int] = 0
+
+    def forward(self, data: np.ndarray) -> np.ndarray:
+        return _lossless.predicted_rct_forward(data, self.weight)
+
+    def inverse(self, data: np.ndarray) -> np.ndarray:
+        return _lossless.predicted_rct_inverse(data, self.weight)
+
+
+for _weight in _lossless.CHROMA_WEIGHTS:
+    if _weight:
+        register_stage(
+            type(
+                f"PredictedReversibleColour{_weight + 8}",
+                (PredictedReversibleColour,),
+                {"codec_id": _lossless.colour_name(_weight), "weight": _weight},
+            )
+        )
 
 
 # --------------------------------------------------------------------------------------------
