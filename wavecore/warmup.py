@@ -117,8 +117,11 @@ def _grids() -> None:
     for grid in (smooth, smooth.astype(np.float32), volume):
         span = float(np.ptp(grid))
         window = tuple(slice(3, 40) for _ in grid.shape)
-        for target in ({"max_error": 1e-3 * span}, {"rmse": 1e-3 * span}, {"bpp": 6.0}):
-            bundle = encode_grid(grid, **target)
+        for bundle in (
+            encode_grid(grid, max_error=1e-3 * span),
+            encode_grid(grid, rmse=1e-3 * span),
+            encode_grid(grid, bpp=6.0),
+        ):
             decode(bundle)
             decode_grid(bundle, window=window)
     decode(encode_grid(np.round(smooth).astype(np.int16), lossless=True))
