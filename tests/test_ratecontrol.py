@@ -77,7 +77,7 @@ def calls(monkeypatch: pytest.MonkeyPatch) -> Iterator[Calls]:
             seen.closed_results.append(id(q))
             return q, params
 
-    reconstruct = ratecontrol._reconstruct
+    reconstruct = ratecontrol.reconstruct_finished
 
     def counted_reconstruct(*args: Any, **kwargs: Any) -> Any:
         seen.syntheses += 1
@@ -85,7 +85,7 @@ def calls(monkeypatch: pytest.MonkeyPatch) -> Iterator[Calls]:
 
     monkeypatch.setattr(ratecontrol, "quantize_bands", counted_quantize)
     monkeypatch.setattr(ratecontrol, "ClosedLoopFit", CountedFit)
-    monkeypatch.setattr(ratecontrol, "_reconstruct", counted_reconstruct)
+    monkeypatch.setattr(ratecontrol, "reconstruct_finished", counted_reconstruct)
     monkeypatch.setattr(ratecontrol, "encode_levels", counted_code)
     monkeypatch.setattr(CodedBlocks, "recode", counted_recode)
     yield seen
