@@ -279,9 +279,8 @@ def _normal_equations(
 
 
 @njit(nogil=True, cache=True)
-def _encode_group(
+def _encode_lines(
     y: np.ndarray,
-    x: np.ndarray,
     missing: np.ndarray,
     shape: tuple[int, int, int],
     odd: np.ndarray,
@@ -294,82 +293,104 @@ def _encode_group(
     allowed: float,
     lo: float,
     hi: float,
+    lines: tuple[int, int],
     symbols: np.ndarray,
-    bits: np.ndarray,
+    first: int,
+    packed: np.ndarray,
+    pack_state: np.ndarray,
     remainders: np.ndarray,
     stats: np.ndarray,
     weights: np.ndarray,
 ) -> int:
-    """Predict, quantize and reconstruct one group (into the flat ``y``), writing its symbols;
-    returns how many samples were stored exactly (their symbol ``_EXACT``).  ``cast``:
-    0 float64, 1 float32, 2 integers clipped to ``[lo, hi]``, 3 a check left to the caller.
-    ``stats`` gathers the squared errors and the largest error of what the decoder returns
-    (cast 0-2)."""
+    """Predict, quantize and reconstruct lines ``lines[0]`` to ``lines[1] - 1`` of one group
+    (its samples along the last axis, in coding order), in place: ``y`` holds the values to
+    code where nothing is coded yet, and each sample is overwritten by what the decoder will
+    reconstruct once it is coded (the predictions read only coded samples).  Writes the
+    symbols from ``symbols[first]`` on; returns how many samples were stored exactly (their
+    symbol ``_EXACT``).
+
+    The low bits of large residuals are appended to ``packed`` (``pack_state``: bytes written,
+    pending bits, their count; the caller leaves room for 53 bits a sample), most significant
+    first, or stored in ``remainders[k]`` when that is not empty (for a caller that checks the
+    bound itself and may still turn samples into exact ones).  ``cast``: 0 float64,
+    1 float32, 2 integers clipped to ``[lo, hi]``, 3 a check left to the caller.  ``stats``
+    gathers the squared errors and the largest error of what the decoder returns (cast 0-2).
+    """
     count = 0
     for a in range(3):
         count += 1 if odd[a] else 0
-    n0, n1, n2 = shape
+    _, n1, n2 = shape
     inverse = 1.0 / step
     o0, o1, o2 = odd[0], odd[1], odd[2]
     w0, w1, w2, w3, w4 = _padded(weights)
     has_missing = missing.size > 0
+    keep_remainders = remainders.size > 0
+    position, pending, pending_count = pack_state[0], pack_state[1], pack_state[2]
+    per_line = (n1 - starts[1] + strides[1] - 1) // strides[1]
     exact_count = 0
-    k = 0
-    for i0 in range(starts[0], n0, strides[0]):
-        for i1 in range(starts[1], n1, strides[1]):
-            row = (i0 * n1 + i1) * n2
-            for i2 in range(starts[2], n2, strides[2]):
-                at = row + i2
-                p = _prediction(
-                    y, at, i0, i1, i2, shape, o0, o1, o2, count, s, integer, w0, w1, w2, w3, w4
-                )
-                target = x[at]
-                if has_missing and missing[at]:
-                    y[at] = p
-                    symbols[k] = 0
-                    bits[k] = 0
-                    k += 1
-                    continue
-                # The product by 1/step may round a residual to the neighbouring multiple
-                # in a tie; the check below still holds every sample to the bound.
-                m = np.rint((target - p) * inverse)
-                ok = abs(m) <= _LARGEST_MULTIPLE
-                value = p + m * step if ok else target
-                if ok and cast != 3:
-                    if cast == 1:
-                        returned = float(np.float32(value))
-                    elif cast == 2:
-                        returned = min(max(np.rint(value), lo), hi)
-                    else:
-                        returned = value
-                    error = abs(returned - target)
-                    ok = error <= allowed
-                    if ok:
-                        stats[0] += error * error
-                        stats[1] = max(stats[1], error)
-                if not ok:
-                    y[at] = target
-                    symbols[k] = _EXACT
-                    bits[k] = 0
-                    exact_count += 1
-                    k += 1
-                    continue
-                y[at] = value
-                q = np.int64(m)
-                z = 2 * q if q >= 0 else -2 * q - 1
-                if z < _DIRECT:
-                    symbols[k] = z
-                    bits[k] = 0
-                else:
-                    b = 0
-                    while (z >> (b + 1)) > 0:
-                        b += 1
-                    low = b - _TOP_BITS
-                    top = (z >> low) & ((1 << _TOP_BITS) - 1)
-                    symbols[k] = _DIRECT + ((b - _FIRST_CLASS_BITS) << _TOP_BITS) + top
-                    bits[k] = low
-                    remainders[k] = z & ((np.int64(1) << low) - 1)
+    k = first
+    for line in range(lines[0], lines[1]):
+        i0 = starts[0] + (line // per_line) * strides[0]
+        i1 = starts[1] + (line % per_line) * strides[1]
+        row = (i0 * n1 + i1) * n2
+        for i2 in range(starts[2], n2, strides[2]):
+            at = row + i2
+            target = y[at]
+            p = _prediction(
+                y, at, i0, i1, i2, shape, o0, o1, o2, count, s, integer, w0, w1, w2, w3, w4
+            )
+            if has_missing and missing[at]:
+                y[at] = p
+                symbols[k] = 0
                 k += 1
+                continue
+            # The product by 1/step may round a residual to the neighbouring multiple
+            # in a tie; the check below still holds every sample to the bound.
+            m = np.rint((target - p) * inverse)
+            ok = abs(m) <= _LARGEST_MULTIPLE
+            value = p + m * step if ok else target
+            if ok and cast != 3:
+                if cast == 1:
+                    returned = float(np.float32(value))
+                elif cast == 2:
+                    returned = min(max(np.rint(value), lo), hi)
+                else:
+                    returned = value
+                error = abs(returned - target)
+                ok = error <= allowed
+                if ok:
+                    stats[0] += error * error
+                    stats[1] = max(stats[1], error)
+            if not ok:  # y[at] keeps the target, stored exactly
+                symbols[k] = _EXACT
+                exact_count += 1
+                k += 1
+                continue
+            y[at] = value
+            q = np.int64(m)
+            z = 2 * q if q >= 0 else -2 * q - 1
+            if z < _DIRECT:
+                symbols[k] = z
+            else:
+                b = 0
+                while (z >> (b + 1)) > 0:
+                    b += 1
+                low = b - _TOP_BITS
+                top = (z >> low) & ((1 << _TOP_BITS) - 1)
+                symbols[k] = _DIRECT + ((b - _FIRST_CLASS_BITS) << _TOP_BITS) + top
+                bits = z & ((np.int64(1) << low) - 1)
+                if keep_remainders:
+                    remainders[k - first] = bits
+                else:
+                    pending = (pending << low) | bits
+                    pending_count += low
+                    while pending_count >= 8:
+                        pending_count -= 8
+                        packed[position] = (pending >> pending_count) & 0xFF
+                        position += 1
+                    pending &= (np.int64(1) << pending_count) - 1
+            k += 1
+    pack_state[0], pack_state[1], pack_state[2] = position, pending, pending_count
     return exact_count
 
 
@@ -388,7 +409,7 @@ def _decode_group(
     values: np.ndarray,
     weights: np.ndarray,
 ) -> None:
-    """The inverse of :func:`_encode_group`: ``values[k]`` where ``exact[k]``."""
+    """The inverse of :func:`_encode_lines`: ``values[k]`` where ``exact[k]``."""
     count = 0
     for a in range(3):
         count += 1 if odd[a] else 0
@@ -572,6 +593,12 @@ def _unpack_bits(
 # --------------------------------------------------------------------------------------------
 
 
+#: The encoder codes a group's lines in bands of about this many samples: the room it leaves
+#: for their low bits (53 bits a sample at most) and the range coder's index array follow the
+#: band, not the chunk.
+_BAND = 1 << 14
+
+
 def encode_predictive(
     original: np.ndarray,
     missing: np.ndarray,
@@ -580,15 +607,23 @@ def encode_predictive(
     axes: tuple[int, ...],
     *,
     integer: bool | None = None,
+    overwrite: bool = False,
 ) -> tuple[bytes, float, float]:
-    """Code ``original`` (float64, the grid's values, 2-D or 3-D; ``missing`` marks the NaN
-    cells, whose values are ignored) so that every other sample decodes within ``bound``;
-    predicted along ``axes``.
+    """Code ``original`` (the grid's values, 2-D or 3-D, float64 or a narrower float or
+    integer dtype whose values float64 holds exactly; ``missing`` marks the NaN cells, whose
+    values are ignored) so that every other sample decodes within ``bound``; predicted along
+    ``axes``.
 
     Returns the stream, and the sum of the squared errors and the largest error of what
     :func:`decode_predictive` returns for it, over the cells not missing.  ``integer``
     (the default for integer dtypes) predicts in whole numbers with the step ``2 floor(t) + 1``:
-    for whole-number values only.
+    for whole-number values only.  ``overwrite=True`` lets the coder work in ``original``
+    itself when it is a C-contiguous float64 array (it is left holding the decoder's values):
+    no copy of the grid.
+
+    Memory: the coder works in place in one float64 grid (the decoder's reconstruction
+    replaces each value as it is coded), and its scratch is one byte a sample of the largest
+    group (the symbols, whose histogram precedes their coding) and a band of ``_BAND`` samples.
     """
     if integer is None:
         integer = dtype.kind in "iu"
@@ -605,9 +640,16 @@ def encode_predictive(
         allowed = bound
         step = min(2.0 * bound, 1e300)
     shape = original.shape
-    y = np.zeros(shape, dtype=np.float64)
+    in_place = (
+        overwrite
+        and cast != 3  # float16's check below compares with the values after coding
+        and original.dtype == np.float64
+        and original.flags.c_contiguous
+        and original.flags.writeable
+    )
+    # The values to code, overwritten by the reconstruction as the coding goes.
+    y = original if in_place else np.array(original, dtype=np.float64, order="C")
     shape3 = _shape3(shape)
-    x_flat = np.ascontiguousarray(original, dtype=np.float64).reshape(-1)
     y_flat = y.reshape(-1)
     missing_flat = (
         np.ascontiguousarray(missing).reshape(-1) if missing.any() else np.zeros(0, np.bool_)
@@ -615,48 +657,63 @@ def encode_predictive(
     encoder = constriction.stream.queue.RangeEncoder()
     tables: list[int] = []
     exact_values: list[np.ndarray] = []
-    largest = y.size
-    symbols = np.empty(largest, dtype=np.int32)
-    bits = np.empty(largest, dtype=np.int64)
-    remainders = np.empty(largest, dtype=np.int64)  # read only where bits > 0
+    groups = list(_groups(shape, axes))
+    largest = max(y[slices].size for _, _, slices in groups)
+    # _EXACT < 256: a symbol is one byte.
+    symbols = np.empty(largest, dtype=np.uint8)
     lookup = np.zeros(_EXACT + 1, dtype=np.int32)
     stats = np.zeros(2, dtype=np.float64)
-    # Low bits: at most 53 a sample (a residual below 2**54 less its class's 2 top bits).
-    packed = np.zeros(0, dtype=np.uint8)
+    packed = np.zeros(1024, dtype=np.uint8)
     pack_state = np.zeros(3, dtype=np.int64)
+    no_remainders = np.zeros(0, dtype=np.int64)
     stored_weights: list[np.ndarray] = []
-    for s, odd, slices in _groups(shape, axes):
+    for s, odd, slices in groups:
         odd_flags, starts, strides = _layout(slices, odd, len(shape))
-        size = y[slices].size
-        group_symbols, group_bits = symbols[:size], bits[:size]
+        group_shape = y[slices].shape
+        size = math.prod(group_shape)
+        group_symbols = symbols[:size]
         count = len(odd)
         weights = _default_weights(count)
         if count and size >= _FIT_MIN:
             weights = _fitted_weights(
-                y_flat, x_flat, missing_flat, shape3, odd_flags, starts, strides, s, size
+                y_flat, y_flat, missing_flat, shape3, odd_flags, starts, strides, s, size
             )
             stored_weights.append(weights.astype("<f4"))
-        exact_count = _encode_group(
-            y_flat,
-            x_flat,
-            missing_flat,
-            shape3,
-            odd_flags,
-            starts,
-            strides,
-            s,
-            step,
-            integer,
-            cast,
-            allowed,
-            lo,
-            hi,
-            group_symbols,
-            group_bits,
-            remainders,
-            stats,
-            weights,
-        )
+        per_line = _shape3(group_shape)[2]
+        lines = size // per_line if per_line else 0
+        band = max(lines, 1) if cast == 3 else max(1, _BAND // max(per_line, 1))
+        remainders = np.zeros(size, dtype=np.int64) if cast == 3 else no_remainders
+        exact_count = 0
+        for first_line in range(0, lines, band):
+            last_line = min(first_line + band, lines)
+            needed = int(pack_state[0]) + (last_line - first_line) * per_line * 7 + 16
+            if packed.size < needed:
+                grown = np.zeros(max(needed, 2 * packed.size), dtype=np.uint8)
+                grown[: int(pack_state[0])] = packed[: int(pack_state[0])]
+                packed = grown
+            exact_count += _encode_lines(
+                y_flat,
+                missing_flat,
+                shape3,
+                odd_flags,
+                starts,
+                strides,
+                s,
+                step,
+                integer,
+                cast,
+                allowed,
+                lo,
+                hi,
+                (first_line, last_line),
+                group_symbols,
+                first_line * per_line,
+                packed,
+                pack_state,
+                remainders,
+                stats,
+                weights,
+            )
         if cast == 3:  # float16: the bound checked here, on the cast numpy does
             decoded = y[slices].reshape(-1)
             target = original[slices].reshape(-1)
@@ -668,10 +725,20 @@ def encode_predictive(
                 decoded[bad] = target[bad]
                 y[slices] = decoded.reshape(y[slices].shape)
                 group_symbols[bad] = _EXACT
-                group_bits[bad] = 0
                 exact_count += int(np.count_nonzero(bad))
+            large = (group_symbols >= _DIRECT) & (group_symbols != _EXACT)
+            widths = np.where(
+                large, ((group_symbols.astype(np.int64) - _DIRECT) >> _TOP_BITS) + 2, 0
+            )
+            needed = int(pack_state[0]) + int(widths.sum()) // 8 + 16
+            if packed.size < needed:
+                grown = np.zeros(needed, dtype=np.uint8)
+                grown[: int(pack_state[0])] = packed[: int(pack_state[0])]
+                packed = grown
+            _pack_bits(remainders, widths, packed, pack_state)
         if exact_count:
-            exact_values.append(original[slices].reshape(-1)[group_symbols == _EXACT])
+            # An exact sample's place in y still holds its value.
+            exact_values.append(y[slices].reshape(-1)[group_symbols == _EXACT])
         counts = np.bincount(group_symbols, minlength=_EXACT + 1)
         present = np.flatnonzero(counts)
         tables.append(present.size)
@@ -681,13 +748,11 @@ def encode_predictive(
             previous = symbol
         if present.size > 1:
             lookup[present] = np.arange(present.size, dtype=np.int32)
-            encoder.encode(lookup[group_symbols], _model(counts[present].astype(np.float64)))
-        low_bits = int(group_bits.sum())
-        if low_bits:
-            needed = int(pack_state[0]) + low_bits // 8 + 16
-            if packed.size < needed:
-                packed = np.concatenate([packed, np.zeros(max(needed, packed.size), np.uint8)])
-            _pack_bits(remainders[:size], group_bits, packed, pack_state)
+            model = _model(counts[present].astype(np.float64))
+            # In pieces: the same words as one call (the coder's state carries over), without
+            # an int32 copy of the whole group.
+            for first in range(0, size, _BAND):
+                encoder.encode(lookup[group_symbols[first : first + _BAND]], model)
     table_bytes = zlib.compress(_write_varints(tables), 9)
     coded = encoder.get_compressed().tobytes()
     position, pending, count = (int(v) for v in pack_state)

@@ -971,6 +971,7 @@ def _encode_predictive(
         bound,
         _PREDICTED_AXES[layout] if axes is None else axes,
         integer=integer,
+        overwrite=not np.may_share_memory(known, arr),  # our copy: coded in place
     )
     finite_count = max(int(np.count_nonzero(~missing)), 1)
     measured_rmse = math.sqrt(squares / finite_count)
@@ -1044,7 +1045,13 @@ def _integers(values: np.ndarray) -> bool:
     lo, hi = float(values.min()), float(values.max())
     if not (hi - lo <= 65535 and abs(lo) < 2**52 and abs(hi) < 2**52):
         return False
-    return bool(np.array_equal(values, np.rint(values)))
+    # In blocks: a field of fractions is told from its first block, with no full-size copy.
+    flat = values.reshape(-1)
+    block = 1 << 16
+    return all(
+        np.array_equal(part, np.rint(part))
+        for part in (flat[start : start + block] for start in range(0, flat.size, block))
+    )
 
 
 def _encode_lossless(arr: np.ndarray, layout: int, level: int | None) -> bytes:
