@@ -93,11 +93,18 @@ def start_sampling(dask_worker: Any) -> int:
     process = psutil.Process()
     baseline = process.memory_info().rss
     cpu = process.cpu_times()
-    state = {"peak": baseline, "stop": False, "cpu": cpu.user + cpu.system}
+    state = {"peak": baseline, "stop": False, "cpu": cpu.user + cpu.system, "held": 0, "at": 0}
+    worker_state = getattr(dask_worker, "state", None)  # None: the process itself (no Dask)
 
     def run() -> None:
         while not state["stop"]:
-            state["peak"] = max(state["peak"], process.memory_info().rss)
+            rss = process.memory_info().rss
+            # The bytes of task results the worker holds (chunks read and not yet consumed,
+            # or fetched from the other worker): Dask's "managed" memory, beside the codec's.
+            held = int(worker_state.nbytes) if worker_state is not None else 0
+            state["held"] = max(state["held"], held)
+            if rss > state["peak"]:
+                state["peak"], state["at"] = rss, held
             time.sleep(0.02)
 
     thread = threading.Thread(target=run, daemon=True)
@@ -114,14 +121,38 @@ def stop_sampling(dask_worker: Any) -> dict[str, int]:
     thread.join()
     cpu = psutil.Process().cpu_times()
     seconds = cpu.user + cpu.system - state["cpu"]
-    return {"baseline": int(baseline), "peak": int(state["peak"]), "cpu_seconds": seconds}
+    return {
+        "baseline": int(baseline),
+        "peak": int(state["peak"]),
+        "cpu_seconds": seconds,
+        "held_max": int(state["held"]),
+        "held_at_peak": int(state["at"]),
+    }
 
 
 def warm_up() -> bool:
+    """Load what a worker's first chunk would: the compiled kernels, and Zarr's codec pipeline
+    and Dask's array modules (a small array written and read), so that the time and the
+    resident rise measured after it are the coding's, not first-use imports.  The probe is
+    small, so the worker's heap is not grown to a full chunk's needs beforehand."""
+    import dask.array  # noqa: F401  (the store tasks' module)
+
     from wavecore.zarr import decode_chunk, encode_chunk
 
     probe = field_block(np.empty((96, 80)), 1024, 96, (1, 1))
-    decode_chunk(encode_chunk(probe, {"max_error": 1e-3 * float(np.ptp(probe))}))
+    config = {"max_error": 1e-3 * float(np.ptp(probe))}
+    decode_chunk(encode_chunk(probe, config))
+    with tempfile.TemporaryDirectory() as folder:
+        array = zarr.create_array(
+            folder,
+            shape=probe.shape,
+            chunks=(48, 40),
+            dtype="float32",
+            serializer={"name": "wavecore", "configuration": config},
+            compressors=None,
+        )
+        array[:] = probe
+        np.asarray(array[:])
     return True
 
 
@@ -235,20 +266,25 @@ def main(argv: list[str] | None = None) -> int:
 
     counts = [int(w) for w in args.workers.split(",")]
     runs: dict[int, Any] = {}
-    low = high = None
+    # Synthesised once (its cost is many times the coding's), stored uncompressed, untimed, on
+    # a cluster of its own: the timed runs' workers start alike, fresh (a worker that had made
+    # the field would start with a heap already grown, and show a smaller rise).  The range,
+    # the check of the bound and the peers read it from there.
+    source = work / "field_raw.zarr"
+    c, client = cluster(max(counts))
+    try:
+        make_field(size, chunk).to_zarr(str(source), overwrite=True, compressors=None)
+        stored = da.from_zarr(str(source))
+        low, high = (float(v) for v in da.compute(stored.min(), stored.max()))
+    finally:
+        client.close()
+        c.close()
+    bound = 1e-3 * (high - low)
+    results.update(range=high - low, bound=bound)
+    print(f"range {high - low:.6g}; max_error = 1e-3 × range = {bound:.6g}")
     for workers in counts:
         c, client = cluster(workers)
         try:
-            if low is None:
-                # Synthesised once (its cost is many times the coding's), stored uncompressed,
-                # untimed; the range, the check of the bound and the peers read it from there.
-                source = work / "field_raw.zarr"
-                make_field(size, chunk).to_zarr(str(source), overwrite=True, compressors=None)
-                stored = da.from_zarr(str(source))
-                low, high = (float(v) for v in da.compute(stored.min(), stored.max()))
-                bound = 1e-3 * (high - low)
-                results.update(range=high - low, bound=bound)
-                print(f"range {high - low:.6g}; max_error = 1e-3 × range = {bound:.6g}")
             store = work / f"wavecore_{workers}.zarr"
             run = write_run(client, source, chunk, results["bound"], store)
             run["stored_bytes"] = stored_bytes(store)
@@ -271,6 +307,16 @@ def main(argv: list[str] | None = None) -> int:
                 f"({max(above) / 2**20:.0f} MiB above its idle size = "
                 f"{max(above) / chunk_bytes:.1f} × the {chunk_bytes / 2**20:.0f} MiB chunk)"
             )
+            # Each worker's own figures (not a sum over workers): its resident rise, and the
+            # task results Dask held in it (chunks read or fetched and not yet coded), at most
+            # and at the moment of its resident peak.
+            for number, m in enumerate(run["memory"]):
+                print(
+                    f"  worker {number}: {(m['peak'] - m['baseline']) / 2**20:.1f} MiB above "
+                    f"idle = {(m['peak'] - m['baseline']) / chunk_bytes:.1f} × the chunk; "
+                    f"chunks held by Dask: at most {m['held_max'] / 2**20:.1f} MiB, "
+                    f"{m['held_at_peak'] / 2**20:.1f} MiB at the resident peak"
+                )
             if workers == counts[-1]:
                 # Read back in parallel: the bound on every value.
                 back = da.from_zarr(str(store)).astype(np.float64)
