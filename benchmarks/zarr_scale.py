@@ -86,9 +86,15 @@ def make_field(size: int, chunk: int) -> Any:
 # --------------------------------------------------------------------------------------------
 
 
-def start_sampling(dask_worker: Any) -> int:
-    """Start sampling this worker's resident set (kept on the worker object between calls)."""
+def start_sampling(dask_worker: Any, trace: bool = False) -> int:
+    """Start sampling this worker's resident set (kept on the worker object between calls);
+    ``trace``: also trace its allocations (tracemalloc: slower, so not in the timed runs)."""
+    import tracemalloc
+
     import psutil
+
+    if trace:
+        tracemalloc.start()
 
     process = psutil.Process()
     baseline = process.memory_info().rss
@@ -114,11 +120,15 @@ def start_sampling(dask_worker: Any) -> int:
 
 
 def stop_sampling(dask_worker: Any) -> dict[str, int]:
+    import tracemalloc
+
     import psutil
 
     state, thread, baseline = dask_worker.wavecore_sampler
     state["stop"] = True
     thread.join()
+    traced = tracemalloc.get_traced_memory()[1] if tracemalloc.is_tracing() else 0
+    tracemalloc.stop()
     cpu = psutil.Process().cpu_times()
     seconds = cpu.user + cpu.system - state["cpu"]
     return {
@@ -127,6 +137,7 @@ def stop_sampling(dask_worker: Any) -> dict[str, int]:
         "cpu_seconds": seconds,
         "held_max": int(state["held"]),
         "held_at_peak": int(state["at"]),
+        "traced_peak": int(traced),
     }
 
 
@@ -211,7 +222,7 @@ def stored_bytes(store: Path) -> int:
 
 
 def write_run(
-    client: Client, source: Path, chunk: int, bound: float, store: Path
+    client: Client, source: Path, chunk: int, bound: float, store: Path, trace: bool = False
 ) -> dict[str, Any]:
     """Re-code the raw field at ``source`` into ``store``: the time is reading raw chunks,
     coding and writing them (the synthesis of the field, 15x the coding, is not timed)."""
@@ -226,7 +237,7 @@ def write_run(
         compressors=None,
         overwrite=True,
     )
-    client.run(start_sampling)
+    client.run(start_sampling, trace=trace)
     start = time.perf_counter()
     field.store(target, lock=False)
     seconds = time.perf_counter() - start
@@ -247,6 +258,11 @@ def main(argv: list[str] | None = None) -> int:
         "--memory-chunks",
         default="",
         help="only measure one process's peak memory coding chunks of these sides (256,512,1024)",
+    )
+    parser.add_argument(
+        "--trace",
+        action="store_true",
+        help="also trace each worker's allocations (tracemalloc; slows the timed runs)",
     )
     parser.add_argument("--json", type=Path, help="write the figures here too")
     parser.add_argument("--keep", type=Path, help="keep the stores in this folder")
@@ -286,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
         c, client = cluster(workers)
         try:
             store = work / f"wavecore_{workers}.zarr"
-            run = write_run(client, source, chunk, results["bound"], store)
+            run = write_run(client, source, chunk, results["bound"], store, args.trace)
             run["stored_bytes"] = stored_bytes(store)
             run["throughput_per_worker"] = raw / run["seconds"] / workers
             peaks = [m["peak"] for m in run["memory"]]
@@ -316,6 +332,12 @@ def main(argv: list[str] | None = None) -> int:
                     f"idle = {(m['peak'] - m['baseline']) / chunk_bytes:.1f} × the chunk; "
                     f"chunks held by Dask: at most {m['held_max'] / 2**20:.1f} MiB, "
                     f"{m['held_at_peak'] / 2**20:.1f} MiB at the resident peak"
+                    + (
+                        f"; allocations' peak {m['traced_peak'] / 2**20:.1f} MiB = "
+                        f"{m['traced_peak'] / chunk_bytes:.1f} × the chunk"
+                        if args.trace
+                        else ""
+                    )
                 )
             if workers == counts[-1]:
                 # Read back in parallel: the bound on every value.
