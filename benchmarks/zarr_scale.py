@@ -14,7 +14,11 @@ into a Zarr store (format 3, the ``wavecore`` serializer) at ``max_error = 1e-3 
   = throughput(2) / (2 × throughput(1));
 * peak memory per worker: each worker samples its own resident set every 20 ms during the
   write (psutil); reported as the peak, and as the peak above the worker's resident set before
-  the write, against the chunk's bytes (the target: ≤ 4 × chunk + a constant);
+  the write, against the chunk's bytes (the target: ≤ 4 × chunk + a constant), for each
+  worker apart (never summed), with the bytes of task results Dask held in it (chunks read
+  and not yet coded); ``--trace`` adds each worker's allocations' peak (tracemalloc).  The
+  field is made on a cluster of its own, so that the timed workers start alike, fresh; run two
+  ``--chunk`` sizes to separate the bytes per chunk byte from the constant;
 * the store is read back in parallel and its largest error over every value is checked
   against the bound;
 * the peers code every chunk of the same field on the same cluster at the same bound:
