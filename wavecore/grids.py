@@ -18,9 +18,16 @@ that adds what gridded data needs beyond a picture:
   The interpolation coder codes no residual there (the decoder interpolates across the hole);
   for the wavelet core they are filled smoothly before the transform (push–pull: averaged down
   a pyramid, interpolated back up), so that the hole costs few bits.
+* **RMSE, PSNR and bpp.**  Without a wavelet named, a float grid under ``rmse`` (or
+  ``psnr``) is coded by the interpolation coder too, at ``t = sqrt(3) × rmse`` (its errors are
+  nearly uniform in ``[-t, t]``), checked on what the decoder returns; where that comes to
+  under 4 bits a sample the wavelet core codes it as well and the smaller is kept (the
+  transform's coding gain wins at low rates).  A ``bpp`` budget of 4 or more is searched on
+  ``t`` the same way; lower budgets, integer grids and named wavelets use the wavelet core
+  (its step for ``rmse`` found from the coefficients, :mod:`wavecore.gridcore`).
 * **Volumes.**  The interpolation coder predicts a volume ``(D, H, W)`` along all three axes
   (3-7 % fewer bytes than its slices coded apart, on the benchmark's volume).  The wavelet
-  core (``rmse``, ``psnr``, ``bpp``, a named wavelet) codes it as ``D`` slices under one 2-D
+  core (a named wavelet, low ``bpp``) codes it as ``D`` slices under one 2-D
   transform each (the codec's surface of ``(H, W)`` points with ``D`` values), in one core
   bundle: the layout that the codec's two-axis plan, quantizer and context coder take as they
   are, and one whose coarse levels are coarse slices.
@@ -31,7 +38,8 @@ The container (little-endian)::
 
     offset  size  field
     0       4     magic b"WVGD"
-    4       1     version (1; 2 when flag 16 is set)
+    4       1     version (1; 2 when flag 16 is set; 3 when the interpolation stream codes
+                  its fine levels by tiles)
     5       1     layout: 0 height field, 1 volume (slices first), 2 surface points (U, V, d)
     6       1     dtype code (``_DTYPES``)
     7       1     flags: 1 NaN mask, 2 outliers, 4 lossless core, 8 bound held,
@@ -49,7 +57,9 @@ The container (little-endian)::
 
 A wavelet core is an ordinary wavecore bundle (:func:`wavecore.decode` reads it), so a coarse
 level (``decode(bundle, level=k)``) comes from its first chunks, as for any bundle; an
-interpolation core gives the lattice of every ``2**k``-th sample.
+interpolation core gives the lattice of every ``2**k``-th sample.  A window of a wavelet core
+reads only its code-blocks; a window of an interpolation core (version 3) entropy decodes only
+the tiles its predictions reach and reconstructs only those samples.
 """
 
 from __future__ import annotations
@@ -66,7 +76,13 @@ import numpy as np
 from .arguments import as_native
 from .bundle import MAX_ELEMENTS
 from .errors import BundleError, InvalidParameter
-from .gridpredict import decode_predictive, encode_predictive
+from .gridpredict import (
+    decode_predictive,
+    decode_predictive_window,
+    encode_predictive,
+    fixed_bytes,
+    is_tiled_stream,
+)
 
 __all__ = ["decode_grid", "encode_grid", "inspect_grid", "is_grid_bundle"]
 
@@ -75,6 +91,10 @@ VERSION = 1
 #: The version of bundles whose core is the interpolation stream (flag 16), which a reader of
 #: version 1 would take for a wavecore bundle; version-1 bundles are still written otherwise.
 PREDICTIVE_VERSION = 2
+#: The version of bundles whose interpolation stream codes its fine levels by tiles (the
+#: stream's own flag; a window decodes from its tiles), which a reader of version 2 would
+#: refuse as a corrupt stream.  Grids of one tile still write version 2.
+TILED_VERSION = 3
 LAYOUT_FIELD, LAYOUT_VOLUME, LAYOUT_POINTS = 0, 1, 2
 _FLAG_MASK, _FLAG_OUTLIERS, _FLAG_LOSSLESS, _FLAG_BOUND = 1, 2, 4, 8
 _FLAG_PREDICTIVE = 16
@@ -649,9 +669,10 @@ def encode_grid(
     data : array_like
         Any size, any of ``uint8`` … ``int64`` (64-bit integers up to ±2**53) and ``float16`` …
         ``float64``, any byte order.  NaN cells (missing data) decode as NaN, exactly;
-        infinities are refused.  Under ``max_error`` a volume is predicted along all three
-        axes; under the other targets it is coded slice by slice along its first axis, under
-        one 2-D transform per slice (see the module docstring).
+        infinities are refused.  The interpolation coder (``max_error``; ``rmse``, ``psnr``
+        and ``bpp`` at high rates) predicts a volume along all three axes; the wavelet core
+        codes it slice by slice along its first axis, under one 2-D transform per slice (see
+        the module docstring).
     wavelet : str, optional
         The wavelet core's: ``"cdf97"`` by default (the measured winner on height fields,
         docs/benchmarks.md), ``"bspline2"`` (the paper's), ``"haar"`` or an alias
@@ -779,11 +800,31 @@ def encode_layout(
     predictive = wavelet is None and (bound is not None and (bound > 0 or dtype.kind in "iu"))
     if predictive and bound is not None:
         return _encode_predictive(arr, layout, values, missing, mask_bytes, bound)
+
+    def core_layout() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(filled values, values, missing) in the wavelet core's layout."""
+        filled = fill_missing(values, missing) if has_mask else values
+        return _to_core(filled, layout), _to_core(values, layout), _to_core(missing, layout)
+
+    by_interpolation = wavelet is None and dtype.kind == "f" and layout != LAYOUT_POINTS
+    if rmse_target is not None and by_interpolation:
+        # A float field or volume under rmse (or psnr), no wavelet named: interpolation first.
+        target = rmse_target
+        return _encode_rmse_predictive(
+            arr,
+            layout,
+            values,
+            missing,
+            mask_bytes,
+            target,
+            lambda: _encode_rmse_wavelet(arr, layout, core, *core_layout(), mask_bytes, target),
+        )
+    if bpp_target is not None and by_interpolation and bpp_target >= _WAVELET_BELOW_BPP:
+        found = _encode_bpp_predictive(arr, layout, values, missing, mask_bytes, bpp_target)
+        if found is not None:
+            return found
     bounded = b""
-    filled = fill_missing(values, missing) if has_mask else values
-    core_values = _to_core(filled, layout)
-    original = _to_core(values, layout)
-    core_missing = _to_core(missing, layout)
+    core_values, original, core_missing = core_layout()
     finite_count = max(int(np.count_nonzero(~missing)), 1)
 
     if bound is not None:
@@ -800,7 +841,6 @@ def encode_layout(
                 return bounded
         return bounded
     # RMSE (or PSNR) and bpp: the core alone, verified over the finite cells.
-    peak = _peak(core_values)
     if bpp_target is not None:
         overhead = _TAIL.size + _HEAD.size + 4 * arr.ndim + _CRC.size + len(mask_bytes)
         budget_bits = bpp_target * arr.size - 8 * overhead
@@ -818,6 +858,25 @@ def encode_layout(
             *_measure(final, original, core_missing, finite_count),
         )
     assert rmse_target is not None
+    return _encode_rmse_wavelet(
+        arr, layout, core, core_values, original, core_missing, mask_bytes, rmse_target
+    )
+
+
+def _encode_rmse_wavelet(
+    arr: np.ndarray,
+    layout: int,
+    core: _Core,
+    core_values: np.ndarray,
+    original: np.ndarray,
+    core_missing: np.ndarray,
+    mask_bytes: bytes,
+    rmse_target: float,
+) -> bytes:
+    """An RMSE target met by the wavelet core alone (see :func:`_encode_rmse_at_steps`)."""
+    dtype = arr.dtype
+    finite_count = max(int(np.count_nonzero(~core_missing)), 1)
+    peak = _peak(core_values)
     fast = _encode_rmse_at_steps(
         arr, layout, core, core_values, original, core_missing, mask_bytes, rmse_target
     )
@@ -835,12 +894,126 @@ def encode_layout(
     raise InvalidParameter(msg)
 
 
-#: An RMSE (or PSNR) target is met by quantizing at a step this many times the target first:
-#: about what the dead-zone quantizer's error comes to at the rates such targets ask for (the
-#: measured ratio was 2.9-3.6 on the benchmark's grids), then at the step scaled by the
-#: target over what was measured (the RMSE is nearly proportional to the step).
+#: Under an RMSE target a float grid is coded by interpolation (uniform errors in ``[-t, t]``,
+#: RMSE ``t / sqrt(3)``) with ``t`` this many times the target, then checked.
+_BOUND_PER_RMSE = math.sqrt(3.0)
+#: Below this many bits per sample the interpolation coder's bundle is compared with the
+#: wavelet core's and the smaller kept: at low rates the transform's coding gain wins (the
+#: elevation model at 2.2 bpp: the wavelet core 6 % smaller), at high rates in-loop
+#: prediction does (the benchmark's field at 7 bpp: interpolation 1-3 % smaller, 3x faster).
+_WAVELET_BELOW_BPP = 4.0
+
+
+def _encode_rmse_predictive(
+    arr: np.ndarray,
+    layout: int,
+    values: np.ndarray,
+    missing: np.ndarray,
+    mask_bytes: bytes,
+    rmse_target: float,
+    wavelet_core: Any,
+) -> bytes:
+    """An RMSE target on a float grid, by the interpolation coder: its in-loop quantization
+    leaves each sample an error nearly uniform in ``[-t, t]``, so ``t = sqrt(3) × target``
+    lands within a per mille of the target (the encoder measures the exact RMSE of what the
+    decoder returns and steps ``t`` down if it missed).  Where that takes fewer than
+    ``_WAVELET_BELOW_BPP`` bits per sample, ``wavelet_core()`` codes the grid too and the
+    smaller bundle is kept.  A volume is predicted along all three axes."""
+    bound = rmse_target * _BOUND_PER_RMSE * _RMSE_AIM
+    best: bytes | None = None
+    for _ in range(_RMSE_TRIES):
+        bundle, measured = _predictive_bundle(arr, layout, values, missing, mask_bytes, bound)
+        if measured <= rmse_target:
+            best = bundle
+            break
+        if not measured > 0 or not math.isfinite(measured):
+            break
+        bound *= 0.99 * rmse_target / measured
+    if best is not None and 8.0 * len(best) >= _WAVELET_BELOW_BPP * arr.size:
+        return best
+    other = wavelet_core()
+    return other if best is None or len(other) < len(best) else best
+
+
+#: The bpp search's full codings: each after the first moves ``t`` by the bits it missed by
+#: (at these rates a sample's bits fall by one as ``t`` doubles).
+_BPP_TRIES = 4
+#: A coding within this fraction under the budget is taken.
+_BPP_SLACK = 0.015
+#: The side of the centred crop whose codings give the search its first ``t`` (a field's
+#: 128 × 128, a volume's 16 × 64 × 64): cheap, and within a few per cent on stationary fields.
+_BPP_CROP = (128, 128)
+#: The crop aims this far under the budget, so that the first coding of the whole grid lands
+#: inside ``_BPP_SLACK`` under it (the crops' bits per sample were within 0.3 % of the whole
+#: field's at the same ``t``) and is the only one.
+_BPP_CROP_AIM = 0.993
+_BPP_VOLUME_CROP = (16, 64, 64)
+
+
+def _encode_bpp_predictive(
+    arr: np.ndarray,
+    layout: int,
+    values: np.ndarray,
+    missing: np.ndarray,
+    mask_bytes: bytes,
+    bpp: float,
+) -> bytes | None:
+    """A ``bpp`` budget of ``_WAVELET_BELOW_BPP`` or more on a float grid, by the interpolation
+    coder (which codes smaller than the wavelet core at such rates, and several times faster):
+    ``t`` is found on a centred crop, then corrected on the whole grid by the bits it missed
+    by, never over the budget; ``None`` if the tries end over it (the wavelet core then)."""
+    budget = math.floor(bpp * arr.size / 8.0)
+    crop_shape = _BPP_VOLUME_CROP if arr.ndim == 3 else _BPP_CROP
+    crop = tuple(
+        slice((n - min(n, c)) // 2, (n - min(n, c)) // 2 + min(n, c))
+        for n, c in zip(arr.shape, crop_shape, strict=True)
+    )
+    finite = values[~missing]
+    spread = float(finite.max() - finite.min()) if finite.size else 0.0
+    bound = max(spread, 1e-300) * 2.0**-12
+    sample = arr[crop]
+    crop_mask = encode_mask(missing[crop]) if bool(missing[crop].any()) else b""
+    for _ in range(6):  # the crop's own search: a few codings of at most 16 384 samples
+        crop_bundle = _predictive_bundle(
+            sample, layout, values[crop], missing[crop], crop_mask, bound
+        )[0]
+        # Its fixed bytes (headers, tables, weights: about as many as the whole grid's) are
+        # left out: the crop aims at the whole grid's bits per sample of residuals.
+        fixed = (
+            fixed_bytes(_Parsed(crop_bundle).core)
+            + len(crop_bundle)
+            - len(_Parsed(crop_bundle).core)
+        )
+        target = (budget - fixed) * _BPP_CROP_AIM * sample.size / arr.size
+        miss = 8.0 * (len(crop_bundle) - fixed - target) / sample.size
+        if abs(miss) < 0.01:
+            break
+        bound *= 2.0 ** min(max(miss, -8.0), 8.0)
+    best: bytes | None = None
+    for _ in range(_BPP_TRIES):
+        if not (bound > 0 and math.isfinite(bound)):
+            break
+        bundle, measured = _predictive_bundle(arr, layout, values, missing, mask_bytes, bound)
+        if len(bundle) <= budget:
+            if best is None or len(bundle) > len(best):
+                best = bundle
+            if len(bundle) >= (1.0 - _BPP_SLACK) * budget or measured == 0:
+                break  # close enough, or exact: no larger bundle is worth having
+        # A little more than the bits missed by, so that the next try lands under the budget.
+        miss = 8.0 * (len(bundle) - budget) / arr.size
+        bound *= 2.0 ** (miss + (0.005 if miss > 0 else 0.002))
+    return best
+
+
+#: The open-loop search's first step, this many times the target: about what the dead-zone
+#: quantizer's error comes to at the rates such targets ask for (the measured ratio was 2.9-3.6
+#: on the benchmark's grids); the search then moves it to the predicted step.
 _STEP_PER_RMSE = 3.2
 _RMSE_TRIES = 4
+#: The open-loop prediction is aimed this far below the target, so that the one coding lands
+#: on its safe side: the prediction was within 0.1 % of the decoded RMSE on the benchmark's
+#: fields, and the cast to float32 adds a little.
+_RMSE_AIM = 0.995
 
 
 def _encode_rmse_at_steps(
@@ -853,19 +1026,33 @@ def _encode_rmse_at_steps(
     mask_bytes: bytes,
     rmse_target: float,
 ) -> bytes | None:
-    """An RMSE target met by a few single quantizations (no search over the rate control's
-    PSNR, whose closed-loop refinement cost 8x more on the benchmark's 1024² field for an RMSE
-    within a per cent or two at the same bytes); ``None`` if these tries miss it."""
-    from .quantize import DEFAULT_ROUNDING
+    """An RMSE target met by a single quantization at the step that the coefficients predict
+    (:class:`wavecore.gridcore.SteppedCore`: decomposed once, no synthesis but the one that
+    verifies), stepped down and coded again if the decoded grid misses it; ``None`` if these
+    tries miss it.  (The rate control's PSNR search, with its closed-loop refinement, cost 8x
+    more on the benchmark's 1024² field for an RMSE within a per cent or two at the same
+    bytes.)"""
+    from .gridcore import SteppedCore, squared_and_largest  # the codec imports this module
 
     dtype = arr.dtype
-    finite_count = max(int(np.count_nonzero(~missing)), 1)
-    step = rmse_target * _STEP_PER_RMSE
-    for attempt in range(_RMSE_TRIES):
-        core_bytes, decoded = core.at_step(core_values, step, DEFAULT_ROUNDING)
+    has_mask = bool(missing.any())
+    finite_count = max(int(np.count_nonzero(~missing)), 1) if has_mask else missing.size
+    stepped = SteppedCore(core_values, core.wavelet, core.level, core.boundary)
+    aim = rmse_target * _RMSE_AIM
+    if dtype.kind in "iu":
+        # Integer samples are rounded on decoding, which adds about 1/12 of a unit squared.
+        aim = math.sqrt(max(aim * aim - 1.0 / 12.0, (0.5 * aim) ** 2))
+    step = stepped.step_for(aim, rmse_target * _STEP_PER_RMSE)
+    for _ in range(_RMSE_TRIES):
+        core_bytes, decoded = stepped.encode(step)
         final = _to_dtype(decoded, dtype)
-        measured_rmse, largest = _measure(final, original, missing, finite_count)
-        if measured_rmse <= rmse_target and (attempt or measured_rmse > 0.9 * rmse_target):
+        del decoded
+        if has_mask:
+            measured_rmse, largest = _measure(final, original, missing, finite_count)
+        else:
+            squares, largest = squared_and_largest(final, original)
+            measured_rmse = math.sqrt(squares / finite_count)
+        if measured_rmse <= rmse_target:
             return _assemble_core(arr, layout, core_bytes, mask_bytes, measured_rmse, largest)
         if not measured_rmse > 0 or not math.isfinite(measured_rmse):
             return None
@@ -946,14 +1133,34 @@ def _encode_predictive(
     bound: float,
     axes: tuple[int, ...] | None = None,
 ) -> bytes:
+    """:func:`_predictive_bundle`'s bundle (``values`` is not used after: coded in place)."""
+    return _predictive_bundle(
+        arr, layout, values, missing, mask_bytes, bound, axes, disposable=True
+    )[0]
+
+
+def _predictive_bundle(
+    arr: np.ndarray,
+    layout: int,
+    values: np.ndarray,
+    missing: np.ndarray,
+    mask_bytes: bytes,
+    bound: float,
+    axes: tuple[int, ...] | None = None,
+    *,
+    disposable: bool = False,
+) -> tuple[bytes, float]:
     """The grid under the interpolation coder (:mod:`wavecore.gridpredict`), whose errors are
-    bounded by construction: no outliers to correct.
+    bounded by construction: no outliers to correct.  Returns the bundle and the RMSE it
+    measured over the finite cells.
 
     On the benchmark's grids it takes 7-12 % fewer bytes than the wavelet core plus outliers
     at the same bound (docs/benchmarks.md, Grids), and it is several times faster.  A volume is
     predicted along all three axes: on the benchmark's volume that is 3-7 % smaller than
     predicting its slices apart (``axes=(1, 2)``), for the same reason a 3-D transform beats 2-D
-    slices: neighbouring slices are as alike as neighbouring rows.
+    slices: neighbouring slices are as alike as neighbouring rows.  ``disposable``: the
+    caller has no further use for ``values`` (its own copy), which the coder then overwrites
+    instead of copying it; the RMSE and bpp searches code the same values again and keep them.
     """
     dtype = arr.dtype
     has_mask = bool(missing.any())
@@ -971,7 +1178,8 @@ def _encode_predictive(
         bound,
         _PREDICTED_AXES[layout] if axes is None else axes,
         integer=integer,
-        overwrite=not np.may_share_memory(known, arr),  # our copy: coded in place
+        # Our copy, not needed after: coded in place.
+        overwrite=(has_mask or disposable) and not np.may_share_memory(known, arr),
     )
     finite_count = max(int(np.count_nonzero(~missing)), 1)
     measured_rmse = math.sqrt(squares / finite_count)
@@ -979,7 +1187,7 @@ def _encode_predictive(
     if largest > allowed:  # cannot happen: every sample that missed was stored exactly
         msg = f"internal error: the bound {bound!r} was missed ({largest!r})"
         raise AssertionError(msg)
-    return _assemble(
+    bundle = _assemble(
         arr,
         layout,
         _FLAG_BOUND | _FLAG_PREDICTIVE,
@@ -992,6 +1200,7 @@ def _encode_predictive(
         measured_rmse,
         largest,
     )
+    return bundle, measured_rmse
 
 
 def _outliers(
@@ -1091,6 +1300,8 @@ def _assemble(
 ) -> bytes:
     flags |= (_FLAG_MASK if mask else 0) | (_FLAG_OUTLIERS if outliers else 0)
     version = PREDICTIVE_VERSION if flags & _FLAG_PREDICTIVE else VERSION
+    if flags & _FLAG_PREDICTIVE and is_tiled_stream(core):
+        version = TILED_VERSION
     head = _HEAD.pack(MAGIC, version, layout, _DTYPES.index(arr.dtype.name), flags, arr.ndim)
     shape = struct.pack(f"<{arr.ndim}I", *arr.shape)
     tail = _TAIL.pack(bound, unit, offset, rmse, largest, len(core), len(mask), len(outliers))
@@ -1122,13 +1333,13 @@ class _Parsed:
             msg = "grid bundle is corrupt or truncated (its CRC-32 does not match)"
             raise BundleError(msg)
         _, version, layout, dtype_code, flags, ndim = _HEAD.unpack_from(data)
-        if version not in (VERSION, PREDICTIVE_VERSION):
+        if version not in (VERSION, PREDICTIVE_VERSION, TILED_VERSION):
             msg = (
                 f"grid bundle version {version} is not supported (this reader knows {VERSION} "
-                f"and {PREDICTIVE_VERSION})"
+                f"to {TILED_VERSION})"
             )
             raise BundleError(msg)
-        if (version == PREDICTIVE_VERSION) != bool(flags & _FLAG_PREDICTIVE):
+        if (version != VERSION) != bool(flags & _FLAG_PREDICTIVE):
             msg = f"grid bundle version {version} does not match its flags {flags}"
             raise BundleError(msg)
         if layout not in (LAYOUT_FIELD, LAYOUT_VOLUME, LAYOUT_POINTS) or dtype_code >= len(_DTYPES):
@@ -1158,7 +1369,10 @@ class _Parsed:
         self.core = data[position : position + lengths[0]]
         self.mask = data[position + lengths[0] : position + lengths[0] + lengths[1]]
         self.outliers = data[position + lengths[0] + lengths[1] : position + sum(lengths)]
-        self.layout, self.flags = layout, flags
+        self.layout, self.flags, self.version = layout, flags, version
+        if self.predictive and (version == TILED_VERSION) != is_tiled_stream(self.core):
+            msg = f"grid bundle version {version} does not match its interpolation stream"
+            raise BundleError(msg)
         self.dtype = np.dtype(_DTYPES[dtype_code])
         if self.dtype.kind != "f" and self.mask:
             msg = "grid bundle has a NaN mask for an integer grid"
@@ -1193,9 +1407,11 @@ def decode_grid(
     window : tuple of slice, optional
         A window of the result, ``(slice(r0, r1), slice(c0, c1))`` (a volume takes
         ``(depth, rows, cols)``); the same as slicing the result, but only the core's
-        code-blocks that reach the window are decoded, and only the window is synthesized
-        (a lossless volume, and a window with a negative step or nothing in it, are decoded
-        whole and then sliced).
+        code-blocks that reach the window are decoded, and only the window is synthesized;
+        from the interpolation coder only the samples the window's predictions reach are
+        reconstructed, from the tiles they lie in (version 3 bundles; older ones are entropy
+        decoded whole).  A lossless volume, a coarse level of an interpolation-coded grid,
+        and a window with a negative step or nothing in it are decoded whole, then sliced.
     keep : float, optional
         Keep only this fraction of the core's details (as :func:`wavecore.decode` does for any
         bundle): a smoother grid, without the outlier corrections, so the bound no longer holds.
@@ -1212,7 +1428,10 @@ def decode_grid(
     if window is not None:
         _window_items(window, len(parsed.shape))  # checked before anything is decoded
     split = _split_window(window, parsed) if window is not None else None
+    box = _predictive_box(window, parsed, level, keep) if window is not None else None
     try:
+        if box is not None:
+            return _decode_predictive_window(parsed, window, box)
         if split is not None:
             return _decode_window(parsed, int(level), keep, *split)
         out = _decode(parsed, int(level), keep)
@@ -1223,6 +1442,45 @@ def decode_grid(
         raise BundleError(msg[:300]) from exc
     if window is not None:
         out = _window(out, window)
+    return out
+
+
+def _predictive_box(
+    window: Any, parsed: _Parsed, level: int, keep: float | None
+) -> tuple[tuple[int, int], ...] | None:
+    """The samples ``[lo, hi)`` per axis that a window of an interpolation-coded grid spans,
+    for :func:`_decode_predictive_window`; None to decode whole and slice (a coarse level,
+    ``keep``, a negative step or a window of nothing)."""
+    if not parsed.predictive or level or (keep is not None and keep < 1.0):
+        return None
+    items = _full(_window_items(window, len(parsed.shape)), len(parsed.shape))
+    box = []
+    for item, n in zip(items, parsed.shape, strict=True):
+        if not all(v is None or isinstance(v, int | np.integer) for v in (item.start, item.stop)):
+            return None
+        if item.step is not None and (
+            not isinstance(item.step, int | np.integer) or item.step <= 0
+        ):
+            return None
+        chosen = range(*item.indices(n))
+        if len(chosen) == 0:
+            return None
+        box.append((chosen[0], chosen[-1] + 1))
+    return tuple(box)
+
+
+def _decode_predictive_window(
+    parsed: _Parsed, window: Any, box: tuple[tuple[int, int], ...]
+) -> np.ndarray:
+    """A window of an interpolation-coded grid: only the samples its predictions reach, and
+    in a tiled stream (version 3) only the tiles they lie in, are decoded."""
+    shape = tuple(parsed.shape)
+    out = decode_predictive_window(parsed.core, shape, parsed.dtype, box)
+    items = _full(_window_items(window, len(shape)), len(shape))
+    steps = tuple(slice(None, None, item.step) for item in items)
+    out = np.ascontiguousarray(out[steps])
+    if parsed.mask:
+        out[decode_mask(parsed.mask, shape)[tuple(items)]] = np.nan
     return out
 
 
@@ -1461,7 +1719,7 @@ def inspect_grid(bundle: Any) -> dict[str, Any]:
     if parsed.predictive:
         # The keys a wavelet core gives, for tools that print them (the CLI's inspect).
         core = {
-            "version": f"grid {PREDICTIVE_VERSION}",
+            "version": f"grid {parsed.version}",
             "wavelet": "interpolation",
             "boundary": ["open", "open"],
             "colour": "none",

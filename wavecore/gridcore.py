@@ -1,0 +1,164 @@
+"""The wavelet core of a grid under an RMSE target: decomposed once, its step found open loop.
+
+:mod:`wavecore.grids` codes ``rmse``, ``psnr`` (and, through the codec's rate control,
+``bpp``) targets with the codec's wavelet transform, dead-zone quantizer and context coder.
+The context coder is most of the time (some 130 of 190 ms on the benchmark's 1024² float32
+field); what this module saves is everything else that a quantize-and-measure loop repeats:
+
+* the grid is decomposed **once**;
+* the step that meets the target is found from the coefficients alone
+  (:class:`wavecore.quantize.OpenLoopDistortion`, one compiled pass per try, no entropy coding
+  and no synthesis), within 0.1 % of the decoded RMSE on the benchmark's fields, so the core is
+  coded **once** and synthesized **once**, to verify what the decoder will return (a miss,
+  from a cast to the grid's dtype or a grid the prediction does not fit, steps down and codes
+  again);
+* the check of the decoded grid against the original is one compiled pass where no cell is
+  missing.
+
+The bundle is the one :func:`wavecore.codec.encode.encode_surface_at_step` writes for the
+same step; only the work around it differs.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._kernels import squared_and_largest_error
+from .bundle import read_bundle, write_bundle
+from .codec.decode import decode
+from .codec.plan import DEFAULT_CODER, MAX_IMAGE_LEVELS, Plan, fit
+from .codec.samples import decompose, finish, measure_errors, peak_of, reconstruct, scaled
+from .entropy import encode_levels
+from .errors import BundleError, InvalidParameter
+from .filters import get_wavelet
+from .quantize import DEFAULT_ROUNDING, OpenLoopDistortion, dequantize_bands, quantize_bands
+
+__all__ = ["SteppedCore", "squared_and_largest"]
+
+#: The open-loop search stops when its prediction is within this fraction of its aim.
+_PREDICTION_TOLERANCE = 2e-3
+_PREDICTION_TRIES = 8
+
+
+class SteppedCore:
+    """A float64 core (``(H, W)``, or ``(H, W, D)``: ``D`` values per point) decomposed once.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        The core's samples (float64, finite).
+    wavelet, level, boundary
+        As for :func:`wavecore.encode_surface`.
+    """
+
+    def __init__(
+        self, values: np.ndarray, wavelet: str, level: int | None, boundary: tuple[str, str]
+    ) -> None:
+        coded, scale = scaled(values)
+        self.coded, self.scale = coded, scale
+        bank = get_wavelet(wavelet)
+        fitted, pads, levels = fit(coded, level, bank.name, boundary, MAX_IMAGE_LEVELS)
+        self.plan = Plan(
+            "surface",
+            values.shape,
+            "float64",
+            bank.name,
+            tuple(boundary),
+            levels,
+            "none",
+            pads,
+            fitted.shape,
+            peak_of(coded, "float64", "surface"),
+            scale=scale,
+        )
+        self.coeffs = decompose(self.plan, fitted)
+        self._fitted_size = fitted.size
+        self._distortion: OpenLoopDistortion | None = None
+
+    def predicted_rmse(self, step: float) -> float:
+        """The RMSE of the core (its own units) quantized at ``step``, predicted open loop."""
+        if self._distortion is None:
+            self._distortion = OpenLoopDistortion(
+                self.coeffs,
+                wavelet=self.plan.wavelet,
+                boundary=list(self.plan.boundary),
+                axes=self.plan.axes,
+                rounding=DEFAULT_ROUNDING,
+            )
+        coded_step = math.ldexp(step, -self.scale)
+        squared = self._distortion(coded_step) / self._fitted_size
+        return math.ldexp(math.sqrt(max(squared, 0.0)), self.scale)
+
+    def step_for(self, rmse: float, first: float) -> float:
+        """The step whose predicted RMSE is ``rmse`` (secant steps on the logarithms, from
+        ``first``); the RMSE grows with the step nearly in proportion."""
+        step, predicted = first, self.predicted_rmse(first)
+        previous: tuple[float, float] | None = None
+        for _ in range(_PREDICTION_TRIES):
+            if not (predicted > 0 and math.isfinite(predicted)):
+                return step
+            if abs(predicted / rmse - 1.0) <= _PREDICTION_TOLERANCE:
+                return step
+            slope = 1.0
+            if previous is not None and previous[0] != step and previous[1] > 0:
+                measured = math.log(predicted / previous[1]) / math.log(step / previous[0])
+                slope = min(max(measured, 0.25), 4.0)
+            previous = (step, predicted)
+            step *= (rmse / predicted) ** (1.0 / slope)
+            predicted = self.predicted_rmse(step)
+        return step
+
+    def encode(self, step: float) -> tuple[bytes, np.ndarray]:
+        """The core bundle quantized at ``step`` (the data's units) and what
+        :func:`wavecore.decode` returns for it (float64, the core's shape)."""
+        plan, bounds = self.plan, list(self.plan.boundary)
+        coded_step = math.ldexp(step, -self.scale)
+        if not (coded_step > 0 and math.isfinite(coded_step)):
+            msg = f"cannot quantize at step {step!r}"
+            raise InvalidParameter(msg)
+        quantized, qparams = quantize_bands(
+            self.coeffs,
+            coded_step,
+            wavelet=plan.wavelet,
+            boundary=bounds,
+            axes=plan.axes,
+            rounding=DEFAULT_ROUNDING,
+            refine=0,
+        )
+        chunks, cparams = encode_levels(quantized, coder=DEFAULT_CODER)
+        dequantized = dequantize_bands(
+            quantized, qparams, wavelet=plan.wavelet, boundary=bounds, axes=plan.axes
+        )
+        del quantized
+        output = finish(plan, reconstruct(plan, dequantized), 0)  # the decoder's samples
+        del dequantized
+        decoded = np.ldexp(output, -self.scale) if self.scale else output
+        psnr, largest = measure_errors(plan, self.coded, decoded)
+        header = plan.header()
+        header.update(
+            quantizer=str(qparams.get("name", "deadzone")),
+            qparams=qparams,
+            coder=str(cparams.get("coder", DEFAULT_CODER)),
+            cparams=cparams,
+            psnr=psnr,
+            max_error=min(math.ldexp(largest, self.scale), float(np.finfo(np.float64).max)),
+        )
+        try:
+            bundle = write_bundle(header, chunks)
+        except BundleError as exc:
+            msg = f"this grid cannot be stored in a bundle: {exc}"
+            raise InvalidParameter(msg) from exc
+        if read_bundle(bundle).header.get("qparams") != qparams:
+            output = decode(bundle)  # the header rounded a parameter: the decoder's result
+        return bundle, output
+
+
+def squared_and_largest(final: np.ndarray, original: np.ndarray) -> tuple[float, float]:
+    """(sum of squared errors, largest error) of ``final`` (any float or integer dtype)
+    against ``original`` (float64, the same shape), in one compiled pass."""
+    total, largest = squared_and_largest_error(
+        np.ascontiguousarray(final).reshape(-1), np.ascontiguousarray(original).reshape(-1)
+    )
+    return float(total), float(largest)
