@@ -740,9 +740,12 @@ def encode_layout(
     psnr: float | None = None,
     bpp: float | None = None,
     lossless: bool = False,
+    tiles: bool = True,
 ) -> bytes:
     """:func:`encode_grid` of an already checked array in the given layout (``LAYOUT_*``);
-    ``encode_surface`` comes here for its ``max_error`` target."""
+    ``encode_surface`` comes here for its ``max_error`` target.  ``tiles=False`` codes the
+    interpolation coder's ``max_error`` stream untiled even above one tile (version 2): for a
+    caller whose unit of a window is the grid itself (a Zarr chunk)."""
     given = [
         name
         for name, value in (("max_error", max_error), ("rmse", rmse), ("psnr", psnr), ("bpp", bpp))
@@ -799,7 +802,7 @@ def encode_layout(
     # wavelet core and its outliers, as before it) or the bound is 0 on floats.
     predictive = wavelet is None and (bound is not None and (bound > 0 or dtype.kind in "iu"))
     if predictive and bound is not None:
-        return _encode_predictive(arr, layout, values, missing, mask_bytes, bound)
+        return _encode_predictive(arr, layout, values, missing, mask_bytes, bound, tiles=tiles)
 
     def core_layout() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(filled values, values, missing) in the wavelet core's layout."""
@@ -1132,10 +1135,12 @@ def _encode_predictive(
     mask_bytes: bytes,
     bound: float,
     axes: tuple[int, ...] | None = None,
+    *,
+    tiles: bool = True,
 ) -> bytes:
     """:func:`_predictive_bundle`'s bundle (``values`` is not used after: coded in place)."""
     return _predictive_bundle(
-        arr, layout, values, missing, mask_bytes, bound, axes, disposable=True
+        arr, layout, values, missing, mask_bytes, bound, axes, disposable=True, tiles=tiles
     )[0]
 
 
@@ -1149,6 +1154,7 @@ def _predictive_bundle(
     axes: tuple[int, ...] | None = None,
     *,
     disposable: bool = False,
+    tiles: bool = True,
 ) -> tuple[bytes, float]:
     """The grid under the interpolation coder (:mod:`wavecore.gridpredict`), whose errors are
     bounded by construction: no outliers to correct.  Returns the bundle and the RMSE it
@@ -1180,6 +1186,7 @@ def _predictive_bundle(
         integer=integer,
         # Our copy, not needed after: coded in place.
         overwrite=(has_mask or disposable) and not np.may_share_memory(known, arr),
+        tiles=tiles,
     )
     finite_count = max(int(np.count_nonzero(~missing)), 1)
     measured_rmse = math.sqrt(squares / finite_count)
