@@ -14,7 +14,11 @@ into a Zarr store (format 3, the ``wavecore`` serializer) at ``max_error = 1e-3 
   = throughput(2) / (2 × throughput(1));
 * peak memory per worker: each worker samples its own resident set every 20 ms during the
   write (psutil); reported as the peak, and as the peak above the worker's resident set before
-  the write, against the chunk's bytes (the target: ≤ 4 × chunk + a constant);
+  the write, against the chunk's bytes (the target: ≤ 4 × chunk + a constant), for each
+  worker apart (never summed), with the bytes of task results Dask held in it (chunks read
+  and not yet coded); ``--trace`` adds each worker's allocations' peak (tracemalloc).  The
+  field is made on a cluster of its own, so that the timed workers start alike, fresh; run two
+  ``--chunk`` sizes to separate the bytes per chunk byte from the constant;
 * the store is read back in parallel and its largest error over every value is checked
   against the bound;
 * the peers code every chunk of the same field on the same cluster at the same bound:
@@ -86,18 +90,31 @@ def make_field(size: int, chunk: int) -> Any:
 # --------------------------------------------------------------------------------------------
 
 
-def start_sampling(dask_worker: Any) -> int:
-    """Start sampling this worker's resident set (kept on the worker object between calls)."""
+def start_sampling(dask_worker: Any, trace: bool = False) -> int:
+    """Start sampling this worker's resident set (kept on the worker object between calls);
+    ``trace``: also trace its allocations (tracemalloc: slower, so not in the timed runs)."""
+    import tracemalloc
+
     import psutil
+
+    if trace:
+        tracemalloc.start()
 
     process = psutil.Process()
     baseline = process.memory_info().rss
     cpu = process.cpu_times()
-    state = {"peak": baseline, "stop": False, "cpu": cpu.user + cpu.system}
+    state = {"peak": baseline, "stop": False, "cpu": cpu.user + cpu.system, "held": 0, "at": 0}
+    worker_state = getattr(dask_worker, "state", None)  # None: the process itself (no Dask)
 
     def run() -> None:
         while not state["stop"]:
-            state["peak"] = max(state["peak"], process.memory_info().rss)
+            rss = process.memory_info().rss
+            # The bytes of task results the worker holds (chunks read and not yet consumed,
+            # or fetched from the other worker): Dask's "managed" memory, beside the codec's.
+            held = int(worker_state.nbytes) if worker_state is not None else 0
+            state["held"] = max(state["held"], held)
+            if rss > state["peak"]:
+                state["peak"], state["at"] = rss, held
             time.sleep(0.02)
 
     thread = threading.Thread(target=run, daemon=True)
@@ -107,21 +124,50 @@ def start_sampling(dask_worker: Any) -> int:
 
 
 def stop_sampling(dask_worker: Any) -> dict[str, int]:
+    import tracemalloc
+
     import psutil
 
     state, thread, baseline = dask_worker.wavecore_sampler
     state["stop"] = True
     thread.join()
+    traced = tracemalloc.get_traced_memory()[1] if tracemalloc.is_tracing() else 0
+    tracemalloc.stop()
     cpu = psutil.Process().cpu_times()
     seconds = cpu.user + cpu.system - state["cpu"]
-    return {"baseline": int(baseline), "peak": int(state["peak"]), "cpu_seconds": seconds}
+    return {
+        "baseline": int(baseline),
+        "peak": int(state["peak"]),
+        "cpu_seconds": seconds,
+        "held_max": int(state["held"]),
+        "held_at_peak": int(state["at"]),
+        "traced_peak": int(traced),
+    }
 
 
 def warm_up() -> bool:
+    """Load what a worker's first chunk would: the compiled kernels, and Zarr's codec pipeline
+    and Dask's array modules (a small array written and read), so that the time and the
+    resident rise measured after it are the coding's, not first-use imports.  The probe is
+    small, so the worker's heap is not grown to a full chunk's needs beforehand."""
+    import dask.array  # noqa: F401  (the store tasks' module)
+
     from wavecore.zarr import decode_chunk, encode_chunk
 
     probe = field_block(np.empty((96, 80)), 1024, 96, (1, 1))
-    decode_chunk(encode_chunk(probe, {"max_error": 1e-3 * float(np.ptp(probe))}))
+    config = {"max_error": 1e-3 * float(np.ptp(probe))}
+    decode_chunk(encode_chunk(probe, config))
+    with tempfile.TemporaryDirectory() as folder:
+        array = zarr.create_array(
+            folder,
+            shape=probe.shape,
+            chunks=(48, 40),
+            dtype="float32",
+            serializer={"name": "wavecore", "configuration": config},
+            compressors=None,
+        )
+        array[:] = probe
+        np.asarray(array[:])
     return True
 
 
@@ -180,7 +226,7 @@ def stored_bytes(store: Path) -> int:
 
 
 def write_run(
-    client: Client, source: Path, chunk: int, bound: float, store: Path
+    client: Client, source: Path, chunk: int, bound: float, store: Path, trace: bool = False
 ) -> dict[str, Any]:
     """Re-code the raw field at ``source`` into ``store``: the time is reading raw chunks,
     coding and writing them (the synthesis of the field, 15x the coding, is not timed)."""
@@ -195,7 +241,7 @@ def write_run(
         compressors=None,
         overwrite=True,
     )
-    client.run(start_sampling)
+    client.run(start_sampling, trace=trace)
     start = time.perf_counter()
     field.store(target, lock=False)
     seconds = time.perf_counter() - start
@@ -217,6 +263,11 @@ def main(argv: list[str] | None = None) -> int:
         default="",
         help="only measure one process's peak memory coding chunks of these sides (256,512,1024)",
     )
+    parser.add_argument(
+        "--trace",
+        action="store_true",
+        help="also trace each worker's allocations (tracemalloc; slows the timed runs)",
+    )
     parser.add_argument("--json", type=Path, help="write the figures here too")
     parser.add_argument("--keep", type=Path, help="keep the stores in this folder")
     args = parser.parse_args(argv)
@@ -235,22 +286,27 @@ def main(argv: list[str] | None = None) -> int:
 
     counts = [int(w) for w in args.workers.split(",")]
     runs: dict[int, Any] = {}
-    low = high = None
+    # Synthesised once (its cost is many times the coding's), stored uncompressed, untimed, on
+    # a cluster of its own: the timed runs' workers start alike, fresh (a worker that had made
+    # the field would start with a heap already grown, and show a smaller rise).  The range,
+    # the check of the bound and the peers read it from there.
+    source = work / "field_raw.zarr"
+    c, client = cluster(max(counts))
+    try:
+        make_field(size, chunk).to_zarr(str(source), overwrite=True, compressors=None)
+        stored = da.from_zarr(str(source))
+        low, high = (float(v) for v in da.compute(stored.min(), stored.max()))
+    finally:
+        client.close()
+        c.close()
+    bound = 1e-3 * (high - low)
+    results.update(range=high - low, bound=bound)
+    print(f"range {high - low:.6g}; max_error = 1e-3 × range = {bound:.6g}")
     for workers in counts:
         c, client = cluster(workers)
         try:
-            if low is None:
-                # Synthesised once (its cost is many times the coding's), stored uncompressed,
-                # untimed; the range, the check of the bound and the peers read it from there.
-                source = work / "field_raw.zarr"
-                make_field(size, chunk).to_zarr(str(source), overwrite=True, compressors=None)
-                stored = da.from_zarr(str(source))
-                low, high = (float(v) for v in da.compute(stored.min(), stored.max()))
-                bound = 1e-3 * (high - low)
-                results.update(range=high - low, bound=bound)
-                print(f"range {high - low:.6g}; max_error = 1e-3 × range = {bound:.6g}")
             store = work / f"wavecore_{workers}.zarr"
-            run = write_run(client, source, chunk, results["bound"], store)
+            run = write_run(client, source, chunk, results["bound"], store, args.trace)
             run["stored_bytes"] = stored_bytes(store)
             run["throughput_per_worker"] = raw / run["seconds"] / workers
             peaks = [m["peak"] for m in run["memory"]]
@@ -271,6 +327,22 @@ def main(argv: list[str] | None = None) -> int:
                 f"({max(above) / 2**20:.0f} MiB above its idle size = "
                 f"{max(above) / chunk_bytes:.1f} × the {chunk_bytes / 2**20:.0f} MiB chunk)"
             )
+            # Each worker's own figures (not a sum over workers): its resident rise, and the
+            # task results Dask held in it (chunks read or fetched and not yet coded), at most
+            # and at the moment of its resident peak.
+            for number, m in enumerate(run["memory"]):
+                print(
+                    f"  worker {number}: {(m['peak'] - m['baseline']) / 2**20:.1f} MiB above "
+                    f"idle = {(m['peak'] - m['baseline']) / chunk_bytes:.1f} × the chunk; "
+                    f"chunks held by Dask: at most {m['held_max'] / 2**20:.1f} MiB, "
+                    f"{m['held_at_peak'] / 2**20:.1f} MiB at the resident peak"
+                    + (
+                        f"; allocations' peak {m['traced_peak'] / 2**20:.1f} MiB = "
+                        f"{m['traced_peak'] / chunk_bytes:.1f} × the chunk"
+                        if args.trace
+                        else ""
+                    )
+                )
             if workers == counts[-1]:
                 # Read back in parallel: the bound on every value.
                 back = da.from_zarr(str(store)).astype(np.float64)

@@ -296,9 +296,8 @@ def _normal_equations(
 
 
 @njit(nogil=True, cache=True)
-def _encode_group(
+def _encode_lines(
     y: np.ndarray,
-    x: np.ndarray,
     missing: np.ndarray,
     shape: tuple[int, int, int],
     odd: np.ndarray,
@@ -311,83 +310,155 @@ def _encode_group(
     allowed: float,
     lo: float,
     hi: float,
+    lines: tuple[int, int],
     symbols: np.ndarray,
-    bits: np.ndarray,
+    first: int,
+    packed: np.ndarray,
+    pack_state: np.ndarray,
     remainders: np.ndarray,
     stats: np.ndarray,
     weights: np.ndarray,
+    counts: np.ndarray,
+    tile_side: np.ndarray,
+    tile_counts: np.ndarray,
+    tile_bases: np.ndarray,
+    tile_states: np.ndarray,
 ) -> int:
-    """Predict, quantize and reconstruct one group (into the flat ``y``), writing its symbols;
-    returns how many samples were stored exactly (their symbol ``_EXACT``).  ``cast``:
-    0 float64, 1 float32, 2 integers clipped to ``[lo, hi]``, 3 a check left to the caller.
-    ``stats`` gathers the squared errors and the largest error of what the decoder returns
-    (cast 0-2)."""
+    """Predict, quantize and reconstruct lines ``lines[0]`` to ``lines[1] - 1`` of one group
+    (its samples along the last axis, in coding order), in place: ``y`` holds the values to
+    code where nothing is coded yet, and each sample is overwritten by what the decoder will
+    reconstruct once it is coded (the predictions read only coded samples).  Writes the
+    symbols from ``symbols[first]`` on; returns how many samples were stored exactly (their
+    symbol ``_EXACT``), and counts the symbols in ``counts`` (the group's histogram).
+
+    The low bits of large residuals are appended to ``packed`` (``pack_state``: bytes written,
+    pending bits, their count; the caller leaves room for 53 bits a sample), most significant
+    first, or stored in ``remainders[k]`` when that is not empty (for a caller that checks the
+    bound itself and may still turn samples into exact ones).  With more than one tile
+    (``tile_states`` has a row per tile; ``tile_side`` and ``tile_counts`` per axis of the 3-D
+    view) they go instead to their tile's stream in ``packed`` (from ``tile_bases[t]`` on,
+    its state in ``tile_states[t]``), the caller leaving room for 53 bits a sample of each
+    tile.  ``cast``: 0 float64, 1 float32, 2 integers clipped to ``[lo, hi]``, 3 a check left
+    to the caller.  ``stats`` gathers the squared errors and the largest error of what the
+    decoder returns (cast 0-2).
+    """
     count = 0
     for a in range(3):
         count += 1 if odd[a] else 0
-    n0, n1, n2 = shape
+    _, n1, n2 = shape
     inverse = 1.0 / step
     o0, o1, o2 = odd[0], odd[1], odd[2]
     w0, w1, w2, w3, w4 = _padded(weights)
     has_missing = missing.size > 0
+    keep_remainders = remainders.size > 0
+    position, pending, pending_count = pack_state[0], pack_state[1], pack_state[2]
+    # Scalars, not stats[0] and stats[1], in the loop: the compiler cannot tell that ``stats``
+    # is not ``y``, and would store and reload them at every sample.  Same sums, same order.
+    squares, worst = stats[0], stats[1]
+    per_line = (n1 - starts[1] + strides[1] - 1) // strides[1]
+    tiled = tile_states.shape[0] > 1
     exact_count = 0
-    k = 0
-    for i0 in range(starts[0], n0, strides[0]):
-        for i1 in range(starts[1], n1, strides[1]):
-            row = (i0 * n1 + i1) * n2
-            for i2 in range(starts[2], n2, strides[2]):
-                at = row + i2
-                p = _prediction(
-                    y, at, i0, i1, i2, shape, o0, o1, o2, count, s, integer, w0, w1, w2, w3, w4
-                )
-                target = x[at]
-                if has_missing and missing[at]:
-                    y[at] = p
-                    symbols[k] = 0
-                    bits[k] = 0
-                    k += 1
-                    continue
-                # The product by 1/step may round a residual to the neighbouring multiple
-                # in a tie; the check below still holds every sample to the bound.
-                m = np.rint((target - p) * inverse)
-                ok = abs(m) <= _LARGEST_MULTIPLE
-                value = p + m * step if ok else target
-                if ok and cast != 3:
-                    if cast == 1:
-                        returned = float(np.float32(value))
-                    elif cast == 2:
-                        returned = min(max(np.rint(value), lo), hi)
-                    else:
-                        returned = value
-                    error = abs(returned - target)
-                    ok = error <= allowed
-                    if ok:
-                        stats[0] += error * error
-                        stats[1] = max(stats[1], error)
-                if not ok:
-                    y[at] = target
-                    symbols[k] = _EXACT
-                    bits[k] = 0
-                    exact_count += 1
-                    k += 1
-                    continue
-                y[at] = value
-                q = np.int64(m)
-                z = 2 * q if q >= 0 else -2 * q - 1
-                if z < _DIRECT:
-                    symbols[k] = z
-                    bits[k] = 0
-                else:
-                    b = 0
-                    while (z >> (b + 1)) > 0:
-                        b += 1
-                    low = b - _TOP_BITS
-                    top = (z >> low) & ((1 << _TOP_BITS) - 1)
-                    symbols[k] = _DIRECT + ((b - _FIRST_CLASS_BITS) << _TOP_BITS) + top
-                    bits[k] = low
-                    remainders[k] = z & ((np.int64(1) << low) - 1)
+    k = first
+    for line in range(lines[0], lines[1]):
+        i0 = starts[0] + (line // per_line) * strides[0]
+        i1 = starts[1] + (line % per_line) * strides[1]
+        row = (i0 * n1 + i1) * n2
+        line_tiles = ((i0 // tile_side[0]) * tile_counts[1] + i1 // tile_side[1]) * tile_counts[2]
+        for i2 in range(starts[2], n2, strides[2]):
+            at = row + i2
+            target = y[at]
+            p = _prediction(
+                y, at, i0, i1, i2, shape, o0, o1, o2, count, s, integer, w0, w1, w2, w3, w4
+            )
+            if has_missing and missing[at]:
+                y[at] = p
+                symbols[k] = 0
+                counts[0] += 1
                 k += 1
+                continue
+            # The product by 1/step may round a residual to the neighbouring multiple
+            # in a tie; the check below still holds every sample to the bound.
+            m = np.rint((target - p) * inverse)
+            ok = abs(m) <= _LARGEST_MULTIPLE
+            value = p + m * step if ok else target
+            if ok and cast != 3:
+                if cast == 1:
+                    returned = float(np.float32(value))
+                elif cast == 2:
+                    returned = min(max(np.rint(value), lo), hi)
+                else:
+                    returned = value
+                error = abs(returned - target)
+                ok = error <= allowed
+                if ok:
+                    squares += error * error
+                    worst = max(worst, error)
+            if not ok:  # y[at] keeps the target, stored exactly
+                symbols[k] = _EXACT
+                counts[_EXACT] += 1
+                exact_count += 1
+                k += 1
+                continue
+            y[at] = value
+            q = np.int64(m)
+            z = 2 * q if q >= 0 else -2 * q - 1
+            if z < _DIRECT:
+                symbols[k] = z
+                counts[z] += 1
+            else:
+                b = 0
+                while (z >> (b + 1)) > 0:
+                    b += 1
+                low = b - _TOP_BITS
+                top = (z >> low) & ((1 << _TOP_BITS) - 1)
+                symbol = _DIRECT + ((b - _FIRST_CLASS_BITS) << _TOP_BITS) + top
+                symbols[k] = symbol
+                counts[symbol] += 1
+                bits = z & ((np.int64(1) << low) - 1)
+                if keep_remainders:
+                    remainders[k - first] = bits
+                elif tiled:
+                    _append_bits(
+                        packed, tile_bases, tile_states, line_tiles + i2 // tile_side[2], bits, low
+                    )
+                else:
+                    pending = (pending << low) | bits
+                    pending_count += low
+                    while pending_count >= 8:
+                        pending_count -= 8
+                        packed[position] = (pending >> pending_count) & 0xFF
+                        position += 1
+                    pending &= (np.int64(1) << pending_count) - 1
+            k += 1
+    pack_state[0], pack_state[1], pack_state[2] = position, pending, pending_count
+    stats[0], stats[1] = squares, worst
     return exact_count
+
+
+@njit(nogil=True, cache=True)
+def _append_bits(
+    packed: np.ndarray, bases: np.ndarray, states: np.ndarray, tile: int, bits: Any, width: int
+) -> None:
+    """Append the ``width`` low bits ``bits`` to tile ``tile``'s stream in ``packed`` (from
+    ``bases[tile]`` on; ``states[tile]``: bytes written, pending bits, their count)."""
+    position, pending, count = states[tile, 0], states[tile, 1], states[tile, 2]
+    pending = (pending << width) | bits
+    count += width
+    base = bases[tile]
+    while count >= 8:
+        count -= 8
+        packed[base + position] = (pending >> count) & 0xFF
+        position += 1
+    pending &= (np.int64(1) << count) - 1
+    states[tile, 0], states[tile, 1], states[tile, 2] = position, pending, count
+
+
+@njit(nogil=True, cache=True)
+def _symbol_indices(symbols: np.ndarray, lookup: np.ndarray, out: np.ndarray) -> None:
+    """``out[k] = lookup[symbols[k]]``: the range coder's indices into a group's present
+    symbols (numpy's fancy indexing took a tenth of the encoder's time)."""
+    for k in range(symbols.size):
+        out[k] = lookup[symbols[k]]
 
 
 @njit(nogil=True, cache=True)
@@ -405,7 +476,7 @@ def _decode_group(
     values: np.ndarray,
     weights: np.ndarray,
 ) -> None:
-    """The inverse of :func:`_encode_group`: ``values[k]`` where ``exact[k]``."""
+    """The inverse of :func:`_encode_lines`: ``values[k]`` where ``exact[k]``."""
     count = 0
     for a in range(3):
         count += 1 if odd[a] else 0
@@ -707,49 +778,124 @@ class _Tiling:
 
 
 class _TileWriter:
-    """The tiled groups' symbols, low bits and exact values, one stream per tile."""
+    """The tiled groups' symbols, low bits and exact values, one stream per tile.
+
+    The low bits of all tiles share one byte array (``packed``, tile ``t``'s from
+    ``bases[t]`` on, ``capacity[t]`` bytes), filled by the encoder's kernel as it codes a
+    group in C order (a tile's samples of a group come in its block's C order): room is
+    reserved band by band for the samples each tile gets, so that no array of the group's
+    size holds the low bits or their widths.
+    """
 
     def __init__(self, tiling: _Tiling) -> None:
         self.tiling = tiling
         self.encoders = [constriction.stream.queue.RangeEncoder() for _ in range(tiling.size)]
-        self.packed = [np.zeros(0, dtype=np.uint8) for _ in range(tiling.size)]
+        self.packed = np.zeros(0, dtype=np.uint8)
+        self.bases = np.zeros(tiling.size, dtype=np.int64)
+        self.capacity = np.zeros(tiling.size, dtype=np.int64)
         self.states = np.zeros((tiling.size, 3), dtype=np.int64)
         self.exact: list[list[np.ndarray]] = [[] for _ in range(tiling.size)]
+        pad = 3 - len(tiling.shape)
+        self.side3 = np.array(
+            [1] * pad
+            + [tiling.side if k in tiling.axes else max(n, 1) for k, n in enumerate(tiling.shape)],
+            dtype=np.int64,
+        )
+        self.counts3 = np.array([1] * pad + list(tiling.counts), dtype=np.int64)
 
-    def add(
+    def reserve(self, needed: np.ndarray) -> None:
+        """Room for ``needed[t]`` more bytes in each tile's low bits (capacities doubled)."""
+        want = self.states[:, 0] + needed
+        short = want > self.capacity
+        if not short.any():
+            return
+        capacity = np.where(short, np.maximum(want, 2 * self.capacity), self.capacity)
+        bases = np.concatenate([[0], np.cumsum(capacity)[:-1]]).astype(np.int64)
+        packed = np.zeros(int(capacity.sum()), dtype=np.uint8)
+        for tile in range(self.tiling.size):
+            used = int(self.states[tile, 0])
+            if used:
+                old = int(self.bases[tile])
+                packed[bases[tile] : bases[tile] + used] = self.packed[old : old + used]
+        self.packed, self.bases, self.capacity = packed, bases, capacity
+
+    def reserve_lines(
+        self,
+        starts: np.ndarray,
+        strides: np.ndarray,
+        group_shape3: tuple[int, int, int],
+        lines: tuple[int, int],
+    ) -> None:
+        """Room for 53 bits a sample of each tile's share of lines ``lines[0]`` to
+        ``lines[1] - 1`` of a group (its layout on the 3-D view: ``starts``, ``strides``)."""
+        line = np.arange(lines[0], lines[1], dtype=np.int64)
+        i0 = starts[0] + (line // group_shape3[1]) * strides[0]
+        i1 = starts[1] + (line % group_shape3[1]) * strides[1]
+        c1, c2 = int(self.counts3[1]), int(self.counts3[2])
+        line_tiles = (i0 // self.side3[0]) * c1 + i1 // self.side3[1]
+        per_row = np.bincount(line_tiles, minlength=int(self.counts3[0]) * c1)
+        side, start, step, m = int(self.side3[2]), int(starts[2]), int(strides[2]), group_shape3[2]
+        columns = np.array(
+            [
+                min(max(-(-(min((t + 1) * side, start + m * step) - start) // step), 0), m)
+                - min(max(-(-(t * side - start) // step), 0), m)
+                for t in range(c2)
+            ],
+            dtype=np.int64,
+        )
+        samples = np.outer(per_row, columns).reshape(-1)
+        self.reserve(np.where(samples > 0, samples * 7 + 16, 0))
+
+    def add_bits(
+        self,
+        group_shape: tuple[int, ...],
+        slices: tuple[slice, ...],
+        symbols: np.ndarray,
+        remainders: np.ndarray,
+    ) -> None:
+        """A group's low bits from ``remainders`` (the group's size), tile by tile: for a
+        caller that kept them (a float16 grid's bound is checked after the coding)."""
+        large = (symbols >= _DIRECT) & (symbols != _EXACT)
+        widths = np.where(large, ((symbols.astype(np.int64) - _DIRECT) >> _TOP_BITS) + 2, 0)
+        for tile, block in self.tiling.blocks(slices):
+            tile_widths = np.ascontiguousarray(widths.reshape(group_shape)[block]).reshape(-1)
+            low_bits = int(tile_widths.sum())
+            if not low_bits:
+                continue
+            needed = np.zeros(self.tiling.size, dtype=np.int64)
+            needed[tile] = low_bits // 8 + 16
+            self.reserve(needed)
+            values = np.ascontiguousarray(remainders.reshape(group_shape)[block]).reshape(-1)
+            base = int(self.bases[tile])
+            out = self.packed[base : base + int(self.capacity[tile])]
+            _pack_bits(values, tile_widths, out, self.states[tile])
+
+    def add_symbols(
         self,
         slices: tuple[slice, ...],
-        indices: np.ndarray | None,
+        symbols: np.ndarray,
+        lookup: np.ndarray,
         model: Any,
-        exact: np.ndarray,
-        bits: np.ndarray,
-        remainders: np.ndarray,
-        original: np.ndarray | None,
+        indices: np.ndarray,
+        values: np.ndarray | None,
     ) -> None:
-        """One group: ``indices`` into its model (None: a single symbol, nothing coded)."""
-        shape = tuple(
-            len(range(*item.indices(n))) for item, n in zip(slices, self.tiling.shape, strict=True)
-        )
+        """A group's symbols (its shape), coded tile by tile with ``model`` (None: a single
+        symbol, nothing coded), and its exact values from ``values`` (the grid's samples of the
+        group, exact ones holding their value; None: there are none)."""
         for tile, block in self.tiling.blocks(slices):
-            if indices is not None:
-                self.encoders[tile].encode(
-                    np.ascontiguousarray(indices.reshape(shape)[block]).reshape(-1), model
-                )
-            widths = np.ascontiguousarray(bits.reshape(shape)[block]).reshape(-1)
-            low_bits = int(widths.sum())
-            if low_bits:
-                state, packed = self.states[tile], self.packed[tile]
-                needed = int(state[0]) + low_bits // 8 + 16
-                if packed.size < needed:
-                    self.packed[tile] = packed = np.concatenate(
-                        [packed, np.zeros(max(needed, packed.size), np.uint8)]
-                    )
-                values = np.ascontiguousarray(remainders.reshape(shape)[block]).reshape(-1)
-                _pack_bits(values, widths, packed, state)
-            if original is not None:
-                chosen = exact.reshape(shape)[block].reshape(-1)
+            if model is None and values is None:
+                break
+            block_symbols = np.ascontiguousarray(symbols[block]).reshape(-1)
+            if model is not None:
+                # In pieces: the same words as one call (the coder's state carries over).
+                for first in range(0, block_symbols.size, _BAND):
+                    piece = block_symbols[first : first + _BAND]
+                    _symbol_indices(piece, lookup, indices)
+                    self.encoders[tile].encode(indices[: piece.size], model)
+            if values is not None:
+                chosen = block_symbols == _EXACT
                 if chosen.any():
-                    self.exact[tile].append(original[block].reshape(-1)[chosen])
+                    self.exact[tile].append(values[block].reshape(-1)[chosen])
 
     def finish(self, dtype: np.dtype[Any]) -> bytes:
         """The tile section: the tile side and largest tiled stride (log2, a byte each), the
@@ -760,7 +906,8 @@ class _TileWriter:
         for tile in range(self.tiling.size):
             words = self.encoders[tile].get_compressed().tobytes()
             position, pending, count = (int(v) for v in self.states[tile])
-            low = self.packed[tile][:position].tobytes()
+            base = int(self.bases[tile])
+            low = self.packed[base : base + position].tobytes()
             if count:
                 low += bytes([(pending << (8 - count)) & 0xFF])
             exact = b""
@@ -778,6 +925,12 @@ class _TileWriter:
 # --------------------------------------------------------------------------------------------
 
 
+#: The encoder codes a group's lines in bands of about this many samples: the room it leaves
+#: for their low bits (53 bits a sample at most) and the range coder's index array follow the
+#: band, not the chunk.
+_BAND = 1 << 14
+
+
 def encode_predictive(
     original: np.ndarray,
     missing: np.ndarray,
@@ -786,17 +939,26 @@ def encode_predictive(
     axes: tuple[int, ...],
     *,
     integer: bool | None = None,
+    overwrite: bool = False,
     tiles: bool = True,
 ) -> tuple[bytes, float, float]:
-    """Code ``original`` (float64, the grid's values, 2-D or 3-D; ``missing`` marks the NaN
-    cells, whose values are ignored) so that every other sample decodes within ``bound``;
-    predicted along ``axes``.
+    """Code ``original`` (the grid's values, 2-D or 3-D, float64 or a narrower float or
+    integer dtype whose values float64 holds exactly; ``missing`` marks the NaN cells, whose
+    values are ignored) so that every other sample decodes within ``bound``; predicted along
+    ``axes``.
 
     Returns the stream, and the sum of the squared errors and the largest error of what
     :func:`decode_predictive` returns for it, over the cells not missing.  ``integer``
     (the default for integer dtypes) predicts in whole numbers with the step ``2 floor(t) + 1``:
-    for whole-number values only.  ``tiles`` codes the fine levels of a grid larger than one
-    tile by tiles (:class:`_Tiling`), so that a window decodes from its tiles alone.
+    for whole-number values only.  ``overwrite=True`` lets the coder work in ``original``
+    itself when it is a C-contiguous float64 array (it is left holding the decoder's values):
+    no copy of the grid.  ``tiles`` codes the fine levels of a grid larger than one tile by
+    tiles (:class:`_Tiling`), so that a window decodes from its tiles alone.
+
+    Memory: the coder works in place in one float64 grid (the decoder's reconstruction
+    replaces each value as it is coded), and its scratch is one byte a sample of the largest
+    group (the symbols, whose histogram precedes their coding) and a band of ``_BAND`` samples
+    (with tiles, the tiles' low bits are reserved band by band too).
     """
     if integer is None:
         integer = dtype.kind in "iu"
@@ -813,9 +975,16 @@ def encode_predictive(
         allowed = bound
         step = min(2.0 * bound, 1e300)
     shape = original.shape
-    y = np.zeros(shape, dtype=np.float64)
+    in_place = (
+        overwrite
+        and cast != 3  # float16's check below compares with the values after coding
+        and original.dtype == np.float64
+        and original.flags.c_contiguous
+        and original.flags.writeable
+    )
+    # The values to code, overwritten by the reconstruction as the coding goes.
+    y = original if in_place else np.array(original, dtype=np.float64, order="C")
     shape3 = _shape3(shape)
-    x_flat = np.ascontiguousarray(original, dtype=np.float64).reshape(-1)
     y_flat = y.reshape(-1)
     missing_flat = (
         np.ascontiguousarray(missing).reshape(-1) if missing.any() else np.zeros(0, np.bool_)
@@ -823,50 +992,91 @@ def encode_predictive(
     encoder = constriction.stream.queue.RangeEncoder()
     tables: list[int] = []
     exact_values: list[np.ndarray] = []
-    largest = y.size
-    symbols = np.empty(largest, dtype=np.int32)
-    bits = np.empty(largest, dtype=np.int64)
-    remainders = np.empty(largest, dtype=np.int64)  # read only where bits > 0
+    groups = list(_groups(shape, axes))
+    largest = max(y[slices].size for _, _, slices in groups)
+    # _EXACT < 256: a symbol is one byte.
+    symbols = np.empty(largest, dtype=np.uint8)
     lookup = np.zeros(_EXACT + 1, dtype=np.int32)
+    indices = np.empty(_BAND, dtype=np.int32)
     stats = np.zeros(2, dtype=np.float64)
-    # Low bits: at most 53 a sample (a residual below 2**54 less its class's 2 top bits).
-    packed = np.zeros(0, dtype=np.uint8)
+    packed = np.zeros(1024, dtype=np.uint8)
     pack_state = np.zeros(3, dtype=np.int64)
+    no_remainders = np.zeros(0, dtype=np.int64)
     stored_weights: list[np.ndarray] = []
+    # One tile: the kernel packs into ``packed`` at ``pack_state``.
+    one_tile = np.ones(3, dtype=np.int64)
+    one_base = np.zeros(1, dtype=np.int64)
+    one_state = np.zeros((1, 3), dtype=np.int64)
     tiling = _Tiling.choose(shape, axes) if tiles else None
     tile_writer = _TileWriter(tiling) if tiling is not None else None
-    for s, odd, slices in _groups(shape, axes):
+    for s, odd, slices in groups:
+        tiled = tile_writer is not None and tile_writer.tiling.tiled(s, odd)
         odd_flags, starts, strides = _layout(slices, odd, len(shape))
-        size = y[slices].size
-        group_symbols, group_bits = symbols[:size], bits[:size]
+        group_shape = y[slices].shape
+        size = math.prod(group_shape)
+        group_symbols = symbols[:size]
         count = len(odd)
         weights = _default_weights(count)
         if count and size >= _FIT_MIN:
             weights = _fitted_weights(
-                y_flat, x_flat, missing_flat, shape3, odd_flags, starts, strides, s, size
+                y_flat, y_flat, missing_flat, shape3, odd_flags, starts, strides, s, size
             )
             stored_weights.append(weights.astype("<f4"))
-        exact_count = _encode_group(
-            y_flat,
-            x_flat,
-            missing_flat,
-            shape3,
-            odd_flags,
-            starts,
-            strides,
-            s,
-            step,
-            integer,
-            cast,
-            allowed,
-            lo,
-            hi,
-            group_symbols,
-            group_bits,
-            remainders,
-            stats,
-            weights,
-        )
+        per_line = _shape3(group_shape)[2]
+        lines = size // per_line if per_line else 0
+        band = max(lines, 1) if cast == 3 else max(1, _BAND // max(per_line, 1))
+        remainders = np.zeros(size, dtype=np.int64) if cast == 3 else no_remainders
+        counts = np.zeros(_EXACT + 1, dtype=np.int64)
+        exact_count = 0
+        for first_line in range(0, lines, band):
+            last_line = min(first_line + band, lines)
+            if tile_writer is not None and tiled:
+                if cast != 3:
+                    tile_writer.reserve_lines(
+                        starts, strides, _shape3(group_shape), (first_line, last_line)
+                    )
+                target_bits, target_bases, target_states = (
+                    tile_writer.packed,
+                    tile_writer.bases,
+                    tile_writer.states,
+                )
+                tile_side, tile_counts = tile_writer.side3, tile_writer.counts3
+            else:
+                needed = int(pack_state[0]) + (last_line - first_line) * per_line * 7 + 16
+                if packed.size < needed:
+                    grown = np.zeros(max(needed, 2 * packed.size), dtype=np.uint8)
+                    grown[: int(pack_state[0])] = packed[: int(pack_state[0])]
+                    packed = grown
+                target_bits, target_bases, target_states = packed, one_base, one_state
+                tile_side, tile_counts = one_tile, one_tile
+            exact_count += _encode_lines(
+                y_flat,
+                missing_flat,
+                shape3,
+                odd_flags,
+                starts,
+                strides,
+                s,
+                step,
+                integer,
+                cast,
+                allowed,
+                lo,
+                hi,
+                (first_line, last_line),
+                group_symbols,
+                first_line * per_line,
+                target_bits,
+                pack_state,
+                remainders,
+                stats,
+                weights,
+                counts,
+                tile_side,
+                tile_counts,
+                target_bases,
+                target_states,
+            )
         if cast == 3:  # float16: the bound checked here, on the cast numpy does
             decoded = y[slices].reshape(-1)
             target = original[slices].reshape(-1)
@@ -878,38 +1088,51 @@ def encode_predictive(
                 decoded[bad] = target[bad]
                 y[slices] = decoded.reshape(y[slices].shape)
                 group_symbols[bad] = _EXACT
-                group_bits[bad] = 0
                 exact_count += int(np.count_nonzero(bad))
-        counts = np.bincount(group_symbols, minlength=_EXACT + 1)
+                counts = np.bincount(group_symbols, minlength=_EXACT + 1)
+            if tile_writer is not None and tiled:
+                tile_writer.add_bits(group_shape, slices, group_symbols, remainders)
+            else:
+                large = (group_symbols >= _DIRECT) & (group_symbols != _EXACT)
+                widths = np.where(
+                    large, ((group_symbols.astype(np.int64) - _DIRECT) >> _TOP_BITS) + 2, 0
+                )
+                needed = int(pack_state[0]) + int(widths.sum()) // 8 + 16
+                if packed.size < needed:
+                    grown = np.zeros(needed, dtype=np.uint8)
+                    grown[: int(pack_state[0])] = packed[: int(pack_state[0])]
+                    packed = grown
+                _pack_bits(remainders, widths, packed, pack_state)
         present = np.flatnonzero(counts)
         tables.append(present.size)
         previous = 0
         for symbol in present.tolist():
             tables += [symbol - previous, int(counts[symbol])]
             previous = symbol
-        if tile_writer is not None and tile_writer.tiling.tiled(s, odd):
+        if tile_writer is not None and tiled:
             lookup[present] = np.arange(present.size, dtype=np.int32)
-            tile_writer.add(
+            # An exact sample's place in y still holds its value.
+            tile_writer.add_symbols(
                 slices,
-                lookup[group_symbols] if present.size > 1 else None,
+                group_symbols.reshape(group_shape),
+                lookup,
                 _model(counts[present].astype(np.float64)) if present.size > 1 else None,
-                group_symbols == _EXACT,
-                group_bits,
-                remainders[:size],
-                original[slices] if exact_count else None,
+                indices,
+                y[slices] if exact_count else None,
             )
             continue
         if exact_count:
-            exact_values.append(original[slices].reshape(-1)[group_symbols == _EXACT])
+            # An exact sample's place in y still holds its value.
+            exact_values.append(y[slices].reshape(-1)[group_symbols == _EXACT])
         if present.size > 1:
             lookup[present] = np.arange(present.size, dtype=np.int32)
-            encoder.encode(lookup[group_symbols], _model(counts[present].astype(np.float64)))
-        low_bits = int(group_bits.sum())
-        if low_bits:
-            needed = int(pack_state[0]) + low_bits // 8 + 16
-            if packed.size < needed:
-                packed = np.concatenate([packed, np.zeros(max(needed, packed.size), np.uint8)])
-            _pack_bits(remainders[:size], group_bits, packed, pack_state)
+            model = _model(counts[present].astype(np.float64))
+            # In pieces: the same words as one call (the coder's state carries over), without
+            # an int32 copy of the whole group.
+            for first in range(0, size, _BAND):
+                piece = group_symbols[first : first + _BAND]
+                _symbol_indices(piece, lookup, indices)
+                encoder.encode(indices[: piece.size], model)
     table_bytes = zlib.compress(_write_varints(tables), 9)
     coded = encoder.get_compressed().tobytes()
     position, pending, count = (int(v) for v in pack_state)

@@ -740,9 +740,12 @@ def encode_layout(
     psnr: float | None = None,
     bpp: float | None = None,
     lossless: bool = False,
+    tiles: bool = True,
 ) -> bytes:
     """:func:`encode_grid` of an already checked array in the given layout (``LAYOUT_*``);
-    ``encode_surface`` comes here for its ``max_error`` target."""
+    ``encode_surface`` comes here for its ``max_error`` target.  ``tiles=False`` codes the
+    interpolation coder's ``max_error`` stream untiled even above one tile (version 2): for a
+    caller whose unit of a window is the grid itself (a Zarr chunk)."""
     given = [
         name
         for name, value in (("max_error", max_error), ("rmse", rmse), ("psnr", psnr), ("bpp", bpp))
@@ -799,7 +802,7 @@ def encode_layout(
     # wavelet core and its outliers, as before it) or the bound is 0 on floats.
     predictive = wavelet is None and (bound is not None and (bound > 0 or dtype.kind in "iu"))
     if predictive and bound is not None:
-        return _encode_predictive(arr, layout, values, missing, mask_bytes, bound)
+        return _encode_predictive(arr, layout, values, missing, mask_bytes, bound, tiles=tiles)
 
     def core_layout() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(filled values, values, missing) in the wavelet core's layout."""
@@ -1132,9 +1135,13 @@ def _encode_predictive(
     mask_bytes: bytes,
     bound: float,
     axes: tuple[int, ...] | None = None,
+    *,
+    tiles: bool = True,
 ) -> bytes:
-    """:func:`_predictive_bundle`'s bundle."""
-    return _predictive_bundle(arr, layout, values, missing, mask_bytes, bound, axes)[0]
+    """:func:`_predictive_bundle`'s bundle (``values`` is not used after: coded in place)."""
+    return _predictive_bundle(
+        arr, layout, values, missing, mask_bytes, bound, axes, disposable=True, tiles=tiles
+    )[0]
 
 
 def _predictive_bundle(
@@ -1145,6 +1152,9 @@ def _predictive_bundle(
     mask_bytes: bytes,
     bound: float,
     axes: tuple[int, ...] | None = None,
+    *,
+    disposable: bool = False,
+    tiles: bool = True,
 ) -> tuple[bytes, float]:
     """The grid under the interpolation coder (:mod:`wavecore.gridpredict`), whose errors are
     bounded by construction: no outliers to correct.  Returns the bundle and the RMSE it
@@ -1154,7 +1164,9 @@ def _predictive_bundle(
     at the same bound (docs/benchmarks.md, Grids), and it is several times faster.  A volume is
     predicted along all three axes: on the benchmark's volume that is 3-7 % smaller than
     predicting its slices apart (``axes=(1, 2)``), for the same reason a 3-D transform beats 2-D
-    slices: neighbouring slices are as alike as neighbouring rows.
+    slices: neighbouring slices are as alike as neighbouring rows.  ``disposable``: the
+    caller has no further use for ``values`` (its own copy), which the coder then overwrites
+    instead of copying it; the RMSE and bpp searches code the same values again and keep them.
     """
     dtype = arr.dtype
     has_mask = bool(missing.any())
@@ -1172,6 +1184,9 @@ def _predictive_bundle(
         bound,
         _PREDICTED_AXES[layout] if axes is None else axes,
         integer=integer,
+        # Our copy, not needed after: coded in place.
+        overwrite=(has_mask or disposable) and not np.may_share_memory(known, arr),
+        tiles=tiles,
     )
     finite_count = max(int(np.count_nonzero(~missing)), 1)
     measured_rmse = math.sqrt(squares / finite_count)
@@ -1246,7 +1261,13 @@ def _integers(values: np.ndarray) -> bool:
     lo, hi = float(values.min()), float(values.max())
     if not (hi - lo <= 65535 and abs(lo) < 2**52 and abs(hi) < 2**52):
         return False
-    return bool(np.array_equal(values, np.rint(values)))
+    # In blocks: a field of fractions is told from its first block, with no full-size copy.
+    flat = values.reshape(-1)
+    block = 1 << 16
+    return all(
+        np.array_equal(part, np.rint(part))
+        for part in (flat[start : start + block] for start in range(0, flat.size, block))
+    )
 
 
 def _encode_lossless(arr: np.ndarray, layout: int, level: int | None) -> bytes:
