@@ -1,4 +1,4 @@
-"""Header sizes of typical bundles in format 2.0 (binary header) against 1.1 (JSON header).
+"""Header sizes of typical bundles in format 3.0 (binary header) against 1.1 (JSON header).
 
     .venv/bin/python benchmarks/header_sizes.py
 
@@ -94,7 +94,7 @@ def curve_headers() -> None:
 
 def main() -> None:
     print(f"load average {os.getloadavg()[0]:.2f}")
-    print("| bundle | levels | payload | header 1.1 | header 2.0 | bundle 1.1 | bundle 2.0 |")
+    print("| bundle | levels | payload | header 1.1 | header 3.0 | bundle 1.1 | bundle 3.0 |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     for name, bundle in cases().items():
         parsed = read_bundle(bundle)
