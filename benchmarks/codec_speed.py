@@ -189,6 +189,8 @@ class OpenJPH(Peer):
 #: line.
 STAGES = (
     ("pad", "wavecore.resample", "pad_to_fit"),
+    # The colour transform written straight into the padded array (the encoder's first pass).
+    ("pad+colour", "wavecore.resample", "pad_converted_to_fit"),
     ("analysis", "wavecore.multilevel", "wavedec2"),
     ("quantize", "wavecore.quantize", "quantize_bands"),
     ("block coding", "wavecore.entropy", "encode_levels"),

@@ -26,7 +26,7 @@ How the extension looks
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -105,13 +105,47 @@ def pad_to_fit(
     True
     """
     arr = np.asarray(data)
-    ax = resolve_axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
+    pads, extensions = _fit_extensions(arr.shape, level, axes, boundary, wavelet)
+    if any(after for _, after, _ in extensions):
+        arr = _padded(arr, extensions, arr.dtype, None)
+    return arr, pads
+
+
+def pad_converted_to_fit(
+    data: np.ndarray,
+    level: int,
+    *,
+    axes: Sequence[int] | int,
+    boundary: str | Sequence[str],
+    wavelet: str | FilterBank,
+    dtype: np.dtype[Any],
+    convert: Callable[[np.ndarray, int, int], None],
+) -> tuple[np.ndarray, Pads]:
+    """``pad_to_fit(converted, ...)`` where ``convert(out, lo, hi)`` writes rows ``[lo, hi)`` of
+    ``data`` converted (to ``dtype``, of ``data``'s shape) into the same rows and leading
+    columns of ``out``, the padded array: the codec's colour transform, written straight into
+    the padded array, so that the converted picture is never made on its own (a 2048² RGB one
+    is 100 MB of fresh float64 pages, whose faults cost more than the arithmetic).  Always a
+    new array, padded or not.  Not public: for :mod:`wavecore.codec`."""
+    pads, extensions = _fit_extensions(data.shape, level, axes, boundary, wavelet)
+    return _padded(data, extensions, np.dtype(dtype), convert), pads
+
+
+def _fit_extensions(
+    shape: tuple[int, ...],
+    level: int,
+    axes: Sequence[int] | int,
+    boundary: str | Sequence[str],
+    wavelet: str | FilterBank,
+) -> tuple[Pads, list[tuple[int, int, bool]]]:
+    """``pad_to_fit``'s pads, and its ``(axis, count, closed)`` extensions, for ``shape``."""
+    ax = resolve_axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], len(shape))
     bank = get_wavelet(wavelet)
     bounds = resolve_boundaries(boundary, len(ax), bank)
     level = as_int(level, "level")
     pads: list[tuple[int, int]] = []
     for a, b in zip(ax, bounds, strict=True):
-        n = arr.shape[a]
+        n = shape[a]
         if n == 0:
             msg = f"axis {a} is empty; there is nothing to pad"
             raise InvalidParameter(msg)
@@ -126,25 +160,33 @@ def pad_to_fit(
     extensions = [
         (a, after, b == "closed") for a, (_, after), b in zip(ax, pads, bounds, strict=True)
     ]
-    if any(after for _, after, _ in extensions):
-        arr = _padded(arr, extensions)
-    return arr, tuple(pads)
+    return tuple(pads), extensions
 
 
-def _padded(arr: np.ndarray, extensions: list[tuple[int, int, bool]]) -> np.ndarray:
+def _padded(
+    arr: np.ndarray,
+    extensions: list[tuple[int, int, bool]],
+    dtype: np.dtype[Any],
+    convert: Callable[[np.ndarray, int, int], None] | None,
+) -> np.ndarray:
     """``arr`` extended by ``count`` samples after the end of each ``(axis, count, closed)``, in
-    that order, written into one new array: the original is copied once (in row slices over the
-    thread pool, as NumPy's copies release the GIL), not once per padded axis."""
+    that order, written into one new array of ``dtype``: the original is copied (or converted,
+    by ``convert``) once, in row slices over the thread pool (NumPy's copies and the compiled
+    conversions release the GIL), not once per padded axis."""
     shape = list(arr.shape)
     for axis, count, _ in extensions:
         shape[axis] += count
-    out = np.empty(shape, dtype=arr.dtype)
+    out = np.empty(shape, dtype=dtype)
     inner = out[tuple(slice(0, n) for n in arr.shape)]
 
     def copy(lo: int, hi: int) -> None:
         inner[lo:hi] = arr[lo:hi]
 
-    run_rows(copy, arr.shape[0], arr.size)
+    def converted(lo: int, hi: int) -> None:
+        assert convert is not None
+        convert(out, lo, hi)
+
+    run_rows(copy if convert is None else converted, arr.shape[0], arr.size)
     filled = list(arr.shape)
     for axis, count, closed in extensions:
         if count:

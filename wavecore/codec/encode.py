@@ -36,6 +36,7 @@ from .ratecontrol import encode_lossy
 from .samples import (
     decompose,
     finish,
+    fitted_samples,
     is_opaque,
     measure_errors,
     peak_of,
@@ -43,7 +44,6 @@ from .samples import (
     scaled,
     scaled_tolerance,
     unscaled,
-    ycbcr_from,
 )
 from .stages import LOSSLESS_WAVELET, NoQuantizer, get_coder, get_colour
 
@@ -149,12 +149,11 @@ def encode_image(
     dtype = dtype_name(arr, "image")
     arr, scale = scaled(arr)
     colour = "ycbcr" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
-    data = ycbcr_from(arr) if colour == "ycbcr" else arr.astype(np.float64)
     bank = get_wavelet(wavelet)
     # Images use the paper's endpoint-interpolating rows; a wavelet without them (cdf97's
     # symmetric extension) uses its own non-periodic boundary.
     boundary = ("open", "open") if "open" in bank.rules else (next(iter(bank.rules)),) * 2
-    fitted, pads, levels = fit(data, level, bank.name, boundary, MAX_IMAGE_LEVELS)
+    fitted, pads, levels = fitted_samples(arr, colour, level, bank.name, boundary, MAX_IMAGE_LEVELS)
     plan = Plan(
         "image",
         arr.shape,

@@ -5,7 +5,7 @@ as a :class:`Plan`, to a header dict and back (with the kind-specific consistenc
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,7 +20,7 @@ from ..multilevel import (
     default_level,
     valid_length,
 )
-from ..resample import pad_to_fit
+from ..resample import pad_converted_to_fit, pad_to_fit
 from .stages import Transform, get_transform, transform_config, transform_of
 
 DEFAULT_CODER = "context"
@@ -145,8 +145,17 @@ class Plan:
 
 
 def fit(
-    data: np.ndarray, plan_level: int | None, wavelet: str, boundary: Sequence[str], most: int
+    data: np.ndarray,
+    plan_level: int | None,
+    wavelet: str,
+    boundary: Sequence[str],
+    most: int,
+    convert: Callable[[np.ndarray, int, int], None] | None = None,
 ) -> tuple[np.ndarray, tuple[tuple[int, int], ...], int]:
+    """``data`` padded to fit the levels (given, or the default for its shape): the fitted
+    array, its pads and the levels.  With ``convert`` (see
+    :func:`wavecore.resample.pad_converted_to_fit`) the fitted array is float64, always new,
+    and ``convert`` writes ``data``'s converted samples into it."""
     axes = (0,) if len(boundary) == 1 else (0, 1)
     level = plan_level
     if level is None:
@@ -160,7 +169,18 @@ def fit(
                 f"{fitted}, more than {_padded_limit(n)}; give a smaller level"
             )
             raise InvalidParameter(msg)
-    padded, pads = pad_to_fit(data, level, axes=axes, boundary=list(boundary), wavelet=wavelet)
+    if convert is not None:
+        padded, pads = pad_converted_to_fit(
+            data,
+            level,
+            axes=axes,
+            boundary=list(boundary),
+            wavelet=wavelet,
+            dtype=np.dtype(np.float64),
+            convert=convert,
+        )
+    else:
+        padded, pads = pad_to_fit(data, level, axes=axes, boundary=list(boundary), wavelet=wavelet)
     return padded, tuple((int(b), int(a)) for b, a in pads), level
 
 
