@@ -327,8 +327,18 @@ def reconstruction_offset(q: np.ndarray, rounding: float) -> float:
     >>> bool(-0.4 < reconstruction_offset(q, 0.4) < 0.5 - 0.4)  # below the bin's middle
     True
     """
-    ones, more = _kernels.count_ones_and_more(np.ravel(q))
-    return _offset_from_counts(int(ones), int(more), rounding)
+    flat = np.ravel(q)
+    counts: list[tuple[int, int]] = []
+    # In slices over the threads: the counts are integers, so their sum is the one-pass count
+    # exactly (a 2048² RGB picture's finest bands took 10 ms of the decoder's serial time).
+    run_rows(
+        lambda lo, hi: counts.append(_kernels.count_ones_and_more(flat[lo:hi])),
+        flat.size,
+        flat.size,
+    )
+    return _offset_from_counts(
+        sum(int(ones) for ones, _ in counts), sum(int(more) for _, more in counts), rounding
+    )
 
 
 def _offset_from_counts(ones: int, more: int, rounding: float) -> float:
