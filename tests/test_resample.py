@@ -183,3 +183,37 @@ def test_minimum_length_and_small_grids() -> None:
         wavecore.fit_grid(np.zeros((7, 30)), 1, axes=(0, 1))
     with pytest.raises(InvalidParameter, match="method"):
         wavecore.fit_grid(np.zeros((8, 30)), 1, axes=(0, 1), method="stretch")
+
+
+@pytest.mark.parametrize("boundary", ["open", "closed"])
+@pytest.mark.parametrize("shape", [(37, 21, 3), (64, 64, 3), (9, 130)])
+def test_padding_a_conversion_equals_padding_the_converted_array(
+    boundary: str, shape: tuple[int, ...]
+) -> None:
+    # The codec writes its colour transform straight into the padded array: the result must be
+    # the padded converted array, edges (repeated or blended from the converted values) included.
+    from wavecore.resample import pad_converted_to_fit
+
+    data = np.random.default_rng(5).integers(0, 256, shape, dtype=np.uint8)
+    matrix = np.array([[0.3, 0.6, 0.1], [-0.2, -0.3, 0.5], [0.5, -0.4, -0.1]])
+
+    def converted(rows: np.ndarray) -> np.ndarray:
+        floats = rows.astype(np.float64)
+        return floats @ matrix.T if floats.ndim == 3 else floats * 0.5 - 3.0
+
+    def convert(out: np.ndarray, lo: int, hi: int) -> None:
+        out[lo:hi, : data.shape[1]] = converted(data[lo:hi])
+
+    expected, pads = wavecore.pad_to_fit(converted(data), 3, axes=(0, 1), boundary=boundary)
+    padded, got_pads = pad_converted_to_fit(
+        data,
+        3,
+        axes=(0, 1),
+        boundary=boundary,
+        wavelet="bspline2",
+        dtype=np.dtype(np.float64),
+        convert=convert,
+    )
+    assert got_pads == pads
+    assert padded.dtype == np.float64
+    assert np.array_equal(padded, expected)

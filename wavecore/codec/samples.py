@@ -229,13 +229,10 @@ def fitted_samples(
             colour_to_floats(arr, YCBCR_MATRIX, out, lo, hi)
 
     else:
-        columns = arr.shape[1] if arr.ndim > 1 else 0
+        columns = arr.shape[1]
 
         def convert(out: np.ndarray, lo: int, hi: int) -> None:
-            if arr.ndim > 1:
-                out[lo:hi, :columns] = arr[lo:hi]
-            else:
-                out[lo:hi] = arr[lo:hi]
+            out[lo:hi, :columns] = arr[lo:hi]  # assignment casts as astype(float64) does
 
     return fit(arr, level, wavelet, boundary, most, convert=convert)
 
