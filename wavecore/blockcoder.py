@@ -507,6 +507,16 @@ def _bands_out(
     p = 0
     for index, band_shapes in enumerate(layout):
         dims = [_plane_dims(shape, two_d) for shape in band_shapes]
+        if windows is None and all(count == 1 for _, _, count in dims):
+            # One plane per band, held whole and contiguous in ``flat``: the band is a view of
+            # it (``flat`` is this decode's own), no copy.
+            views = []
+            for shape, (rows, cols, _) in zip(band_shapes, dims, strict=True):
+                start = int(planes[p, kernels.P_OFFSET])
+                views.append(flat[start : start + rows * cols].reshape(shape))
+                p += 1
+            levels.append(views)
+            continue
         cuts = (
             windows[index]
             if windows is not None
