@@ -12,6 +12,7 @@ memory a worker keeps between tasks is then what its largest chunk needed.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import dask
@@ -21,7 +22,9 @@ import dask
 WORKER_CONFIG: dict[str, Any] = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
 
-def local_cluster(workers: int, **options: Any) -> Any:
+def local_cluster(
+    workers: int, environ: Mapping[str, str | None] | None = None, **options: Any
+) -> Any:
     """A ``dask.distributed.LocalCluster`` of ``workers`` processes of one thread each.
 
     One thread per process: a chunk's coding has Python parts between its compiled kernels
@@ -33,6 +36,10 @@ def local_cluster(workers: int, **options: Any) -> Any:
     ----------
     workers : int
         Worker processes.
+    environ : mapping, optional
+        More environment variables for the worker processes only (``None`` unsets one), on
+        top of :data:`WORKER_CONFIG`: e.g. ``{"MALLOC_MMAP_THRESHOLD_": "524288"}`` for a
+        memory-tight cluster (docs/scale.md, "Memory per chunk").
     **options
         Passed on to ``LocalCluster`` (``memory_limit``, ``dashboard_address``, ...).
 
@@ -45,5 +52,8 @@ def local_cluster(workers: int, **options: Any) -> Any:
 
     settings: dict[str, Any] = {"threads_per_worker": 1, "dashboard_address": None}
     settings.update(options)
-    with dask.config.set(WORKER_CONFIG):
+    config = dict(WORKER_CONFIG)
+    for name, value in (environ or {}).items():
+        config[f"distributed.nanny.pre-spawn-environ.{name}"] = value
+    with dask.config.set(config):
         return LocalCluster(n_workers=workers, processes=True, **settings)
