@@ -12,6 +12,7 @@ memory a worker keeps between tasks is then what its largest chunk needed.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -55,5 +56,16 @@ def local_cluster(
     config = dict(WORKER_CONFIG)
     for name, value in (environ or {}).items():
         config[f"distributed.nanny.pre-spawn-environ.{name}"] = value
-    with dask.config.set(config):
-        return LocalCluster(n_workers=workers, processes=True, **settings)
+    # Dask's nanny runs in this process and puts its pre-spawn variables into os.environ
+    # before it spawns a worker: ours are put back afterwards, so that they stay the workers'.
+    names = {key.rsplit(".", 1)[1] for key in config}
+    before = {name: os.environ.get(name) for name in names}
+    try:
+        with dask.config.set(config):
+            return LocalCluster(n_workers=workers, processes=True, **settings)
+    finally:
+        for name, value in before.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
