@@ -25,6 +25,12 @@ into a Zarr store (format 3, the ``wavecore`` serializer) at ``max_error = 1e-3 
   numcodecs' Zstd (lossless, level 3), and through imagecodecs ZFP (fixed accuracy), SZ3
   (absolute bound) and SPERR (point-wise error); their largest errors are measured too.
 
+``--fit-chunks 512,1024,2048`` measures only the memory: one fresh worker writes the field in
+chunks of each side, and a least-squares line through its resident rises over idle gives the
+bytes per chunk byte and the constant apart, with the worker's MB per CPU-second.
+``--worker-env NAME=VALUE`` (``NAME=`` unsets) changes the timed workers' environment on top of
+``wavecore.scale.WORKER_CONFIG``, e.g. ``--worker-env MALLOC_ARENA_MAX=`` for glibc's default.
+
 The machine may be shared: the load average is printed at the start and the end.
 """
 

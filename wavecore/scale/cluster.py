@@ -1,5 +1,5 @@
-"""A local ``dask.distributed`` cluster set up for the codec: one thread per worker process, and
-glibc's own memory thresholds in the workers.
+"""A local ``dask.distributed`` cluster set up for the codec: one thread per worker process,
+glibc's own memory thresholds and one malloc arena in the workers.
 
 Dask's nanny starts each worker with ``MALLOC_TRIM_THRESHOLD_=65536`` (to hand freed memory
 back to the system).  Setting that variable at all fixes glibc's mmap threshold at 128 KiB, so
@@ -19,8 +19,15 @@ from typing import Any
 import dask
 
 #: The Dask configuration the workers are spawned under: ``None`` unsets a variable that the
-#: nanny would otherwise set (``distributed.nanny.pre-spawn-environ``).
-WORKER_CONFIG: dict[str, Any] = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+#: nanny would otherwise set (``distributed.nanny.pre-spawn-environ``).  ``MALLOC_ARENA_MAX``:
+#: a worker's threads (Dask's executor, Zarr's event loop, its file threads) share one glibc
+#: arena, so an array freed by one is reused by the next that asks, instead of each thread's
+#: arena keeping its own; the resident rise per worker fell from 5.1 to 4.1 bytes per chunk
+#: byte (and its constant from 9.7 to 4.8 MiB) at no measured CPU cost (docs/scale.md).
+WORKER_CONFIG: dict[str, Any] = {
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+    "distributed.nanny.pre-spawn-environ.MALLOC_ARENA_MAX": "1",
+}
 
 
 def local_cluster(
