@@ -31,7 +31,7 @@ WORKER_CONFIG: dict[str, Any] = {
 
 
 def local_cluster(
-    workers: int, environ: Mapping[str, str | None] | None = None, **options: Any
+    workers: int, *, environ: Mapping[str, str | None] | None = None, **options: Any
 ) -> Any:
     """A ``dask.distributed.LocalCluster`` of ``workers`` processes of one thread each.
 
