@@ -25,6 +25,12 @@ into a Zarr store (format 3, the ``wavecore`` serializer) at ``max_error = 1e-3 
   numcodecs' Zstd (lossless, level 3), and through imagecodecs ZFP (fixed accuracy), SZ3
   (absolute bound) and SPERR (point-wise error); their largest errors are measured too.
 
+``--fit-chunks 512,1024,2048`` measures only the memory: one fresh worker writes the field in
+chunks of each side, and a least-squares line through its resident rises over idle gives the
+bytes per chunk byte and the constant apart, with the worker's MB per CPU-second.
+``--worker-env NAME=VALUE`` (``NAME=`` unsets) changes the timed workers' environment on top of
+``wavecore.scale.WORKER_CONFIG``, e.g. ``--worker-env MALLOC_ARENA_MAX=`` for glibc's default.
+
 The machine may be shared: the load average is printed at the start and the end.
 """
 
@@ -216,8 +222,12 @@ def peer_chunk(source: str, chunk: int, block_id: tuple[int, int], bound: float)
 # --------------------------------------------------------------------------------------------
 
 
+#: More environment for the timed workers (``--worker-env``), on top of ``WORKER_CONFIG``.
+WORKER_ENV: dict[str, str | None] = {}
+
+
 def cluster(workers: int) -> tuple[LocalCluster, Client]:
-    c = local_cluster(workers, memory_limit=None)
+    c = local_cluster(workers, environ=WORKER_ENV, memory_limit=None)
     return c, Client(c)
 
 
@@ -268,14 +278,34 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="also trace each worker's allocations (tracemalloc; slows the timed runs)",
     )
+    parser.add_argument(
+        "--fit-chunks",
+        default="",
+        help="only measure 1 worker's resident rise writing the field in chunks of these sides "
+        "(512,1024) and fit bytes per chunk byte + a constant",
+    )
+    parser.add_argument(
+        "--worker-env",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set (NAME= unsets) a variable in the timed workers' environment (repeatable)",
+    )
     parser.add_argument("--json", type=Path, help="write the figures here too")
     parser.add_argument("--keep", type=Path, help="keep the stores in this folder")
     args = parser.parse_args(argv)
 
     load_start = Path("/proc/loadavg").read_text().split()[:3]
     print(f"load average at start: {' '.join(load_start)}; cpus: {os.cpu_count()}")
+    for setting in args.worker_env:
+        name, _, value = setting.partition("=")
+        WORKER_ENV[name] = value or None
+    if WORKER_ENV:
+        print(f"workers' environment: {WORKER_ENV}")
     if args.memory_chunks:
         return memory_curve([int(n) for n in args.memory_chunks.split(",")])
+    if args.fit_chunks:
+        return worker_memory_fit(args.size, [int(n) for n in args.fit_chunks.split(",")])
     work = args.keep or Path(tempfile.mkdtemp(prefix="zarr_scale_"))
     work.mkdir(parents=True, exist_ok=True)
     size, chunk = args.size, args.chunk
@@ -455,6 +485,52 @@ def memory_curve(sides: list[int]) -> int:
                 f"{name}: {slope:.2f} bytes per chunk byte + {constant / 2**20:.1f} MiB "
                 "(least squares over the sizes)"
             )
+    print(f"load average at end: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
+    return 0
+
+
+def worker_memory_fit(size: int, sides: list[int]) -> int:
+    """One worker's resident rise over its idle size while it writes the field, for each chunk
+    side, and a least-squares line through them: bytes per chunk byte and a constant.
+
+    Each side gets its own raw source (made on a cluster of its own) and a fresh worker, so
+    every run starts alike; the CPU seconds are the worker's own (MB per CPU-second)."""
+    rows = []
+    raw = size * size * 4
+    with tempfile.TemporaryDirectory(prefix="zarr_fit_") as folder:
+        for side in sides:
+            source = Path(folder) / f"raw_{side}.zarr"
+            c = local_cluster(1, memory_limit=None)
+            client = Client(c)
+            try:
+                make_field(size, side).to_zarr(str(source), overwrite=True, compressors=None)
+                stored = da.from_zarr(str(source))
+                low, high = (float(v) for v in da.compute(stored.min(), stored.max()))
+            finally:
+                client.close()
+                c.close()
+            c, client = cluster(1)
+            try:
+                run = write_run(client, source, side, 1e-3 * (high - low), Path(folder) / "w.zarr")
+            finally:
+                client.close()
+                c.close()
+            (memory,) = run["memory"]
+            above = memory["peak"] - memory["baseline"]
+            chunk_bytes = side * side * 4
+            rate = raw / memory["cpu_seconds"] / 1e6
+            rows.append((chunk_bytes, above, rate))
+            print(
+                f"chunk {side}² ({chunk_bytes / 2**20:.0f} MiB): {above / 2**20:.1f} MiB above "
+                f"idle = {above / chunk_bytes:.1f} × the chunk; {rate:.1f} MB per CPU-second "
+                f"({raw / run['seconds'] / 1e6:.1f} MB/s wall)"
+            )
+    if len(rows) > 1:
+        slope, constant = np.polyfit([r[0] for r in rows], [r[1] for r in rows], 1)
+        print(
+            f"resident rise per worker: {slope:.2f} bytes per chunk byte + "
+            f"{constant / 2**20:.1f} MiB (least squares over {len(rows)} chunk sizes)"
+        )
     print(f"load average at end: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
     return 0
 

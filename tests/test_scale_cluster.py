@@ -36,3 +36,29 @@ def test_local_cluster_workers_keep_glibc_thresholds() -> None:
 
     key = next(iter(WORKER_CONFIG))
     assert dask.config.get(key) is not None
+
+
+def _probe_environ() -> tuple[str | None, ...]:
+    names = ("WAVECORE_PROBE_WORKER_ENV", "MALLOC_TRIM_THRESHOLD_", "MALLOC_ARENA_MAX")
+    return tuple(os.environ.get(name) for name in names)
+
+
+@pytest.mark.skipif(
+    any(
+        name in os.environ
+        for name in ("WAVECORE_PROBE_WORKER_ENV", "MALLOC_TRIM_THRESHOLD_", "MALLOC_ARENA_MAX")
+    ),
+    reason="variables set in this shell reach the workers whatever the configuration",
+)
+def test_local_cluster_environ_reaches_only_the_workers() -> None:
+    # environ= adds variables to the worker processes (a memory setting for a tight cluster),
+    # on top of WORKER_CONFIG (one malloc arena: the resident rise per chunk byte, docs/scale.md),
+    # and neither reaches this process.
+    with (
+        local_cluster(1, environ={"WAVECORE_PROBE_WORKER_ENV": "on"}) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        seen = list(client.run(_probe_environ).values())
+    assert seen == [("on", None, "1")]
+    assert "WAVECORE_PROBE_WORKER_ENV" not in os.environ
+    assert "MALLOC_ARENA_MAX" not in os.environ
