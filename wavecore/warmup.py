@@ -71,8 +71,10 @@ def _images(dtype: str) -> Callable[[], None]:
             image = _image(dtype, channels, rng)
             # A kept fraction is the cheapest lossy target; the quality and rate searches call
             # the same kernels many times, so one of each per dtype is enough.
+            # Full resolution decodes take the fused last synthesis level, coarser levels the
+            # separate colour pass (on a strided view, for some wavelets): both, for each.
             for wavelet in IMAGE_WAVELETS:
-                decode(encode_image(image, wavelet=wavelet, keep=0.2))
+                _decode_every_way(encode_image(image, wavelet=wavelet, keep=0.2))
             if dtype in ("uint8", "uint16"):
                 _decode_every_way(encode_image(image, lossless=True))
         _decode_every_way(encode_image(image))  # the default, 40 dB
