@@ -26,14 +26,12 @@ import math
 import numpy as np
 
 from ._kernels import squared_and_largest_error
-from .bundle import read_bundle, write_bundle
-from .codec.decode import decode
-from .codec.plan import DEFAULT_CODER, MAX_IMAGE_LEVELS, Plan, fit
-from .codec.samples import decompose, finish, measure_errors, peak_of, reconstruct, scaled
-from .entropy import encode_levels
-from .errors import BundleError, InvalidParameter
+from .codec.encode import bundle_from_quantized
+from .codec.plan import MAX_IMAGE_LEVELS, Plan, fit
+from .codec.samples import decompose, peak_of, scaled
+from .errors import InvalidParameter
 from .filters import get_wavelet
-from .quantize import DEFAULT_ROUNDING, OpenLoopDistortion, dequantize_bands, quantize_bands
+from .quantize import DEFAULT_ROUNDING, OpenLoopDistortion, quantize_bands
 
 __all__ = ["SteppedCore", "squared_and_largest"]
 
@@ -127,32 +125,7 @@ class SteppedCore:
             rounding=DEFAULT_ROUNDING,
             refine=0,
         )
-        chunks, cparams = encode_levels(quantized, coder=DEFAULT_CODER)
-        dequantized = dequantize_bands(
-            quantized, qparams, wavelet=plan.wavelet, boundary=bounds, axes=plan.axes
-        )
-        del quantized
-        output = finish(plan, reconstruct(plan, dequantized), 0)  # the decoder's samples
-        del dequantized
-        decoded = np.ldexp(output, -self.scale) if self.scale else output
-        psnr, largest = measure_errors(plan, self.coded, decoded)
-        header = plan.header()
-        header.update(
-            quantizer=str(qparams.get("name", "deadzone")),
-            qparams=qparams,
-            coder=str(cparams.get("coder", DEFAULT_CODER)),
-            cparams=cparams,
-            psnr=psnr,
-            max_error=min(math.ldexp(largest, self.scale), float(np.finfo(np.float64).max)),
-        )
-        try:
-            bundle = write_bundle(header, chunks)
-        except BundleError as exc:
-            msg = f"this grid cannot be stored in a bundle: {exc}"
-            raise InvalidParameter(msg) from exc
-        if read_bundle(bundle).header.get("qparams") != qparams:
-            output = decode(bundle)  # the header rounded a parameter: the decoder's result
-        return bundle, output
+        return bundle_from_quantized(plan, quantized, qparams, self.coded, "grid")
 
 
 def squared_and_largest(final: np.ndarray, original: np.ndarray) -> tuple[float, float]:

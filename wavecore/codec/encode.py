@@ -501,6 +501,16 @@ def encode_surface_at_step(
         refine=0,
     )
     del coeffs  # each full-size temporary is let go once used: peak memory per Zarr chunk
+    return bundle_from_quantized(plan, quantized, qparams, arr, "input")
+
+
+def bundle_from_quantized(
+    plan: Plan, quantized: list[Any], qparams: dict[str, Any], coded: np.ndarray, what: str
+) -> tuple[bytes, np.ndarray]:
+    """Code a surface plan's quantized bands into its bundle, measured on what the decoder
+    returns: the bundle and that output.  ``coded`` is the (scaled) samples the plan was made
+    from; ``what`` names them in the error a bundle that cannot be stored raises."""
+    bounds = list(plan.boundary)
     chunks, cparams = encode_levels(quantized, coder=DEFAULT_CODER)
     dequantized = dequantize_bands(
         quantized, qparams, wavelet=plan.wavelet, boundary=bounds, axes=plan.axes
@@ -510,8 +520,9 @@ def encode_surface_at_step(
     del dequantized
     output = finish(plan, samples, 0)
     del samples
+    scale = plan.scale
     decoded = np.ldexp(output, -scale) if scale else output
-    psnr, largest = measure_errors(plan, arr, decoded)
+    psnr, largest = measure_errors(plan, coded, decoded)
     header = plan.header()
     header.update(
         quantizer=str(qparams.get("name", "deadzone")),
@@ -524,7 +535,7 @@ def encode_surface_at_step(
     try:
         bundle = write_bundle(header, chunks)
     except BundleError as exc:
-        msg = f"this input cannot be stored in a bundle: {exc}"
+        msg = f"this {what} cannot be stored in a bundle: {exc}"
         raise InvalidParameter(msg) from exc
     if read_bundle(bundle).header.get("qparams") != qparams:
         output = decode(bundle)  # the header rounded a parameter: take the decoder's result
