@@ -23,7 +23,15 @@ from hypothesis import strategies as st
 
 import wavecore
 from wavecore import BundleError, binheader, decode, inspect
-from wavecore.bundle import MAGIC, deflate_header, read_bundle
+from wavecore.bundle import (
+    COMPACT_MAGIC,
+    COMPACT_VERSION,
+    MAGIC,
+    chunk_groups,
+    deflate_header,
+    read_bundle,
+    write_bundle,
+)
 
 FAST = settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
 SLOW = settings(max_examples=2600, deadline=None, suppress_health_check=list(HealthCheck))
@@ -38,16 +46,30 @@ def _make_bundles() -> dict[str, bytes]:
     t = np.linspace(0, 2 * np.pi, 37, endpoint=False)
     curve = np.stack([np.cos(t), np.sin(2 * t)], axis=1)
     grid = np.stack([np.add.outer(np.arange(12.0), np.zeros(10)), rng.random((12, 10))], -1)
+    compact = wavecore.encode_curve(curve, closed=True, level=2, tolerance=0.01)
+    t = np.linspace(0, 1, 90)
+    open_curve = np.stack([t, np.sin(5 * t) * t, t**2], axis=1)
     return {
         "lossy image": wavecore.encode_image(grey.astype(np.uint8), level=2, quality=30),
         "lossless rgb": wavecore.encode_image(rgb, lossless=True, level=2),
-        "closed curve": wavecore.encode_curve(curve, closed=True, level=2, tolerance=0.01),
+        # The same curve in format 3.0 (its chunks are one block each: stored as coded).
+        "closed curve": write_bundle(*split(compact), version=(3, 0)),
         "surface": wavecore.encode_surface(grid, closed=(True, False), level=1, quality=30),
+        # Format 4.0, as encode_curve writes curves.
+        "compact curve": compact,
+        "compact open curve": wavecore.encode_curve(open_curve, level=3, tolerance=1e-4),
     }
+
+
+def split(data: bytes) -> tuple[dict[str, Any], list[bytes]]:
+    parsed = read_bundle(data)
+    return json.loads(json.dumps(parsed.header)), [bytes(c or b"") for c in parsed.chunks]
 
 
 BUNDLES = _make_bundles()
 NAMES = sorted(BUNDLES)
+#: Each bundle's format version.
+VERSIONS = {name: read_bundle(data).version for name, data in BUNDLES.items()}
 
 
 def decodes_or_fails_cleanly(data: bytes, **kwargs: Any) -> np.ndarray | None:
@@ -58,11 +80,6 @@ def decodes_or_fails_cleanly(data: bytes, **kwargs: Any) -> np.ndarray | None:
         return None
     assert isinstance(out, np.ndarray)
     return out
-
-
-def split(data: bytes) -> tuple[dict[str, Any], list[bytes]]:
-    parsed = read_bundle(data)
-    return json.loads(json.dumps(parsed.header)), [bytes(c or b"") for c in parsed.chunks]
 
 
 def assemble(header: bytes, chunks: list[bytes], major: int = 1, minor: int = 0) -> bytes:
@@ -96,16 +113,48 @@ def assemble2(packed: bytes, chunks: list[bytes], version: tuple[int, int] = (3,
     return head + struct.pack("<I", crc) + b"".join(chunks)
 
 
+def assemble4(packed: bytes, chunks: list[bytes], minor: int = 0) -> bytes:
+    """A format 4.0 bundle with correct CRCs around whatever binary header bytes it is given:
+    the 4-byte preamble, the header, the chunk lengths, a CRC-16 per group of chunks, the
+    CRC-16 of all that."""
+    head = COMPACT_MAGIC + bytes([COMPACT_VERSION[0], minor]) + packed
+    head += b"".join(_varint(len(c)) for c in chunks)
+    for first, last in chunk_groups([len(c) for c in chunks]):
+        head += struct.pack("<H", binascii.crc_hqx(b"".join(chunks[first : last + 1]), 0))
+    return head + struct.pack("<H", binascii.crc_hqx(head, 0)) + b"".join(chunks)
+
+
+def assemble_as(name: str, packed: bytes, chunks: list[bytes]) -> bytes:
+    """``packed`` and ``chunks`` in the format version of bundle ``name``."""
+    if VERSIONS[name] == COMPACT_VERSION:
+        return assemble4(packed, chunks)
+    return assemble2(packed, chunks)
+
+
 def packed_header(data: bytes) -> bytes:
-    """The binary header of a 2.x or 3.x bundle, as stored."""
+    """The binary header of a 2.x, 3.x or 4.x bundle, as stored."""
+    if data[:2] == COMPACT_MAGIC and data[2] == COMPACT_VERSION[0]:
+        return data[4 : binheader.unpack_from(data, 4)[1]]
     assert data[8] in (2, 3) and data[10] < 128
     return data[11 : 11 + data[10]]
+
+
+def unpack_as(name: str, packed: bytes) -> dict[str, Any]:
+    """The header dict of binary header bytes in the version of bundle ``name``; the whole of
+    the bytes must be read."""
+    if VERSIONS[name] != COMPACT_VERSION:
+        return binheader.unpack(packed)
+    header, end, _ = binheader.unpack_from(packed, 0)
+    if end != len(packed):
+        msg = "binary header field 'end': unexpected bytes"
+        raise BundleError(msg)
+    return header
 
 
 @pytest.mark.parametrize("name", NAMES)
 def test_assemble2_rebuilds_the_writers_bytes(name: str) -> None:
     _, chunks = split(BUNDLES[name])
-    assert assemble2(packed_header(BUNDLES[name]), chunks) == BUNDLES[name]
+    assert assemble_as(name, packed_header(BUNDLES[name]), chunks) == BUNDLES[name]
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -114,10 +163,11 @@ def test_a_binary_header_cut_at_every_length_names_a_field(name: str) -> None:
     _, chunks = split(BUNDLES[name])
     for length in range(len(packed)):
         with pytest.raises(BundleError, match="binary header field '"):
-            binheader.unpack(packed[:length])
-        assert decodes_or_fails_cleanly(assemble2(packed[:length], chunks)) is None
-    with pytest.raises(BundleError, match=r"'end'.*1 unexpected byte"):
-        binheader.unpack(packed + b"\x00")
+            unpack_as(name, packed[:length])
+        assert decodes_or_fails_cleanly(assemble_as(name, packed[:length], chunks)) is None
+    if VERSIONS[name] != COMPACT_VERSION:  # 4.0's header has no length: it ends where it ends
+        with pytest.raises(BundleError, match=r"'end'.*1 unexpected byte"):
+            binheader.unpack(packed + b"\x00")
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -129,7 +179,7 @@ def test_every_flipped_header_byte_with_fixed_crcs(name: str) -> None:
         for flip in (0x01, 0x10, 0x80, 0xFF):
             damaged = bytearray(packed)
             damaged[position] ^= flip
-            bundle = assemble2(bytes(damaged), chunks)
+            bundle = assemble_as(name, bytes(damaged), chunks)
             for level in (0, 1):
                 with contextlib.suppress(wavecore.InvalidParameter):  # a level too deep
                     decodes_or_fails_cleanly(bundle, level=level)
@@ -143,11 +193,16 @@ def test_every_cut_fails_cleanly_or_decodes_its_complete_levels(name: str) -> No
     info = inspect(data)
     levels = info["levels"]
     ends = np.cumsum([info["header_bytes"]] + [c["bytes"] for c in info["chunks"]])
+    # 4.0 checks chunks in groups: a chunk counts once its whole group is there.
+    groups = read_bundle(data).groups or [(i, i) for i in range(levels + 1)]
     full = [decode(data, level=k) for k in range(levels + 1)]
     for length in range(len(data)):
         cut = data[:length]
         assert decodes_or_fails_cleanly(cut) is None  # the finest level always needs more
-        complete = int(np.searchsorted(ends, length, side="right")) - 1  # chunks fully present
+        present = int(np.searchsorted(ends, length, side="right")) - 1  # chunks fully present
+        complete = 0
+        while complete < present and groups[complete][1] < present:
+            complete += 1
         for k in range(levels + 1):
             out = decodes_or_fails_cleanly(cut, level=k)
             if length >= info["header_bytes"] and levels - k + 1 <= complete:
@@ -245,16 +300,25 @@ def fuzz_case(data: st.DataObject) -> None:
     elif mode == 2:  # a crafted header with valid CRCs
         bundle = assemble(json.dumps(mutate_header(header, data)).encode(), chunks)
     elif mode == 3:  # arbitrary bytes behind a valid preamble
-        bundle = MAGIC + bytes([data.draw(st.sampled_from([1, 2])), 0])
+        major = data.draw(st.sampled_from([1, 2, 3, 4]))
+        if major == COMPACT_VERSION[0]:
+            bundle = COMPACT_MAGIC + bytes([major, 0])
+        else:
+            bundle = MAGIC + bytes([major, 0])
         bundle += data.draw(st.binary(max_size=300))
     elif mode == 4:  # a crafted binary header (from a crafted dict) with valid CRCs
+        compact = VERSIONS[name] == COMPACT_VERSION
         try:
-            packed = binheader.pack(mutate_header(header, data))
+            packed = binheader.pack(
+                mutate_header(header, data),
+                major=4 if compact else 3,
+                derived_weights=compact and data.draw(st.booleans()),
+            )
         except BundleError:  # a value the binary header cannot hold
             return
-        bundle = assemble2(packed, chunks)
+        bundle = assemble_as(name, packed, chunks)
     else:  # damaged binary header bytes with valid CRCs
-        bundle = assemble2(mutate_bytes(packed_header(BUNDLES[name]), data), chunks)
+        bundle = assemble_as(name, mutate_bytes(packed_header(BUNDLES[name]), data), chunks)
     level = data.draw(st.integers(0, 2))
     try:
         decodes_or_fails_cleanly(bundle, level=level)

@@ -84,6 +84,11 @@ _MAX_NUMBER_HEAD = 2**70 - 1
 
 # The number form: a varint ``V``; ``V & 15`` says how to read it.
 _NUM_DECIMAL_MIN, _NUM_DECIMAL_MAX = -8, 3  # codes 0 … 11: ``k · 10**(code - 8)``
+#: Format 4.0: code 11 is the *binary* form ``k · 2**e`` (``k = zigzag⁻¹(V >> 4)``, odd, then
+#: ``e`` as a zigzag varint) instead of the decimal ``k · 1000``: a value with few significant
+#: bits (a curve's ``peak``, rounded up to 9 of them) takes three bytes at any magnitude.
+_NUM_BINARY = 11
+_BINARY_EXPONENT_MAX = 1100
 _NUM_NULL, _NUM_FLOAT32, _NUM_FLOAT64, _NUM_INT = 12, 13, 14, 15
 
 _FLOAT32_NORMAL = 2.0**-126  # the smallest normal float32
@@ -139,7 +144,18 @@ def _decimal(value: float) -> tuple[int, int] | None:
     return k, exponent
 
 
-def _number(value: Any, field: str, *, upper_float32: bool = False) -> bytes:
+def _binary(value: float) -> tuple[int, int] | None:
+    """``(k, e)`` with ``value == k · 2**e`` and ``k`` odd, or None (zero, not finite)."""
+    if not math.isfinite(value) or value == 0.0:
+        return None
+    num, den = value.as_integer_ratio()
+    if den > 1:
+        return num, 1 - den.bit_length()
+    shift = (num & -num).bit_length() - 1
+    return num >> shift, shift
+
+
+def _number(value: Any, field: str, *, upper_float32: bool = False, major: int = 3) -> bytes:
     """The number form of ``value`` (int, float or None), shortest exact encoding."""
     if value is None:
         return encode_varint(_NUM_NULL)
@@ -158,10 +174,18 @@ def _number(value: Any, field: str, *, upper_float32: bool = False) -> bytes:
         k, e = decimal
         if e > _NUM_DECIMAL_MAX:
             k, e = k * 10 ** (e - _NUM_DECIMAL_MAX), _NUM_DECIMAL_MAX
+        if major >= 4 and e == _NUM_DECIMAL_MAX:  # code 11 is the binary form in 4.0
+            k, e = k * 10, e - 1
         if e >= _NUM_DECIMAL_MIN and _same_float(float(f"{k}e{e}"), value):
             short = encode_varint(zigzag(k) * 16 + (e - _NUM_DECIMAL_MIN))
             if len(short) < len(best):
                 best = short
+    binary = _binary(value) if major >= 4 else None
+    if binary is not None and abs(binary[1]) <= _BINARY_EXPONENT_MAX:
+        k, e = binary
+        short = encode_varint(zigzag(k) * 16 + _NUM_BINARY) + encode_varint(zigzag(e))
+        if len(short) < len(best):
+            best = short
     if upper_float32 and len(best) > 5 and _FLOAT32_NORMAL <= abs(value) < 3.0e38:
         # The float32 at or above the value: a diagnostic that stays an upper bound, within
         # 2**-23 of it (in float32's normal range; beyond it, the float64).
@@ -216,13 +240,23 @@ def _pack_weights(weights: Any, levels: int, two_d: bool) -> bytes | None:
     return bytes(out)
 
 
-def _compact_qparams(header: dict[str, Any]) -> tuple[bytes, bool] | None:
-    """(bytes, rounding is the default) of the quantizer's parameters, or None."""
+def _is_float32(value: float) -> bool:
+    """Whether ``value`` is a float32 exactly (finite, in float32's range)."""
+    return abs(value) < 3.0e38 and _same_float(float(np.float32(value)), value)
+
+
+def _compact_qparams(
+    header: dict[str, Any], major: int = 3, derived_weights: bool = False
+) -> tuple[bytes, bool, bool] | None:
+    """(bytes, rounding is the default, step is a float32) of the quantizer's parameters, or
+    None.  In 4.0 the step takes 4 bytes when it is a float32, and ``derived_weights`` (the
+    weights are those the plan gives, :func:`wavecore.bundle.derived_weights`) leaves them
+    out."""
     quantizer, qparams = header.get("quantizer"), header.get("qparams")
     if not isinstance(qparams, dict):
         return None
     if quantizer == "none":
-        return (b"", False) if qparams == {} else None
+        return (b"", False, False) if qparams == {} else None
     if quantizer != "deadzone" or set(qparams) != {"name", "step", "weights", "rounding"}:
         return None
     step, rounding = qparams["step"], qparams["rounding"]
@@ -236,9 +270,13 @@ def _compact_qparams(header: dict[str, Any]) -> tuple[bytes, bool] | None:
     weights = _pack_weights(qparams["weights"], levels, len(boundary) == 2)
     if weights is None:
         return None
+    if major >= 4 and derived_weights:
+        weights = b""
     is_default = isinstance(rounding, float) and _same_float(rounding, DEFAULT_ROUNDING)
-    middle = b"" if is_default else _number(rounding, "qparams.rounding")
-    return _F64.pack(step) + middle + weights, is_default
+    middle = b"" if is_default else _number(rounding, "qparams.rounding", major=major)
+    single = major >= 4 and _is_float32(step)
+    packed_step = _F32.pack(step) if single else _F64.pack(step)
+    return packed_step + middle + weights, is_default, single
 
 
 def _compact_cparams(header: dict[str, Any]) -> bytes | None:
@@ -268,6 +306,13 @@ def _compact_cparams(header: dict[str, Any]) -> bytes | None:
             return None
         block_code = block.bit_length() - 4
     return bytes([version | two_d << 4 | block_code << 5])
+
+
+def default_cparams_for(boundary: Any) -> dict[str, Any]:
+    """The coder parameters a 4.0 header stores in no bytes: the context coder's version 4
+    with 128-sample blocks, two-dimensional when there are two axes."""
+    two_d = isinstance(boundary, list) and len(boundary) == 2
+    return {"coder": "context", "version": 4, "two_d": two_d, "block": 128}
 
 
 def _index(table: tuple[str, ...], value: Any, field: str) -> int:
@@ -304,8 +349,14 @@ def _derived_fitted(shape: list[int], pads: list[list[int]]) -> list[int]:
     return fitted
 
 
-def pack(header: dict[str, Any]) -> bytes:
+def pack(header: dict[str, Any], *, major: int = 3, derived_weights: bool = False) -> bytes:
     """The binary form of a header dict (one that :func:`bundle.check_header` accepts).
+
+    ``major`` is the bundle format's major version: 2 and 3 share one form; 4 (see
+    ``docs/bundle-format.md``, *The binary header in 4.0*) always derives ``fitted`` (else it
+    goes to the extension), leaves the weights out when ``derived_weights`` says they are the
+    plan's, stores a float32 step in 4 bytes and the default coder parameters in none, and
+    has the binary number form.
 
     Raises
     ------
@@ -366,6 +417,8 @@ def pack(header: dict[str, Any]) -> bytes:
         raise BundleError(msg[:200])
     fitted = _sizes(header["fitted"], "fitted")
     fitted_derived = fitted == _derived_fitted(shape, pads)
+    if major >= 4 and not fitted_derived:
+        extension["fitted"] = fitted
     if all(p == [0, 0] for p in pads):
         pads_mode = 0
     elif all(p[0] == 0 for p in pads):
@@ -403,9 +456,14 @@ def pack(header: dict[str, Any]) -> bytes:
     quantizer_code = QUANTIZER_CODES.index(quantizer) if quantizer in QUANTIZER_CODES else 2
     if quantizer_code == IN_EXTENSION:
         extension["quantizer"] = quantizer
-    qparams = _compact_qparams(header) if quantizer_code != IN_EXTENSION else None
+    qparams = (
+        _compact_qparams(header, major, derived_weights) if quantizer_code != IN_EXTENSION else None
+    )
     if qparams is None:
         extension["qparams"] = header["qparams"]
+        if major >= 4 and quantizer_code != IN_EXTENSION:  # 4.0: both in the extension
+            quantizer_code = IN_EXTENSION
+            extension["quantizer"] = quantizer
     coder = header["coder"]
     coder_code = CODER_CODES.index(coder) if coder in CODER_CODES else 2
     if coder_code == IN_EXTENSION:
@@ -413,6 +471,22 @@ def pack(header: dict[str, Any]) -> bytes:
     cparams = _compact_cparams(header) if coder_code != IN_EXTENSION else None
     if cparams is None:
         extension["cparams"] = header["cparams"]
+        if major >= 4 and coder_code != IN_EXTENSION:
+            coder_code = IN_EXTENSION
+            extension["coder"] = coder
+    default_cparams = (
+        major >= 4 and cparams is not None and header["cparams"] == default_cparams_for(boundary)
+    )
+    if major >= 4:
+        # 4.0's flags: byte 1 bit 5 says the weights are derived (``fitted`` always is),
+        # byte 3 bit 4 that the step is a float32, bit 5 that the coder's parameters are the
+        # default ones (no byte); a stage whose parameters have no compact form is named in
+        # the extension with them.
+        fitted_derived = derived_weights and qparams is not None and quantizer_code == 1
+        q_flag = qparams is not None and qparams[2]
+        c_flag = default_cparams
+    else:
+        q_flag, c_flag = qparams is not None, cparams is not None
 
     out = bytearray(
         [
@@ -421,8 +495,8 @@ def pack(header: dict[str, Any]) -> bytes:
             wavelet_code | boundary_codes[0] << 3 | boundary_codes[1] << 5 | scale_compact << 7,
             quantizer_code
             | coder_code << 2
-            | (qparams is not None) << 4
-            | (cparams is not None) << 5
+            | q_flag << 4
+            | c_flag << 5
             | bool(extension) << 6
             | (qparams is not None and qparams[1]) << 7,
         ]
@@ -430,7 +504,7 @@ def pack(header: dict[str, Any]) -> bytes:
     out += encode_varint(levels)
     for size in shape:
         out += encode_varint(size)
-    if not fitted_derived:
+    if not fitted_derived and major < 4:
         if not 1 <= len(fitted) <= 4:
             msg = f"header field 'fitted' must list 1 to 4 sizes, not {len(fitted)}"
             raise BundleError(msg)
@@ -450,13 +524,13 @@ def pack(header: dict[str, Any]) -> bytes:
         codes = [LIFTING_CODES.index(name) for name in lifting]
         for start in range(0, len(codes), 4):
             out.append(sum(c << (2 * i) for i, c in enumerate(codes[start : start + 4])))
-    out += _number(header["peak"], "peak")
+    out += _number(header["peak"], "peak", major=major)
     if scale_compact:
         assert isinstance(scale, int)
         out += encode_varint(zigzag(scale))
     if qparams is not None:
         out += qparams[0]
-    if cparams is not None:
+    if cparams is not None and not default_cparams:
         out += cparams
     psnr = header["psnr"]
     if psnr is None:
@@ -466,8 +540,8 @@ def pack(header: dict[str, Any]) -> bytes:
     ):
         out += encode_varint(zigzag(round(psnr * 1e4)) + 2)
     else:
-        out += encode_varint(1) + _number(psnr, "psnr")
-    out += _number(header["max_error"], "max_error", upper_float32=True)
+        out += encode_varint(1) + _number(psnr, "psnr", major=major)
+    out += _number(header["max_error"], "max_error", upper_float32=True, major=major)
     if extension:
         try:
             text = json.dumps(extension, separators=(",", ":"), allow_nan=False).encode()
@@ -532,9 +606,19 @@ class _Reader:
             raise self.fail(field, f"unknown code {value}; known: {list(table)}")
         return table[value]
 
-    def number(self, field: str) -> Any:
+    def number(self, field: str, major: int = 3) -> Any:
         head = self.varint(field, _MAX_NUMBER_HEAD)
         form, rest = head & 15, head >> 4
+        if form == _NUM_BINARY and major >= 4:
+            k = unzigzag(rest)
+            e = unzigzag(self.varint(field, 2 * _BINARY_EXPONENT_MAX))
+            if not k & 1 or abs(k) >= 2**53:
+                raise self.fail(field, f"binary number {k}·2^{e} needs an odd k below 2^53")
+            try:
+                value = math.ldexp(k, e)
+            except OverflowError:
+                raise self.fail(field, f"binary number {k}·2^{e} is not finite") from None
+            return value
         if form <= _NUM_DECIMAL_MAX - _NUM_DECIMAL_MIN:
             k = unzigzag(rest)
             return float(f"{k}e{form + _NUM_DECIMAL_MIN}")
@@ -585,6 +669,28 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
         say together is checked by :func:`bundle.check_header` and the codec.
     """
     reader = _Reader(data)
+    header, _ = _read_fields(reader, 3)
+    reader.end()
+    return header
+
+
+def unpack_from(
+    data: bytes | bytearray | memoryview, offset: int, *, major: int = 4
+) -> tuple[dict[str, Any], int, bool]:
+    """A 4.0 header read from ``data`` at ``offset``, where nothing says its length: the header
+    dict, the offset just past it, and whether its weights are derived from the plan (then
+    ``qparams`` holds no ``weights``: :func:`wavecore.bundle.derived_weights` gives them).
+
+    Reads at most ``MAX_HEADER_SIZE`` (65 535) bytes; raises :class:`BundleError` naming the
+    field for anything malformed, as :func:`unpack` does.
+    """
+    reader = _Reader(memoryview(data)[offset : offset + _MAX_EXTENSION])
+    header, derived = _read_fields(reader, major)
+    return header, offset + reader.offset, derived
+
+
+def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool]:
+    """The fields of a binary header, in order (``major`` 2, 3 or 4)."""
     flags = [reader.byte("flags") for _ in range(4)]
     kind = reader.code(flags[0] & 3, KIND_CODES, "kind")
     colour_code = flags[0] >> 2 & 3
@@ -595,7 +701,8 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
     opaque = bool(flags[0] >> 7)
     dtype = reader.code(flags[1] & 15, DTYPE_CODES, "dtype")
     axes = (flags[1] >> 4 & 1) + 1
-    fitted_derived = bool(flags[1] >> 5 & 1)
+    fitted_derived = bool(flags[1] >> 5 & 1) or major >= 4
+    weights_derived = bool(flags[1] >> 5 & 1) and major >= 4
     pads_mode = flags[1] >> 6
     if pads_mode == 3:
         raise reader.fail("pads", "unknown pads form 3")
@@ -614,6 +721,18 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
     if coder_code > IN_EXTENSION:
         raise reader.fail("coder", f"unknown code {coder_code}")
     q_compact, c_compact = bool(flags[3] >> 4 & 1), bool(flags[3] >> 5 & 1)
+    single_step = default_cparams = False
+    if major >= 4:
+        # 4.0: a stage named by its code has compact parameters; bits 4 and 5 say the step is
+        # a float32 and the coder's parameters are the default ones.
+        single_step, default_cparams = q_compact, c_compact
+        if single_step and quantizer_code != 1:
+            raise reader.fail("flags", "the float32-step flag without a deadzone quantizer")
+        if default_cparams and coder_code != 0:
+            raise reader.fail("flags", "the default-parameters flag without the context coder")
+        if weights_derived and quantizer_code != 1:
+            raise reader.fail("flags", "the derived-weights flag without a deadzone quantizer")
+        q_compact, c_compact = quantizer_code != IN_EXTENSION, coder_code != IN_EXTENSION
     has_extension, default_rounding = bool(flags[3] >> 6 & 1), bool(flags[3] >> 7)
     if (q_compact and quantizer_code == IN_EXTENSION) or (c_compact and coder_code == 2):
         raise reader.fail("flags", "compact parameters for a stage named in the extension")
@@ -658,7 +777,7 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
             if byte >> (2 * min(4, count - start)):
                 raise reader.fail("lifting", "bits set beyond the last filter")
         header["lifting"] = [reader.code(c, LIFTING_CODES, "lifting") for c in codes]
-    header["peak"] = reader.number("peak")
+    header["peak"] = reader.number("peak", major)
     if has_scale:
         header["scale"] = unzigzag(reader.varint("scale", 2**20))
     if opaque:
@@ -668,19 +787,22 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
     if q_compact and quantizer_code == 0:
         header["qparams"] = {}
     elif q_compact:
-        (step,) = _F64.unpack(reader.take(8, "qparams.step"))
-        rounding = DEFAULT_ROUNDING if default_rounding else reader.number("qparams.rounding")
-        weights = _unpack_weights(reader, levels, axes == 2)
-        header["qparams"] = {
-            "name": "deadzone",
-            "step": step,
-            "weights": weights,
-            "rounding": rounding,
-        }
+        step_form = _F32 if single_step else _F64
+        (step,) = step_form.unpack(reader.take(step_form.size, "qparams.step"))
+        rounding = (
+            DEFAULT_ROUNDING if default_rounding else reader.number("qparams.rounding", major)
+        )
+        qparams: dict[str, Any] = {"name": "deadzone", "step": float(step)}
+        if not weights_derived:  # else the bundle reader derives them from the plan
+            qparams["weights"] = _unpack_weights(reader, levels, axes == 2)
+        qparams["rounding"] = rounding
+        header["qparams"] = qparams
     if coder_code != IN_EXTENSION:
         header["coder"] = CODER_CODES[coder_code]
     if c_compact and coder_code == 1:
         header["cparams"] = {"coder": "zlib"}
+    elif default_cparams:
+        header["cparams"] = default_cparams_for(boundary)
     elif c_compact:
         byte = reader.byte("cparams")
         cparams: dict[str, Any] = {
@@ -695,14 +817,16 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
     if psnr_head == 0:
         header["psnr"] = None
     elif psnr_head == 1:
-        header["psnr"] = reader.number("psnr")
+        header["psnr"] = reader.number("psnr", major)
     else:
         header["psnr"] = unzigzag(psnr_head - 2) / 1e4
-    header["max_error"] = reader.number("max_error")
+    header["max_error"] = reader.number("max_error", major)
     if has_extension:
+        derived_fitted = header.pop("fitted") if major >= 4 else None
         _merge_extension(reader, header)
-    reader.end()
-    return header
+        if derived_fitted is not None:  # 4.0: ``fitted`` is derived unless the extension says
+            header.setdefault("fitted", derived_fitted)
+    return header, weights_derived
 
 
 def _merge_extension(reader: _Reader, header: dict[str, Any]) -> None:

@@ -120,7 +120,7 @@ import math
 import struct
 import zlib
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from . import binheader
@@ -128,16 +128,22 @@ from .blockcoder import add_block_checks
 from .errors import BundleError
 
 __all__ = [
-    "FORMAT_VERSION",
+    "COMPACT_MAGIC",
+    "COMPACT_VERSION",
+    "GROUP_BYTES",
     "MAGIC",
     "MAX_CHUNKS",
     "MAX_ELEMENTS",
     "MAX_HEADER_SIZE",
     "Bundle",
+    "chunk_groups",
     "deflate_header",
+    "derived_weights",
     "inflate_header",
     "read_bundle",
+    "with_header",
     "write_bundle",
+    "written_version",
 ]
 
 MAGIC = b"\x89WVB\r\n\x1a\n"
@@ -147,9 +153,23 @@ MAGIC = b"\x89WVB\r\n\x1a\n"
 #: float16, int8–int64 and uint32, and 1.2 the optional ``scale`` key.  3.0 (again a new major
 #: version: chunk 0 is no longer under the CRC-32, and block-coded chunks carry block checks)
 #: keeps the binary header and adds a CRC-16 per chunk and per code-block.
+#: The version written for images and surfaces (:func:`written_version`).
 FORMAT_VERSION = (3, 0)
+#: 4.0, the compact layout (a new major version: a 4-byte preamble, no header length, derived
+#: weights, chunks checked in groups and the head by a CRC-16; see ``docs/bundle-format.md``),
+#: is written for curves, and is the newest version this module reads.
+COMPACT_VERSION = (4, 0)
 #: The major versions this module reads.
-READ_MAJORS = (1, 2, 3)
+READ_MAJORS = (1, 2, 3, 4)
+#: 4.0's preamble: these two bytes, then the major and the minor version (one byte each).  The
+#: third byte of :data:`MAGIC` (``V``) is never a major version, so the two never meet.
+COMPACT_MAGIC = b"\x89W"
+#: 4.0 checks chunks in *groups*: consecutive chunks, coarse to fine, packed while a group
+#: holds at most this many bytes (a longer chunk is a group of its own), each group under one
+#: CRC-16.  A CRC-16 detects every error of up to three bits in up to 4 KiB, so 1 KiB groups
+#: lose no detection strength; a curve's levels (a few bytes to a few hundred each) then
+#: share one or two checks, and a large chunk keeps its own.
+GROUP_BYTES = 1024
 MAX_HEADER_SIZE = 65535
 MAX_CHUNKS = 64
 #: Largest element count (samples × channels) a bundle may declare: 2**27, about a 6700 × 6700
@@ -203,6 +223,10 @@ class Bundle:
     checksum: str = "crc32"
     #: Whether block-coded chunks carry a CRC-16 per block after their table (3.0 on).
     block_checks: bool = False
+    #: 4.0: for each chunk, the first and last chunk of its group; one CRC-16 (``crcs`` holds
+    #: it for every chunk of the group) checks the group's bytes.  None: a check per chunk.
+    groups: tuple[tuple[int, int], ...] | None = None
+    _verified: dict[int, bool] = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def available(self) -> int:
@@ -224,19 +248,37 @@ class Bundle:
                 "level or supply the whole bundle"
             )
             raise BundleError(msg)
-        if _chunk_check(data, self.checksum) != self.crcs[index]:
+        if not self._matches(index):
             name = "CRC-16" if self.checksum == "crc16" else "CRC-32"
+            what = f"its {name}"
+            if self.groups is not None and self.groups[index][0] != self.groups[index][1]:
+                first, last = self.groups[index]
+                what = f"the {name} of its group (chunks {first} to {last})"
             msg = (
-                f"chunk {index} is corrupt: its {name} does not match the chunk table (decode "
+                f"chunk {index} is corrupt: {what} does not match the chunk table (decode "
                 "with damaged='zero' to get the rest with its damaged blocks zeroed)"
             )
             raise BundleError(msg)
         return bytes(data)
 
     def intact(self, index: int) -> bool:
-        """Whether chunk ``index`` is present and matches its CRC."""
-        data = self.chunks[index]
-        return data is not None and _chunk_check(data, self.checksum) == self.crcs[index]
+        """Whether chunk ``index`` is present and matches its CRC (4.0: its group's)."""
+        return self.chunks[index] is not None and self._matches(index)
+
+    def _matches(self, index: int) -> bool:
+        if self.groups is None:
+            data = self.chunks[index]
+            return data is not None and _chunk_check(data, self.checksum) == self.crcs[index]
+        first, last = self.groups[index]
+        if first not in self._verified:  # each group's CRC is computed once
+            crc, whole = 0, True
+            for part in self.chunks[first : last + 1]:
+                if part is None:
+                    whole = False
+                    break
+                crc = binascii.crc_hqx(part, crc)
+            self._verified[first] = whole and crc == self.crcs[index]
+        return self._verified[first]
 
 
 def _chunk_check(data: bytes | memoryview, checksum: str) -> int:
@@ -286,18 +328,29 @@ class _Reader:
         raise BundleError(msg)
 
 
+def written_version(header: dict[str, Any]) -> tuple[int, int]:
+    """The version :func:`write_bundle` writes by default: 4.0 for curves, 3.0 for the rest.
+
+    Images and surfaces stay in 3.0: their headers are 45 to 93 bytes already, and 4.0's
+    grouped chunk checks and shorter head check would weaken their damage handling for a
+    few bytes (see ``docs/bundle-format.md``).
+    """
+    return COMPACT_VERSION if header.get("kind") == "curve" else FORMAT_VERSION
+
+
 def write_bundle(
     header: dict[str, Any],
     chunks: Sequence[bytes],
     *,
-    version: tuple[int, int] = FORMAT_VERSION,
+    version: tuple[int, int] | None = None,
 ) -> bytes:
     """Serialise a header and its chunks (coarse to fine) into bundle bytes.
 
     The header is validated exactly as a reader would, so a writer can never produce a bundle
-    that its own reader refuses.  ``version`` is :data:`FORMAT_VERSION` (3.0: the binary
-    header, a CRC-16 per chunk and per code-block), ``(2, 0)`` (no block checks, chunk 0
-    under the header's CRC-32), or ``(1, 1)`` for the JSON header that wavecore releases
+    that its own reader refuses.  ``version`` is None (:func:`written_version`: 4.0 for
+    curves, 3.0 for images and surfaces), ``(4, 0)`` (the compact layout), ``(3, 0)`` (the
+    binary header, a CRC-16 per chunk and per code-block), ``(2, 0)`` (no block checks, chunk
+    0 under the header's CRC-32), or ``(1, 1)`` for the JSON header that wavecore releases
     before 2.0 read (labelled 1.2 when the header has ``scale``).  ``chunks`` are always as
     the coder wrote them: for 3.0 the block checks are added here, after each chunk's table
     of block lengths (the blocks per chunk follow from the header; the band counts come
@@ -318,11 +371,16 @@ def write_bundle(
     if not 1 <= len(chunks) <= MAX_CHUNKS or len(chunks) != header["levels"] + 1:
         msg = f"a bundle of {header['levels']} levels needs {header['levels'] + 1} chunks"
         raise BundleError(msg)
+    if version is None:
+        version = written_version(header)
     if version[0] == 1:
         return _write_json(header, chunks)
+    if version == COMPACT_VERSION:
+        return _write_compact(header, chunks)
     if version not in ((2, 0), FORMAT_VERSION):
         msg = (
-            f"cannot write bundle format version {version}; use {FORMAT_VERSION}, (2, 0) or (1, 1)"
+            f"cannot write bundle format version {version}; use {COMPACT_VERSION}, "
+            f"{FORMAT_VERSION}, (2, 0) or (1, 1)"
         )
         raise BundleError(msg)
     packed = binheader.pack(header)
@@ -340,6 +398,114 @@ def write_bundle(
         return b"".join([head, _CRC.pack(zlib.crc32(head)), *chunks])
     crc = zlib.crc32(chunks[0], zlib.crc32(head))
     return b"".join([head, _CRC.pack(crc), *chunks])
+
+
+def _write_compact(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
+    """Format 4.0: preamble, header, chunk lengths, a CRC-16 per group, the head's CRC-16."""
+    derived = False
+    weights = header["qparams"].get("weights")
+    if header["quantizer"] == "deadzone" and weights is not None:
+        try:
+            derived = derived_weights(header) == weights
+        except BundleError:
+            derived = False
+    packed = binheader.pack(header, major=COMPACT_VERSION[0], derived_weights=derived)
+    if len(packed) > MAX_HEADER_SIZE:
+        msg = f"header is {len(packed)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
+        raise BundleError(msg)
+    return _compact_bytes(packed, _with_block_checks(header, chunks))
+
+
+def _compact_bytes(packed: bytes, chunks: Sequence[bytes]) -> bytes:
+    """A 4.0 bundle from its packed header and its chunks as stored (block checks added)."""
+    parts = [COMPACT_MAGIC, bytes(COMPACT_VERSION), packed]
+    parts += [_varint(len(chunk)) for chunk in chunks]
+    for first, last in chunk_groups([len(chunk) for chunk in chunks]):
+        crc = 0
+        for chunk in chunks[first : last + 1]:
+            crc = binascii.crc_hqx(chunk, crc)
+        parts.append(_U16.pack(crc))
+    head = b"".join(parts)
+    return b"".join([head, _U16.pack(binascii.crc_hqx(head, 0)), *chunks])
+
+
+def with_header(bundle: bytes, header: dict[str, Any]) -> bytes:
+    """A complete 4.0 ``bundle`` with its header replaced by ``header`` (same chunks).
+
+    For an encoder that adjusts a header field after coding (``encode_curve`` stores a float32
+    step when that keeps its tolerance); the header is checked as :func:`write_bundle` checks.
+    """
+    parsed = read_bundle(bundle)
+    if parsed.version[0] != COMPACT_VERSION[0] or parsed.available != len(parsed.chunks):
+        msg = "with_header takes a complete 4.x bundle"
+        raise BundleError(msg)
+    check_header(header)
+    if header["levels"] != parsed.header["levels"]:
+        msg = "with_header cannot change the number of levels"
+        raise BundleError(msg)
+    weights = header["qparams"].get("weights")
+    derived = header["quantizer"] == "deadzone" and derived_weights(header) == weights
+    packed = binheader.pack(header, major=COMPACT_VERSION[0], derived_weights=derived)
+    return _compact_bytes(packed, [bytes(chunk or b"") for chunk in parsed.chunks])
+
+
+def chunk_groups(lengths: Sequence[int], limit: int = GROUP_BYTES) -> list[tuple[int, int]]:
+    """Format 4.0's groups of chunks, ``(first, last)`` each: consecutive chunks, coarse to
+    fine, packed while a group holds at most ``limit`` bytes (a longer chunk is alone).
+
+    >>> chunk_groups([150, 4, 1, 1, 10, 2000, 30])
+    [(0, 4), (5, 5), (6, 6)]
+    """
+    groups: list[tuple[int, int]] = []
+    first = total = 0
+    for index, length in enumerate(lengths):
+        if index > first and total + length > limit:
+            groups.append((first, index - 1))
+            first, total = index, 0
+        total += length
+    groups.append((first, len(lengths) - 1))
+    return groups
+
+
+def derived_weights(header: dict[str, Any]) -> list[list[float]]:
+    """The per-band weights of a ``deadzone`` header as its plan gives them.
+
+    They are :func:`wavecore.quantize.band_weights` of the band shapes that the header's
+    ``fitted`` shape, ``levels``, ``wavelet`` and ``boundary`` make: the reciprocal RMS basis
+    norm of each band, to four significant digits, exactly what the encoder uses.  A 4.0
+    header stores them in no bytes when they are these.
+
+    Raises
+    ------
+    BundleError
+        If the header does not describe a consistent plan.
+    """
+    # The plan and the quantizer import this module (through the codec); hence here.
+    import numpy as np
+
+    from .codec.plan import plan_from_header
+    from .quantize import band_weights
+
+    plan = plan_from_header(header)
+    try:
+        layout = plan.band_shapes()
+        stand_in = np.zeros(())
+
+        def band(shape: Any) -> Any:
+            return np.broadcast_to(stand_in, tuple(shape))  # shapes only: no memory
+
+        coeffs = [band(layout[0])] + [
+            band(entry) if len(plan.axes) == 1 else tuple(band(s) for s in entry)
+            for entry in layout[1:]
+        ]
+        return band_weights(
+            coeffs, wavelet=plan.wavelet, boundary=list(plan.boundary), axes=plan.axes
+        )
+    except BundleError:
+        raise
+    except Exception as exc:  # a crafted header that passed every check
+        msg = f"the header's weights cannot be derived: {type(exc).__name__}: {exc}"
+        raise BundleError(msg[:300]) from exc
 
 
 def _with_block_checks(header: dict[str, Any], chunks: Sequence[bytes]) -> list[bytes]:
@@ -403,15 +569,27 @@ def read_bundle(data: Any) -> Bundle:
     except TypeError as exc:
         msg = f"a bundle must be bytes, not {type(data).__name__}"
         raise BundleError(msg) from exc
+    start = bytes(reader.view[:3])
+    if len(start) == 3 and start[:2] == COMPACT_MAGIC and start[2] != MAGIC[2]:
+        major, minor = reader.take(4, "the preamble")[2:]
+        if major != COMPACT_VERSION[0]:
+            msg = (
+                f"unsupported bundle format version {major}.{minor}: this wavecore reads major "
+                f"versions {', '.join(map(str, READ_MAJORS))} (up to "
+                f"{COMPACT_VERSION[0]}.{COMPACT_VERSION[1]} fully); use a wavecore release that "
+                "knows this version"
+            )
+            raise BundleError(msg)
+        return _read_compact(reader, major, minor)
     magic, major, minor = reader.unpack(_MAGIC_AND_VERSION, "the preamble")
     if magic != MAGIC:
         msg = f"not a wavecore bundle: the magic bytes are {bytes(magic)!r}, expected {MAGIC!r}"
         raise BundleError(msg)
-    if major not in READ_MAJORS:
+    if major not in READ_MAJORS or major >= COMPACT_VERSION[0]:
         msg = (
             f"unsupported bundle format version {major}.{minor}: this wavecore reads major "
             f"versions {', '.join(map(str, READ_MAJORS))} (up to "
-            f"{FORMAT_VERSION[0]}.{FORMAT_VERSION[1]} fully); use a wavecore release that "
+            f"{COMPACT_VERSION[0]}.{COMPACT_VERSION[1]} fully); use a wavecore release that "
             "knows this version"
         )
         raise BundleError(msg)
@@ -458,6 +636,48 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
     crcs[0] = binascii.crc_hqx(first, 0)
     chunks = _take_chunks(reader, lengths)
     return Bundle((major, minor), header, chunks, tuple(crcs), "crc16")
+
+
+def _read_compact(reader: _Reader, major: int, minor: int) -> Bundle:
+    """Format 4.x: the header (no length before it), varint chunk lengths, a CRC-16 per group
+    of chunks, then the CRC-16 of all that.  Every 4.x minor version is read as 4.0."""
+    header, reader.offset, derived = binheader.unpack_from(reader.view, reader.offset)
+    check_header(header)
+    count = header["levels"] + 1
+    lengths = [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
+    spans = chunk_groups(lengths)
+    crcs = [0] * count
+    for number, (first, last) in enumerate(spans):
+        (crc,) = reader.unpack(_U16, f"the CRC-16 of group {number}")
+        crcs[first : last + 1] = [crc] * (last + 1 - first)
+    head_end = reader.offset
+    (crc,) = reader.unpack(_U16, "the header CRC-16")
+    if binascii.crc_hqx(reader.view[:head_end], 0) != crc:
+        msg = "the header or chunk table is corrupt: the header CRC-16 does not match"
+        raise BundleError(msg)
+    if derived:  # only once the header is known to be intact
+        qparams = header["qparams"]
+        header["qparams"] = {
+            "name": qparams["name"],
+            "step": qparams["step"],
+            "weights": derived_weights(header),
+            "rounding": qparams["rounding"],
+        }
+    chunks = list(_take_chunks(reader, lengths))
+    groups = [(0, 0)] * count
+    for first, last in spans:
+        groups[first : last + 1] = [(first, last)] * (last + 1 - first)
+        if any(chunk is None for chunk in chunks[first : last + 1]):
+            chunks[first : last + 1] = [None] * (last + 1 - first)  # a group is read whole
+    return Bundle(
+        (major, minor),
+        header,
+        tuple(chunks),
+        tuple(crcs),
+        "crc16",
+        block_checks=True,
+        groups=tuple(groups),
+    )
 
 
 def _take_chunks(reader: _Reader, lengths: Sequence[int]) -> tuple[memoryview | None, ...]:
