@@ -43,6 +43,9 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
     t = np.linspace(0, 1, 50)
     open_curve = np.stack([t, np.sin(6 * t) * t], axis=1)
     s = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    t = np.linspace(0, 1, 1500)
+    noisy_curve = np.stack([t, np.sin(9 * t)], axis=1)
+    noisy_curve += np.random.default_rng(44).normal(0, 0.01, (1500, 2))  # its own: the rest stay
     closed_curve = np.stack([np.cos(s), np.sin(s), 0.2 * np.sin(3 * s)], axis=1)
     u = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     v = np.linspace(-1, 1, 14)
@@ -117,6 +120,24 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
         "v3_0_image_rgb_u8_bpp": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 6.0}),
         "v3_0_surface_closed_open": ("surface", surface, {"closed": (True, False)}),
         "v3_0_curve_default": ("curve", open_curve, {}),
+        # Format 4.0 (the compact layout encode_curve writes: a 4-byte preamble, weights
+        # derived from the plan, a float32 step, chunks checked in groups): the default curve;
+        # a closed 3-D one with ``keep`` (its step a short binary number); a 1-D series with
+        # haar; a noisy curve whose chunks fall into several groups; and an image written in
+        # 4.0 on purpose (readers take every kind in it; the codec writes images in 3.0).
+        "v4_0_curve_default": ("curve", open_curve, {}),
+        "v4_0_curve_closed_3d_keep": ("curve", closed_curve, {"closed": True, "keep": 0.5}),
+        "v4_0_curve_series_haar": (
+            "curve",
+            np.sin(np.linspace(0, 9, 77)) * 40.0,
+            {"wavelet": "haar", "tolerance": 0.05},
+        ),
+        "v4_0_curve_noisy_groups": ("curve", noisy_curve, {"tolerance": 0.002, "level": 4}),
+        "v4_0_image_grey_u8": (
+            "image",
+            grey.astype(np.uint8),
+            {"quality": 40.0, "format_version": (4, 0)},
+        ),
         # Format 1.2 (the JSON header with ``scale``), written by the 1.x writer that
         # ``write_bundle(..., version=(1, 1))`` keeps: no earlier golden bundle had it.
         "surface_scaled_v1_2": (
