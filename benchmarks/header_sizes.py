@@ -1,12 +1,13 @@
-"""Header sizes of typical bundles in format 3.0 (binary header) against 1.1 (JSON header).
+"""Header sizes of typical bundles in formats 4.0 (compact), 3.0 (binary header) and 1.1 (JSON).
 
     .venv/bin/python benchmarks/header_sizes.py
 
-Each bundle is encoded once; the same header and chunks are then written in both formats
+Each bundle is encoded once; the same header and chunks are then written in each format
 (``write_bundle(..., version=(1, 1))`` is the writer of releases before 2.0), so the payload is
 identical and only the overhead differs.  ``header`` is ``inspect(...)["header_bytes"]``:
-everything but the chunks (preamble, header, chunk table and checks).  Prints a Markdown table
-(docs/bundle-format.md quotes it).
+everything but the chunks (preamble, header, chunk table and checks).  The codec writes 4.0
+for curves and 3.0 for images and surfaces; the column of the version it writes is the one
+in bold.  Prints Markdown tables (docs/bundle-format.md quotes them).
 
 A second table gives the same curves as one-curve *curve sets* (``encode_curves([curve])``, at
 the tolerance ``encode_curve`` uses by default: 1e-3 of the bounding-box diagonal): their
@@ -20,7 +21,9 @@ import os
 import numpy as np
 
 import wavecore
+from wavecore.blockcoder import block_counts, strip_block_checks
 from wavecore.bundle import read_bundle, write_bundle
+from wavecore.codec.plan import plan_from_header
 
 
 def cases() -> dict[str, bytes]:
@@ -28,9 +31,14 @@ def cases() -> dict[str, bytes]:
 
     t8 = np.linspace(0, 1, 8)
     made = {"curve, 8 points": wavecore.encode_curve(np.stack([t8, np.sin(3 * t8)], 1))}
-    for n in (50, 200, 1000):
+    for n in (50, 200, 1000, 50_000):
         t = np.linspace(0, 1, n)
         made[f"curve, {n} points"] = wavecore.encode_curve(np.stack([t, np.sin(6 * t) * t], 1))
+    t = np.linspace(0, 1, 50_000)
+    noisy = np.stack([t, np.sin(6 * t) * t], 1) + np.random.default_rng(5).normal(
+        0, 0.01, (50_000, 2)
+    )
+    made["curve, 50 000 points + noise (σ 0.01)"] = wavecore.encode_curve(noisy)
     made["image 512² grey (camera), default"] = wavecore.encode_image(data.camera())
     made["image 512² RGB (astronaut), default"] = wavecore.encode_image(data.astronaut())
     made["image 512² grey (camera), lossless"] = wavecore.encode_image(data.camera(), lossless=True)
@@ -78,12 +86,12 @@ def curve_headers() -> None:
     """``encode_curve``'s overhead (``header_bytes``: everything but the chunks) by length,
     open and closed, in two and three dimensions, with the levels it chose."""
     print()
-    print("| encode_curve | 8 points | 50 points | 1000 points | 50 000 points |")
-    print("|---|---:|---:|---:|---:|")
+    print("| encode_curve | 8 points | 50 points | 200 points | 1000 points | 50 000 points |")
+    print("|---|---:|---:|---:|---:|---:|")
     for d in (2, 3):
         for closed in (False, True):
             cells = []
-            for n in (8, 50, 1000, 50_000):
+            for n in (8, 50, 200, 1000, 50_000):
                 t = np.linspace(0, 1, n)
                 points = np.stack([t, np.sin(6 * t) * t, np.cos(3 * t)][:d], 1)
                 info = wavecore.inspect(wavecore.encode_curve(points, closed=closed))
@@ -92,24 +100,71 @@ def curve_headers() -> None:
             print(f"| {name} | " + " | ".join(cells) + " |")
 
 
+def coder_chunks(bundle: bytes) -> list[bytes]:
+    """The chunks as the coder wrote them (3.0 and 4.0 add block checks to chunks of several
+    code-blocks; ``write_bundle`` adds them again)."""
+    parsed = read_bundle(bundle)
+    plan = plan_from_header(parsed.header)
+    shapes = plan.band_shapes()
+    one_axis = len(plan.axes) == 1
+    entries = [[tuple(shapes[0])]] + [
+        [tuple(entry)] if one_axis else [tuple(band) for band in entry] for entry in shapes[1:]
+    ]
+    cparams = parsed.header["cparams"]
+    if parsed.header["coder"] != "context" or cparams.get("version", 0) < 4:
+        return [bytes(chunk or b"") for chunk in parsed.chunks]
+    counts = block_counts(entries, cparams["two_d"], cparams["block"])
+    return [
+        strip_block_checks(bytes(chunk or b""), count, len(entry) if index else 0)[0]
+        for index, (chunk, count, entry) in enumerate(
+            zip(parsed.chunks, counts, entries, strict=True)
+        )
+    ]
+
+
+def deep_levels() -> None:
+    """``header_bytes`` of the 50 000-point curve at levels deeper than the default (8)."""
+    print()
+    t = np.linspace(0, 1, 50_000)
+    points = np.stack([t, np.sin(6 * t) * t], 1)
+    levels = (8, 10, 12, 13, 14, 15)
+    print("| 50 000 points, level | " + " | ".join(map(str, levels)) + " |")
+    print("|---|" + "---:|" * len(levels))
+    cells = [
+        wavecore.inspect(wavecore.encode_curve(points, level=k))["header_bytes"] for k in levels
+    ]
+    print("| header bytes | " + " | ".join(f"{c} B" for c in cells) + " |")
+
+
 def main() -> None:
     print(f"load average {os.getloadavg()[0]:.2f}")
-    print("| bundle | levels | payload | header 1.1 | header 3.0 | bundle 1.1 | bundle 3.0 |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
+    versions = ((1, 1), (3, 0), (4, 0))
+    print(
+        "| bundle | levels | payload | header 1.1 | header 3.0 | header 4.0 "
+        "| bundle 1.1 | bundle 3.0 | bundle 4.0 |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name, bundle in cases().items():
         parsed = read_bundle(bundle)
-        chunks = [parsed.chunk(i) for i in range(len(parsed.chunks))]
-        old = write_bundle(parsed.header, chunks, version=(1, 1))
-        payload = sum(map(len, chunks))
-        new_header = wavecore.inspect(bundle)["header_bytes"]
-        old_header = wavecore.inspect(old)["header_bytes"]
-        assert new_header == len(bundle) - payload and old_header == len(old) - payload
+        chunks = coder_chunks(bundle)
+        written = {v: write_bundle(parsed.header, chunks, version=v) for v in versions}
+        assert written[parsed.version] == bundle  # the same bytes as the codec wrote
+        headers, sizes = [], []
+        for version, data in written.items():
+            info = wavecore.inspect(data)
+            assert read_bundle(data).header == parsed.header
+            bold = "**" if version == parsed.version else ""
+            headers.append(f"{bold}{info['header_bytes']}{bold}")
+            sizes.append(f"{bold}{len(data)}{bold}")
+        payload = len(bundle) - wavecore.inspect(bundle)["header_bytes"]
         print(
-            f"| {name} | {parsed.header['levels']} | {payload} | {old_header} | {new_header} "
-            f"| {len(old)} | {len(bundle)} |"
+            f"| {name} | {parsed.header['levels']} | {payload} | "
+            + " | ".join(headers + sizes)
+            + " |"
         )
     curve_sets()
     curve_headers()
+    deep_levels()
 
 
 if __name__ == "__main__":

@@ -1,16 +1,22 @@
-"""The worked example of docs/bundle-format.md ("Inspecting a bundle") is what the code gives.
+"""The worked examples of docs/bundle-format.md are what the code gives: "Inspecting a bundle"
+(an image, format 3.0) and the 4.0 curve taken apart byte by byte.
 
-The example's text is generated here from the code's own output and compared with the file:
+The examples' text is generated here from the code's own output and compared with the file:
 when the format or the coder changes, this test fails and
-``python tests/test_bundle_format_doc.py`` rewrites the example (then review the diff).
+``python tests/test_bundle_format_doc.py`` rewrites the examples (then review the diff).
+The curve's bytes are split into fields by a reader written here from the specification, not
+by the library's, so the example also checks that the bytes are laid out as documented.
 """
 
 from __future__ import annotations
 
+import binascii
 import re
+import struct
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import wavecore
@@ -20,6 +26,96 @@ BEGIN = "<!-- worked example: written by tests/test_bundle_format_doc.py -->"
 END = "<!-- end of the worked example -->"
 SUMMARY_KEYS = ("version", "kind", "shape", "levels", "coder", "psnr", "total_bytes")
 SUMMARY_KEYS += ("header_bytes", "bpp")
+CURVE_BEGIN = "<!-- curve example: written by tests/test_bundle_format_doc.py -->"
+CURVE_END = "<!-- end of the curve example -->"
+
+
+def _varint(data: bytes, at: int) -> int:
+    """Where the LEB128 varint at ``at`` ends."""
+    while data[at] & 0x80:
+        at += 1
+    return at + 1
+
+
+def _number(data: bytes, at: int) -> int:
+    """Where the 4.0 *number* at ``at`` ends: a varint, then 4 (form 13), 8 (form 14) or a
+    varint exponent (form 11)."""
+    end = _varint(data, at)
+    value, shift = 0, 0
+    for byte in data[at:end]:
+        value |= (byte & 0x7F) << shift
+        shift += 7
+    form = value & 15
+    extra = {13: 4, 14: 8}.get(form, 0)
+    return _varint(data, end) if form == 11 else end + extra
+
+
+def curve_fields(bundle: bytes) -> list[tuple[str, bytes]]:
+    """A 4.0 curve bundle with no pads, extension or scale, split into its documented fields."""
+    assert bundle[:4] == b"\x89W\x04\x00"
+    fields = [("preamble: magic `89 57`, major 4, minor 0", bundle[:4])]
+    flags = bundle[4:8]
+    assert flags[1] >> 6 == 0 and not flags[3] >> 6 & 1 and not flags[2] >> 7  # the simple case
+    fields.append(("flags (4 bytes)", flags))
+    at = 8
+    names = ["`levels`", "`shape` (n)", "`shape` (d)"]
+    for name in names:
+        end = _varint(bundle, at)
+        fields.append((name, bundle[at:end]))
+        at = end
+    end = _number(bundle, at)
+    fields.append(("`peak`, a number", bundle[at:end]))
+    at = end
+    step = 4 if flags[3] >> 4 & 1 else 8
+    fields.append((f"`step`, a float{8 * step}", bundle[at : at + step]))
+    at += step
+    assert flags[1] >> 5 & 1 and flags[3] >> 7 and flags[3] >> 5 & 1  # derived, defaults
+    end = _varint(bundle, at)
+    fields.append(("`psnr` (`P`)", bundle[at:end]))
+    at = end
+    end = _number(bundle, at)
+    fields.append(("`max_error`, a number", bundle[at:end]))
+    at = end
+    levels = bundle[8]
+    for index in range(levels + 1):
+        end = _varint(bundle, at)
+        fields.append((f"length of chunk {index}", bundle[at:end]))
+        at = end
+    info = wavecore.inspect(bundle)
+    total = sum(c["bytes"] for c in info["chunks"])
+    assert total <= 1024  # one group
+    chunks = bundle[len(bundle) - total :]
+    fields.append(("CRC-16 of the one group (chunks 0 … L)", bundle[at : at + 2]))
+    assert struct.unpack("<H", bundle[at : at + 2])[0] == binascii.crc_hqx(chunks, 0)
+    at += 2
+    fields.append(("head check: CRC-16 of all the above", bundle[at : at + 2]))
+    assert struct.unpack("<H", bundle[at : at + 2])[0] == binascii.crc_hqx(bundle[:at], 0)
+    at += 2
+    assert at == info["header_bytes"] == len(bundle) - total
+    return fields
+
+
+def render_curve() -> str:
+    """The 8-point curve of benchmarks/header_sizes.py, field by field."""
+    t8 = np.linspace(0, 1, 8)
+    bundle = wavecore.encode_curve(np.stack([t8, np.sin(3 * t8)], 1))
+    info = wavecore.inspect(bundle)
+    lines = [
+        "| bytes | hex | field |",
+        "|---:|---|---|",
+    ]
+    for name, raw in curve_fields(bundle):
+        lines.append(f"| {len(raw)} | `{raw.hex(' ')}` | {name} |")
+    header = info["header"]
+    lines += [
+        "",
+        f"{info['header_bytes']} bytes besides the {len(bundle) - info['header_bytes']} of its "
+        f"{info['levels'] + 1} chunks; the header says `peak` {header['peak']!r}, `step` "
+        f"{header['qparams']['step']!r} (a float32), `psnr` {header['psnr']!r}, `max_error` "
+        f"{header['max_error']!r}, and the weights {header['qparams']['weights']!r} "
+        "come from the plan.",
+    ]
+    return "\n".join(lines)
 
 
 def _percent(part: int, whole: int) -> str:
@@ -97,10 +193,10 @@ def test_the_bytes_needed_per_level_are_what_decode_reads() -> None:
             wavecore.decode(bundle[: needed - 1], level=k)
 
 
-def _current() -> str:
+def _current(begin: str = BEGIN, end: str = END) -> str:
     text = DOC.read_text(encoding="utf-8")
-    match = re.search(re.escape(BEGIN) + r"\n(.*?)\n" + re.escape(END), text, re.S)
-    assert match, f"{DOC} has lost its worked-example markers ({BEGIN} … {END})"
+    match = re.search(re.escape(begin) + r"\n(.*?)\n" + re.escape(end), text, re.S)
+    assert match, f"{DOC} has lost its worked-example markers ({begin} … {end})"
     return match.group(1)
 
 
@@ -112,9 +208,21 @@ def test_the_worked_example_matches_the_code() -> None:
     )
 
 
+def test_the_curve_example_matches_the_code() -> None:
+    assert _current(CURVE_BEGIN, CURVE_END) == render_curve(), (
+        "docs/bundle-format.md's 4.0 curve example no longer matches the code: run "
+        "`python tests/test_bundle_format_doc.py` to rewrite it, and review the diff"
+    )
+
+
+def _rewrite(text: str, begin: str, end: str, body: str) -> str:
+    start = text.index(begin) + len(begin) + 1
+    return text[:start] + body + "\n" + text[text.index(end) :]
+
+
 if __name__ == "__main__":
     text = DOC.read_text(encoding="utf-8")
-    start = text.index(BEGIN) + len(BEGIN) + 1
-    end = text.index(END)
-    DOC.write_text(text[:start] + render() + "\n" + text[end:], encoding="utf-8")
-    print(f"rewrote the worked example in {DOC}", file=sys.stderr)
+    text = _rewrite(text, BEGIN, END, render())
+    text = _rewrite(text, CURVE_BEGIN, CURVE_END, render_curve())
+    DOC.write_text(text, encoding="utf-8")
+    print(f"rewrote the worked examples in {DOC}", file=sys.stderr)

@@ -182,10 +182,14 @@ def _number(value: Any, field: str, *, upper_float32: bool = False, major: int =
                 best = short
     binary = _binary(value) if major >= 4 else None
     if binary is not None and abs(binary[1]) <= _BINARY_EXPONENT_MAX:
+        # 4.0: the binary form when it beats a float32 (at most 4 bytes), else a float32 when
+        # the value is one (5 bytes), so that a value read back packs to the same bytes.
         k, e = binary
         short = encode_varint(zigzag(k) * 16 + _NUM_BINARY) + encode_varint(zigzag(e))
-        if len(short) < len(best):
+        if len(short) < min(len(best), 5):
             best = short
+        elif len(best) > 5 and _is_float32(value):
+            best = bytes([_NUM_FLOAT32]) + _F32.pack(value)
     if upper_float32 and len(best) > 5 and _FLOAT32_NORMAL <= abs(value) < 3.0e38:
         # The float32 at or above the value: a diagnostic that stays an upper bound, within
         # 2**-23 of it (in float32's normal range; beyond it, the float64).

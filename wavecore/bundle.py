@@ -1,9 +1,20 @@
 """The coefficient bundle: a versioned binary container, coarse to fine.
 
-This docstring summarises format version 3.0, and 2.0 and 1.x, which are still read;
-``docs/bundle-format.md`` is the specification.  Like NumPy's ``.npy`` format, a bundle is a
+This docstring summarises format versions 4.0 (written for curves) and 3.0 (written for images
+and surfaces), and 2.0 and 1.x, which are still read; ``docs/bundle-format.md`` is the
+specification.  Like NumPy's ``.npy`` format, a bundle is a
 fixed preamble, a bounded self-describing header, then the payload.  All integers are
 little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
+
+Layout (4.0)
+------------
+``89 57`` (the first two bytes of the 3.x magic, whose third byte ``V`` is never a major
+version), the major version ``4`` and the minor ``0``; the binary header of
+:mod:`wavecore.binheader` in its 4.0 form (no length before it: its fields say where it ends;
+weights derived from the plan, a float32 step, default coder parameters in no bytes); each
+chunk's length, a varint; a CRC-16/XMODEM of each *group* of chunks (:func:`chunk_groups`:
+consecutive chunks packed while a group holds at most :data:`GROUP_BYTES`); the CRC-16 of every
+byte before it; the chunks, as in 3.0.
 
 Layout (3.0; 2.0 where it says so)
 ----------------------------------
@@ -51,7 +62,7 @@ of an enumerated field (refused clearly by older readers, naming the field; 1.1 
 new layout, an entropy coder whose old bitstreams no longer decode — is a new major version, or
 a new coder *name* (which older readers refuse clearly).  2.0 is such a new layout, and so is
 3.0 (chunk 0 leaves the CRC-32, block checks inside chunks): a 2.x reader refuses it by its
-major version.  The golden
+major version; and 4.0 (a new preamble, which a 3.x reader refuses by its magic bytes).  The golden
 bundles in ``tests/golden`` are decoded in every test run to hold this promise.
 
 Header
@@ -166,7 +177,7 @@ READ_MAJORS = (1, 2, 3, 4)
 COMPACT_MAGIC = b"\x89W"
 #: 4.0 checks chunks in *groups*: consecutive chunks, coarse to fine, packed while a group
 #: holds at most this many bytes (a longer chunk is a group of its own), each group under one
-#: CRC-16.  A CRC-16 detects every error of up to three bits in up to 4 KiB, so 1 KiB groups
+#: CRC-16.  A CRC-16 detects every error of up to three bits in up to 4 093 bytes, so 1 KiB groups
 #: lose no detection strength; a curve's levels (a few bytes to a few hundred each) then
 #: share one or two checks, and a large chunk keeps its own.
 GROUP_BYTES = 1024
