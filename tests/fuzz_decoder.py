@@ -9,9 +9,10 @@ Every kind of bundle (grey, colour, RGBA, lossless 8/16-bit, curves open and clo
 huge floats in the scaled domain, and every golden bundle in ``tests/golden``) is mutated in a
 seeded loop: byte flips (CRCs left as they are, or recomputed as an attacker would),
 truncations, inserted and deleted bytes, chunk damage behind valid CRCs, and header edits
-(values replaced, removed, nudged, chunk tables reshuffled), written as format 1.1 JSON or
-3.0 binary headers, and binary header bytes damaged behind valid CRCs (huge varints, cut
-fields).  Each mutant is decoded at a random level, with and without ``keep``, and inspected.
+(values replaced, removed, nudged, chunk tables reshuffled), written as format 1.1 JSON,
+3.0 or 4.0 binary headers (4.0: weights derived or stored), and binary header bytes damaged
+behind valid CRCs (huge varints, cut fields).  Each mutant is decoded at a random level, with
+and without ``keep``, and inspected.
 Acceptable outcomes: an array, a ``BundleError``, or an ``InvalidParameter`` for a level
 deeper than the (crafted) bundle says it has.  A ``BundleError`` that wraps an ``IndexError``
 (an out-of-bounds access the checks missed, caught only by the decoder's last line of
@@ -37,7 +38,7 @@ import numpy as np
 
 import wavecore
 from wavecore import BundleError, InvalidParameter, binheader
-from wavecore.bundle import MAGIC, deflate_header, read_bundle
+from wavecore.bundle import COMPACT_MAGIC, MAGIC, chunk_groups, deflate_header, read_bundle
 
 GOLDEN = Path(__file__).parent / "golden"
 
@@ -106,11 +107,38 @@ def assemble2(packed: bytes, chunks: list[bytes]) -> bytes:
     return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
 
 
+def assemble4(packed: bytes, chunks: list[bytes]) -> bytes:
+    """A format 4.0 bundle with correct CRCs (a CRC-16 per group, the head's CRC-16)."""
+    head = COMPACT_MAGIC + bytes([4, 0]) + packed + b"".join(_varint(len(c)) for c in chunks)
+    for first, last in chunk_groups([len(c) for c in chunks]):
+        head += struct.pack("<H", binascii.crc_hqx(b"".join(chunks[first : last + 1]), 0))
+    return head + struct.pack("<H", binascii.crc_hqx(head, 0)) + b"".join(chunks)
+
+
+def binary(
+    header: dict[str, Any], chunks: list[bytes], rng: random.Random, damage: bool = False
+) -> bytes:
+    """The crafted header as a 3.0 or a 4.0 binary header (4.0: its weights derived or
+    stored), its bytes damaged when ``damage``, with valid CRCs; BundleError when the binary
+    header cannot say a value."""
+    compact = rng.random() < 0.5
+    if compact:
+        packed = binheader.pack(header, major=4, derived_weights=rng.random() < 0.5)
+    else:
+        packed = binheader.pack(header)
+    if damage:
+        if rng.random() < 0.2:  # a huge varint, or a field cut short
+            at = rng.randrange(len(packed))
+            packed = packed[:at] + rng.choice([b"\xff" * 11, b"\x80\x00", b""]) + packed[at:]
+        packed = mutate_bytes(packed, rng)
+    return assemble4(packed, chunks) if compact else assemble2(packed, chunks)
+
+
 def either(header: dict[str, Any], chunks: list[bytes], rng: random.Random) -> bytes:
-    """The crafted bundle in format 3.0 (binary header) or 1.1 (JSON), with valid CRCs."""
+    """The crafted bundle in format 3.0 or 4.0 (binary header) or 1.1 (JSON), valid CRCs."""
     if rng.random() < 0.5:
         try:
-            return assemble2(binheader.pack(header), chunks)
+            return binary(header, chunks, rng)
         except BundleError:  # a value the binary header cannot say
             pass
     return assemble(json.dumps(header).encode(), chunks)
@@ -190,7 +218,7 @@ def mutant(data: bytes, rng: random.Random) -> tuple[str, bytes]:
                 header[key] = mutate_value(header[key], rng)
         if rng.random() < 0.5:
             try:
-                return "binary header", assemble2(binheader.pack(header), chunks)
+                return "binary header", binary(header, chunks, rng)
             except BundleError:  # a value the binary header cannot say
                 pass
         return "header", assemble(json.dumps(header).encode(), chunks, minor=rng.choice([1, 2]))
@@ -207,11 +235,7 @@ def mutant(data: bytes, rng: random.Random) -> tuple[str, bytes]:
             chunks[i] = b""
         return "table", either(header, chunks, rng)
     if kind in (7, 8):  # binary header bytes damaged behind valid CRCs
-        packed = binheader.pack(header)
-        if rng.random() < 0.2:  # a huge varint, or a field cut short
-            at = rng.randrange(len(packed))
-            packed = packed[:at] + rng.choice([b"\xff" * 11, b"\x80\x00", b""]) + packed[at:]
-        return "binary bytes", assemble2(mutate_bytes(packed, rng), chunks)
+        return "binary bytes", binary(header, chunks, rng, damage=True)
     # header bytes that are not JSON, or JSON that is not an object
     text = json.dumps(header).encode()
     return "header bytes", assemble(mutate_bytes(text, rng), chunks)

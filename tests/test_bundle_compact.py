@@ -286,3 +286,21 @@ def test_binary_numbers_are_short_and_checked() -> None:
     ):
         with pytest.raises(BundleError, match=f"'peak'.*{message}"):
             binheader.unpack_from(zero[:at] + bad + zero[at + 1 :], 0)
+
+
+def test_a_float32_step_that_would_break_the_tolerance_is_not_taken() -> None:
+    # Far from the origin (60 times its extent), rounding the step to a float32 moves the
+    # points by some 60 · 2**-24 of their magnitude: more than a tight tolerance allows.
+    t = np.linspace(0, 1, 300)
+    points = np.stack([t + 60, np.sin(6 * t) * t + 60], axis=1)
+    tolerance = 1e-5
+    bundle = wavecore.encode_curve(points, tolerance=tolerance)
+    header = read_bundle(bundle).header
+    step = header["qparams"]["step"]
+    assert float(np.max(np.linalg.norm(decode(bundle) - points, axis=1))) <= tolerance
+    single = float(np.float32(step))
+    if single != step:  # the encoder kept the float64 step: the float32 one must fail
+        rounded = with_header(bundle, {**header, "qparams": {**header["qparams"], "step": single}})
+        assert float(np.max(np.linalg.norm(decode(rounded) - points, axis=1))) > tolerance
+    else:  # the float32 step met the tolerance (and was verified by the encoder)
+        assert inspect(bundle)["max_error"] <= tolerance * (1 + 2**-22)

@@ -1,4 +1,5 @@
-"""The binary header of bundle format 2.0: the header dict the codec builds, in a few dozen bytes.
+"""The binary header of bundle formats 2.0, 3.0 and 4.0: the codec's header dict in a few dozen
+bytes.
 
 :func:`pack` maps the header dict that the codec builds (``_Plan.header()`` plus the quantizer,
 coder and error keys) to bytes, and :func:`unpack` maps the bytes back to an equal dict, so the
@@ -21,6 +22,12 @@ specifies the bytes; in short, in this order:
 * an optional *extension*: a raw-DEFLATE JSON object holding whatever the compact fields cannot
   say (unknown keys, parameters of another shape, wavelet names not in the table).  So every
   header that :func:`wavecore.bundle.check_header` accepts packs, and unpacks to an equal dict.
+
+Format 4.0 (:func:`pack` with ``major=4``, :func:`unpack_from`) has the same fields, with
+no length before them, and gives three flag bits new meanings: the weights are derived from
+the plan (then not stored; ``fitted`` is always derived, or in the extension), the step is a
+float32 (4 bytes), the coder's parameters are the default ones (no byte).  Its numbers have a
+binary form ``k · 2**e`` in place of the decimal ``k · 1000``.
 
 Every read goes through one reader whose errors (:class:`~wavecore.errors.BundleError`) name
 the field being read, as NumPy's ``.npy`` reader does; no input makes :func:`unpack` raise
