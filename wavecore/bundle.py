@@ -126,6 +126,7 @@ the entropy decoder never produces more values than the subband shapes that foll
 from __future__ import annotations
 
 import binascii
+import functools
 import json
 import math
 import struct
@@ -491,32 +492,47 @@ def derived_weights(header: dict[str, Any]) -> list[list[float]]:
     BundleError
         If the header does not describe a consistent plan.
     """
-    # The plan and the quantizer import this module (through the codec); hence here.
-    import numpy as np
-
+    # The plan imports this module (through the codec); hence here.
     from .codec.plan import plan_from_header
-    from .quantize import band_weights
 
     plan = plan_from_header(header)
     try:
         layout = plan.band_shapes()
-        stand_in = np.zeros(())
-
-        def band(shape: Any) -> Any:
-            return np.broadcast_to(stand_in, tuple(shape))  # shapes only: no memory
-
-        coeffs = [band(layout[0])] + [
-            band(entry) if len(plan.axes) == 1 else tuple(band(s) for s in entry)
-            for entry in layout[1:]
-        ]
-        return band_weights(
-            coeffs, wavelet=plan.wavelet, boundary=list(plan.boundary), axes=plan.axes
+        shapes = tuple(
+            (tuple(entry),) if index == 0 or len(plan.axes) == 1 else tuple(map(tuple, entry))
+            for index, entry in enumerate(layout)
         )
+        weights = _plan_weights(plan.wavelet, tuple(plan.boundary), shapes)
     except BundleError:
         raise
     except Exception as exc:  # a crafted header that passed every check
         msg = f"the header's weights cannot be derived: {type(exc).__name__}: {exc}"
         raise BundleError(msg[:300]) from exc
+    return [list(entry) for entry in weights]
+
+
+@functools.lru_cache(maxsize=64)
+def _plan_weights(
+    wavelet: str, boundary: tuple[str, ...], shapes: tuple[tuple[tuple[int, ...], ...], ...]
+) -> tuple[tuple[float, ...], ...]:
+    """``band_weights`` of a layout's band shapes (cached: an encoder reads back what it wrote,
+    and ``inspect`` and ``decode`` read the same bundles)."""
+    import numpy as np
+
+    from .quantize import band_weights
+
+    stand_in = np.zeros(())
+
+    def band(shape: tuple[int, ...]) -> Any:
+        return np.broadcast_to(stand_in, shape)  # shapes only: no memory
+
+    one_axis = len(boundary) == 1
+    coeffs: list[Any] = [band(shapes[0][0])] + [
+        band(entry[0]) if one_axis else tuple(band(s) for s in entry) for entry in shapes[1:]
+    ]
+    axes = (0,) if one_axis else (0, 1)
+    weights = band_weights(coeffs, wavelet=wavelet, boundary=list(boundary), axes=axes)
+    return tuple(tuple(entry) for entry in weights)
 
 
 def _with_block_checks(header: dict[str, Any], chunks: Sequence[bytes]) -> list[bytes]:
