@@ -375,9 +375,11 @@ def write_bundle(
     ...           "boundary": ["open"], "levels": 0, "colour": "none", "quantizer": "none",
     ...           "qparams": {}, "coder": "raw", "cparams": {}, "peak": 1.0, "psnr": None,
     ...           "max_error": 0.0}
-    >>> data = write_bundle(header, [b"abc"])
-    >>> data[:8], read_bundle(data).chunk(0)
-    (b'\\x89WVB\\r\\n\\x1a\\n', b'abc')
+    >>> data = write_bundle(header, [b"abc"])  # a curve: format 4.0
+    >>> data[:4], read_bundle(data).chunk(0)
+    (b'\\x89W\\x04\\x00', b'abc')
+    >>> read_bundle(write_bundle(header, [b"abc"], version=(3, 0))).version
+    (3, 0)
     """
     check_header(header)
     if not 1 <= len(chunks) <= MAX_CHUNKS or len(chunks) != header["levels"] + 1:
