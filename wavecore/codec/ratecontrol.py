@@ -871,6 +871,11 @@ def _encode_to_tolerance(
     """
     finest = encoder.quality(low, closed=False)[1]
     if finest > tolerance:
+        # Far from the origin (a track in projected metres), the finest step can overflow the
+        # quantizer's integers while a coarser one still fits: scan down from the coarsest.
+        low = _finest_fitting_step(encoder, tolerance, low, high)
+        finest = encoder.quality(low, closed=False)[1]
+    if finest > tolerance:
         msg = (
             f"tolerance {tolerance} cannot be met (the finest quantizer leaves a deviation of "
             f"{finest:.3g}); ask for a larger tolerance"
@@ -906,6 +911,19 @@ def _encode_to_tolerance(
         if _errors(encoder.plan, encoder.original, decoded)[1] <= tolerance or step <= low:
             return data
         step, closed = step / 2, False
+
+
+def _finest_fitting_step(
+    encoder: _LossyEncoder, tolerance: float, low: float, high: float
+) -> float:
+    """The coarsest of ``high / 2**k`` (down to ``low``) whose open loop meets ``tolerance``,
+    or ``low`` if none does: a feasible lower end for the bisection when ``low`` is not."""
+    step = high
+    while step > low:
+        if encoder.quality(step, closed=False)[1] <= tolerance:
+            return step
+        step /= 2.0
+    return low
 
 
 def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) -> bytes:
