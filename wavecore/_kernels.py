@@ -685,6 +685,20 @@ def squared_and_largest_error(decoded, original):
 
 
 @njit(nogil=True, cache=True)
+def squared_and_largest_error_u8(decoded, original):
+    """:func:`squared_and_largest_error` of two ``uint8`` arrays with integer sums, which
+    vectorise: the same two numbers while the total stays below 2**53 (the caller checks),
+    since every partial sum of the float loop is then exact too."""
+    total = np.int64(0)
+    largest = np.int64(0)
+    for k in range(decoded.size):
+        d = np.int64(decoded[k]) - np.int64(original[k])
+        total += d * d
+        largest = np.int64(max(largest, abs(d)))
+    return float(total), float(largest)
+
+
+@njit(nogil=True, cache=True)
 def colour_to_floats(src, matrix, out, row_lo, row_hi):
     """``out = matrix @ src`` per pixel on the first three channels (the others copied), as
     float64, rows ``[row_lo, row_hi)``: the encoder's colour transform in one pass."""
