@@ -68,3 +68,25 @@ def test_fused_path_maps_nan_to_zero_like_the_colour_pass() -> None:
 def test_opaque_alpha_stays_opaque_on_the_fused_path() -> None:
     bundle = wavecore.encode_image(IMAGES["rgba-opaque"], bpp=1.5)
     assert np.all(wavecore.decode(bundle)[..., 3] == 255)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.int16])
+def test_grey_rounding_is_rint_and_clip(dtype: type) -> None:
+    """The one-channel pass (a loop of its own, without the colour matrix) rounds half to
+    even, clips into the dtype and maps NaN to 0: NumPy's ``rint`` and ``clip``, element by
+    element, for the values a synthesis can give (ties, both infinities, far out of range)."""
+    from wavecore import _kernels
+
+    info = np.iinfo(dtype)
+    values = np.concatenate(
+        [
+            [np.nan, np.inf, -np.inf, -0.0, 0.5, 1.5, 2.5, -0.5, 254.5, 255.5, 1e300, -1e300],
+            RNG.normal(info.max / 2, info.max, 500),
+        ]
+    )
+    src = values.reshape(1, -1, 1)
+    out = np.empty(src.shape, dtype=dtype)
+    lo, hi = float(info.min), float(info.max)
+    _kernels.colour_to_integers(src, np.eye(3), False, lo, hi, out, 0, 1)
+    expected = np.clip(np.rint(np.nan_to_num(values, nan=0.0, posinf=hi, neginf=lo)), lo, hi)
+    np.testing.assert_array_equal(out.reshape(-1), expected.astype(dtype))

@@ -23,7 +23,7 @@ from . import _kernels
 from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet, step_sparse
 from .multilevel import as_int, resolve_boundaries
-from .transform import normalize_axis, run_rows
+from .transform import fused_level_fits, normalize_axis, run_rows
 
 __all__ = ["synthesis_adjoint", "synthesis_step_adjoint"]
 
@@ -42,6 +42,102 @@ def _transposed(bank_name: str, boundary: str, m: int) -> tuple[tuple[np.ndarray
             (np.cumsum(indptr), rows[order].astype(np.intp), matrix.weights[order].astype(float))
         )
     return out[0], out[1]
+
+
+@lru_cache(maxsize=128)
+def _transposed_compact(
+    bank_name: str, boundary: str, m: int
+) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """``P.T`` and ``Q.T`` in the compact form the fused analysis kernel reads (cached).
+
+    That form is the compressed rows plus one regular interior: rows ``lo + b`` hold the same
+    taps in columns ``col + 2 b`` onwards, as an analysis matrix's do (a synthesis matrix's
+    columns are its transpose's rows, two fine samples apart).  The interior is the longest run
+    of such rows; the compressed rows keep the others.  Each row's sum runs over its taps in
+    increasing column order either way, as :func:`_kernels.analysis3` adds them, so the fused
+    adjoint gives the same values as the one-axis-at-a-time one.
+    """
+    out = []
+    for indptr, indices, weights in _transposed(bank_name, boundary, m):
+        rows = len(indptr) - 1
+        signatures = []
+        for r in range(rows):
+            cols = indices[indptr[r] : indptr[r + 1]]
+            contiguous = cols.size > 0 and bool(np.all(np.diff(cols) == 1))
+            key = (
+                (int(cols[0]) - 2 * r, tuple(weights[indptr[r] : indptr[r + 1]].tolist()))
+                if contiguous
+                else None
+            )
+            signatures.append(key)
+        best_lo, best_len, start = 0, 0, 0
+        for r in range(1, rows + 1):
+            if r == rows or signatures[r] is None or signatures[r] != signatures[start]:
+                if signatures[start] is not None and r - start > best_len:
+                    best_lo, best_len = start, r - start
+                start = r
+        if best_len >= 2:
+            shift, taps = signatures[best_lo]  # type: ignore[misc]
+            interior = np.array([best_lo, best_len, shift + 2 * best_lo], dtype=np.intp)
+            pattern = np.array([taps], dtype=np.float64)
+            kept = np.r_[0:best_lo, best_lo + best_len : rows]
+        else:
+            interior = np.zeros(3, dtype=np.intp)
+            pattern = np.zeros((1, 1), dtype=np.float64)
+            kept = np.arange(rows)
+        counts = np.diff(indptr)[kept]
+        starts = indptr[kept]
+        picks = (
+            np.concatenate([np.arange(a, a + c) for a, c in zip(starts, counts, strict=True)])
+            if kept.size
+            else np.zeros(0, dtype=np.intp)
+        ).astype(np.intp)
+        ptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
+        out.append(
+            (
+                ptr,
+                np.ascontiguousarray(indices[picks], dtype=np.intp),
+                np.ascontiguousarray(weights[picks], dtype=np.float64),
+                interior,
+                pattern,
+            )
+        )
+    return out[0], out[1]
+
+
+def _adjoint_2d(
+    data: np.ndarray, bank: FilterBank, bounds: tuple[str, str]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """One level's adjoint over axes 0 and 1 in one pass (the fused analysis kernel given the
+    transposed synthesis matrices): ``(aa, ad, da, dd)`` as :func:`wavecore.transform`'s
+    ``analysis_2d`` names them, or ``None`` where that kernel cannot take the layout.
+
+    The same values as two :func:`synthesis_step_adjoint` calls, without their transposes.
+    """
+    if data.ndim < 2 or not fused_level_fits(data.shape, [0, 1], data.dtype):
+        return None
+    m0, m1 = data.shape[0], data.shape[1]
+    trail = data.shape[2:]
+    inner = int(np.prod(trail, dtype=np.int64))
+    (p0, q0), (p1, q1) = (
+        _transposed_compact(bank.name, bounds[0], m0),
+        _transposed_compact(bank.name, bounds[1], m1),
+    )
+    if max(int(np.diff(m[0]).max(initial=0)) for m in (p0, q0, p1, q1)) > _kernels.MAX_TAPS:
+        return None
+    # Rows: the compressed ones plus the interior's.
+    r0, s0, r1, s1 = (len(m[0]) - 1 + int(m[3][1]) for m in (p0, q0, p1, q1))
+    x = np.ascontiguousarray(data, dtype=np.float64).reshape(1, m0, m1 * inner)
+    sizes = ((r0, r1), (r0, s1), (s0, r1), (s0, s1))
+    bands = [np.empty((1, rows, cols * inner)) for rows, cols in sizes]
+    args = (x, p0, q0, p1, q1, *bands, inner)
+    kernel: Callable[..., None] = _kernels.analysis_2d  # given P.T and Q.T along both axes
+    # Each output row is a sum of its own, so any split into row blocks gives the same bits.
+    run_rows(lambda lo, hi: kernel(*args, 0, 1, lo, hi), max(r0, s0), x.size)
+    aa, ad, da, dd = (
+        band.reshape((rows, cols, *trail)) for band, (rows, cols) in zip(bands, sizes, strict=True)
+    )
+    return aa, ad, da, dd
 
 
 def synthesis_step_adjoint(
@@ -166,6 +262,11 @@ def synthesis_adjoint(
             details.append(high)
             continue
         (a0, a1), (b0, b1) = ax, bounds
+        fused = _adjoint_2d(coarse, bank, (b0, b1)) if (a0, a1) == (0, 1) else None
+        if fused is not None:
+            coarse, cV, cH, cD = fused  # (aa, ad, da, dd)
+            details.append((cH, cV, cD))
+            continue
         low, high = synthesis_step_adjoint(coarse, bank, b0, a0)
         cH, cD = synthesis_step_adjoint(high, bank, b1, a1)
         coarse, cV = synthesis_step_adjoint(low, bank, b1, a1)

@@ -9,7 +9,12 @@ from typing import Any
 
 import numpy as np
 
-from .._kernels import colour_to_floats, colour_to_integers, squared_and_largest_error
+from .._kernels import (
+    colour_to_floats,
+    colour_to_integers,
+    squared_and_largest_error,
+    squared_and_largest_error_u8,
+)
 from ..colour import YCBCR_INVERSE_MATRIX, YCBCR_MATRIX, ycbcr_forward
 from ..errors import InvalidParameter
 from ..filters import get_wavelet
@@ -305,10 +310,10 @@ def _squared_and_largest_error(decoded: np.ndarray, original: np.ndarray) -> tup
         widest = float(max(spans))
         if widest * widest * max(decoded.size, 1) < 2.0**53:
             parts: list[tuple[float, float]] = []
+            bytes_only = decoded.dtype == original.dtype == np.uint8
+            kernel = squared_and_largest_error_u8 if bytes_only else squared_and_largest_error
             run_rows(
-                lambda lo, hi: parts.append(
-                    squared_and_largest_error(decoded[lo:hi], original[lo:hi])
-                ),
+                lambda lo, hi: parts.append(kernel(decoded[lo:hi], original[lo:hi])),
                 decoded.size,
                 decoded.size,
             )
