@@ -6,6 +6,7 @@ of the encoder's own check.
 
 from __future__ import annotations
 
+import itertools
 import struct
 import time
 import zlib
@@ -255,3 +256,80 @@ def test_frozen_bundles_of_both_forms_still_decode(form: str) -> None:
     assert wavecore.inspect(bytes.fromhex(FROZEN[form]))["method"] == form
     for original, back, flag in zip((ring, walk), got.curves, got.closed, strict=True):
         assert _both_ways(original, back, flag) <= 0.01
+
+
+def _spans_fit(points, nodes, offsets, closed, keep, tolerance) -> bool:
+    """Brute force: every point between two kept points within ``tolerance`` of their segment
+    (``nodes``: the decoded position of every point)."""
+    for c in range(len(offsets) - 1):
+        first, stop = int(offsets[c]), int(offsets[c + 1])
+        kept = np.flatnonzero(keep[first:stop]).tolist()
+        if closed[c] and stop - first > 2:
+            kept.append(stop - first)  # the start again
+        for a, b in itertools.pairwise(kept):
+            ring = np.arange(a, b + 1) % (stop - first) + first
+            segment = nodes[ring[[0, -1]]]
+            if _to_polyline(points[ring], segment, False) > tolerance * (1 + 1e-12):
+                return False
+    return True
+
+
+@pytest.mark.parametrize("closed_flag", [0, 1])
+def test_optimal_simplification_never_keeps_more_than_greedy(closed_flag: int) -> None:
+    rng = np.random.default_rng(13)
+    curves = []
+    for _ in range(12):
+        n = int(rng.integers(3, 300))
+        angle = np.cumsum(rng.normal(0, 0.3, n))
+        curves.append(np.cumsum(np.stack([np.cos(angle), np.sin(angle)], 1), 0))
+    points = np.ascontiguousarray(np.concatenate(curves))
+    offsets = np.concatenate([[0], np.cumsum([len(c) for c in curves])]).astype(np.int64)
+    closed = np.full(len(curves), closed_flag, dtype=np.int64)
+    starts = np.zeros(len(curves), dtype=np.int64)
+    for tolerance in (0.05, 0.3, 1.5):
+        nodes = np.rint(points / (1.4 * tolerance)) * (1.4 * tolerance)
+        greedy = curvecoder.reach_set(points, nodes, offsets, closed, starts, tolerance, 64)
+        best = curvecoder.optimal_set(points, nodes, offsets, closed, starts, tolerance, 64, greedy)
+        by_curve = np.add.reduceat(best, offsets[:-1])
+        assert np.all(by_curve <= np.add.reduceat(greedy, offsets[:-1]))
+        assert _spans_fit(points, nodes, offsets, closed, best, tolerance)
+        ends = offsets[:-1] if closed_flag else np.concatenate([offsets[:-1], offsets[1:] - 1])
+        assert np.all(best[ends])
+
+
+def test_optimal_simplification_is_the_fewest_by_brute_force() -> None:
+    # small open curves: every subset of the inner points, with the ends, tried
+    rng = np.random.default_rng(0)
+    offsets = np.array([0, 0], dtype=np.int64)
+    closed = np.zeros(1, dtype=np.int64)
+    starts = np.zeros(1, dtype=np.int64)
+    beaten = 0
+    for _ in range(150):
+        n = int(rng.integers(3, 9))
+        points = np.ascontiguousarray(np.cumsum(rng.normal(0, 1, (n, 2)), 0).round(1))
+        offsets[1] = n
+        greedy = curvecoder.reach_set(points, points, offsets, closed, starts, 0.5, 64)
+        best = curvecoder.optimal_set(points, points, offsets, closed, starts, 0.5, 64, greedy)
+        fewest = n
+        for bits in range(1 << (n - 2)):
+            keep = np.array([True] + [bool(bits >> i & 1) for i in range(n - 2)] + [True])
+            if keep.sum() < fewest and _spans_fit(points, points, offsets, closed, keep, 0.5):
+                fewest = int(keep.sum())
+        assert best.sum() == fewest
+        assert _spans_fit(points, points, offsets, closed, best, 0.5)
+        beaten += int(greedy.sum() > fewest)
+    assert beaten > 0  # curves where greedy reach is not the fewest (seed 0: several)
+
+
+def test_optimal_simplification_keeps_greedy_beyond_its_work_budget() -> None:
+    # a long circle: every span up to the window fits, so the path search would test about
+    # window points per point, beyond its linear budget; it must give greedy's mask back
+    n = 20000
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    points = np.ascontiguousarray(np.stack([np.cos(t), np.sin(t)], 1) * 1000)
+    offsets = np.array([0, n], dtype=np.int64)
+    closed = np.ones(1, dtype=np.int64)
+    starts = np.zeros(1, dtype=np.int64)
+    greedy = curvecoder.reach_set(points, points, offsets, closed, starts, 1.0, 512)
+    best = curvecoder.optimal_set(points, points, offsets, closed, starts, 1.0, 512, greedy)
+    assert np.array_equal(best, greedy)

@@ -941,6 +941,9 @@ def _encode_vertex(
         keep = curvecoder.reach_set(
             points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW
         )
+        keep = curvecoder.optimal_set(
+            points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW, keep
+        )
         moved = lattice
         if d == 2:  # lifting costs 3**d positions per end: plane curves only
             # vertices lifted off the curve where that lets a span reach farther; a curve
@@ -951,6 +954,10 @@ def _encode_vertex(
             )
             kept = _lattice_values(lifted[lifted_keep], step, dtype).astype(np.float64)
             fits = curvecoder.check_set(points_r, offsets, closed, lifted_keep, kept) <= tolerance
+            # lifted only where that keeps fewer vertices than the optimum on the curve's own
+            # points (on a tie the points' own lattice points: 0.2 % fewer bytes on the glyphs)
+            fewer = np.add.reduceat(lifted_keep, offsets[:-1]) < np.add.reduceat(keep, offsets[:-1])
+            fits &= fewer
             rows_lifted = np.repeat(fits, np.diff(offsets))
             keep = np.where(rows_lifted, lifted_keep, keep)
             moved = np.where(rows_lifted[:, None], lifted, lattice)
