@@ -62,7 +62,7 @@ def test_vertex_form_keeps_the_bound(tolerance: float, d: int) -> None:
     curves = [_walk(500, 1, d), _walk(30, 2, d), _walk(2, 3, d), _walk(1, 4, d), _walk(3, 5, d)]
     closed = [False, True, True, False, True]
     bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
-    assert bundle[4] == curvesets.VERTEX_VERSION
+    assert bundle[4] in (curvesets.VERTEX_VERSION, curvesets.BULGED_VERSION)
     out = wavecore.decode_curves(bundle)
     assert out.closed == closed and out.tolerance == tolerance
     for original, back, flag in zip(curves, out.curves, closed, strict=True):
@@ -178,10 +178,12 @@ def test_crafted_vertex_bundles_give_curves_or_bundle_error() -> None:
         tolerance=0.01,
         method="vertex",
     )
-    assert bundle[4] == curvesets.VERTEX_VERSION
+    assert bundle[4] == curvesets.BULGED_VERSION  # the ring's arcs are bulged segments
     rng = np.random.default_rng(9)
-    for trial in range(300):
+    for trial in range(450):
         body = bytearray(bundle[:-4])
+        if trial % 5 == 0:  # the same stream read as the other vertex version
+            body[4] = curvesets.VERTEX_VERSION
         if trial % 3 == 0:  # cut or extend the stream
             body = body[: int(rng.integers(5, len(body)))] + bytes(int(rng.integers(0, 9)))
         for _ in range(int(rng.integers(1, 4))):
@@ -333,3 +335,57 @@ def test_optimal_simplification_keeps_greedy_beyond_its_work_budget() -> None:
     greedy = curvecoder.reach_set(points, points, offsets, closed, starts, 1.0, 512)
     best = curvecoder.optimal_set(points, points, offsets, closed, starts, 1.0, 512, greedy)
     assert np.array_equal(best, greedy)
+
+
+@pytest.mark.parametrize("tolerance", [0.01, 0.002])
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_bulged_segments_keep_the_bound_in_fewer_bytes(tolerance: float, dtype: str) -> None:
+    # smooth closed and open plane curves: the parabolas between vertices follow the arcs
+    curves = [(_ring(400, 1 + k) + 3 * k).astype(dtype) for k in range(4)]
+    curves.append(np.stack([np.linspace(0, 6, 300), np.sin(np.linspace(0, 6, 300))], 1))
+    curves[-1] = curves[-1].astype(dtype)
+    closed = [True, True, True, True, False]
+    bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
+    assert bundle[4] == curvesets.BULGED_VERSION
+    out = wavecore.decode_curves(bundle)
+    assert out.closed == closed
+    for original, back, flag in zip(curves, out.curves, closed, strict=True):
+        assert back.dtype == original.dtype
+        assert _both_ways(original, back, flag) <= out.tolerance
+    # the same vertices without bulges: the version-2 stream the encoder weighed it against
+    stream_v3 = len(bundle)
+    assert wavecore.inspect(bundle)["version"] == "3"
+    plain = _plain_vertex_size(curves, closed, tolerance)
+    assert stream_v3 < plain
+
+
+def _plain_vertex_size(curves, closed, tolerance) -> int:
+    """The vertex form's size with bulges switched off (version 2)."""
+    original = curvesets._bulged_stream
+    curvesets._bulged_stream = lambda *args: None
+    try:
+        bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
+    finally:
+        curvesets._bulged_stream = original
+    assert bundle[4] == curvesets.VERTEX_VERSION
+    return len(bundle)
+
+
+def test_bulged_polylines_lie_on_their_parabolas() -> None:
+    # decoded inner points: on the parabola through both vertices, its middle `bulge * unit`
+    # to the left of the chord (independent formula: the vertex form of a parabola)
+    vertices = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0]])
+    counts = np.array([3], dtype=np.int64)
+    closed = np.array([1], dtype=np.int64)
+    bulges = np.array([2, 3, 0], dtype=np.int64)  # segments ending at rows 0 (closing), 1, 2
+    out, sizes, rows = curvecoder.bulged_polylines(vertices, counts, closed, bulges, 0.25)
+    parts = curvecoder.BULGE_PARTS
+    assert sizes.tolist() == [3 + 2 * (parts - 1)]
+    assert rows.tolist() == [0, parts, parts + 1]
+    first = out[1:parts]  # (0,0) -> (4,0), middle 0.75 to the left (+y)
+    assert np.allclose(first[:, 1], 0.75 * (1 - ((first[:, 0] - 2) / 2) ** 2))
+    closing = out[parts + 2 :]  # (4,3) -> (0,0), middle 0.5 to the left of that chord
+    chord = np.array([-4.0, -3.0]) / 5
+    left = np.array([-chord[1], chord[0]])
+    along = (closing - [4.0, 3.0]) @ chord / 5
+    assert np.allclose((closing - [4.0, 3.0]) @ left, 0.5 * 4 * along * (1 - along))
