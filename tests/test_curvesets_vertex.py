@@ -244,6 +244,11 @@ FROZEN = {
         "d72560226396195a1105e2dc5116233680dde8687853f2832ebf0bf417bf4e4e5f8ccd2f0e2b3f7efd"
         "2adca65435f5fd"
     ),
+    # version 3 (bulged segments), written by the release that introduced it
+    "bulged": (
+        "8957564303390002050106021978daab56ca4bcc4d55b2524a2bcaaf4acd53aa0500343605f0b8fd09"
+        "2ed589190012fe78d9402e92e96e0a73c1e9c9dccad286c41b439be0dd05"
+    ),
 }
 
 
@@ -255,7 +260,9 @@ def test_frozen_bundles_of_both_forms_still_decode(form: str) -> None:
     got = wavecore.decode_curves(bytes.fromhex(FROZEN[form]))
     assert got.closed == [True, False] and got.tolerance == 0.01
     assert got.metadata == {"name": "frozen"}
-    assert wavecore.inspect(bytes.fromhex(FROZEN[form]))["method"] == form
+    info = wavecore.inspect(bytes.fromhex(FROZEN[form]))
+    assert info["method"] == ("vertex" if form == "bulged" else form)
+    assert info["version"] == {"wavelet": "1", "vertex": "2", "bulged": "3"}[form]
     for original, back, flag in zip((ring, walk), got.curves, got.closed, strict=True):
         assert _both_ways(original, back, flag) <= 0.01
 

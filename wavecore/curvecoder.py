@@ -48,7 +48,8 @@ _OTHER_COORD = _FIRST_COORD + _CLASSES
 _ALONG = _OTHER_COORD + _CLASSES * 4  # frame predictor: along the predicted direction
 _ACROSS = _ALONG + _CLASSES  # and across it
 _BULGE = _ACROSS + _CLASSES  # a segment's bulge (version 3): by the previous bulge's size (4)
-_MAG_KINDS = _BULGE + 4
+# and the segment's length (4)
+_MAG_KINDS = _BULGE + 16
 MAG_BASE = 0
 MANT_BASE = MAG_BASE + _MAG_KINDS * _UNARY
 MANT_SIZE = (MAX_BITS + 1) * MAX_BITS
@@ -346,10 +347,30 @@ def _code_set(
             bulge_class, bulge_sign = 0, 0
             for row in range(at + 1, at + m):
                 bulge_class, bulge_sign = _bulge(
-                    st, buf, models, bulges, row, bulge_class, bulge_sign, decoding
+                    st,
+                    buf,
+                    models,
+                    bulges,
+                    row,
+                    row - 1,
+                    lattice,
+                    bulge_class,
+                    bulge_sign,
+                    decoding,
                 )
             if closed[c] and m > 1:
-                _bulge(st, buf, models, bulges, at, bulge_class, bulge_sign, decoding)
+                _bulge(
+                    st,
+                    buf,
+                    models,
+                    bulges,
+                    at,
+                    at + m - 1,
+                    lattice,
+                    bulge_class,
+                    bulge_sign,
+                    decoding,
+                )
             else:
                 bulges[at] = 0
         at += m
@@ -357,9 +378,14 @@ def _code_set(
 
 
 @njit(cache=True, nogil=True)
-def _bulge(st, buf, models, bulges, row, bulge_class, bulge_sign, decoding):
-    """Code the bulge of the segment ending at ``row``; the next bulge's contexts."""
-    kind = _BULGE + bulge_class
+def _bulge(st, buf, models, bulges, row, before, lattice, bulge_class, bulge_sign, decoding):
+    """Code the bulge of the segment from row ``before`` to ``row``; the next bulge's
+    contexts.  Context: the previous bulge's size and the segment's (a sagitta grows with the
+    square of the chord)."""
+    longest = max(
+        abs(lattice[row, 0] - lattice[before, 0]), abs(lattice[row, 1] - lattice[before, 1])
+    )
+    kind = _BULGE + bulge_class + 4 * min(3, _bit_length(longest) // 2)
     value = _signed(st, buf, models, kind, _SIGN_BULGE + 1 + bulge_sign, bulges[row], decoding)
     bulges[row] = value
     return min(3, _bit_length(abs(value))), (value > 0) - (value < 0)
@@ -574,7 +600,7 @@ def optimal_set(points, decoded, offsets, closed, starts, tolerance, window, gre
     that stops short of the farthest reach can let the next one go much farther).  A span is
     tested only where it would shorten the path to its end, so on long smooth stretches few
     are; where a curve's tests would still exceed a work budget linear in its points
-    (``64 n`` points visited, plus a constant), it keeps ``greedy``'s vertices (the mask of
+    (``256 n`` points visited, plus a constant), it keeps ``greedy``'s vertices (the mask of
     :func:`reach_set` from the same starts).  Returns a mask of the kept points.
     """
     total = points.shape[0]
@@ -591,7 +617,7 @@ def optimal_set(points, decoded, offsets, closed, starts, tolerance, window, gre
         dist = np.full(last + 1, 1 << 40, dtype=np.int64)
         previous = np.full(last + 1, -1, dtype=np.int64)
         dist[0] = 0
-        budget = 64 * n + 4096
+        budget = 256 * n + (1 << 16)
         for a in range(last):
             if budget < 0:
                 break
@@ -1429,3 +1455,59 @@ def check_bulged(points, offsets, closed, keep, out, sizes, rows):
         at += m
         w = end
     return worst
+
+
+@njit(cache=True, nogil=True)
+def optimal_bulged_set(
+    points, decoded, offsets, closed, tolerance, window, unit, strict, greedy, bulges
+):
+    """The fewest parabolic spans on each curve (as :func:`optimal_set`, with
+    :func:`_bulged_fit`'s test), from each curve's point 0.  ``greedy`` and ``bulges`` hold
+    :func:`bulged_reach_set`'s result, kept for a curve whose tests would exceed the work
+    budget; elsewhere ``bulges`` is rewritten.  Returns the mask of the kept points."""
+    total = points.shape[0]
+    keep = np.zeros(total, dtype=np.bool_)
+    chain = np.empty((BULGE_PARTS + 1, 2))
+    for c in range(len(offsets) - 1):
+        first, stop = offsets[c], offsets[c + 1]
+        n = stop - first
+        if n == 0:
+            continue
+        ring = n + 1 if closed[c] and n > 2 else n
+        last = ring - 1
+        dist = np.full(last + 1, 1 << 40, dtype=np.int64)
+        previous = np.full(last + 1, -1, dtype=np.int64)
+        chosen = np.zeros(last + 1, dtype=np.int64)
+        dist[0] = 0
+        budget = 256 * n + (1 << 16)
+        for a in range(last):
+            if budget < 0:
+                break
+            top = min(last, a + window)
+            for b in range(a + 1, top + 1):
+                if dist[a] + 1 >= dist[b]:
+                    continue
+                budget -= 4 * (b - a)
+                found = _bulged_fit(
+                    points, decoded, first, n, a, b, tolerance, unit, chain, strict[c]
+                )
+                if found != _NO_FIT:
+                    dist[b] = dist[a] + 1
+                    previous[b] = a
+                    chosen[b] = found
+        if budget < 0 or dist[last] >= 1 << 40:
+            for i in range(first, stop):
+                keep[i] = greedy[i]
+            continue
+        for i in range(first, stop):
+            if not greedy[i]:
+                bulges[i] = 0
+        at = last
+        while at > 0:
+            keep[first + (at % n)] = True
+            bulges[first + (at % n)] = chosen[at]
+            at = previous[at]
+        keep[first] = True
+        if ring == n:
+            bulges[first] = 0
+    return keep

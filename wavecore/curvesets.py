@@ -937,6 +937,18 @@ def _bulged_stream(
             bulges,
             strict,
         )
+        keep = curvecoder.optimal_bulged_set(
+            points,
+            decoded,
+            offsets,
+            closed,
+            tolerance,
+            _VERTEX_WINDOW,
+            step * _BULGE_UNIT,
+            strict,
+            keep,
+            bulges,
+        )
         rows = _cheapest_starts(lattice, keep, offsets, closed)
         trial_points = np.ascontiguousarray(points[rows])
         keep = np.ascontiguousarray(keep[rows])
