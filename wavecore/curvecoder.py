@@ -1285,7 +1285,7 @@ def _bulged_fit(points, decoded, first, n, a, b, tolerance, unit, chain, strict)
     toward = -1 if centre > 0 else 1
     for t in range(4):
         bulge = 0 if t == 0 else centre + (0, toward, 0, -toward)[t]
-        if t > 0 and (bulge == 0 or strict == 2):
+        if t > 0 and (bulge == 0 or strict >= 2):
             continue
         if t == 1 and (centre + toward == 0 or centre == 0):
             continue

@@ -912,6 +912,8 @@ def _bulged_stream(
     points: np.ndarray,
     lattice: np.ndarray,
     decoded: np.ndarray,
+    fallback_keep: np.ndarray,
+    fallback_lattice: np.ndarray,
     offsets: np.ndarray,
     closed: np.ndarray,
     repeated: np.ndarray,
@@ -921,10 +923,12 @@ def _bulged_stream(
     dtype: np.dtype[Any],
 ) -> tuple[bytes, int] | None:
     """The stream of version 3 (bulged segments) and its predictor, or None where its
-    measured bound fails.  Greedy farthest reach with parabolic spans
-    (:func:`curvecoder.bulged_reach_set`) on the points' own lattice points."""
+    measured bound fails.  The fewest parabolic spans (:func:`curvecoder.bulged_reach_set`,
+    :func:`curvecoder.optimal_bulged_set`) on the points' own lattice points; a curve whose
+    measured bound fails is simplified again with stricter spans, then straight ones, and at
+    last takes ``fallback_keep`` and ``fallback_lattice`` (version 2's choice) unbulged."""
     strict = np.zeros(len(offsets) - 1, dtype=np.int64)
-    for _ in range(3):  # a curve whose check fails is simplified again, stricter
+    for _ in range(4):  # a curve whose check fails is simplified again, stricter
         bulges = np.zeros(len(points), dtype=np.int64)
         keep = curvecoder.bulged_reach_set(
             points,
@@ -949,10 +953,14 @@ def _bulged_stream(
             keep,
             bulges,
         )
-        rows = _cheapest_starts(lattice, keep, offsets, closed)
+        last_resort = np.repeat(strict == 3, np.diff(offsets))
+        keep = np.where(last_resort, fallback_keep, keep)
+        bulges[last_resort] = 0
+        moved = np.where(last_resort[:, None], fallback_lattice, lattice)
+        rows = _cheapest_starts(moved, keep, offsets, closed)
         trial_points = np.ascontiguousarray(points[rows])
         keep = np.ascontiguousarray(keep[rows])
-        vertices = np.ascontiguousarray(lattice[rows][keep])
+        vertices = np.ascontiguousarray(moved[rows][keep])
         bulges = np.ascontiguousarray(bulges[rows][keep])
         counts = np.add.reduceat(keep, offsets[:-1]).astype(np.int64)
         out, sizes, vertex_rows = _bulged_polylines(vertices, counts, closed, bulges, step, dtype)
@@ -961,7 +969,7 @@ def _bulged_stream(
         )
         if np.all(worst <= tolerance):
             break
-        if np.any(strict[worst > tolerance] == 2):
+        if np.any(strict[worst > tolerance] == 3):
             return None
         strict[worst > tolerance] += 1
     best: tuple[bytes, int] | None = None
@@ -1052,6 +1060,7 @@ def _encode_vertex(
             rows_lifted = np.repeat(fits, np.diff(offsets))
             keep = np.where(rows_lifted, lifted_keep, keep)
             moved = np.where(rows_lifted[:, None], lifted, lattice)
+        chosen_keep, chosen_lattice = keep, moved  # a bulged curve's last resort
         rows = _cheapest_starts(moved, keep, offsets, closed)
         trial_points = np.ascontiguousarray(points_r[rows])
         trial_lattice = np.ascontiguousarray(moved[rows])
@@ -1097,6 +1106,8 @@ def _encode_vertex(
                 plain_points,
                 plain_lattice,
                 plain_decoded,
+                chosen_keep,
+                chosen_lattice,
                 offsets,
                 closed,
                 again,
