@@ -12,7 +12,8 @@ bounding-box diagonal):
 * ``wavecore``: :func:`wavecore.encode_curves` (the whole file) as it is called by default
   (``method="auto"``: the smaller of its wavelet and vertex forms);
 * ``wavecore wavelet``: the wavelet form alone (``method="wavelet"``, bspline2: format 1);
-* ``wavecore vertex``: the vertex form alone (``method="vertex"``: format 2);
+* ``wavecore vertex``: the vertex form alone (``method="vertex"``: format 2, or 3 with bulged
+  segments where that is smaller);
 * ``dp+zlib``: Douglas–Peucker at ``t - q/√2``, the kept points quantized to ``q = t/2``,
   per-curve varint counts and zigzag varint deltas, zlib level 9 (written here);
 * ``polyline``: the same Douglas–Peucker and quantization, written as Google's encoded polyline
