@@ -246,8 +246,8 @@ FROZEN = {
     ),
     # version 3 (bulged segments), written by the release that introduced it
     "bulged": (
-        "8957564303390002050106021978daab56ca4bcc4d55b2524a2bcaaf4acd53aa0500343605f0b8fd09"
-        "2ed589190012fe78d9402e92e96e0a73c1e9c9dccad286c41b439be0dd05"
+        "8957564303090002050106021978daab56ca4bcc4d55b2524a2bcaaf4acd53aa0500343605f0b8fd09"
+        "2ed58c5de4deb85a7f9ba76ddd0398f5e0e7b6c14f77e74e8587d393788e"
     ),
 }
 

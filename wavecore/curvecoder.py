@@ -54,9 +54,9 @@ MAG_BASE = 0
 MANT_BASE = MAG_BASE + _MAG_KINDS * _UNARY
 MANT_SIZE = (MAX_BITS + 1) * MAX_BITS
 SIGN_BASE = MANT_BASE + MANT_SIZE
-SIGN_SIZE = 3 * 4 + 4 + 4 + 3  # by the previous residual's sign and the coordinate; first
+SIGN_SIZE = 3 * 4 + 4 + 4 + 9  # by the previous residual's sign and the coordinate; first
 # vertices; the frame predictor's along (1) and across (3, by the previous across residual);
-# bulges (3, by the previous bulge's sign: an arc keeps bending the same way)
+# bulges (9, by the turns at the segment's two ends)
 _SIGN_ALONG = 16
 _SIGN_ACROSS = 17
 _SIGN_BULGE = 21
@@ -354,6 +354,9 @@ def _code_set(
                     row,
                     row - 1,
                     lattice,
+                    at,
+                    m,
+                    closed[c],
                     bulge_class,
                     bulge_sign,
                     decoding,
@@ -367,6 +370,9 @@ def _code_set(
                     at,
                     at + m - 1,
                     lattice,
+                    at,
+                    m,
+                    closed[c],
                     bulge_class,
                     bulge_sign,
                     decoding,
@@ -377,16 +383,36 @@ def _code_set(
     return at
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _turn(lattice, a, b, c):
+    """The sign of the turn at ``b`` from ``a`` to ``c`` (+1 left, -1 right, 0 straight), for
+    steps short enough for exact products (0 beyond)."""
+    ux, uy = lattice[b, 0] - lattice[a, 0], lattice[b, 1] - lattice[a, 1]
+    vx, vy = lattice[c, 0] - lattice[b, 0], lattice[c, 1] - lattice[b, 1]
+    if max(abs(ux), abs(uy), abs(vx), abs(vy)) >= _FRAME_LIMIT:
+        return 0
+    cross = ux * vy - uy * vx
+    return (cross > 0) - (cross < 0)
+
+
 @njit(cache=True, nogil=True)
-def _bulge(st, buf, models, bulges, row, before, lattice, bulge_class, bulge_sign, decoding):
-    """Code the bulge of the segment from row ``before`` to ``row``; the next bulge's
-    contexts.  Context: the previous bulge's size and the segment's (a sagitta grows with the
-    square of the chord)."""
+def _bulge(
+    st, buf, models, bulges, row, before, lattice, at, m, ring, bulge_class, bulge_sign, decoding
+):
+    """Code the bulge of the segment from row ``before`` to ``row`` (of the curve at rows
+    ``at … at + m - 1``); the next bulge's contexts.  Context: the previous bulge's size and
+    the segment's (a sagitta grows with the square of the chord); for its sign, the turns at
+    both its ends (an arc bulges to the side it turns away from)."""
     longest = max(
         abs(lattice[row, 0] - lattice[before, 0]), abs(lattice[row, 1] - lattice[before, 1])
     )
     kind = _BULGE + bulge_class + 4 * min(3, _bit_length(longest) // 2)
-    value = _signed(st, buf, models, kind, _SIGN_BULGE + 1 + bulge_sign, bulges[row], decoding)
+    earlier = before - 1 if before > at else (at + m - 1 if ring else -1)
+    later = row + 1 if row < at + m - 1 else (at if ring else -1)
+    turn_in = _turn(lattice, earlier, before, row) if earlier >= 0 else 0
+    turn_out = _turn(lattice, before, row, later) if later >= 0 else 0
+    sign_ctx = _SIGN_BULGE + 3 * (1 + turn_in) + 1 + turn_out
+    value = _signed(st, buf, models, kind, sign_ctx, bulges[row], decoding)
     bulges[row] = value
     return min(3, _bit_length(abs(value))), (value > 0) - (value < 0)
 
