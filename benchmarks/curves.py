@@ -12,7 +12,8 @@ bounding-box diagonal):
 * ``wavecore``: :func:`wavecore.encode_curves` (the whole file) as it is called by default
   (``method="auto"``: the smaller of its wavelet and vertex forms);
 * ``wavecore wavelet``: the wavelet form alone (``method="wavelet"``, bspline2: format 1);
-* ``wavecore vertex``: the vertex form alone (``method="vertex"``: format 2);
+* ``wavecore vertex``: the vertex form alone (``method="vertex"``: format 2, or 3 with bulged
+  segments where that is smaller);
 * ``dp+zlib``: Douglas–Peucker at ``t - q/√2``, the kept points quantized to ``q = t/2``,
   per-curve varint counts and zigzag varint deltas, zlib level 9 (written here);
 * ``polyline``: the same Douglas–Peucker and quantization, written as Google's encoded polyline
@@ -226,6 +227,106 @@ def wavecore_curves(curves: list[np.ndarray], closed: bool, tolerance: float, op
     return len(bundle), wavecore.decode(bundle)
 
 
+# --- what the vertex form's simplification leaves on the table (``--ideas``) ------------------
+
+
+def _optimal_counts(points, lattice_points, offsets, tolerance, window):
+    """Fewest vertices of each closed curve started at its point 0 (Imai–Iri): a shortest path
+    in the visibility graph, every edge ``i -> j`` (``j - i <= window``) tested exactly (every
+    point between within ``tolerance`` of the lattice segment), not assumed from a reach."""
+    from numba import njit
+
+    @njit(cache=False)
+    def fits(points, nodes, first, n, a, b, tolerance):
+        end = first + (b % n)
+        start = first + (a % n)
+        ax, ay = nodes[start, 0], nodes[start, 1]
+        bx, by = nodes[end, 0] - ax, nodes[end, 1] - ay
+        length2 = bx * bx + by * by
+        for k in range(a + 1, b):
+            px = points[first + (k % n), 0] - ax
+            py = points[first + (k % n), 1] - ay
+            t = 0.0
+            if length2 > 0.0:
+                t = min(1.0, max(0.0, (px * bx + py * by) / length2))
+            gx, gy = px - t * bx, py - t * by
+            if gx * gx + gy * gy > tolerance * tolerance:
+                return False
+        return True
+
+    @njit(cache=False)
+    def shortest(points, nodes, offsets, tolerance, window):
+        out = np.zeros(len(offsets) - 1, dtype=np.int64)
+        for c in range(len(offsets) - 1):
+            first, n = offsets[c], offsets[c + 1] - offsets[c]
+            dist = np.full(n + 1, 1 << 40, dtype=np.int64)
+            dist[0] = 0
+            for a in range(n):
+                for b in range(a + 1, min(n, a + window) + 1):
+                    if dist[a] + 1 < dist[b] and fits(points, nodes, first, n, a, b, tolerance):
+                        dist[b] = dist[a] + 1
+            out[c] = dist[n]
+        return out
+
+    return shortest(points, lattice_points, offsets, tolerance, window)
+
+
+def simplification_ideas(sets: list) -> None:
+    """Print, per glyph set and tolerance, the vertices greedy farthest reach keeps (as the
+    vertex form runs it, on the rounded lattice of step 1.4 t) against an exact optimum from the
+    same start (Imai–Iri, window 512) and against the best start of all (every point of each
+    contour's first span tried), so that the ideas left in docs/curves.md are measured."""
+    from wavecore import curvecoder
+
+    window = 512
+    for name, curves, closed, scale in sets:
+        if not closed:
+            continue
+        points = np.ascontiguousarray(np.concatenate(curves))
+        offsets = np.zeros(len(curves) + 1, dtype=np.int64)
+        offsets[1:] = np.cumsum([len(c) for c in curves])
+        flags = np.ones(len(curves), dtype=np.int64)
+        cells = []
+        for relative in RELATIVE_TOLERANCES:
+            tolerance = relative * scale
+            step = 1.4 * tolerance
+            nodes = np.ascontiguousarray(np.rint(points / step) * step)
+            zeros = np.zeros(len(curves), dtype=np.int64)
+            keep = curvecoder.reach_set(points, nodes, offsets, flags, zeros, tolerance, window)
+            greedy = np.add.reduceat(keep, offsets[:-1])
+            optimal = _optimal_counts(points, nodes, offsets, tolerance, window)
+            kept = np.flatnonzero(keep)
+            spans = [
+                int(kept[np.searchsorted(kept, offsets[c]) + 1] - offsets[c])
+                for c in range(len(curves))
+            ]
+            usual = greedy.copy()  # the encoder's rule: point 0 or one of the first 3 vertices
+            for nth in (1, 2, 3):
+                trial = zeros.copy()
+                for c in range(len(curves)):
+                    inside = kept[
+                        np.searchsorted(kept, offsets[c]) : np.searchsorted(kept, offsets[c + 1])
+                    ]
+                    if len(inside) > nth:
+                        trial[c] = inside[nth] - offsets[c]
+                found = curvecoder.reach_set(
+                    points, nodes, offsets, flags, trial, tolerance, window
+                )
+                usual = np.minimum(usual, np.add.reduceat(found, offsets[:-1]))
+            every = greedy.copy()
+            for k in range(1, max(spans) + 1):
+                trial = np.minimum(k, spans).astype(np.int64)
+                found = curvecoder.reach_set(
+                    points, nodes, offsets, flags, trial, tolerance, window
+                )
+                every = np.minimum(every, np.add.reduceat(found, offsets[:-1]))
+            cells.append(
+                f"t={relative:g}: greedy {greedy.sum()}, optimal {optimal.sum()}; "
+                f"starts as encoded {usual.sum()}, best start {every.sum()}"
+            )
+        print(f"{name}: " + "; ".join(cells), flush=True)
+
+
 # --- the run -------------------------------------------------------------------------------
 
 
@@ -331,6 +432,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--write", action="store_true", help="rewrite the docs table and figure")
     parser.add_argument("--quick", action="store_true", help="one font, a short track")
+    parser.add_argument(
+        "--ideas",
+        action="store_true",
+        help="only the vertex counts of greedy reach against an optimal simplification",
+    )
     args = parser.parse_args()
     sets = []
     for family in FONTS[:1] if args.quick else FONTS:
@@ -341,6 +447,9 @@ def main() -> None:
     sets.append(("random walk", [track], False, diagonal))
     for name, curves, _, _ in sets:
         print(f"{name}: {len(curves)} curves, {sum(len(c) for c in curves)} points")
+    if args.ideas:
+        simplification_ideas(sets)
+        return
     start = time.perf_counter()
     rows = []
     for name, curves, closed, scale in sets:

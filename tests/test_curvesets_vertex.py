@@ -6,6 +6,7 @@ of the encoder's own check.
 
 from __future__ import annotations
 
+import itertools
 import struct
 import time
 import zlib
@@ -61,7 +62,7 @@ def test_vertex_form_keeps_the_bound(tolerance: float, d: int) -> None:
     curves = [_walk(500, 1, d), _walk(30, 2, d), _walk(2, 3, d), _walk(1, 4, d), _walk(3, 5, d)]
     closed = [False, True, True, False, True]
     bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
-    assert bundle[4] == curvesets.VERTEX_VERSION
+    assert bundle[4] in (curvesets.VERTEX_VERSION, curvesets.BULGED_VERSION)
     out = wavecore.decode_curves(bundle)
     assert out.closed == closed and out.tolerance == tolerance
     for original, back, flag in zip(curves, out.curves, closed, strict=True):
@@ -177,10 +178,12 @@ def test_crafted_vertex_bundles_give_curves_or_bundle_error() -> None:
         tolerance=0.01,
         method="vertex",
     )
-    assert bundle[4] == curvesets.VERTEX_VERSION
+    assert bundle[4] == curvesets.BULGED_VERSION  # the ring's arcs are bulged segments
     rng = np.random.default_rng(9)
-    for trial in range(300):
+    for trial in range(450):
         body = bytearray(bundle[:-4])
+        if trial % 5 == 0:  # the same stream read as the other vertex version
+            body[4] = curvesets.VERTEX_VERSION
         if trial % 3 == 0:  # cut or extend the stream
             body = body[: int(rng.integers(5, len(body)))] + bytes(int(rng.integers(0, 9)))
         for _ in range(int(rng.integers(1, 4))):
@@ -241,6 +244,11 @@ FROZEN = {
         "d72560226396195a1105e2dc5116233680dde8687853f2832ebf0bf417bf4e4e5f8ccd2f0e2b3f7efd"
         "2adca65435f5fd"
     ),
+    # version 3 (bulged segments), written by the release that introduced it
+    "bulged": (
+        "8957564303090002050106021978daab56ca4bcc4d55b2524a2bcaaf4acd53aa0500343605f0b8fd09"
+        "2ed58c5de4deb85a7f9ba76ddd0398f5e0e7b6c14f77e74e8587d393788e"
+    ),
 }
 
 
@@ -252,6 +260,139 @@ def test_frozen_bundles_of_both_forms_still_decode(form: str) -> None:
     got = wavecore.decode_curves(bytes.fromhex(FROZEN[form]))
     assert got.closed == [True, False] and got.tolerance == 0.01
     assert got.metadata == {"name": "frozen"}
-    assert wavecore.inspect(bytes.fromhex(FROZEN[form]))["method"] == form
+    info = wavecore.inspect(bytes.fromhex(FROZEN[form]))
+    assert info["method"] == ("vertex" if form == "bulged" else form)
+    assert info["version"] == {"wavelet": "1", "vertex": "2", "bulged": "3"}[form]
     for original, back, flag in zip((ring, walk), got.curves, got.closed, strict=True):
         assert _both_ways(original, back, flag) <= 0.01
+
+
+def _spans_fit(points, nodes, offsets, closed, keep, tolerance) -> bool:
+    """Brute force: every point between two kept points within ``tolerance`` of their segment
+    (``nodes``: the decoded position of every point)."""
+    for c in range(len(offsets) - 1):
+        first, stop = int(offsets[c]), int(offsets[c + 1])
+        kept = np.flatnonzero(keep[first:stop]).tolist()
+        if closed[c] and stop - first > 2:
+            kept.append(stop - first)  # the start again
+        for a, b in itertools.pairwise(kept):
+            ring = np.arange(a, b + 1) % (stop - first) + first
+            segment = nodes[ring[[0, -1]]]
+            if _to_polyline(points[ring], segment, False) > tolerance * (1 + 1e-12):
+                return False
+    return True
+
+
+@pytest.mark.parametrize("closed_flag", [0, 1])
+def test_optimal_simplification_never_keeps_more_than_greedy(closed_flag: int) -> None:
+    rng = np.random.default_rng(13)
+    curves = []
+    for _ in range(12):
+        n = int(rng.integers(3, 300))
+        angle = np.cumsum(rng.normal(0, 0.3, n))
+        curves.append(np.cumsum(np.stack([np.cos(angle), np.sin(angle)], 1), 0))
+    points = np.ascontiguousarray(np.concatenate(curves))
+    offsets = np.concatenate([[0], np.cumsum([len(c) for c in curves])]).astype(np.int64)
+    closed = np.full(len(curves), closed_flag, dtype=np.int64)
+    starts = np.zeros(len(curves), dtype=np.int64)
+    for tolerance in (0.05, 0.3, 1.5):
+        nodes = np.rint(points / (1.4 * tolerance)) * (1.4 * tolerance)
+        greedy = curvecoder.reach_set(points, nodes, offsets, closed, starts, tolerance, 64)
+        best = curvecoder.optimal_set(points, nodes, offsets, closed, starts, tolerance, 64, greedy)
+        by_curve = np.add.reduceat(best, offsets[:-1])
+        assert np.all(by_curve <= np.add.reduceat(greedy, offsets[:-1]))
+        assert _spans_fit(points, nodes, offsets, closed, best, tolerance)
+        ends = offsets[:-1] if closed_flag else np.concatenate([offsets[:-1], offsets[1:] - 1])
+        assert np.all(best[ends])
+
+
+def test_optimal_simplification_is_the_fewest_by_brute_force() -> None:
+    # small open curves: every subset of the inner points, with the ends, tried
+    rng = np.random.default_rng(0)
+    offsets = np.array([0, 0], dtype=np.int64)
+    closed = np.zeros(1, dtype=np.int64)
+    starts = np.zeros(1, dtype=np.int64)
+    beaten = 0
+    for _ in range(150):
+        n = int(rng.integers(3, 9))
+        points = np.ascontiguousarray(np.cumsum(rng.normal(0, 1, (n, 2)), 0).round(1))
+        offsets[1] = n
+        greedy = curvecoder.reach_set(points, points, offsets, closed, starts, 0.5, 64)
+        best = curvecoder.optimal_set(points, points, offsets, closed, starts, 0.5, 64, greedy)
+        fewest = n
+        for bits in range(1 << (n - 2)):
+            keep = np.array([True] + [bool(bits >> i & 1) for i in range(n - 2)] + [True])
+            if keep.sum() < fewest and _spans_fit(points, points, offsets, closed, keep, 0.5):
+                fewest = int(keep.sum())
+        assert best.sum() == fewest
+        assert _spans_fit(points, points, offsets, closed, best, 0.5)
+        beaten += int(greedy.sum() > fewest)
+    assert beaten > 0  # curves where greedy reach is not the fewest (seed 0: several)
+
+
+def test_optimal_simplification_keeps_greedy_beyond_its_work_budget() -> None:
+    # a long circle: every span up to the window fits, so the path search would test about
+    # window points per point, beyond its linear budget; it must give greedy's mask back
+    n = 20000
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    points = np.ascontiguousarray(np.stack([np.cos(t), np.sin(t)], 1) * 1000)
+    offsets = np.array([0, n], dtype=np.int64)
+    closed = np.ones(1, dtype=np.int64)
+    starts = np.zeros(1, dtype=np.int64)
+    greedy = curvecoder.reach_set(points, points, offsets, closed, starts, 1.0, 512)
+    best = curvecoder.optimal_set(points, points, offsets, closed, starts, 1.0, 512, greedy)
+    assert np.array_equal(best, greedy)
+
+
+@pytest.mark.parametrize("tolerance", [0.01, 0.002])
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_bulged_segments_keep_the_bound_in_fewer_bytes(tolerance: float, dtype: str) -> None:
+    # smooth closed and open plane curves: the parabolas between vertices follow the arcs
+    curves = [(_ring(400, 1 + k) + 3 * k).astype(dtype) for k in range(4)]
+    curves.append(np.stack([np.linspace(0, 6, 300), np.sin(np.linspace(0, 6, 300))], 1))
+    curves[-1] = curves[-1].astype(dtype)
+    closed = [True, True, True, True, False]
+    bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
+    assert bundle[4] == curvesets.BULGED_VERSION
+    out = wavecore.decode_curves(bundle)
+    assert out.closed == closed
+    for original, back, flag in zip(curves, out.curves, closed, strict=True):
+        assert back.dtype == original.dtype
+        assert _both_ways(original, back, flag) <= out.tolerance
+    # the same vertices without bulges: the version-2 stream the encoder weighed it against
+    stream_v3 = len(bundle)
+    assert wavecore.inspect(bundle)["version"] == "3"
+    plain = _plain_vertex_size(curves, closed, tolerance)
+    assert stream_v3 < plain
+
+
+def _plain_vertex_size(curves, closed, tolerance) -> int:
+    """The vertex form's size with bulges switched off (version 2)."""
+    original = curvesets._bulged_stream
+    curvesets._bulged_stream = lambda *args: None
+    try:
+        bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
+    finally:
+        curvesets._bulged_stream = original
+    assert bundle[4] == curvesets.VERTEX_VERSION
+    return len(bundle)
+
+
+def test_bulged_polylines_lie_on_their_parabolas() -> None:
+    # decoded inner points: on the parabola through both vertices, its middle `bulge * unit`
+    # to the left of the chord (independent formula: the vertex form of a parabola)
+    vertices = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0]])
+    counts = np.array([3], dtype=np.int64)
+    closed = np.array([1], dtype=np.int64)
+    bulges = np.array([2, 3, 0], dtype=np.int64)  # segments ending at rows 0 (closing), 1, 2
+    out, sizes, rows = curvecoder.bulged_polylines(vertices, counts, closed, bulges, 0.25)
+    parts = curvecoder.BULGE_PARTS
+    assert sizes.tolist() == [3 + 2 * (parts - 1)]
+    assert rows.tolist() == [0, parts, parts + 1]
+    first = out[1:parts]  # (0,0) -> (4,0), middle 0.75 to the left (+y)
+    assert np.allclose(first[:, 1], 0.75 * (1 - ((first[:, 0] - 2) / 2) ** 2))
+    closing = out[parts + 2 :]  # (4,3) -> (0,0), middle 0.5 to the left of that chord
+    chord = np.array([-4.0, -3.0]) / 5
+    left = np.array([-chord[1], chord[0]])
+    along = (closing - [4.0, 3.0]) @ chord / 5
+    assert np.allclose((closing - [4.0, 3.0]) @ left, 0.5 * 4 * along * (1 - along))

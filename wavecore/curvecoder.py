@@ -47,15 +47,22 @@ _FIRST_COORD = _KIND_START + 4
 _OTHER_COORD = _FIRST_COORD + _CLASSES
 _ALONG = _OTHER_COORD + _CLASSES * 4  # frame predictor: along the predicted direction
 _ACROSS = _ALONG + _CLASSES  # and across it
-_MAG_KINDS = _ACROSS + _CLASSES
+_BULGE = _ACROSS + _CLASSES  # a segment's bulge (version 3): by the previous bulge's size (4)
+# and the segment's length (4)
+_MAG_KINDS = _BULGE + 16
 MAG_BASE = 0
 MANT_BASE = MAG_BASE + _MAG_KINDS * _UNARY
 MANT_SIZE = (MAX_BITS + 1) * MAX_BITS
 SIGN_BASE = MANT_BASE + MANT_SIZE
-SIGN_SIZE = 3 * 4 + 4 + 4  # by the previous residual's sign and the coordinate; first
-# vertices; the frame predictor's along (1) and across (3, by the previous across residual)
+SIGN_SIZE = 3 * 4 + 4 + 4 + 9  # by the previous residual's sign and the coordinate; first
+# vertices; the frame predictor's along (1) and across (3, by the previous across residual);
+# bulges (9, by the turns at the segment's two ends)
 _SIGN_ALONG = 16
 _SIGN_ACROSS = 17
+_SIGN_BULGE = 21
+#: A bulged segment (curve-set version 3) is decoded as ``BULGE_PARTS`` chords of the parabola
+#: through its two vertices whose middle lies ``bulge * step / 2`` off the chord, to the left.
+BULGE_PARTS = 8
 #: Predictors: 0 the previous vertex, 1 half a step on, 2 a straight continuation; 3 and 4
 #: (two dimensions) code a step in the frame of its predicted direction: the previous step's
 #: (3) or that direction turned again by the previous turn (4).
@@ -241,12 +248,17 @@ def _across_prediction(zx, zy, u):
 
 
 @njit(cache=True, nogil=True)
-def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order, decoding):
+def _code_set(
+    buf, st, lattice, counts, closed, repeated, closed_mode, d, order, decoding, bulges, bulged
+):
     """Code (or decode into ``lattice``, ``counts``, ``closed``, ``repeated``) a whole set.
 
     ``lattice`` holds the vertices of all curves, one after another, ``(total, d)`` int64.
     ``order`` is the predictor: each step is predicted as ``(order * previous step) >> 1``
     (0: the previous vertex; 2: a straight continuation; 1: half way), and the residual coded.
+    With ``bulged`` (version 3), each segment's bulge follows the vertex that ends it (a
+    closed curve's closing segment after its last vertex), kept in ``bulges`` at the row of
+    the segment's end (the closing segment's at the curve's first row).
     Returns the number of vertices (decoding: those written; -1 if the stream declares more
     than ``lattice`` holds).
     """
@@ -331,8 +343,78 @@ def _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order,
                     first_class = max(0, min(3, length_class - k + 1))
                 largest = max(largest, abs(previous_step[j]))
             length_class = _class(_bit_length(largest))
+        if bulged:  # the curve's bulges, in order; a closed curve's closing one last
+            bulge_class, bulge_sign = 0, 0
+            for row in range(at + 1, at + m):
+                bulge_class, bulge_sign = _bulge(
+                    st,
+                    buf,
+                    models,
+                    bulges,
+                    row,
+                    row - 1,
+                    lattice,
+                    at,
+                    m,
+                    closed[c],
+                    bulge_class,
+                    bulge_sign,
+                    decoding,
+                )
+            if closed[c] and m > 1:
+                _bulge(
+                    st,
+                    buf,
+                    models,
+                    bulges,
+                    at,
+                    at + m - 1,
+                    lattice,
+                    at,
+                    m,
+                    closed[c],
+                    bulge_class,
+                    bulge_sign,
+                    decoding,
+                )
+            else:
+                bulges[at] = 0
         at += m
     return at
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _turn(lattice, a, b, c):
+    """The sign of the turn at ``b`` from ``a`` to ``c`` (+1 left, -1 right, 0 straight), for
+    steps short enough for exact products (0 beyond)."""
+    ux, uy = lattice[b, 0] - lattice[a, 0], lattice[b, 1] - lattice[a, 1]
+    vx, vy = lattice[c, 0] - lattice[b, 0], lattice[c, 1] - lattice[b, 1]
+    if max(abs(ux), abs(uy), abs(vx), abs(vy)) >= _FRAME_LIMIT:
+        return 0
+    cross = ux * vy - uy * vx
+    return (cross > 0) - (cross < 0)
+
+
+@njit(cache=True, nogil=True)
+def _bulge(
+    st, buf, models, bulges, row, before, lattice, at, m, ring, bulge_class, bulge_sign, decoding
+):
+    """Code the bulge of the segment from row ``before`` to ``row`` (of the curve at rows
+    ``at … at + m - 1``); the next bulge's contexts.  Context: the previous bulge's size and
+    the segment's (a sagitta grows with the square of the chord); for its sign, the turns at
+    both its ends (an arc bulges to the side it turns away from)."""
+    longest = max(
+        abs(lattice[row, 0] - lattice[before, 0]), abs(lattice[row, 1] - lattice[before, 1])
+    )
+    kind = _BULGE + bulge_class + 4 * min(3, _bit_length(longest) // 2)
+    earlier = before - 1 if before > at else (at + m - 1 if ring else -1)
+    later = row + 1 if row < at + m - 1 else (at if ring else -1)
+    turn_in = _turn(lattice, earlier, before, row) if earlier >= 0 else 0
+    turn_out = _turn(lattice, before, row, later) if later >= 0 else 0
+    sign_ctx = _SIGN_BULGE + 3 * (1 + turn_in) + 1 + turn_out
+    value = _signed(st, buf, models, kind, sign_ctx, bulges[row], decoding)
+    bulges[row] = value
+    return min(3, _bit_length(abs(value))), (value > 0) - (value < 0)
 
 
 @njit(cache=True, nogil=True)
@@ -356,9 +438,13 @@ def encode_set(
     repeated: np.ndarray,
     closed_mode: int,
     order: int = 0,
+    bulges: np.ndarray | None = None,
 ) -> bytes:
-    """The range-coded stream of a set of lattice curves (see :func:`decode_set`)."""
+    """The range-coded stream of a set of lattice curves (see :func:`decode_set`); with
+    ``bulges`` (one per vertex row: the bulge of the segment ending there), version 3's."""
     d = lattice.shape[1]
+    bulged = bulges is not None
+    bulges = np.zeros(len(lattice), dtype=np.int64) if bulges is None else bulges
     capacity = 64 + 16 * lattice.size + 8 * len(counts)
     out = np.zeros(capacity, dtype=np.uint8)
     st = np.array([0, MASK32, 0, 1, 0, 0], dtype=np.int64)
@@ -373,6 +459,8 @@ def encode_set(
         d,
         order,
         False,
+        np.ascontiguousarray(bulges, dtype=np.int64),
+        bulged,
     )
     _finish_stream(st, out)
     size = int(st[_POS])
@@ -396,6 +484,21 @@ def decode_set(
 
     None if the stream declares more than ``max_vertices`` vertices in all.
     """
+    result = decode_bulged_set(data, count, d, closed_mode, all_closed, max_vertices, order, False)
+    return None if result is None else result[:4]
+
+
+def decode_bulged_set(
+    data: bytes,
+    count: int,
+    d: int,
+    closed_mode: int,
+    all_closed: bool,
+    max_vertices: int,
+    order: int,
+    bulged: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """As :func:`decode_set`, and the bulges (zeros unless ``bulged``: version 3)."""
     buf = np.frombuffer(bytes(data), dtype=np.uint8).copy()  # one compiled signature
     st = np.array([0, MASK32, 0, 1, 0, 0], dtype=np.int64)
     code = 0
@@ -407,10 +510,13 @@ def decode_set(
     counts = np.zeros(count, dtype=np.int64)
     closed = np.full(count, 1 if all_closed else 0, dtype=np.int64)
     repeated = np.zeros(count, dtype=np.int64)
-    total = _code_set(buf, st, lattice, counts, closed, repeated, closed_mode, d, order, True)
+    bulges = np.zeros(max_vertices, dtype=np.int64)
+    total = _code_set(
+        buf, st, lattice, counts, closed, repeated, closed_mode, d, order, True, bulges, bulged
+    )
     if total < 0:
         return None
-    return lattice[:total], counts, closed, repeated
+    return lattice[:total], counts, closed, repeated, bulges[:total]
 
 
 # --- the encoder's geometry: simplification against quantized segments, and the check --------
@@ -506,6 +612,58 @@ def reach_set(points, decoded, offsets, closed, starts, tolerance, window):
                 b += 1
             keep[first + (best % n)] = True
             a = best
+    return keep
+
+
+@njit(cache=True, nogil=True)
+def optimal_set(points, decoded, offsets, closed, starts, tolerance, window, greedy):
+    """Fewest vertices on each curve (Imai–Iri): a shortest path in the graph whose edges are
+    the spans that keep every point between within ``tolerance`` of the *decoded* segment
+    (:func:`reach_set`'s test), each span at most ``window`` points long, tested exactly.
+
+    Greedy farthest reach is one path in that graph, so the result never has more vertices;
+    on the glyphs of benchmarks/curves.py it has 1–5 % fewer at coarse tolerances (a span
+    that stops short of the farthest reach can let the next one go much farther).  A span is
+    tested only where it would shorten the path to its end, so on long smooth stretches few
+    are; where a curve's tests would still exceed a work budget linear in its points
+    (``256 n`` points visited, plus a constant), it keeps ``greedy``'s vertices (the mask of
+    :func:`reach_set` from the same starts).  Returns a mask of the kept points.
+    """
+    total = points.shape[0]
+    d = points.shape[1]
+    keep = np.zeros(total, dtype=np.bool_)
+    for c in range(len(offsets) - 1):
+        first, stop = offsets[c], offsets[c + 1]
+        n = stop - first
+        if n == 0:
+            continue
+        ring = n + 1 if closed[c] and n > 2 else n
+        origin = starts[c] if ring > n else 0
+        last = ring - 1  # path positions 0 … last, point (origin + position) % n
+        dist = np.full(last + 1, 1 << 40, dtype=np.int64)
+        previous = np.full(last + 1, -1, dtype=np.int64)
+        dist[0] = 0
+        budget = 256 * n + (1 << 16)
+        for a in range(last):
+            if budget < 0:
+                break
+            top = min(last, a + window)
+            for b in range(a + 1, top + 1):
+                if dist[a] + 1 >= dist[b]:
+                    continue
+                budget -= b - a
+                gap = _span_fits(points, decoded, first, n, origin + a, origin + b, tolerance, d)
+                if gap <= tolerance:
+                    dist[b] = dist[a] + 1
+                    previous[b] = a
+        if budget < 0:
+            for i in range(first, stop):
+                keep[i] = greedy[i]
+            continue
+        at = last
+        while at >= 0:
+            keep[first + ((origin + at) % n)] = True
+            at = previous[at]
     return keep
 
 
@@ -1039,3 +1197,343 @@ def _next_reach(points, lattice, first, n, a, last, position, step, tolerance, w
         best = b
         span *= 2
     return best
+
+
+# --- version 3: bulged segments -----------------------------------------------------------------
+
+
+@njit(cache=True, nogil=True)
+def _bulge_points(ax, ay, bx, by, middle, out, at):
+    """The ``BULGE_PARTS - 1`` inner points of the parabola from ``(ax, ay)`` to ``(bx, by)``
+    whose middle lies ``middle`` to the left of the chord, written into ``out[at:]``.
+
+    Plain float64 arithmetic on the decoded vertices (``sqrt`` is correctly rounded), so the
+    encoder's check and every decoder compute the same points.  None for a zero-length chord.
+    """
+    dx, dy = bx - ax, by - ay
+    length = np.sqrt(dx * dx + dy * dy)
+    if length == 0.0 or middle == 0.0:
+        return 0
+    nx, ny = -dy / length, dx / length
+    for i in range(1, BULGE_PARTS):
+        s = i / BULGE_PARTS
+        off = 4.0 * s * (1.0 - s) * middle
+        out[at + i - 1, 0] = ax + s * dx + off * nx
+        out[at + i - 1, 1] = ay + s * dy + off * ny
+    return BULGE_PARTS - 1
+
+
+@njit(cache=True, nogil=True)
+def bulged_polylines(vertices, counts, closed, bulges, unit):
+    """The decoded polylines of version 3: each curve's vertices (float64, ``(total, 2)``) with
+    every bulged segment's inner points between its ends.  Returns the points, each curve's
+    point count, and each vertex's row among the points."""
+    extra = 0
+    for i in range(len(bulges)):
+        if bulges[i] != 0:
+            extra += BULGE_PARTS - 1
+    out = np.empty((len(vertices) + extra, 2))
+    sizes = np.zeros(len(counts), dtype=np.int64)
+    rows = np.empty(len(vertices), dtype=np.int64)
+    at = 0
+    w = 0
+    for c in range(len(counts)):
+        m = counts[c]
+        start = w
+        for v in range(at, at + m):
+            if v > at:
+                w += _bulge_points(
+                    vertices[v - 1, 0],
+                    vertices[v - 1, 1],
+                    vertices[v, 0],
+                    vertices[v, 1],
+                    bulges[v] * unit,
+                    out,
+                    w,
+                )
+            rows[v] = w
+            out[w, 0] = vertices[v, 0]
+            out[w, 1] = vertices[v, 1]
+            w += 1
+        if closed[c] and m > 1:
+            w += _bulge_points(
+                vertices[at + m - 1, 0],
+                vertices[at + m - 1, 1],
+                vertices[at, 0],
+                vertices[at, 1],
+                bulges[at] * unit,
+                out,
+                w,
+            )
+        sizes[c] = w - start
+        at += m
+    return out[:w], sizes, rows
+
+
+@njit(cache=True, nogil=True)
+def _to_chain(points, k, chain, lo, hi):
+    """Distance from ``points[k]`` to the polyline ``chain[lo] … chain[hi]``."""
+    best = np.inf
+    if hi == lo:
+        return _segment_distance(points, k, chain, lo, lo, 2)
+    for i in range(lo, hi):
+        best = min(best, _segment_distance(points, k, chain, i, i + 1, 2))
+    return best
+
+
+@njit(cache=True, nogil=True)
+def _bulged_fit(points, decoded, first, n, a, b, tolerance, unit, chain, strict):
+    """The bulge (in ``unit``) whose parabola from decoded point ``a`` to ``b`` (ring indices)
+    keeps the points between within ``tolerance`` and its inner points within ``tolerance``
+    of the original segments ``a … b - 1``; 0 for the straight segment; ``_NO_FIT`` if none.
+    Tried: straight, then the bulge through the point farthest from the chord and its two
+    neighbours, the smaller first.  ``strict`` 1: the span's ends too must lie within
+    ``tolerance`` of it (the check measures them against both their spans; some sets need it
+    to pass); 2: straight spans only (:func:`reach_set`'s test)."""
+    ia, ib = first + (a % n), first + (b % n)
+    ax, ay = decoded[ia, 0], decoded[ia, 1]
+    bx, by = decoded[ib, 0], decoded[ib, 1]
+    dx, dy = bx - ax, by - ay
+    length2 = dx * dx + dy * dy
+    guess = 0.0
+    widest = 0.0
+    if length2 > 0.0:
+        for k in range(a + 1, b):
+            p = first + (k % n)
+            px, py = points[p, 0] - ax, points[p, 1] - ay
+            s = (px * dx + py * dy) / length2
+            if 0.0 < s < 1.0 and s * (1.0 - s) > widest:
+                widest = s * (1.0 - s)
+                guess = (-px * dy + py * dx) / np.sqrt(length2) / (4.0 * widest)
+    centre = np.int64(np.rint(guess / unit)) if unit > 0 and abs(guess / unit) < 1e9 else 0
+    chain[0, 0], chain[0, 1] = ax, ay
+    # the smallest bulge first (the cheapest to code): 0, then the guess's side nearer zero
+    toward = -1 if centre > 0 else 1
+    for t in range(4):
+        bulge = 0 if t == 0 else centre + (0, toward, 0, -toward)[t]
+        if t > 0 and (bulge == 0 or strict >= 2):
+            continue
+        if t == 1 and (centre + toward == 0 or centre == 0):
+            continue
+        inner = _bulge_points(ax, ay, bx, by, bulge * unit, chain, 1)
+        chain[inner + 1, 0], chain[inner + 1, 1] = bx, by
+        fits = True
+        ends = 1 if strict == 1 else 0
+        for k in range(a + 1 - ends, b + ends):
+            if _to_chain(points, first + (k % n), chain, 0, inner + 1) > tolerance:
+                fits = False
+                break
+        for i in range(1, inner + 1):
+            if not fits:
+                break
+            best = np.inf
+            for s in range(a, b):
+                best = min(
+                    best,
+                    _segment_distance(chain, i, points, first + (s % n), first + ((s + 1) % n), 2),
+                )
+            fits = best <= tolerance
+        if fits:
+            return bulge
+    return _NO_FIT
+
+
+_NO_FIT = 1 << 62
+
+
+@njit(cache=True, nogil=True)
+def bulged_reach_set(points, decoded, offsets, closed, tolerance, window, unit, bulges, strict):
+    """Greedy farthest reach (:func:`reach_set`, from each curve's point 0) where a span may be
+    a parabola (:func:`_bulged_fit`): on an arc it follows the curve, so it reaches several
+    times as far as a chord.  Writes each span's bulge at the row of its end (a closed curve's
+    closing span at its first row) into ``bulges``; returns the mask of the kept points.
+    ``strict`` per curve: see :func:`_bulged_fit`."""
+    total = points.shape[0]
+    keep = np.zeros(total, dtype=np.bool_)
+    chain = np.empty((BULGE_PARTS + 1, 2))
+    for c in range(len(offsets) - 1):
+        first, stop = offsets[c], offsets[c + 1]
+        n = stop - first
+        if n == 0:
+            continue
+        ring = n + 1 if closed[c] and n > 2 else n
+        last = ring - 1
+        keep[first] = True
+        keep[first + (last % n)] = True
+        a = 0
+        while a < last:
+            top = min(last, a + window)
+            best = a + 1
+            best_bulge = 0
+            span = 2
+            fail = top + 1
+            while a + span <= top:
+                found = _bulged_fit(
+                    points, decoded, first, n, a, a + span, tolerance, unit, chain, strict[c]
+                )
+                if found != _NO_FIT:
+                    best, best_bulge = a + span, found
+                    span *= 2
+                else:
+                    fail = a + span
+                    break
+            if fail > top and best < top:
+                found = _bulged_fit(
+                    points, decoded, first, n, a, top, tolerance, unit, chain, strict[c]
+                )
+                if found != _NO_FIT:
+                    best, best_bulge = top, found
+                else:
+                    fail = top
+            while fail - best > 1:
+                middle = (best + fail) // 2
+                found = _bulged_fit(
+                    points, decoded, first, n, a, middle, tolerance, unit, chain, strict[c]
+                )
+                if found != _NO_FIT:
+                    best, best_bulge = middle, found
+                else:
+                    fail = middle
+            keep[first + (best % n)] = True
+            bulges[first + (best % n)] = best_bulge
+            a = best
+    return keep
+
+
+@njit(cache=True, nogil=True)
+def check_bulged(points, offsets, closed, keep, out, sizes, rows):
+    """The largest deviation, both ways, of each curve of version 3 (an upper bound).
+
+    ``out`` holds the decoded polylines (:func:`bulged_polylines`), ``rows`` each vertex's row
+    in it.  Per span between kept points ``a`` and ``b``: each original point strictly between
+    to the decoded points from vertex ``a`` to ``b``, each decoded inner point to the original
+    segments ``a … b - 1``; each kept point to the decoded points of its two spans, each vertex
+    to the original segments of its two spans.  Each is a minimum over part of a polyline.
+    """
+    worst = np.zeros(len(offsets) - 1)
+    index = np.empty(points.shape[0] + 1, dtype=np.int64)
+    at = 0
+    w = 0
+    for c in range(len(offsets) - 1):
+        first, stop = offsets[c], offsets[c + 1]
+        n = stop - first
+        m = 0
+        for i in range(n):
+            if keep[first + i]:
+                index[m] = i
+                m += 1
+        ring = bool(closed[c]) and n > 2
+        end = w + sizes[c]  # one past the curve's last decoded point
+        largest = 0.0
+        spans = m if ring else m - 1
+        if m == 1:
+            largest = _to_chain(points, first, out, w, w)
+            for k in range(first, stop):
+                largest = max(largest, _to_chain(points, k, out, w, end - 1))
+        for v in range(max(spans, 0)):
+            ka = index[v]
+            kb = index[v + 1] if v + 1 < m else n + index[0]
+            lo = rows[at + v]
+            hi = rows[at + v + 1] if v + 1 < m else end  # ``end`` stands for the first again
+            # the chain lo … hi (hi == end: the first vertex again)
+            for k in range(ka + 1, kb):  # kept points: below, against both spans
+                p = first + (k % n)
+                if hi == end:
+                    gap = _to_chain(points, p, out, lo, end - 1)
+                    gap = min(gap, _segment_distance(points, p, out, end - 1, w, 2))
+                else:
+                    gap = _to_chain(points, p, out, lo, hi)
+                largest = max(largest, gap)
+            for i in range(lo + 1, hi):
+                best = np.inf
+                for s in range(ka, kb):
+                    best = min(
+                        best,
+                        _segment_distance(
+                            out, i, points, first + (s % n), first + ((s + 1) % n), 2
+                        ),
+                    )
+                largest = max(largest, best)
+        # kept points against the decoded points of both their spans, vertices against the
+        # original segments of both
+        for v in range(m):
+            p = first + index[v]
+            here = rows[at + v]
+            nxt = rows[at + v + 1] if v + 1 < m else (end if ring else here)
+            prv = rows[at + v - 1] if v > 0 else (rows[at + m - 1] if ring else here)
+            gap = _to_chain(points, p, out, here, min(nxt, end - 1))
+            if ring and v + 1 == m:
+                gap = min(gap, _segment_distance(points, p, out, end - 1, w, 2))
+            if v > 0:
+                gap = min(gap, _to_chain(points, p, out, prv, here))
+            elif ring:
+                gap = min(gap, _to_chain(points, p, out, prv, end - 1))
+                gap = min(gap, _segment_distance(points, p, out, end - 1, w, 2))
+            largest = max(largest, gap)
+            lo = index[v - 1] if v > 0 else (index[m - 1] - n if ring else 0)
+            hi = index[v + 1] if v + 1 < m else (n + index[0] if ring else n - 1)
+            if m == 1:
+                lo, hi = 0, n if ring else n - 1
+            gap = _to_original(out, here, points, first, n, ring, lo, hi, 2)
+            gap = min(gap, _segment_distance(out, here, points, p, p, 2))
+            largest = max(largest, gap)
+        worst[c] = largest
+        at += m
+        w = end
+    return worst
+
+
+@njit(cache=True, nogil=True)
+def optimal_bulged_set(
+    points, decoded, offsets, closed, tolerance, window, unit, strict, greedy, bulges
+):
+    """The fewest parabolic spans on each curve (as :func:`optimal_set`, with
+    :func:`_bulged_fit`'s test), from each curve's point 0.  ``greedy`` and ``bulges`` hold
+    :func:`bulged_reach_set`'s result, kept for a curve whose tests would exceed the work
+    budget; elsewhere ``bulges`` is rewritten.  Returns the mask of the kept points."""
+    total = points.shape[0]
+    keep = np.zeros(total, dtype=np.bool_)
+    chain = np.empty((BULGE_PARTS + 1, 2))
+    for c in range(len(offsets) - 1):
+        first, stop = offsets[c], offsets[c + 1]
+        n = stop - first
+        if n == 0:
+            continue
+        ring = n + 1 if closed[c] and n > 2 else n
+        last = ring - 1
+        dist = np.full(last + 1, 1 << 40, dtype=np.int64)
+        previous = np.full(last + 1, -1, dtype=np.int64)
+        chosen = np.zeros(last + 1, dtype=np.int64)
+        dist[0] = 0
+        budget = 256 * n + (1 << 16)
+        for a in range(last):
+            if budget < 0:
+                break
+            top = min(last, a + window)
+            for b in range(a + 1, top + 1):
+                if dist[a] + 1 >= dist[b]:
+                    continue
+                budget -= 4 * (b - a)
+                found = _bulged_fit(
+                    points, decoded, first, n, a, b, tolerance, unit, chain, strict[c]
+                )
+                if found != _NO_FIT:
+                    dist[b] = dist[a] + 1
+                    previous[b] = a
+                    chosen[b] = found
+        if budget < 0 or dist[last] >= 1 << 40:
+            for i in range(first, stop):
+                keep[i] = greedy[i]
+            continue
+        for i in range(first, stop):
+            if not greedy[i]:
+                bulges[i] = 0
+        at = last
+        while at > 0:
+            keep[first + (at % n)] = True
+            bulges[first + (at % n)] = chosen[at]
+            at = previous[at]
+        keep[first] = True
+        if ring == n:
+            bulges[first] = 0
+    return keep
