@@ -169,7 +169,7 @@ def checked_grid(data: Any, ndims: Sequence[int], what: str) -> np.ndarray:
     if arr.dtype.name not in _DTYPES:
         msg = f"the {what} has dtype {arr.dtype}; expected one of {', '.join(_DTYPES)}"
         raise InvalidParameter(msg)
-    if arr.dtype.kind == "f" and np.isinf(arr).any():
+    if any_infinite(arr):
         msg = f"the {what} holds infinite values; only finite numbers and NaN can be encoded"
         raise InvalidParameter(msg)
     if arr.dtype.itemsize == 8 and arr.dtype.kind in "iu":
@@ -181,6 +181,16 @@ def checked_grid(data: Any, ndims: Sequence[int], what: str) -> np.ndarray:
             )
             raise InvalidParameter(msg)
     return np.ascontiguousarray(arr)
+
+
+def any_infinite(arr: np.ndarray) -> bool:
+    """Whether a float array holds an infinite value, with no array of its size on the way
+    (``np.isinf(arr).any()`` makes a bool a value: a quarter of a float32 Zarr chunk at the
+    encoder's memory peak).  ``fmin``/``fmax`` skip NaN, which would hide an extreme."""
+    if arr.dtype.kind != "f" or arr.size == 0:
+        return False
+    low, high = np.fmin.reduce(arr, axis=None), np.fmax.reduce(arr, axis=None)
+    return bool(np.isinf(low) or np.isinf(high))
 
 
 def _target(value: Any, name: str, what: str, *, zero: bool = False) -> float | None:
@@ -779,8 +789,10 @@ def encode_layout(
     core = _Core(name, level, boundary)
 
     values = arr.astype(np.float64)
-    missing = np.isnan(values) if dtype.kind == "f" else np.zeros(arr.shape, dtype=bool)
-    has_mask = bool(missing.any())
+    # NaN propagates through min (the grid holds no infinities): the mask is made only when
+    # needed; without NaN a read-only view of False stands for it (no bytes per sample).
+    has_mask = dtype.kind == "f" and bool(np.isnan(values.min()))
+    missing = np.isnan(values) if has_mask else np.broadcast_to(np.False_, arr.shape)
     if has_mask:
         finite = values[~missing]
         data_range = float(finite.max() - finite.min()) if finite.size else 0.0
@@ -803,6 +815,8 @@ def encode_layout(
     predictive = wavelet is None and (bound is not None and (bound > 0 or dtype.kind in "iu"))
     if predictive and bound is not None:
         return _encode_predictive(arr, layout, values, missing, mask_bytes, bound, tiles=tiles)
+    if not has_mask:  # the other coders index, invert and reshape the mask: a real one
+        missing = np.zeros(arr.shape, dtype=bool)
 
     def core_layout() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(filled values, values, missing) in the wavelet core's layout."""
@@ -1188,7 +1202,7 @@ def _predictive_bundle(
         overwrite=(has_mask or disposable) and not np.may_share_memory(known, arr),
         tiles=tiles,
     )
-    finite_count = max(int(np.count_nonzero(~missing)), 1)
+    finite_count = max(missing.size - int(np.count_nonzero(missing)), 1)  # no ~missing copy
     measured_rmse = math.sqrt(squares / finite_count)
     allowed = math.floor(bound) if integer else bound
     if largest > allowed:  # cannot happen: every sample that missed was stored exactly
