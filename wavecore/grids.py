@@ -189,7 +189,9 @@ def any_infinite(arr: np.ndarray) -> bool:
     encoder's memory peak).  ``fmin``/``fmax`` skip NaN, which would hide an extreme."""
     if arr.dtype.kind != "f" or arr.size == 0:
         return False
-    low, high = np.fmin.reduce(arr, axis=None), np.fmax.reduce(arr, axis=None)
+    low, high = np.min(arr), np.max(arr)  # the fast reductions first
+    if np.isnan(low):
+        low, high = np.fmin.reduce(arr, axis=None), np.fmax.reduce(arr, axis=None)
     return bool(np.isinf(low) or np.isinf(high))
 
 
@@ -791,13 +793,14 @@ def encode_layout(
     values = arr.astype(np.float64)
     # NaN propagates through min (the grid holds no infinities): the mask is made only when
     # needed; without NaN a read-only view of False stands for it (no bytes per sample).
-    has_mask = dtype.kind == "f" and bool(np.isnan(values.min()))
+    low = values.min()
+    has_mask = dtype.kind == "f" and bool(np.isnan(low))
     missing = np.isnan(values) if has_mask else np.broadcast_to(np.False_, arr.shape)
     if has_mask:
         finite = values[~missing]
         data_range = float(finite.max() - finite.min()) if finite.size else 0.0
     else:  # no copy of the values for their range
-        data_range = float(values.max() - values.min())
+        data_range = float(values.max() - low)
     if not (bound is not None or rmse_target or psnr_target or bpp_target or lossless):
         bound = DEFAULT_RELATIVE_MAX_ERROR * data_range
     if psnr_target is not None:
