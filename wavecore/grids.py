@@ -1186,7 +1186,7 @@ def _predictive_bundle(
     instead of copying it; the RMSE and bpp searches code the same values again and keep them.
     """
     dtype = arr.dtype
-    has_mask = bool(missing.any())
+    has_mask = _holds_true(missing)
     known = np.where(missing, 0.0, values) if has_mask else values
     integer = dtype.kind in "iu"
     if not integer and bound < 0.5 and not has_mask and _integers(values):
@@ -1205,7 +1205,8 @@ def _predictive_bundle(
         overwrite=(has_mask or disposable) and not np.may_share_memory(known, arr),
         tiles=tiles,
     )
-    finite_count = max(missing.size - int(np.count_nonzero(missing)), 1)  # no ~missing copy
+    # No ~missing copy for the count.
+    finite_count = max(missing.size - int(np.count_nonzero(missing)), 1) if has_mask else arr.size
     measured_rmse = math.sqrt(squares / finite_count)
     allowed = math.floor(bound) if integer else bound
     if largest > allowed:  # cannot happen: every sample that missed was stored exactly
@@ -1270,6 +1271,14 @@ def _corrected(
     arithmetic, shared)."""
     with np.errstate(over="ignore", invalid="ignore"):
         return _to_dtype(decoded + multiples.astype(np.float64) * unit, dtype)
+
+
+def _holds_true(mask: np.ndarray) -> bool:
+    """``mask.any()``, at once for a view of one value (``encode_layout``'s stand-in for the
+    mask of a grid without NaN, whose ``any`` NumPy would otherwise walk value by value)."""
+    if mask.size and not any(mask.strides):
+        return bool(mask.flat[0])
+    return bool(mask.any())
 
 
 def _integers(values: np.ndarray) -> bool:
