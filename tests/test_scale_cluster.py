@@ -1,4 +1,5 @@
-"""wavecore.scale.local_cluster: worker processes spawned without Dask's malloc trim setting."""
+"""wavecore.scale.local_cluster: worker processes spawned with the codec's malloc settings, not
+Dask's trim threshold."""
 
 from __future__ import annotations
 
@@ -11,24 +12,28 @@ distributed = pytest.importorskip("dask.distributed", reason="the zarr extra ins
 
 from wavecore.scale import WORKER_CONFIG, local_cluster  # noqa: E402
 
+_MALLOC_NAMES = ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_", "MALLOC_ARENA_MAX")
 
-def _worker_environ() -> tuple[str | None, int]:
-    return os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.getpid()
+
+def _worker_environ() -> tuple[tuple[str | None, ...], int]:
+    return tuple(os.environ.get(name) for name in _MALLOC_NAMES), os.getpid()
 
 
 @pytest.mark.skipif(
-    "MALLOC_TRIM_THRESHOLD_" in os.environ,
-    reason="the variable set in this shell reaches the workers whatever the configuration",
+    any(name in os.environ for name in _MALLOC_NAMES),
+    reason="variables set in this shell reach the workers whatever the configuration",
 )
-def test_local_cluster_workers_keep_glibc_thresholds() -> None:
+def test_local_cluster_workers_get_the_codecs_malloc_settings() -> None:
     # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in every worker by default, which fixes
-    # glibc's mmap threshold and made the codec ~2x slower per CPU-second (docs/scale.md).
+    # glibc's mmap threshold at 128 KiB and made the codec ~2x slower per CPU-second; the
+    # workers get an mmap threshold of 32 MiB beside a trim threshold of 8 MiB (docs/scale.md).
     with local_cluster(1) as cluster, distributed.Client(cluster) as client:
         seen = list(client.run(_worker_environ).values())
         info = client.scheduler_info()
     assert len(seen) == 1
-    value, pid = seen[0]
-    assert value is None
+    values, pid = seen[0]
+    assert values == (str(8 << 20), str(32 << 20), "1")
+    assert int(values[0]) > 65536  # not Dask's default
     assert pid != os.getpid()  # a worker process, not a thread of this one
     assert all(w["nthreads"] == 1 for w in info["workers"].values())
     # The setting applies only while the cluster is made: the caller's configuration is intact.
@@ -59,6 +64,6 @@ def test_local_cluster_environ_reaches_only_the_workers() -> None:
         distributed.Client(cluster) as client,
     ):
         seen = list(client.run(_probe_environ).values())
-    assert seen == [("on", None, "1")]
+    assert seen == [("on", str(8 << 20), "1")]
     assert "WAVECORE_PROBE_WORKER_ENV" not in os.environ
     assert "MALLOC_ARENA_MAX" not in os.environ

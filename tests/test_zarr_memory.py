@@ -4,14 +4,22 @@ the in-place interpolation coder that meets it (same stream as coding a copy).""
 from __future__ import annotations
 
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 from zarr_fields import smooth_field
 
 from wavecore.gridpredict import decode_predictive, encode_predictive
+from wavecore.grids import any_infinite
 from wavecore.zarr import decode_chunk, encode_chunk
+
+da = pytest.importorskip("dask.array", reason="the zarr extra installs dask")
+dask = pytest.importorskip("dask", reason="the zarr extra installs dask")
+zarr = pytest.importorskip("zarr", reason="the zarr extra installs zarr")
 
 
 def _allocation_peak(function: object, *args: object) -> int:
@@ -40,6 +48,84 @@ def test_float32_chunk_allocations_grow_below_four_chunks() -> None:
     constant = peaks[0] - slope * sizes[0]
     assert slope <= 4.0, slope
     assert constant <= 2**20, constant
+
+
+def _slope(peaks: list[int], sizes: list[int]) -> float:
+    return (peaks[1] - peaks[0]) / (sizes[1] - sizes[0])
+
+
+def test_float32_chunk_without_nan_allocates_its_float64_copy_and_little_else() -> None:
+    """Without NaN no mask of the chunk's size is made (nor an ``isinf`` or ``~missing``
+    array): what grows with the chunk is the float64 grid the coder works in (2 bytes per
+    float32 byte) and its one-byte symbols of the largest group (1/16).  A bool array of the
+    chunk's size would add 0.25: main's code before this test measured 2.31 (its NaN mask)."""
+    peaks, sizes = [], []
+    for side in (256, 512):
+        chunk = smooth_field((side, side), seed=side)
+        config = {"max_error": 1e-2 * float(np.ptp(chunk))}
+        encode_chunk(chunk, config)
+        peaks.append(_allocation_peak(encode_chunk, chunk, config))
+        sizes.append(chunk.nbytes)
+    assert _slope(peaks, sizes) <= 2.2, _slope(peaks, sizes)
+
+
+def test_zarr_write_path_allocations_stay_well_below_four_chunks(tmp_path: Path) -> None:
+    """The worker's path of benchmarks/zarr_scale.py in one process (Dask's synchronous
+    scheduler): a raw Zarr chunk read, coded by the ``wavecore`` serializer and written.  What
+    grows with the chunk: the chunk read (1), the coder's float64 grid (2) and its symbols
+    (1/16), measured 3.05 bytes per chunk byte; main's code before this test 3.29 (its NaN
+    mask and a bool array for its count).  The resident rise in a worker adds glibc's free
+    memory on top (docs/scale.md, Memory per chunk), so this is the part the code controls."""
+    peaks, sizes = [], []
+    for side in (256, 512):
+        source = zarr.create_array(
+            tmp_path / f"raw_{side}.zarr",
+            shape=(2 * side, 2 * side),
+            chunks=(side, side),
+            dtype="float32",
+            compressors=None,
+        )
+        source[:] = smooth_field((2 * side, 2 * side), seed=side)
+        bound = 1e-2 * float(np.ptp(source[:]))
+
+        def write(side: int = side, source: object = source, bound: float = bound) -> None:
+            target = zarr.create_array(
+                tmp_path / f"coded_{side}.zarr",
+                shape=(2 * side, 2 * side),
+                chunks=(side, side),
+                dtype="float32",
+                serializer={"name": "wavecore", "configuration": {"max_error": bound}},
+                compressors=None,
+                overwrite=True,
+            )
+            da.from_zarr(source).store(target, lock=False)
+
+        with dask.config.set(scheduler="synchronous"):
+            write()  # compiled kernels and Zarr's first-use imports outside the measure
+            peaks.append(_allocation_peak(write))
+        sizes.append(side * side * 4)
+        back = np.asarray(zarr.open_array(tmp_path / f"coded_{side}.zarr")[:], np.float64)
+        assert np.max(np.abs(back - source[:])) <= bound
+    assert _slope(peaks, sizes) <= 3.2, _slope(peaks, sizes)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    hnp.arrays(
+        st.sampled_from([np.float16, np.float32, np.float64, np.dtype(">f8")]),
+        hnp.array_shapes(min_dims=1, max_dims=3, max_side=9),
+        elements=st.floats(allow_nan=True, allow_infinity=True, width=16),
+    )
+)
+def test_any_infinite_is_isinf_any(values: np.ndarray) -> None:
+    assert any_infinite(values) == bool(np.isinf(values).any())
+    assert any_infinite(values[..., ::2]) == bool(np.isinf(values[..., ::2]).any())
+
+
+def test_any_infinite_of_integers_and_empty_arrays() -> None:
+    assert not any_infinite(np.arange(5))
+    assert not any_infinite(np.zeros((0, 3)))
+    assert any_infinite(np.array([[np.nan, -np.inf], [np.nan, np.nan]]))
 
 
 @settings(max_examples=25, deadline=None)

@@ -169,7 +169,7 @@ def checked_grid(data: Any, ndims: Sequence[int], what: str) -> np.ndarray:
     if arr.dtype.name not in _DTYPES:
         msg = f"the {what} has dtype {arr.dtype}; expected one of {', '.join(_DTYPES)}"
         raise InvalidParameter(msg)
-    if arr.dtype.kind == "f" and np.isinf(arr).any():
+    if any_infinite(arr):
         msg = f"the {what} holds infinite values; only finite numbers and NaN can be encoded"
         raise InvalidParameter(msg)
     if arr.dtype.itemsize == 8 and arr.dtype.kind in "iu":
@@ -181,6 +181,18 @@ def checked_grid(data: Any, ndims: Sequence[int], what: str) -> np.ndarray:
             )
             raise InvalidParameter(msg)
     return np.ascontiguousarray(arr)
+
+
+def any_infinite(arr: np.ndarray) -> bool:
+    """Whether a float array holds an infinite value, with no array of its size on the way
+    (``np.isinf(arr).any()`` makes a bool a value: a quarter of a float32 Zarr chunk at the
+    encoder's memory peak).  ``fmin``/``fmax`` skip NaN, which would hide an extreme."""
+    if arr.dtype.kind != "f" or arr.size == 0:
+        return False
+    low, high = np.min(arr), np.max(arr)  # the fast reductions first
+    if np.isnan(low):
+        low, high = np.fmin.reduce(arr, axis=None), np.fmax.reduce(arr, axis=None)
+    return bool(np.isinf(low) or np.isinf(high))
 
 
 def _target(value: Any, name: str, what: str, *, zero: bool = False) -> float | None:
@@ -779,13 +791,16 @@ def encode_layout(
     core = _Core(name, level, boundary)
 
     values = arr.astype(np.float64)
-    missing = np.isnan(values) if dtype.kind == "f" else np.zeros(arr.shape, dtype=bool)
-    has_mask = bool(missing.any())
+    # NaN propagates through min (the grid holds no infinities): the mask is made only when
+    # needed; without NaN a read-only view of False stands for it (no bytes per sample).
+    low = values.min()
+    has_mask = dtype.kind == "f" and bool(np.isnan(low))
+    missing = np.isnan(values) if has_mask else np.broadcast_to(np.False_, arr.shape)
     if has_mask:
         finite = values[~missing]
         data_range = float(finite.max() - finite.min()) if finite.size else 0.0
     else:  # no copy of the values for their range
-        data_range = float(values.max() - values.min())
+        data_range = float(values.max() - low)
     if not (bound is not None or rmse_target or psnr_target or bpp_target or lossless):
         bound = DEFAULT_RELATIVE_MAX_ERROR * data_range
     if psnr_target is not None:
@@ -803,6 +818,8 @@ def encode_layout(
     predictive = wavelet is None and (bound is not None and (bound > 0 or dtype.kind in "iu"))
     if predictive and bound is not None:
         return _encode_predictive(arr, layout, values, missing, mask_bytes, bound, tiles=tiles)
+    if not has_mask:  # the other coders index, invert and reshape the mask: a real one
+        missing = np.zeros(arr.shape, dtype=bool)
 
     def core_layout() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(filled values, values, missing) in the wavelet core's layout."""
@@ -1169,7 +1186,7 @@ def _predictive_bundle(
     instead of copying it; the RMSE and bpp searches code the same values again and keep them.
     """
     dtype = arr.dtype
-    has_mask = bool(missing.any())
+    has_mask = _holds_true(missing)
     known = np.where(missing, 0.0, values) if has_mask else values
     integer = dtype.kind in "iu"
     if not integer and bound < 0.5 and not has_mask and _integers(values):
@@ -1188,7 +1205,8 @@ def _predictive_bundle(
         overwrite=(has_mask or disposable) and not np.may_share_memory(known, arr),
         tiles=tiles,
     )
-    finite_count = max(int(np.count_nonzero(~missing)), 1)
+    # No ~missing copy for the count.
+    finite_count = max(missing.size - int(np.count_nonzero(missing)), 1) if has_mask else arr.size
     measured_rmse = math.sqrt(squares / finite_count)
     allowed = math.floor(bound) if integer else bound
     if largest > allowed:  # cannot happen: every sample that missed was stored exactly
@@ -1253,6 +1271,14 @@ def _corrected(
     arithmetic, shared)."""
     with np.errstate(over="ignore", invalid="ignore"):
         return _to_dtype(decoded + multiples.astype(np.float64) * unit, dtype)
+
+
+def _holds_true(mask: np.ndarray) -> bool:
+    """``mask.any()``, at once for a view of one value (``encode_layout``'s stand-in for the
+    mask of a grid without NaN, whose ``any`` NumPy would otherwise walk value by value)."""
+    if mask.size and not any(mask.strides):
+        return bool(mask.flat[0])
+    return bool(mask.any())
 
 
 def _integers(values: np.ndarray) -> bool:

@@ -56,7 +56,7 @@ import numpy as np
 from . import decode, encode_image, encode_surface
 from .errors import BundleError, InvalidParameter
 from .filters import get_wavelet
-from .grids import LAYOUT_FIELD, LAYOUT_VOLUME, checked_grid, encode_layout
+from .grids import LAYOUT_FIELD, LAYOUT_VOLUME, any_infinite, checked_grid, encode_layout
 
 try:
     import numcodecs
@@ -241,7 +241,7 @@ def encode_chunk(array: Any, config: CodecConfig | Mapping[str, Any]) -> bytes:
             return _lossless_chunk(head, slices, low, high, cfg.level)
     if cfg.lossless:
         cfg = replace(cfg, lossless=False, max_error=0.5)  # integers within 0.5 are exact
-    elif cfg.max_error is not None and not np.isinf(arr).any():
+    elif cfg.max_error is not None and not any_infinite(arr):
         # encode_grid, untiled: a chunk is already the unit of a window, and tiles above 256²
         # would cost the encoder some 14 % and each chunk bytes (~140 B a 1024² chunk).
         checked = checked_grid(arr, (2, 3), "grid")
