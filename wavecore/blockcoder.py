@@ -262,9 +262,16 @@ def band_counts(band: np.ndarray) -> tuple[int, int]:
     (:func:`wavecore.quantize.reconstruction_offset`), so a decode that reads only some
     blocks of a band needs them for the whole band.
     """
-    # The dequantizer's own count (one compiled pass), so the two can never disagree.
-    ones, more = sample_kernels.count_ones_and_more(np.ravel(band))
-    return int(ones), int(more)
+    # The dequantizer's own count (compiled passes), so the two can never disagree; in slices
+    # over the threads (integer counts add up exactly), since the encoder counts every band.
+    flat = np.ravel(band)
+    parts: list[tuple[int, int]] = []
+    run_rows(
+        lambda lo, hi: parts.append(sample_kernels.count_ones_and_more(flat[lo:hi])),
+        flat.size,
+        flat.size,
+    )
+    return sum(int(p[0]) for p in parts), sum(int(p[1]) for p in parts)
 
 
 class CodedBlocks:
