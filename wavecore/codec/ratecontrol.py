@@ -435,10 +435,16 @@ class _LossyEncoder:
         key = (step, self.kept_fraction)
         if key not in self._estimates:
             bits = 0.0
-            for lost, large, signs in _band_estimates(self._histograms(), step):
-                bits -= lost
-                bits += 1.2 * large  # larger magnitudes by their bit length
-                bits += signs  # a bit per sign
+            for counts, centres, rounding in self._histograms():
+                indices = np.floor(centres / step + rounding)
+                histogram = np.bincount(
+                    np.minimum(indices, 255).astype(np.int64), weights=counts, minlength=256
+                )
+                present = histogram[histogram > 0]
+                bits -= float(np.sum(present * np.log2(present / counts.sum())))
+                beyond = indices > 255  # larger magnitudes by their bit length
+                bits += 1.2 * float(np.sum(counts[beyond] * np.log2(indices[beyond])))
+                bits += float(counts[indices >= 1].sum())  # a bit per sign
             self._estimates[key] = bits / 8.0 + _HEADER_GUESS
         return self._estimates[key]
 
@@ -487,48 +493,6 @@ def _log_histogram(values: np.ndarray, scale: float) -> tuple[np.ndarray, int]:
         values.size,
     )
     return np.sum(parts, axis=0), top
-
-
-def _band_estimates(
-    histograms: list[tuple[np.ndarray, np.ndarray, float]], step: float
-) -> list[tuple[float, float, float]]:
-    """Per band, the three sums of :meth:`_LossyEncoder.size_estimate` at ``step``: the
-    first-order entropy of the indices up to 255 (as a negative sum), the bit lengths of the
-    larger ones, the nonzero count.
-
-    Every band at once in each NumPy pass (the bpp search asks for dozens of steps, and band by
-    band this was a few hundred small calls a step on the calling thread), with each band's
-    sums taken over the same values in the same order as band by band: the same bits.
-    """
-    counts = np.concatenate([h[0] for h in histograms])
-    centres = np.concatenate([h[1] for h in histograms])
-    rounding = np.concatenate([np.full(h[0].size, h[2]) for h in histograms])
-    sizes = np.array([h[0].size for h in histograms], dtype=np.int64)
-    bands = len(histograms)
-    band_of = np.repeat(np.arange(bands), sizes)
-    indices = np.floor(centres / step + rounding)
-    binned = np.minimum(indices, 255).astype(np.int64) + 256 * band_of
-    histogram = np.bincount(binned, weights=counts, minlength=256 * bands).reshape(bands, 256)
-    present = histogram > 0
-    totals = np.array([h[0].sum() for h in histograms])
-    values = histogram[present]
-    lost = values * np.log2(values / np.repeat(totals, present.sum(axis=1)))
-    beyond = indices > 255
-    large = counts[beyond] * np.log2(indices[beyond])
-    nonzero = counts[indices >= 1]
-    ends = [
-        np.cumsum(present.sum(axis=1)),
-        np.cumsum(np.bincount(band_of[beyond], minlength=bands)),
-        np.cumsum(np.bincount(band_of[indices >= 1], minlength=bands)),
-    ]
-    out = []
-    for band in range(bands):
-        sums = []
-        for terms, end in zip((lost, large, nonzero), ends, strict=True):
-            start = int(end[band - 1]) if band else 0
-            sums.append(float(np.sum(terms[start : int(end[band])])))
-        out.append((sums[0], sums[1], sums[2]))
-    return out
 
 
 class _Search:
