@@ -677,6 +677,23 @@ def squared_and_largest_error(decoded, original):
 
 
 @njit(nogil=True, cache=True)
+def squared_and_largest_integer_error(decoded, original):
+    """:func:`squared_and_largest_error` of integer samples whose squared differences add up
+    below ``2**53``, in integers: the same values (every float partial sum of integers that
+    small is exact), in a loop that vectorises (a float sum must keep its order)."""
+    total = np.int64(0)
+    largest = np.int64(0)
+    for k in range(decoded.size):
+        d = np.int64(decoded[k]) - np.int64(original[k])
+        total += d * d
+        if d < 0:
+            d = -d
+        if d > largest:
+            largest = d
+    return total, largest
+
+
+@njit(nogil=True, cache=True)
 def colour_to_floats(src, matrix, out, row_lo, row_hi):
     """``out = matrix @ src`` per pixel on the first three channels (the others copied), as
     float64, rows ``[row_lo, row_hi)``: the encoder's colour transform in one pass."""

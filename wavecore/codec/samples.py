@@ -9,7 +9,12 @@ from typing import Any
 
 import numpy as np
 
-from .._kernels import colour_to_floats, colour_to_integers, squared_and_largest_error
+from .._kernels import (
+    colour_to_floats,
+    colour_to_integers,
+    squared_and_largest_error,
+    squared_and_largest_integer_error,
+)
 from ..colour import YCBCR_INVERSE_MATRIX, YCBCR_MATRIX, ycbcr_forward
 from ..errors import InvalidParameter
 from ..filters import get_wavelet
@@ -304,15 +309,15 @@ def _squared_and_largest_error(decoded: np.ndarray, original: np.ndarray) -> tup
         spans = [_integer_span(decoded.dtype), _integer_span(original.dtype)]
         widest = float(max(spans))
         if widest * widest * max(decoded.size, 1) < 2.0**53:
-            parts: list[tuple[float, float]] = []
+            parts: list[tuple[int, int]] = []
             run_rows(
                 lambda lo, hi: parts.append(
-                    squared_and_largest_error(decoded[lo:hi], original[lo:hi])
+                    squared_and_largest_integer_error(decoded[lo:hi], original[lo:hi])
                 ),
                 decoded.size,
                 decoded.size,
             )
-            return sum(p[0] for p in parts), max(p[1] for p in parts)
+            return float(sum(int(p[0]) for p in parts)), float(max(int(p[1]) for p in parts))
     total, largest = squared_and_largest_error(decoded, original)
     return float(total), float(largest)
 
