@@ -1075,6 +1075,11 @@ def _sampled_ratio(
     chosen = ~sampled | (rank % stride == stride // 2)
     sample = np.flatnonzero(chosen)
     lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample)
+    # Let the sample's quantization go now (the full coding quantizes at another step): its
+    # bands are freed before the next ones are made, which can then take their memory
+    # instead of faulting in fresh pages.
+    del levels
+    encoder._quantized.pop(False, None)
     coded = 0.0
     for entry in range(len(counts)):
         mine = entry_of[sample] == entry
