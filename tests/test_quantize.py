@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from wavecore import basis_norms, wavedec, wavedec2, waverec, waverec2
 from wavecore.errors import InvalidCoefficients, InvalidParameter
+from wavecore.layout import as_levels
 from wavecore.quantize import (
     DEFAULT_ROUNDING,
     dequantize_bands,
@@ -206,3 +207,19 @@ def test_refine_argument_is_checked() -> None:
     coeffs = wavedec2(_image(shape=(64, 32)), "haar", "open", 1)
     with pytest.raises(InvalidParameter, match="refine"):
         quantize_bands(coeffs, 1.0, wavelet="haar", boundary="open", refine=-1)
+
+
+def test_dequantize_into_given_arrays() -> None:
+    rng = np.random.default_rng(11)
+    coeffs = wavedec2(rng.normal(0, 40, (64, 48, 3)), wavelet="cdf97", level=2)
+    q, params = quantize_bands(coeffs, 3.0, wavelet="cdf97", boundary="open", refine=0)
+    fresh = dequantize_bands(q, params, wavelet="cdf97", boundary="open")
+    targets = [np.zeros_like(coeffs[0]), tuple(np.zeros_like(b) for b in coeffs[1])]
+    # A band of the wrong dtype is not written into: it gets a new array.
+    targets.append((np.zeros(coeffs[2][0].shape, dtype=np.float32), *coeffs[2][1:]))
+    out = dequantize_bands(q, params, wavelet="cdf97", boundary="open", out=targets)
+    assert out[0] is targets[0] and out[1][2] is targets[1][2]
+    assert out[2][0] is not targets[2][0] and out[2][1] is targets[2][1]
+    for got, expected in zip(as_levels(out), as_levels(fresh), strict=True):
+        for a, b in zip(got, expected, strict=True):
+            assert np.array_equal(a, b)

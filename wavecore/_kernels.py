@@ -644,14 +644,6 @@ def colour_to_integers(src, matrix, use_matrix, lo, hi, out, row_lo, row_hi):
                 dest[j, 1] = _rounded_into(m10 * y + m11 * cb + m12 * cr, lo, hi)
                 dest[j, 2] = _rounded_into(m20 * y + m21 * cb + m22 * cr, lo, hi)
         return
-    if not use_matrix and channels == 1:
-        # A grey picture, likewise: the general loop's branches cost 0.7 ms of a 512² decode.
-        for i in range(row_lo, row_hi):
-            row = src[i]
-            dest = out[i]
-            for j in range(cols):
-                dest[j, 0] = _rounded_into(row[j, 0], lo, hi)
-        return
     for i in range(row_lo, row_hi):
         for j in range(cols):
             pixel = src[i, j]
@@ -685,17 +677,20 @@ def squared_and_largest_error(decoded, original):
 
 
 @njit(nogil=True, cache=True)
-def squared_and_largest_error_u8(decoded, original):
-    """:func:`squared_and_largest_error` of two ``uint8`` arrays with integer sums, which
-    vectorise: the same two numbers while the total stays below 2**53 (the caller checks),
-    since every partial sum of the float loop is then exact too."""
+def squared_and_largest_integer_error(decoded, original):
+    """:func:`squared_and_largest_error` of integer samples whose squared differences add up
+    below ``2**53``, in integers: the same values (every float partial sum of integers that
+    small is exact), in a loop that vectorises (a float sum must keep its order)."""
     total = np.int64(0)
     largest = np.int64(0)
     for k in range(decoded.size):
         d = np.int64(decoded[k]) - np.int64(original[k])
         total += d * d
-        largest = np.int64(max(largest, abs(d)))
-    return float(total), float(largest)
+        if d < 0:
+            d = -d
+        if d > largest:
+            largest = d
+    return total, largest
 
 
 @njit(nogil=True, cache=True)

@@ -262,9 +262,16 @@ def band_counts(band: np.ndarray) -> tuple[int, int]:
     (:func:`wavecore.quantize.reconstruction_offset`), so a decode that reads only some
     blocks of a band needs them for the whole band.
     """
-    # The dequantizer's own count (one compiled pass), so the two can never disagree.
-    ones, more = sample_kernels.count_ones_and_more(np.ravel(band))
-    return int(ones), int(more)
+    # The dequantizer's own count (compiled passes), so the two can never disagree; in slices
+    # over the threads (integer counts add up exactly), since the encoder counts every band.
+    flat = np.ravel(band)
+    parts: list[tuple[int, int]] = []
+    run_rows(
+        lambda lo, hi: parts.append(sample_kernels.count_ones_and_more(flat[lo:hi])),
+        flat.size,
+        flat.size,
+    )
+    return sum(int(p[0]) for p in parts), sum(int(p[1]) for p in parts)
 
 
 class CodedBlocks:
@@ -346,27 +353,65 @@ def _code_some(
     blocks: np.ndarray,
     indices: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Blocks ``indices`` of the tables coded from ``entries``: their bytes and lengths."""
-    total = int((planes[:, kernels.P_ROWS] * planes[:, kernels.P_COLS]).sum())
+    """Blocks ``indices`` of the tables coded from ``entries``: their bytes and lengths.
+
+    Only the chosen blocks' regions are copied, each into planes of its own (a block's coding
+    reads nothing outside it, and depends on its planes' sizes only where they cut it short,
+    which the compact planes keep): the bpp search's sample codes a quarter of a picture's
+    blocks, and copying every plane for it cost as much as the coding of the sample.
+    """
+    sub_planes, sub_blocks, pieces, total = _compact_tables(planes, blocks, indices)
     flat = np.empty(total, dtype=np.int32)
     views = _plane_views(entries, two_d)
-    targets = [
-        flat[start : start + view.size].reshape(view.shape)
-        for start, view in zip(planes[:, kernels.P_OFFSET], views, strict=True)
-    ]
-    _copy_planes(views, targets, total)
-    chosen = np.ascontiguousarray(blocks[indices])
-    sizes = _block_sizes(planes, chosen)
+    sources, targets = [], []
+    for (p, r0, r1, c0, c1), offset in zip(pieces, sub_planes[:, kernels.P_OFFSET], strict=True):
+        if r1 > r0 and c1 > c0:
+            sources.append(views[p][r0:r1, c0:c1])
+            targets.append(flat[offset : offset + (r1 - r0) * (c1 - c0)].reshape(r1 - r0, c1 - c0))
+    _copy_planes(sources, targets, total)
+    sizes = _block_sizes(sub_planes, sub_blocks)
     spans = _span_count(int(sizes.sum()))
     cuts = _cuts(sizes, spans)
     results: list[Any] = [None] * spans
 
     def run(lo: int, hi: int) -> None:
         for span in range(lo, hi):
-            results[span] = kernels.encode_span(flat, planes, chosen, cuts[span], cuts[span + 1])
+            results[span] = kernels.encode_span(
+                flat, sub_planes, sub_blocks, cuts[span], cuts[span + 1]
+            )
 
     run_rows(run, spans, pieces=spans)
     return np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results])
+
+
+def _compact_tables(
+    planes: np.ndarray, blocks: np.ndarray, indices: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int, int, int, int]], int]:
+    """Plane and block tables that hold only blocks ``indices``, each with planes of its own:
+    the region of every plane of its level that the block covers, cut where the plane ends,
+    and the block at their corner.  Also where each compact plane comes from (``(plane,
+    row0, row1, col0, col1)`` of the original tables) and their total size."""
+    sub_planes: list[np.ndarray] = []
+    sub_blocks = np.empty((len(indices), kernels.BLOCK_FIELDS), dtype=np.int64)
+    pieces: list[tuple[int, int, int, int, int]] = []
+    offset = 0
+    for k, index in enumerate(indices.tolist()):
+        lo, hi, r0, c0, r1, c1 = blocks[index, : kernels.BLOCK_FIELDS].tolist()
+        first = len(sub_planes)
+        for p in range(lo, hi):
+            row = planes[p].copy()
+            height = max(0, min(r1, int(row[kernels.P_ROWS])) - r0)
+            width = max(0, min(c1, int(row[kernels.P_COLS])) - c0)
+            row[kernels.P_OFFSET], row[kernels.P_ROWS], row[kernels.P_COLS] = offset, height, width
+            for slot in (kernels.P_SIB1, kernels.P_SIB2, kernels.P_LUMA):
+                if row[slot] >= 0:
+                    row[slot] += first - lo
+            sub_planes.append(row)
+            pieces.append((p, r0, r0 + height, c0, c0 + width))
+            offset += height * width
+        sub_blocks[k] = (first, len(sub_planes), 0, 0, r1 - r0, c1 - c0)
+    table = np.array(sub_planes, dtype=np.int64).reshape(-1, kernels.PLANE_FIELDS)
+    return table, sub_blocks, pieces, offset
 
 
 def block_lengths(

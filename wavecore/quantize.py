@@ -254,13 +254,17 @@ def dequantize_bands(
     wavelet: str,
     boundary: str | Sequence[str],
     axes: Sequence[int] = (0, 1),
+    out: Sequence[Any] | None = None,
 ) -> list[Any]:
     """Turn quantized integers back into coefficients (the inverse of :func:`quantize_bands`).
 
     ``qcoeffs`` may be a prefix of the layout (``[cA, level L, ..., level k+1]``): ``params``
     describes the bands from the coarse end.  ``wavelet``, ``boundary`` and ``axes`` are accepted
     for symmetry with :func:`quantize_bands`; the steps stored in ``params`` are all the
-    decoder needs.
+    decoder needs.  ``out``, in the same layout, gives arrays to write the coefficients into
+    (each band that is ``float64``, C-contiguous, writeable and of its band's shape; a new
+    array for any other): an encoder's own coefficients once it no longer needs them, so that
+    a full-size picture's dequantization does not fault in fresh memory.
 
     Raises
     ------
@@ -290,6 +294,7 @@ def dequantize_bands(
     if not isinstance(weights, list) or len(weights) < len(levels):
         msg = f"quantizer parameters describe fewer levels than the {len(levels)} given"
         raise InvalidParameter(msg)
+    targets = None if out is None else as_levels(out)
     out_levels = []
     for index, bands in enumerate(levels):
         level_weights = weights[index]
@@ -297,18 +302,35 @@ def dequantize_bands(
             msg = f"quantizer weights of level entry {index} do not match its {len(bands)} bands"
             raise InvalidParameter(msg)
         restored = []
-        for band, weight in zip(bands, level_weights, strict=True):
+        for k, (band, weight) in enumerate(zip(bands, level_weights, strict=True)):
             band_step = step * _number(weight, "weight")
             q = np.asarray(band)
             if q.dtype.kind not in "iu":
                 msg = f"quantized coefficients must be integers, not {q.dtype}"
                 raise InvalidParameter(msg)
             offset = 0.0 if index == 0 else reconstruction_offset(q, rounding)
-            values = np.empty(q.shape, dtype=np.float64)
+            values = _writable_target(targets, index, k, q.shape)
             _dequantize_flat(np.ravel(q), offset, band_step, values.reshape(-1))
             restored.append(values)
         out_levels.append(restored)
     return from_levels(qcoeffs, out_levels)
+
+
+def _writable_target(
+    targets: list[list[np.ndarray]] | None, index: int, k: int, shape: tuple[int, ...]
+) -> np.ndarray:
+    """Band ``k`` of level entry ``index`` of ``targets`` if the dequantizer can write into it
+    as it is (float64, C-contiguous, writeable, ``shape``), else a new array."""
+    if targets is not None and index < len(targets) and k < len(targets[index]):
+        target = targets[index][k]
+        if (
+            target.dtype == np.float64
+            and target.shape == shape
+            and target.flags.c_contiguous
+            and target.flags.writeable
+        ):
+            return target
+    return np.empty(shape, dtype=np.float64)
 
 
 def reconstruction_offset(q: np.ndarray, rounding: float) -> float:

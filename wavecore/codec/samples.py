@@ -13,7 +13,7 @@ from .._kernels import (
     colour_to_floats,
     colour_to_integers,
     squared_and_largest_error,
-    squared_and_largest_error_u8,
+    squared_and_largest_integer_error,
 )
 from ..colour import YCBCR_INVERSE_MATRIX, YCBCR_MATRIX, ycbcr_forward
 from ..errors import InvalidParameter
@@ -309,15 +309,15 @@ def _squared_and_largest_error(decoded: np.ndarray, original: np.ndarray) -> tup
         spans = [_integer_span(decoded.dtype), _integer_span(original.dtype)]
         widest = float(max(spans))
         if widest * widest * max(decoded.size, 1) < 2.0**53:
-            parts: list[tuple[float, float]] = []
-            bytes_only = decoded.dtype == original.dtype == np.uint8
-            kernel = squared_and_largest_error_u8 if bytes_only else squared_and_largest_error
+            parts: list[tuple[int, int]] = []
             run_rows(
-                lambda lo, hi: parts.append(kernel(decoded[lo:hi], original[lo:hi])),
+                lambda lo, hi: parts.append(
+                    squared_and_largest_integer_error(decoded[lo:hi], original[lo:hi])
+                ),
                 decoded.size,
                 decoded.size,
             )
-            return sum(p[0] for p in parts), max(p[1] for p in parts)
+            return float(sum(int(p[0]) for p in parts)), float(max(int(p[1]) for p in parts))
     total, largest = squared_and_largest_error(decoded, original)
     return float(total), float(largest)
 
