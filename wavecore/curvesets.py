@@ -821,8 +821,10 @@ def _start_rotation(
     offsets: np.ndarray,
     closed: np.ndarray,
     tolerance: float,
-) -> np.ndarray:
-    """Row order that starts each closed curve where greedy reach keeps the fewest vertices.
+) -> tuple[np.ndarray, np.ndarray]:
+    """Row order that starts each closed curve where greedy reach keeps the fewest vertices,
+    and greedy reach's mask in that order (reach from a ring index is reach on the curve
+    rotated there, so the mask found here is the one a new search would give).
 
     A closed curve's start is always a vertex, so a start in the middle of a smooth stretch
     costs one.  Tried: point 0 and the first few vertices that greedy reach from point 0
@@ -830,11 +832,12 @@ def _start_rotation(
     """
     count = len(offsets) - 1
     starts = np.zeros(count, dtype=np.int64)
-    if not np.any(closed):
-        return np.arange(len(points))
     zeros = np.zeros(count, dtype=np.int64)
     keep = curvecoder.reach_set(points, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW)
+    if not np.any(closed):
+        return np.arange(len(points)), keep
     best = np.add.reduceat(keep, offsets[:-1]) if count else zeros
+    chosen = keep
     kept = np.flatnonzero(keep)
     for nth in (1, 2, 3):
         trial = zeros.copy()
@@ -850,11 +853,12 @@ def _start_rotation(
         better = counts < best
         starts[better] = trial[better]
         best = np.minimum(best, counts)
+        chosen = np.where(np.repeat(better, np.diff(offsets)), found, chosen)
     rows = np.arange(len(points))
     for rotated in np.flatnonzero(starts).tolist():
         first, stop = int(offsets[rotated]), int(offsets[rotated + 1])
         rows[first:stop] = np.roll(rows[first:stop], -int(starts[rotated]))
-    return rows
+    return rows, np.ascontiguousarray(chosen[rows])
 
 
 def _cheapest_starts(
@@ -1029,7 +1033,7 @@ def _encode_vertex(
         else:
             lattice = np.rint(points / step).astype(np.int64)
         decoded = _lattice_values(lattice, step, dtype).astype(np.float64)
-        order_rows = _start_rotation(points, decoded, offsets, closed, tolerance)
+        order_rows, keep = _start_rotation(points, decoded, offsets, closed, tolerance)
         points_r = np.ascontiguousarray(points[order_rows])
         lattice = np.ascontiguousarray(lattice[order_rows])
         decoded = np.ascontiguousarray(decoded[order_rows])
@@ -1037,9 +1041,6 @@ def _encode_vertex(
         # vertices lifted off the curve where that lets a span reach farther; where the
         # measured bound then fails, the points' own lattice points
         zeros = np.zeros(len(offsets) - 1, dtype=np.int64)
-        keep = curvecoder.reach_set(
-            points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW
-        )
         keep = curvecoder.optimal_set(
             points_r, decoded, offsets, closed, zeros, tolerance, _VERTEX_WINDOW, keep
         )
