@@ -86,6 +86,7 @@ __all__ = [
     "LOSSLESS_DEPTHS",
     "band_shapes",
     "best_depth",
+    "choose_depth",
     "choose_filters",
     "chroma_weight",
     "colour_name",
@@ -94,6 +95,7 @@ __all__ = [
     "inverse",
     "lift",
     "lossless_colour",
+    "med_residuals",
     "predict_chroma",
     "predicted_rct_forward",
     "predicted_rct_inverse",
@@ -115,6 +117,14 @@ CANDIDATE_SETS = (("legall53", "haar", "511c"), FILTERS)
 #: would cost a coding of a quarter of the samples more; depth 3 costs a sixteenth.
 #: First-order entropy ranks the depths wrongly, so they are coded.
 LOSSLESS_DEPTHS = (2, 3)
+#: How much smaller (as a fraction) a level's first-order entropy must be than the whole
+#: picture's, each under LOCO-I's median edge prediction, for :func:`choose_depth` to lift
+#: it: the lossless coder (:mod:`wavecore.losslesscoder`) predicts the picture itself better
+#: than one lifting level does on photographs.  On scikit-image's pictures the ratio of the
+#: entropies (one level / none) is 0.994 on camera, 0.987 coins, 1.034 brick, 0.972
+#: astronaut, where no level codes 1.8 %, 1.0 %, 9.0 % and 0.8 % smaller; and 0.626 on moon,
+#: a pixel-repeated enlargement, where one integer Haar level codes 29 % smaller.
+DEPTH_GAIN = 0.9
 
 
 #: The weights of :func:`predict_chroma`, in eighths: Cr is predicted from Cb as ``w / 8 · Cb``.
@@ -438,6 +448,54 @@ def best_depth(
         if size < best_size:
             best, best_size, chosen = candidate, size, depth
     return chosen, best
+
+
+def med_residuals(plane: np.ndarray) -> np.ndarray:
+    """A 2-D plane less LOCO-I's median-edge prediction from its west, north and north-west
+    neighbours (the first row from the west, the first column from the north)."""
+    x = np.asarray(plane, dtype=np.int64)
+    w = np.zeros_like(x)
+    n = np.zeros_like(x)
+    nw = np.zeros_like(x)
+    w[:, 1:] = x[:, :-1]
+    w[1:, 0] = x[:-1, 0]
+    n[1:] = x[:-1]
+    n[0, 1:] = x[0, :-1]
+    nw[1:, 1:] = x[:-1, :-1]
+    nw[1:, 0] = x[:-1, 0]
+    nw[0, 1:] = x[0, :-1]
+    high, low = np.maximum(w, n), np.minimum(w, n)
+    prediction = np.where(nw >= high, low, np.where(nw <= low, high, w + n - nw))
+    return x - prediction
+
+
+def _predicted_bits(data: np.ndarray) -> float:
+    """First-order entropy of :func:`med_residuals`, channel by channel."""
+    planes = [data] if data.ndim == 2 else [data[..., c] for c in range(data.shape[2])]
+    return _entropy_bits([med_residuals(p) for p in planes])
+
+
+def choose_depth(data: np.ndarray, candidates: Sequence[str] = CANDIDATE_SETS[0]) -> list[str]:
+    """The filters of a lossless encode without a given ``level``: none (the picture coded
+    by prediction) or one level, whichever first-order entropy favours by :data:`DEPTH_GAIN`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> small = np.random.default_rng(0).integers(0, 256, (16, 16))
+    >>> choose_depth(np.kron(small, np.ones((2, 2), int)))  # a 2x pixel-repeated image
+    ['haar']
+    >>> choose_depth(np.add.outer(np.arange(32), np.arange(32)))  # a ramp: predicted exactly
+    []
+    """
+    arr = np.asarray(data).astype(np.int64)
+    if min(arr.shape[:2]) < 2:
+        return []
+    memo: dict[tuple[tuple[str, ...], str], tuple[float, np.ndarray]] = {}
+    chosen = _choose(arr, 1, (0, 1), candidates, memo)
+    detail_bits, coarse = memo[((), chosen[0])]
+    one_level = detail_bits + _predicted_bits(coarse)
+    return chosen if one_level < DEPTH_GAIN * _predicted_bits(arr) else []
 
 
 def predict_chroma(ycc: np.ndarray, weight: int) -> np.ndarray:
