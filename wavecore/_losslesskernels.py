@@ -93,6 +93,7 @@ def _squash_py(d: int) -> int:
 
 STRETCH = _stretch_table()
 QLOG_SIZE = 4096
+BITLEN = np.array([v.bit_length() for v in range(QLOG_SIZE)], dtype=np.int64)
 QLOG = np.array(
     [
         v if v < 4 else 2 * v.bit_length() - 2 + ((v >> (v.bit_length() - 2)) & 1)
@@ -131,6 +132,8 @@ def _qlog(x, top):
 
 @njit(nogil=True, cache=True, inline="always")
 def _bit_length(value):
+    if value < QLOG_SIZE:
+        return BITLEN[value]
     n = np.int64(0)
     while value:
         value >>= 1
@@ -139,77 +142,71 @@ def _bit_length(value):
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _update(probs, states, ctx, bit):
-    n = states[ctx]
+def _update(models, ctx, bit):
+    """A model's probability of a 1 (16 bits, above 4 bits of count) moves towards the bit by
+    ``2**-min(count + 1, RATE_LIMIT)``: fast at first, then steadier."""
+    model = models[ctx]
+    n = model & 15
+    p = model >> 4
     shift = min(n + 1, RATE_LIMIT)
-    p = probs[ctx]
     if bit:
         p += (65536 - p) >> shift
     else:
         p -= p >> shift
-    probs[ctx] = max(32, min(65504, p))
-    if n < STATE_CAP:
-        states[ctx] = n + 1
+    models[ctx] = (max(32, min(65504, p)) << 4) | min(n + 1, RATE_LIMIT)
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _code(st, out, data, p, bit, decoding):
+def _code(x1, x2, x, pos, out, data, p, bit, decoding):
     """One bit at probability ``p`` (of a 1, in 1 / 4096) through the carry-less binary
-    arithmetic coder of lpaq1; ``st`` holds ``x1, x2, x`` and the byte position."""
-    x1 = st[0]
-    x2 = st[1]
+    arithmetic coder of lpaq1: its range ``[x1, x2]``, the decoder's code ``x`` and the byte
+    position live in the caller's locals (kept in an array they cost several times as much)."""
     xmid = x1 + (((x2 - x1) * p) >> 12)
     if decoding:
-        bit = 1 if st[2] <= xmid else 0
+        bit = 1 if x <= xmid else 0
     if bit:
         x2 = xmid
     else:
         x1 = xmid + 1
     while ((x1 ^ x2) & 0xFF000000) == 0:
         if decoding:
-            pos = st[3]
             byte = np.int64(data[pos]) if pos < data.size else np.int64(0)
-            st[3] = pos + 1
-            st[2] = ((st[2] << 8) & 0xFFFFFFFF) | byte
-        else:
-            pos = st[3]
-            if pos < out.size:
-                out[pos] = (x2 >> 24) & 0xFF
-            st[3] = pos + 1
+            x = ((x << 8) & 0xFFFFFFFF) | byte
+        elif pos < out.size:
+            out[pos] = (x2 >> 24) & 0xFF
+        pos += 1
         x1 = (x1 << 8) & 0xFFFFFFFF
         x2 = ((x2 << 8) & 0xFFFFFFFF) | 255
-    st[0] = x1
-    st[1] = x2
-    return bit
+    return x1, x2, x, pos, bit
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _mixed(st, out, data, probs, states, weights, wset, c1, c2, c3, bit, decoding):
+def _mixed(x1, x2, x, pos, out, data, probs, weights, wset, c1, c2, c3, bit, decoding):
     """A bit under the logistic mix of three models; every model and the mixer learn it."""
-    s1 = STRETCH[probs[c1] >> 4]
-    s2 = STRETCH[probs[c2] >> 4]
-    s3 = STRETCH[probs[c3] >> 4]
+    s1 = STRETCH[probs[c1] >> 8]
+    s2 = STRETCH[probs[c2] >> 8]
+    s3 = STRETCH[probs[c3] >> 8]
     w = wset * INPUTS
     dot = weights[w] * s1 + weights[w + 1] * s2 + weights[w + 2] * s3 + weights[w + 3] * 256
     p = _squash(dot >> 16)
-    bit = _code(st, out, data, p, bit, decoding)
+    x1, x2, x, pos, bit = _code(x1, x2, x, pos, out, data, p, bit, decoding)
     err = ((bit << 12) - p) * LEARNING
     weights[w] += (s1 * err) >> 16
     weights[w + 1] += (s2 * err) >> 16
     weights[w + 2] += (s3 * err) >> 16
     weights[w + 3] += (256 * err) >> 16
-    _update(probs, states, c1, bit)
-    _update(probs, states, c2, bit)
-    _update(probs, states, c3, bit)
-    return bit
+    _update(probs, c1, bit)
+    _update(probs, c2, bit)
+    _update(probs, c3, bit)
+    return x1, x2, x, pos, bit
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _single(st, out, data, probs, states, ctx, bit, decoding):
-    p = max(1, min(4095, probs[ctx] >> 4))
-    bit = _code(st, out, data, p, bit, decoding)
-    _update(probs, states, ctx, bit)
-    return bit
+def _single(x1, x2, x, pos, out, data, probs, ctx, bit, decoding):
+    p = max(1, min(4095, probs[ctx] >> 8))
+    x1, x2, x, pos, bit = _code(x1, x2, x, pos, out, data, p, bit, decoding)
+    _update(probs, ctx, bit)
+    return x1, x2, x, pos, bit
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -349,21 +346,21 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
     ``rows * (stripe + 1) // stripes`` of every band, which look at no other stripe of the
     level (so the stripes are coded in parallel).  ``mags`` is scratch of ``values``' size: the
     magnitudes the contexts look at (the coarse band's prediction residuals, the details')."""
-    probs = np.full(MODELS, PROB_INIT, dtype=np.int64)
-    states = np.zeros(MODELS, dtype=np.int64)
+    probs = np.full(MODELS, PROB_INIT << 4, dtype=np.int64)
     weights = np.zeros(MIX_SETS * INPUTS, dtype=np.int64)
     for k in range(MIX_SETS):
         weights[k * INPUTS] = WEIGHT_INIT
         weights[k * INPUTS + 1] = WEIGHT_INIT
         weights[k * INPUTS + 2] = WEIGHT_INIT
-    st = np.zeros(4, dtype=np.int64)
-    st[1] = 0xFFFFFFFF
+    x1 = np.int64(0)
+    x2 = np.int64(0xFFFFFFFF)
+    xc = np.int64(0)
+    pos = np.int64(0)
     if decoding:
         for _ in range(4):
-            pos = st[3]
             byte = np.int64(data[pos]) if pos < data.size else np.int64(0)
-            st[2] = (st[2] << 8) | byte
-            st[3] = pos + 1
+            xc = (xc << 8) | byte
+            pos += 1
     subs = np.zeros(WP_N, dtype=np.int64)
     for p in range(planes.shape[0]):
         full_rows = planes[p, P_ROWS]
@@ -446,12 +443,14 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                     c2 = M2_BASE + (ob * X_CLASSES + qx) * C_CLASSES + qc
                     c3 = M3_BASE + (ob * X_CLASSES + qe) * C_CLASSES + qn
                     more = 1 if klass > k else 0
-                    more = _mixed(
-                        st,
+                    x1, x2, xc, pos, more = _mixed(
+                        x1,
+                        x2,
+                        xc,
+                        pos,
                         out,
                         data,
                         probs,
-                        states,
                         weights,
                         ob * C_CLASSES + qc,
                         c1,
@@ -486,12 +485,14 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                         c1 = M1_BASE + ob * S_CLASSES + qs
                         c2 = M2_BASE + (ob * X_CLASSES + qx) * C_CLASSES + qc
                         c3 = M3_BASE + (ob * X_CLASSES + qe) * C_CLASSES + qn
-                        bit = _mixed(
-                            st,
+                        x1, x2, xc, pos, bit = _mixed(
+                            x1,
+                            x2,
+                            xc,
+                            pos,
                             out,
                             data,
                             probs,
-                            states,
                             weights,
                             ob * C_CLASSES + qc,
                             c1,
@@ -502,7 +503,9 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                         )
                     else:
                         ctx = RAW_BASE + klass * (MAX_LENGTH + 1) + position
-                        bit = _single(st, out, data, probs, states, ctx, bit, decoding)
+                        x1, x2, xc, pos, bit = _single(
+                            x1, x2, xc, pos, out, data, probs, ctx, bit, decoding
+                        )
                     mag = (mag << 1) | bit
                 if decoding:
                     magnitude = mag
@@ -530,12 +533,14 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                 c1 = SIGN_BASE + (orient * 27 + (sw + 1) * 9 + (sn + 1) * 3 + sp + 1) * 2
                 c2 = SIGN_BASE + (orient * 27 + (s1 + 1) * 9 + (s2 + 1) * 3 + s3 + 1) * 2 + 1
                 negative = 1 if value < 0 else 0
-                negative = _mixed(
-                    st,
+                x1, x2, xc, pos, negative = _mixed(
+                    x1,
+                    x2,
+                    xc,
+                    pos,
                     out,
                     data,
                     probs,
-                    states,
                     weights,
                     (ORIENTS * DECISIONS + orient) * C_CLASSES + qc,
                     c1,
@@ -551,11 +556,9 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                     _wp_update(np.int64(values[at]), r, size, pred8, subs, te, pe)
     if not decoding:
         # flush: the top bytes of x1, so that any continuation decodes inside [x1, x2]
-        x1 = st[0]
         for _ in range(4):
-            pos = st[3]
             if pos < out.size:
                 out[pos] = (x1 >> 24) & 0xFF
-            st[3] = pos + 1
+            pos += 1
             x1 = (x1 << 8) & 0xFFFFFFFF
-    return st[3]
+    return pos
