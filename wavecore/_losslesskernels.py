@@ -259,22 +259,29 @@ def _wp_predict(values, off, rows, cols, i, j, te, pe, subs):
     te_n = te[at - cols] if i > 0 else np.int64(0)
     te_nw = te[at - cols - 1] if i > 0 and j > 0 else te_n
     te_ne = te[at - cols + 1] if i > 0 and j + 1 < cols else te_n
-    size = rows * cols
     total = np.int64(0)
     wts = np.empty(WP_N, dtype=np.int64)
-    for k in range(WP_N):
-        base = k * size
-        e = np.int64(0)
-        if i > 0:
-            e += pe[base + at - cols]
-            e += pe[base + at - cols - 1] if j > 0 else pe[base + at - cols]
-            e += pe[base + at - cols + 1] if j + 1 < cols else pe[base + at - cols]
-        if j > 0:
-            e += pe[base + at - 1]
-        if j > 1:
-            e += pe[base + at - 2]
-        wts[k] = _error_weight(e, WP_W[k])
-        total += wts[k]
+    # the sub-predictors' errors, WP_N per position: at N, NW, NE (N again at the ends), W, WW
+    up = (at - cols) * WP_N
+    if i > 0 and 1 < j < cols - 1:  # the common case, without a test per neighbour
+        for k in range(WP_N):
+            e = pe[up + k] + pe[up - WP_N + k] + pe[up + WP_N + k]
+            e += pe[(at - 1) * WP_N + k] + pe[(at - 2) * WP_N + k]
+            wts[k] = _error_weight(e, WP_W[k])
+            total += wts[k]
+    else:
+        for k in range(WP_N):
+            e = np.int64(0)
+            if i > 0:
+                e += pe[up + k]
+                e += pe[up - WP_N + k] if j > 0 else pe[up + k]
+                e += pe[up + WP_N + k] if j + 1 < cols else pe[up + k]
+            if j > 0:
+                e += pe[(at - 1) * WP_N + k]
+            if j > 1:
+                e += pe[(at - 2) * WP_N + k]
+            wts[k] = _error_weight(e, WP_W[k])
+            total += wts[k]
     n8, w8, nw8, ne8 = n << 3, w << 3, nw << 3, ne << 3
     sum_wn = te_n + te_w
     subs[0] = w8 + ne8 - n8
@@ -307,15 +314,15 @@ def _wp_predict(values, off, rows, cols, i, j, te, pe, subs):
         big = te_nw
     if abs(te_ne) > abs(big):
         big = te_ne
-    return (pred + 3) >> 3, pred, big
+    return (pred + 3) >> 3, pred, big, w, n, nw, ne
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _wp_update(value, at, size, pred8, subs, te, pe):
+def _wp_update(value, at, pred8, subs, te, pe):
     v8 = value << 3
     te[at] = pred8 - v8
     for k in range(WP_N):
-        pe[k * size + at] = (abs(subs[k] - v8) + 3) >> 3
+        pe[at * WP_N + k] = (abs(subs[k] - v8) + 3) >> 3
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -387,7 +394,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
         size = rows * cols
         if approx:
             te = np.zeros(size, dtype=np.int64)
-            pe = np.zeros(WP_N * size, dtype=np.int64)
+            pe = np.zeros(WP_N * size, dtype=np.int64)  # position-major
         else:
             te = np.zeros(0, dtype=np.int64)
             pe = np.zeros(0, dtype=np.int64)
@@ -398,13 +405,17 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                 at = off + r
                 s, a, b = _neighbourhood(mags, off, rows, cols, i, j)
                 if approx:
-                    pred, pred8, big = _wp_predict(values, off, rows, cols, i, j, te, pe, subs)
+                    pred, pred8, big, wv, nv, nwv, nev = _wp_predict(
+                        values, off, rows, cols, i, j, te, pe, subs
+                    )
+                    interior = i > 0 and 0 < j < cols - 1
                     x = 4 * abs(big)
                     # the third model: the gradients' activity, or the first channel's residual
-                    wv = _at(values, off, rows, cols, i, j - 1)
-                    nv = _at(values, off, rows, cols, i - 1, j)
-                    nwv = _at(values, off, rows, cols, i - 1, j - 1)
-                    nev = _at(values, off, rows, cols, i - 1, j + 1) if j + 1 < cols else nv
+                    if not interior:  # outside the plane counts as 0 here
+                        wv = _at(values, off, rows, cols, i, j - 1)
+                        nv = _at(values, off, rows, cols, i - 1, j)
+                        nwv = _at(values, off, rows, cols, i - 1, j - 1)
+                        nev = _at(values, off, rows, cols, i - 1, j + 1) if j + 1 < cols else nv
                     e = 2 * (abs(wv - nwv) + abs(nv - nwv) + abs(nev - nv))
                     qn = min(_qlog(a + b, 2 * C_CLASSES) >> 1, C_CLASSES - 1)
                     if luma >= 0:
@@ -414,7 +425,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                         )
                 else:
                     pred = np.int64(0)
-                    big = np.int64(0)
+                    big = wv = nv = nwv = np.int64(0)
                     pi = (i + r0) >> 1
                     pj = j >> 1
                     x = 2 * _at(parent, par, prows, pcols, pi, pj)
@@ -468,7 +479,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                     if decoding:
                         values[at] = pred
                     if approx:
-                        _wp_update(pred, r, size, pred8, subs, te, pe)
+                        _wp_update(pred, r, pred8, subs, te, pe)
                     continue
                 # the bits below the leading one: the top two mixed, the rest one model each
                 mag = np.int64(1)
@@ -511,14 +522,8 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                     magnitude = mag
                 # the sign
                 if approx:
-                    sw = _sgn(
-                        _at(values, off, rows, cols, i, j - 1)
-                        - _at(values, off, rows, cols, i - 1, j - 1)
-                    )
-                    sn = _sgn(
-                        _at(values, off, rows, cols, i - 1, j)
-                        - _at(values, off, rows, cols, i - 1, j - 1)
-                    )
+                    sw = _sgn(wv - nwv)
+                    sn = _sgn(nv - nwv)
                     sp = _sgn(pred8 - 8 * pred)  # which way the prediction was rounded
                     s1 = _sgn(te[r - 1]) if j > 0 else np.int64(0)
                     s2 = _sgn(te[r - cols]) if i > 0 else np.int64(0)
@@ -553,7 +558,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                 if decoding:
                     values[at] = pred - magnitude if negative else pred + magnitude
                 if approx:
-                    _wp_update(np.int64(values[at]), r, size, pred8, subs, te, pe)
+                    _wp_update(np.int64(values[at]), r, pred8, subs, te, pe)
     if not decoding:
         # flush: the top bytes of x1, so that any continuation decodes inside [x1, x2]
         for _ in range(4):
