@@ -28,6 +28,7 @@ UNARY_LAST = 12
 MANT0 = 13
 MANT1 = 23
 DECISIONS = 33
+INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 MAX_LENGTH = 34  # the longest bit length a value may have (int32 values, coarse residuals)
 
 S_CLASSES = 24
@@ -556,7 +557,10 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                 )
                 mags[at] = magnitude
                 if decoding:
-                    values[at] = pred - magnitude if negative else pred + magnitude
+                    value = pred - magnitude if negative else pred + magnitude
+                    if value < INT32_MIN or value > INT32_MAX:
+                        return np.int64(-1)  # no coder writes this: the stream is damaged
+                    values[at] = value
                 if approx:
                     _wp_update(np.int64(values[at]), r, pred8, subs, te, pe)
     if not decoding:

@@ -182,13 +182,22 @@ def _decode_stripes(
     nothing = np.zeros(0, np.uint8)
     stripes = len(parts)
 
+    damaged: list[int] = []
+
     def decode(lo: int, hi: int) -> None:
         for stripe in range(lo, hi):
-            kernels.code_level(
-                values, mags, ancestors, table, stripe, stripes, nothing, parts[stripe], True
-            )
+            if (
+                kernels.code_level(
+                    values, mags, ancestors, table, stripe, stripes, nothing, parts[stripe], True
+                )
+                < 0
+            ):
+                damaged.append(stripe)
 
     run_rows(decode, stripes, values.size, pieces=stripes)
+    if damaged:
+        msg = f"lossless-coded stripe(s) {sorted(damaged)} decode to values beyond int32"
+        raise BundleError(msg)
 
 
 def encode_lossless_levels(coeffs: Sequence[Any]) -> tuple[list[bytes], dict[str, Any]]:
