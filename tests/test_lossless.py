@@ -169,8 +169,12 @@ def test_lossless_coarse_levels_are_thumbnails() -> None:
         assert coarse.shape == (-(-45 // 2**k), -(-70 // 2**k), 3)
         assert coarse.dtype == np.uint8
     flat = np.full((45, 70), 77, np.uint8)
-    thumbnail = wavecore.decode(wavecore.encode_image(flat, lossless=True, level=2), level=2)
-    assert np.all(thumbnail == 77)
+    assert np.all(wavecore.decode(wavecore.encode_image(flat, lossless=True), level=2) == 77)
+    # coded without levels (the picture predicted), the thumbnail is lifted after decoding
+    whole = wavecore.encode_image(image, lossless=True, level=0)
+    for k in range(4):
+        assert np.array_equal(wavecore.decode(whole, level=k), lossless.coarser(image, k))
+    assert wavecore.decode(whole, level=2, region=(slice(1, 4), slice(2, 9))).shape == (3, 7, 3)
 
 
 def test_lossless_keep_at_decode_time_is_lossy_but_close() -> None:

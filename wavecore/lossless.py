@@ -89,7 +89,9 @@ __all__ = [
     "choose_depth",
     "choose_filters",
     "chroma_weight",
+    "coarser",
     "colour_name",
+    "deepest",
     "filter_choices",
     "forward",
     "inverse",
@@ -485,7 +487,7 @@ def choose_depth(data: np.ndarray, candidates: Sequence[str] = CANDIDATE_SETS[0]
     >>> small = np.random.default_rng(0).integers(0, 256, (16, 16))
     >>> choose_depth(np.kron(small, np.ones((2, 2), int)))  # a 2x pixel-repeated image
     ['haar']
-    >>> choose_depth(np.add.outer(np.arange(32), np.arange(32)))  # a ramp: predicted exactly
+    >>> choose_depth(np.random.default_rng(1).integers(0, 256, (32, 32)))  # noise: prediction
     []
     """
     arr = np.asarray(data).astype(np.int64)
@@ -496,6 +498,31 @@ def choose_depth(data: np.ndarray, candidates: Sequence[str] = CANDIDATE_SETS[0]
     detail_bits, coarse = memo[((), chosen[0])]
     one_level = detail_bits + _predicted_bits(coarse)
     return chosen if one_level < DEPTH_GAIN * _predicted_bits(arr) else []
+
+
+def deepest(shape: Sequence[int]) -> int:
+    """The most lifting levels an image of ``shape`` (rows, columns, ...) takes, each subband
+    left non-empty."""
+    return max(0, min(int(shape[0]), int(shape[1])).bit_length() - 1)
+
+
+def coarser(image: np.ndarray, levels: int) -> np.ndarray:
+    """The coarse band of ``levels`` LeGall 5/3 levels of a decoded image, in its dtype (clipped
+    to it): what ``decode(level=k)`` returns for a lossless bundle coded with fewer than ``k``
+    levels, of the shape a ``k``-level bundle's thumbnail has.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> coarser(np.full((5, 8), 9, np.uint8), 2).tolist()
+    [[9, 9], [9, 9]]
+    """
+    arr = np.asarray(image)
+    coarse = forward(arr, levels, (0, 1))[0] if levels else arr.astype(np.int64)
+    if arr.dtype.kind in "iu":
+        info = np.iinfo(arr.dtype)
+        coarse = np.clip(coarse, info.min, info.max)
+    return np.ascontiguousarray(coarse.astype(arr.dtype))
 
 
 def predict_chroma(ycc: np.ndarray, weight: int) -> np.ndarray:
