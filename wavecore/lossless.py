@@ -487,7 +487,8 @@ def choose_depth(data: np.ndarray, candidates: Sequence[str] = CANDIDATE_SETS[0]
     >>> small = np.random.default_rng(0).integers(0, 256, (16, 16))
     >>> choose_depth(np.kron(small, np.ones((2, 2), int)))  # a 2x pixel-repeated image
     ['haar']
-    >>> choose_depth(np.random.default_rng(1).integers(0, 256, (32, 32)))  # noise: prediction
+    >>> ramp = np.add.outer(np.arange(64), np.arange(64))
+    >>> choose_depth(ramp + np.random.default_rng(1).integers(0, 4, (64, 64)))  # predicted
     []
     """
     arr = np.asarray(data).astype(np.int64)
