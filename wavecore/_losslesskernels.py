@@ -256,18 +256,21 @@ def _wp_predict(values, off, rows, cols, i, j, te, pe, subs):
     n = np.int64(values[off + at - cols]) if i > 0 else w
     nw = np.int64(values[off + at - cols - 1]) if i > 0 and j > 0 else n
     ne = np.int64(values[off + at - cols + 1]) if i > 0 and j + 1 < cols else n
-    te_w = te[at - 1] if j > 0 else np.int64(0)
-    te_n = te[at - cols] if i > 0 else np.int64(0)
-    te_nw = te[at - cols - 1] if i > 0 and j > 0 else te_n
-    te_ne = te[at - cols + 1] if i > 0 and j + 1 < cols else te_n
+    # te and pe keep two rows: this one and the one above
+    cur = (i & 1) * cols + j
+    prv = ((i + 1) & 1) * cols + j
+    te_w = te[cur - 1] if j > 0 else np.int64(0)
+    te_n = te[prv] if i > 0 else np.int64(0)
+    te_nw = te[prv - 1] if i > 0 and j > 0 else te_n
+    te_ne = te[prv + 1] if i > 0 and j + 1 < cols else te_n
     total = np.int64(0)
     wts = np.empty(WP_N, dtype=np.int64)
     # the sub-predictors' errors, WP_N per position: at N, NW, NE (N again at the ends), W, WW
-    up = (at - cols) * WP_N
+    up = prv * WP_N
     if i > 0 and 1 < j < cols - 1:  # the common case, without a test per neighbour
         for k in range(WP_N):
             e = pe[up + k] + pe[up - WP_N + k] + pe[up + WP_N + k]
-            e += pe[(at - 1) * WP_N + k] + pe[(at - 2) * WP_N + k]
+            e += pe[(cur - 1) * WP_N + k] + pe[(cur - 2) * WP_N + k]
             wts[k] = _error_weight(e, WP_W[k])
             total += wts[k]
     else:
@@ -278,9 +281,9 @@ def _wp_predict(values, off, rows, cols, i, j, te, pe, subs):
                 e += pe[up - WP_N + k] if j > 0 else pe[up + k]
                 e += pe[up + WP_N + k] if j + 1 < cols else pe[up + k]
             if j > 0:
-                e += pe[(at - 1) * WP_N + k]
+                e += pe[(cur - 1) * WP_N + k]
             if j > 1:
-                e += pe[(at - 2) * WP_N + k]
+                e += pe[(cur - 2) * WP_N + k]
             wts[k] = _error_weight(e, WP_W[k])
             total += wts[k]
     n8, w8, nw8, ne8 = n << 3, w << 3, nw << 3, ne << 3
@@ -320,6 +323,7 @@ def _wp_predict(values, off, rows, cols, i, j, te, pe, subs):
 
 @njit(nogil=True, cache=True, inline="always")
 def _wp_update(value, at, pred8, subs, te, pe):
+    """Record the true error and the sub-predictors' errors at ``at`` (of the two rows kept)."""
     v8 = value << 3
     te[at] = pred8 - v8
     for k in range(WP_N):
@@ -392,10 +396,9 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
         if luma >= 0:
             luma += r0 * cols
         approx = orient == APPROX
-        size = rows * cols
         if approx:
-            te = np.zeros(size, dtype=np.int64)
-            pe = np.zeros(WP_N * size, dtype=np.int64)  # position-major
+            te = np.zeros(2 * cols, dtype=np.int64)  # two rows: this one and the one above
+            pe = np.zeros(2 * cols * WP_N, dtype=np.int64)  # position-major
         else:
             te = np.zeros(0, dtype=np.int64)
             pe = np.zeros(0, dtype=np.int64)
@@ -480,7 +483,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                     if decoding:
                         values[at] = pred
                     if approx:
-                        _wp_update(pred, r, pred8, subs, te, pe)
+                        _wp_update(pred, (i & 1) * cols + j, pred8, subs, te, pe)
                     continue
                 # the bits below the leading one: the top two mixed, the rest one model each
                 mag = np.int64(1)
@@ -526,8 +529,8 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                     sw = _sgn(wv - nwv)
                     sn = _sgn(nv - nwv)
                     sp = _sgn(pred8 - 8 * pred)  # which way the prediction was rounded
-                    s1 = _sgn(te[r - 1]) if j > 0 else np.int64(0)
-                    s2 = _sgn(te[r - cols]) if i > 0 else np.int64(0)
+                    s1 = _sgn(te[(i & 1) * cols + j - 1]) if j > 0 else np.int64(0)
+                    s2 = _sgn(te[((i + 1) & 1) * cols + j]) if i > 0 else np.int64(0)
                     s3 = _sgn(big)
                 else:
                     sw = _sgn(_at(values, off, rows, cols, i, j - 1))
@@ -562,7 +565,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                         return np.int64(-1)  # no coder writes this: the stream is damaged
                     values[at] = value
                 if approx:
-                    _wp_update(np.int64(values[at]), r, pred8, subs, te, pe)
+                    _wp_update(np.int64(values[at]), (i & 1) * cols + j, pred8, subs, te, pe)
     if not decoding:
         # flush: the top bytes of x1, so that any continuation decodes inside [x1, x2]
         for _ in range(4):
