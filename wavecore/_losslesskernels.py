@@ -351,6 +351,19 @@ def _neighbourhood(mags, off, rows, cols, i, j):
 
 
 @njit(nogil=True, cache=True)
+def encode_level(values, mags, parent, planes, stripe, stripes, out):
+    """:func:`code_level` coding into ``out`` (compiled without the decoder's branches)."""
+    return code_level(values, mags, parent, planes, stripe, stripes, out, out[:0], False)
+
+
+@njit(nogil=True, cache=True)
+def decode_level(values, mags, parent, planes, stripe, stripes, data):
+    """:func:`code_level` decoding ``data`` (compiled without the encoder's branches)."""
+    nothing = np.empty(0, dtype=np.uint8)
+    return code_level(values, mags, parent, planes, stripe, stripes, nothing, data, True)
+
+
+@njit(nogil=True, cache=True, inline="always")
 def code_level(values, mags, parent, planes, stripe, stripes, out, data, decoding):
     """Code (``decoding`` False: ``values`` → ``out``; returns the bytes written, which may
     exceed ``out.size``: then call again with more room) or decode (``data`` → ``values``)

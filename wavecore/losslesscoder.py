@@ -126,16 +126,15 @@ def stripe_count(rows: int) -> int:
 
 def _code(values: np.ndarray, parent: np.ndarray, table: np.ndarray, stripes: int) -> bytes:
     mags = np.zeros(values.size, dtype=np.int64)
-    empty = np.zeros(0, dtype=np.uint8)
     parts: list[bytes] = [b""] * stripes
 
     def code(lo: int, hi: int) -> None:
         for stripe in range(lo, hi):
             out = np.empty(values.size // stripes + 1024, dtype=np.uint8)
-            n = kernels.code_level(values, mags, parent, table, stripe, stripes, out, empty, False)
+            n = kernels.encode_level(values, mags, parent, table, stripe, stripes, out)
             if n > out.size:
                 out = np.empty(n, dtype=np.uint8)
-                kernels.code_level(values, mags, parent, table, stripe, stripes, out, empty, False)
+                kernels.encode_level(values, mags, parent, table, stripe, stripes, out)
             parts[stripe] = out[:n].tobytes()
 
     run_rows(code, stripes, values.size, pieces=stripes)
@@ -179,19 +178,13 @@ def _decode_stripes(
     parts: list[np.ndarray],
 ) -> None:
     """Decode every stripe of a level into ``values``, in parallel."""
-    nothing = np.zeros(0, np.uint8)
     stripes = len(parts)
-
     damaged: list[int] = []
 
     def decode(lo: int, hi: int) -> None:
         for stripe in range(lo, hi):
-            if (
-                kernels.code_level(
-                    values, mags, ancestors, table, stripe, stripes, nothing, parts[stripe], True
-                )
-                < 0
-            ):
+            part = parts[stripe]
+            if kernels.decode_level(values, mags, ancestors, table, stripe, stripes, part) < 0:
                 damaged.append(stripe)
 
     run_rows(decode, stripes, values.size, pieces=stripes)
