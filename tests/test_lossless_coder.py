@@ -9,11 +9,13 @@ import wavecore
 from wavecore import lossless
 from wavecore.errors import BundleError
 from wavecore.losslesscoder import (
-    LOSSLESS_CODER,
+    LOSSLESS_VERSION,
     decode_lossless_levels,
     encode_lossless_levels,
     stripe_count,
 )
+
+PARAMS = {"coder": "context", "version": LOSSLESS_VERSION, "two_d": True}
 
 
 def _picture(shape: tuple[int, ...], seed: int) -> np.ndarray:
@@ -48,7 +50,7 @@ def test_round_trip(shape: tuple[int, ...], level: int) -> None:
     data = _picture(shape, sum(shape) + level)
     coeffs = lossless.forward(data, level)
     chunks, params = encode_lossless_levels(coeffs)
-    assert params == {"coder": LOSSLESS_CODER, "version": 1}
+    assert params == {"coder": "context", "version": LOSSLESS_VERSION, "two_d": True}
     back = decode_lossless_levels(chunks, lossless.band_shapes(shape, level), params)
     assert _same(back, coeffs)
     # a prefix of the chunks decodes to the first entries
@@ -109,20 +111,20 @@ def test_hostile_chunks_give_an_array_or_bundle_error(seed: int) -> None:
 def test_stripe_lengths_past_the_end_are_refused() -> None:
     shapes = [(400, 20)]
     with pytest.raises(BundleError, match="stripe lengths"):
-        decode_lossless_levels([b"\xff\xff"], shapes, {"coder": LOSSLESS_CODER, "version": 1})
+        decode_lossless_levels([b"\xff\xff"], shapes, PARAMS)
     with pytest.raises(BundleError, match="do not fit"):
-        decode_lossless_levels([b"\x7f\x00"], shapes, {"coder": LOSSLESS_CODER, "version": 1})
+        decode_lossless_levels([b"\x7f\x00"], shapes, PARAMS)
 
 
 def test_unknown_version_is_refused() -> None:
     with pytest.raises(BundleError, match="version"):
-        decode_lossless_levels([b""], [(4, 4)], {"coder": LOSSLESS_CODER, "version": 9})
+        decode_lossless_levels([b""], [(4, 4)], {**PARAMS, "version": 9})
 
 
-def test_new_bundles_name_the_lossless_coder() -> None:
+def test_new_bundles_name_the_context_coders_version_5() -> None:
     image = _picture((48, 40, 3), 9).astype(np.uint8)
     bundle = wavecore.encode_image(image, lossless=True)
-    assert wavecore.inspect(bundle)["coder"] == LOSSLESS_CODER
+    assert wavecore.inspect(bundle)["header"]["cparams"] == PARAMS
     assert np.array_equal(wavecore.decode(bundle), image)
     region = (slice(5, 30), slice(3, 20))
     assert np.array_equal(wavecore.decode(bundle, region=region), image[region])

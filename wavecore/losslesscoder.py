@@ -3,7 +3,7 @@
 Lossless bundles used to go through the lossy path's block coder (``"context"`` version 4),
 whose models are tuned for quantized bands: a few context classes, the bits below the top two
 sent raw, 128 × 128 blocks that each learn afresh.  Lossless bands are dense, so they pay for a
-stronger model, which this coder (``coder: "lossless"``) gives them:
+stronger model, which this coder (the context coder's version 5) gives them:
 
 * each resolution level is one stream (no blocks): the models learn over the whole level;
 * every value is binarised as in the block coder (zero flag, the bit length in unary, the bits
@@ -20,7 +20,7 @@ Why our own coder rather than constriction's: the mixing needs a probability per
 from the bits before it, in compiled code; constriction's coders take their models from Python.
 
 Every step is integer arithmetic, so the bytes are the same on every machine.  The bit-level
-specification is in ``docs/bundle-format.md`` (section "Lossless coder").
+specification is in ``docs/bundle-format.md`` (section "Context coder version 5").
 """
 
 from __future__ import annotations
@@ -36,11 +36,12 @@ from .layout import as_levels, is_band_group
 from .transform import run_rows
 from .varints import encode_varint
 
-__all__ = ["LOSSLESS_CODER", "decode_lossless_levels", "encode_lossless_levels"]
+__all__ = ["LOSSLESS_VERSION", "decode_lossless_levels", "encode_lossless_levels"]
 
-#: The coder's name in the header (``coder``), and its version (``cparams["version"]``).
-LOSSLESS_CODER = "lossless"
-VERSION = 1
+#: The coder's version in the header: it is the context coder's version 5 (``coder:
+#: "context"``, ``cparams {"version": 5, "two_d": true}``), so that the binary header holds it
+#: in its one compact byte; versions 2 to 4 are :mod:`wavecore.entropy`'s.
+LOSSLESS_VERSION = 5
 _MAX_VALUE = 2**31 - 1
 #: Rows of a level's first band per stripe, and the most stripes a level is cut into.
 STRIPE_ROWS = 192
@@ -209,7 +210,7 @@ def encode_lossless_levels(coeffs: Sequence[Any]) -> tuple[list[bytes], dict[str
         ancestors = parent if index > 1 and parent is not None else np.zeros(0, np.int64)
         chunks.append(_code(values, ancestors, table, stripe_count(shapes[0][0])))
         parent, parent_shapes = values, shapes
-    return chunks, {"coder": LOSSLESS_CODER, "version": VERSION}
+    return chunks, {"coder": "context", "version": LOSSLESS_VERSION, "two_d": True}
 
 
 def decode_lossless_levels(
@@ -217,8 +218,11 @@ def decode_lossless_levels(
 ) -> list[Any]:
     """The inverse of :func:`encode_lossless_levels`: the first ``len(chunks)`` entries of the
     layout ``shapes`` (``[shape, (shape, shape, shape), ...]``)."""
-    if params.get("version") != VERSION:
-        msg = f"lossless coder parameters {params!r} are not of version {VERSION}"
+    if params.get("version") != LOSSLESS_VERSION or params.get("two_d") is not True:
+        msg = f"lossless coder parameters {params!r} are not of version {LOSSLESS_VERSION}"
+        raise BundleError(msg)
+    if any(not isinstance(chunk, bytes | bytearray | memoryview) for chunk in chunks):
+        msg = "each chunk must be bytes"
         raise BundleError(msg)
     out: list[Any] = []
     parent: np.ndarray | None = None

@@ -161,12 +161,16 @@ def decode(
             raise InvalidParameter(msg)
         level = drop_levels
     parsed, plan = _open(bundle)
-    if level > plan.levels and plan.transform.lossless and level <= _lossless.deepest(plan.shape):
-        # A lossless bundle coded with fewer levels (the picture predicted): the thumbnail is
-        # lifted from the decoded picture (wavecore.lossless.coarser).
+    if (
+        plan.levels <= 1
+        and plan.levels < level <= _lossless.deepest(plan.shape)
+        and (plan.transform.lossless)
+    ):
+        # A lossless bundle of the depths encode_image(lossless=True) picks (0 or 1 levels):
+        # the deeper thumbnail is lifted from the decoded picture (wavecore.lossless.coarser).
         slices = None if region is None else _region_slices(plan, int(level), region)
-        whole = decode(bundle, keep=keep, level=plan.levels, damaged=damaged)
-        thumbnail = _lossless.coarser(whole, int(level) - plan.levels)
+        coded = decode(bundle, keep=keep, level=plan.levels, damaged=damaged)
+        thumbnail = _lossless.coarser(coded, int(level) - plan.levels)
         return thumbnail if slices is None else np.ascontiguousarray(thumbnail[slices])
     if level > plan.levels:
         msg = f"level {level} is deeper than the bundle's {plan.levels} levels"

@@ -16,7 +16,7 @@ from ..bundle import read_bundle, write_bundle
 from ..entropy import encode_levels
 from ..errors import BundleError, InvalidParameter
 from ..filters import get_wavelet
-from ..losslesscoder import LOSSLESS_CODER
+from ..losslesscoder import encode_lossless_levels
 from ..quantize import DEFAULT_ROUNDING, dequantize_bands, quantize_bands
 from ..threshold import check_share
 from .decode import decode
@@ -45,7 +45,7 @@ from .samples import (
     scaled_tolerance,
     unscaled,
 )
-from .stages import LOSSLESS_WAVELET, NoQuantizer, get_coder, get_colour
+from .stages import LOSSLESS_WAVELET, NoQuantizer, get_colour
 
 #: Without ``keep``/``tolerance``, curves are coded to this fraction of their bounding-box
 #: diagonal as the largest point deviation.
@@ -198,10 +198,8 @@ def _lossless_bundle(
     level: int,
     lifting: list[str],
 ) -> bytes:
-    # The lossless coder (wavecore.losslesscoder), with its own context mixing.
-    chunks, cparams = get_coder({"id": LOSSLESS_CODER}).encode(
-        _lossless.forward(data, level, (0, 1), lifting)
-    )
+    # The lossless coder (wavecore.losslesscoder: the context coder's version 5).
+    chunks, cparams = encode_lossless_levels(_lossless.forward(data, level, (0, 1), lifting))
     plan = Plan(
         "image",
         arr.shape,
@@ -219,7 +217,7 @@ def _lossless_bundle(
     header.update(
         quantizer=NoQuantizer.codec_id,
         qparams={},
-        coder=LOSSLESS_CODER,
+        coder=cparams["coder"],
         cparams=cparams,
         psnr=None,
         max_error=0.0,

@@ -8,8 +8,7 @@ so decoding dispatches through the registry instead of testing names.  Four kind
 * transforms: ``"wavelet"`` (the lossy filter banks, padded to a size that fits) and
   ``"reversible"`` (the integer lifting of lossless bundles: one pipeline among others);
 * quantizers: ``"deadzone"`` and ``"none"`` (integers coded as they are);
-* entropy coders: ``"context"`` and ``"zlib"`` (:mod:`wavecore.entropy`), ``"lossless"``
-  (:mod:`wavecore.losslesscoder`, lossless bundles only);
+* entropy coders: ``"context"`` and ``"zlib"`` (:mod:`wavecore.entropy`);
 * colour transforms: ``"none"``, ``"ycbcr"`` and ``"rct"`` (:mod:`wavecore.colour`), and
   ``"rct-p<w>"``, the RCT with Cr predicted from Cb (lossless only, ``w`` in -8 … 8, not 0).
 
@@ -31,7 +30,6 @@ from ..entropy import decode_levels, encode_levels
 from ..errors import BundleError, InvalidLength, InvalidParameter
 from ..filters import get_wavelet
 from ..layout import band_shapes
-from ..losslesscoder import LOSSLESS_CODER, decode_lossless_levels, encode_lossless_levels
 from ..multilevel import wavedec, wavedec2, waverec, waverec2
 from ..quantize import dequantize_bands
 from ..resample import crop_padding
@@ -402,19 +400,6 @@ class ContextCoder(Coder):
 @register_stage
 class ZlibCoder(Coder):
     codec_id = "zlib"
-
-
-@register_stage
-class LosslessCoder(Coder):
-    """The context-mixing coder of lossless bundles (:mod:`wavecore.losslesscoder`)."""
-
-    codec_id = LOSSLESS_CODER
-
-    def encode(self, qcoeffs: list[Any]) -> tuple[list[bytes], dict[str, Any]]:
-        return encode_lossless_levels(qcoeffs)
-
-    def decode(self, chunks: list[bytes], shapes: list[Any]) -> list[Any]:
-        return decode_lossless_levels(chunks, shapes, self.params)
 
 
 # --------------------------------------------------------------------------------------------
