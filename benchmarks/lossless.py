@@ -199,23 +199,22 @@ def section(rows: list[dict[str, Any]]) -> str:
             "",
             peer_table(rows),
             "",
-            "The transform is the reversible integer lifting of `wavecore.lossless`: per level "
-            "LeGall 5/3, JPEG 2000 Part 2's 5/11-C (5/3 with one more predict step, from the "
-            "coarse samples' curvature), integer Haar or the closed `bspline2`'s exact integer "
-            "lifting, chosen by first-order entropy and confirmed by coding; JPEG 2000's "
-            "reversible colour transform for RGB, with Cr then predicted from Cb at a weight "
-            "w/8 chosen per picture (colour `rct-p<w>`: astronaut takes w = 2, 0.9 % smaller); "
-            "the context entropy coder of `wavecore.entropy`.  Without a "
-            "`level`, the encoder codes 2 and 3 levels and keeps the smaller "
-            "(`wavecore.lossless.best_depth`, which re-codes only the coarse part of the "
-            "deeper one): the coder's median-edge prediction of the coarse band beats further "
-            "5/3 levels (5 levels, the lossy default, coded 0.6 % more on the grey pictures and "
-            "0.3 % more on astronaut).  The paper's "
-            "*open* `bspline2` has no integer form: its analysis matrix has determinant ±2, and "
-            "an integer bijection needs ±1 (see `docs/bundle-format.md`).  Integer Haar wins the "
-            "finest level of `moon`, a 2× pixel-repeated enlargement, where its details are all "
-            "zero; that is how we beat PNG by a third there (and JPEG 2000 by two thirds).  "
-            "16-bit images are bit-exact too (tested), but scikit-image ships none to compare.",
+            "Lossless bundles are coded by the lossless coder (`wavecore.losslesscoder`, "
+            "specified in `docs/bundle-format.md`): each bit of each value (its bit length in "
+            "unary, the two bits below the leading one, its sign) is coded at the logistic mix "
+            "of three adaptive models (PAQ's mixing, in integers), whose contexts are the "
+            "neighbours' magnitudes, the parent band or the predictor's recent errors, and the "
+            "other bands or the local gradients.  Without a `level` the encoder codes the "
+            "picture itself, predicted by JPEG XL's weighted predictor with LOCO-I's median "
+            "edge detector as a fifth sub-predictor, unless one lifting level has a first-order "
+            "entropy under 0.9 × the picture's (`wavecore.lossless.choose_depth`): integer Haar "
+            "wins one level of `moon`, a 2× pixel-repeated enlargement, whose details are then "
+            "all zero.  `decode(level=k)` of a bundle coded with fewer levels lifts the "
+            "thumbnail from the decoded picture.  RGB takes JPEG 2000's reversible colour "
+            "transform, with Cr predicted from Cb at a weight w/8 chosen per picture (colour "
+            "`rct-p<w>`).  Each level is coded in stripes of 192 rows or more, in parallel.  "
+            "The paper's *open* `bspline2` has no integer form: its analysis matrix has "
+            "determinant ±2, and an integer bijection needs ±1 (see `docs/bundle-format.md`).",
             END,
         ]
     )

@@ -170,13 +170,18 @@ def test_lossless_coarse_levels_are_thumbnails() -> None:
         assert coarse.dtype == np.uint8
     flat = np.full((45, 70), 77, np.uint8)
     assert np.all(wavecore.decode(wavecore.encode_image(flat, lossless=True), level=2) == 77)
+    # coded without levels (the picture predicted), the thumbnail is lifted after decoding
+    whole = wavecore.encode_image(image, lossless=True, level=0)
+    for k in range(4):
+        assert np.array_equal(wavecore.decode(whole, level=k), lossless.coarser(image, k))
+    assert wavecore.decode(whole, level=2, region=(slice(1, 4), slice(2, 9))).shape == (3, 7, 3)
 
 
 def test_lossless_keep_at_decode_time_is_lossy_but_close() -> None:
     x = np.linspace(0, 200, 64)
     image = (np.add.outer(x, x) / 2 + np.random.default_rng(3).normal(0, 4, (64, 64))).clip(0, 255)
     image = image.astype(np.uint8)
-    bundle = wavecore.encode_image(image, lossless=True)
+    bundle = wavecore.encode_image(image, lossless=True, level=3)  # keep ranks the details
     smooth = wavecore.decode(bundle, keep=0.2)
     assert smooth.shape == image.shape and not np.array_equal(smooth, image)
     error = np.abs(smooth.astype(float) - image).mean()

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from .. import curvesets, grids
+from .. import lossless as _lossless
 from ..blockcoder import (
     BLOCK_SIZES,
     band_counts,
@@ -160,6 +161,17 @@ def decode(
             raise InvalidParameter(msg)
         level = drop_levels
     parsed, plan = _open(bundle)
+    if (
+        plan.levels <= 1
+        and plan.levels < level <= _lossless.deepest(plan.shape)
+        and (plan.transform.lossless)
+    ):
+        # A lossless bundle of the depths encode_image(lossless=True) picks (0 or 1 levels):
+        # the deeper thumbnail is lifted from the decoded picture (wavecore.lossless.coarser).
+        slices = None if region is None else _region_slices(plan, int(level), region)
+        coded = decode(bundle, keep=keep, level=plan.levels, damaged=damaged)
+        thumbnail = _lossless.coarser(coded, int(level) - plan.levels)
+        return thumbnail if slices is None else np.ascontiguousarray(thumbnail[slices])
     if level > plan.levels:
         msg = f"level {level} is deeper than the bundle's {plan.levels} levels"
         raise InvalidParameter(msg)

@@ -17,7 +17,7 @@ from ..bundle import read_bundle, with_header, write_bundle
 from ..entropy import encode_levels
 from ..errors import BundleError, InvalidParameter
 from ..filters import get_wavelet
-from ..multilevel import default_level
+from ..losslesscoder import encode_lossless_levels
 from ..quantize import DEFAULT_ROUNDING, dequantize_bands, quantize_bands
 from ..threshold import check_share
 from .decode import decode
@@ -46,7 +46,7 @@ from .samples import (
     scaled_tolerance,
     unscaled,
 )
-from .stages import LOSSLESS_WAVELET, NoQuantizer, get_coder, get_colour
+from .stages import LOSSLESS_WAVELET, NoQuantizer, get_colour
 
 # Freed working arrays stay mapped between codings instead of being faulted in afresh by each
 # (a tenth of a 512² encode's CPU time; see wavecore._heap).
@@ -182,24 +182,17 @@ def _encode_lossless(arr: np.ndarray, level: int | None) -> bytes:
     data = get_colour({"id": colour}).forward(arr).astype(np.int64, copy=False)
     # At most as many levels as leave every subband non-empty (5/3 fits any size unpadded).
     deepest = min(arr.shape[:2]).bit_length() - 1
-    search = level is None
-    if level is None:  # the depths of LOSSLESS_DEPTHS that fit, tried by _lossless_bundle
-        level = min(default_level(arr.shape[:2], MAX_IMAGE_LEVELS), deepest)
-        level = min(level, max(_lossless.LOSSLESS_DEPTHS))
+    if level is None:  # none (prediction) or one level, by entropy (wavecore.lossless)
+        lifting = _lossless.choose_depth(data)
     elif level > deepest:
         msg = (
             f"level {level} is too deep for a lossless {arr.shape[0]}×{arr.shape[1]} image: "
             f"at most {deepest} levels leave every subband non-empty"
         )
         raise InvalidParameter(msg)
-    # First-order entropy only guides the choice of filters (the context coder ranks them
-    # differently), so code the choice with and without the closed bspline2 and keep the smaller.
-    choices = _lossless.filter_choices(data, level)
-    bundles = [
-        _lossless_bundle(arr, data, dtype, colour, level, lifting, search=search)
-        for lifting in choices
-    ]
-    return min(bundles, key=len)
+    else:
+        lifting = _lossless.choose_filters(data, level, candidates=_lossless.CANDIDATE_SETS[0])
+    return _lossless_bundle(arr, data, dtype, colour, len(lifting), lifting)
 
 
 def _lossless_bundle(
@@ -209,21 +202,9 @@ def _lossless_bundle(
     colour: str,
     level: int,
     lifting: list[str],
-    search: bool = False,
 ) -> bytes:
-    coder = get_coder({"id": DEFAULT_CODER})
-    coded: list[dict[str, Any]] = []
-
-    def code(coeffs: list[Any]) -> list[bytes]:
-        chunks, params = coder.encode(coeffs)
-        coded.append(params)
-        return chunks
-
-    # No level given: the depth that codes smallest (wavecore.lossless.LOSSLESS_DEPTHS).
-    depths = tuple(d for d in _lossless.LOSSLESS_DEPTHS if d <= level) if search else ()
-    level, chunks = _lossless.best_depth(data, lifting, code, depths or (level,))
-    lifting = lifting[:level]
-    cparams = coded[0]
+    # The lossless coder (wavecore.losslesscoder: the context coder's version 5).
+    chunks, cparams = encode_lossless_levels(_lossless.forward(data, level, (0, 1), lifting))
     plan = Plan(
         "image",
         arr.shape,
@@ -241,7 +222,7 @@ def _lossless_bundle(
     header.update(
         quantizer=NoQuantizer.codec_id,
         qparams={},
-        coder=str(cparams.get("coder", DEFAULT_CODER)),
+        coder=cparams["coder"],
         cparams=cparams,
         psnr=None,
         max_error=0.0,
