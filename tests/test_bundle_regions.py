@@ -62,7 +62,7 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and a.dtype == b.dtype and bool(np.array_equal(a, b))
 
 
-@pytest.mark.parametrize("name", [n for n in NAMES if not n.startswith("lossless")])
+@pytest.mark.parametrize("name", NAMES)
 def test_every_bundle_spans_several_blocks(name: str) -> None:
     """Otherwise the region tests below would not skip anything."""
     parsed = read_bundle(BUNDLES[name])

@@ -121,9 +121,9 @@ def test_unknown_version_is_refused() -> None:
         decode_lossless_levels([b""], [(4, 4)], {**PARAMS, "version": 9})
 
 
-def test_new_bundles_name_the_context_coders_version_5() -> None:
+def test_max_effort_bundles_name_the_context_coders_version_5() -> None:
     image = _picture((48, 40, 3), 9).astype(np.uint8)
-    bundle = wavecore.encode_image(image, lossless=True)
+    bundle = wavecore.encode_image(image, lossless=True, effort="max")
     assert wavecore.inspect(bundle)["header"]["cparams"] == PARAMS
     assert np.array_equal(wavecore.decode(bundle), image)
     region = (slice(5, 30), slice(3, 20))

@@ -25,6 +25,7 @@ from ..blockcoder import (
 from ..bundle import Bundle, read_bundle
 from ..errors import BundleError, InvalidParameter
 from ..layout import band_names, is_band_group
+from ..losslesscoder import LOSSLESS_VERSION
 from ..regions import band_masks, check_region, windowed_inverse
 from ..resample import coarse_extent
 from ..threshold import check_share
@@ -164,10 +165,12 @@ def decode(
     if (
         plan.levels <= 1
         and plan.levels < level <= _lossless.deepest(plan.shape)
-        and (plan.transform.lossless)
+        and plan.transform.lossless
+        and (parsed.header.get("cparams") or {}).get("version") == LOSSLESS_VERSION
     ):
-        # A lossless bundle of the depths encode_image(lossless=True) picks (0 or 1 levels):
+        # A bundle of the lossless coder (effort="max"), whose default depth is 0 or 1 levels:
         # the deeper thumbnail is lifted from the decoded picture (wavecore.lossless.coarser).
+        # Bundles of the block coder keep their levels' limit, as before that coder.
         slices = None if region is None else _region_slices(plan, int(level), region)
         coded = decode(bundle, keep=keep, level=plan.levels, damaged=damaged)
         thumbnail = _lossless.coarser(coded, int(level) - plan.levels)
