@@ -19,9 +19,10 @@ need determinant ±1.  An integer form would have to rescale a coefficient of ev
 is no longer the paper's transform.  The closed (periodic) ``bspline2`` has determinant ±1, and
 this module does implement its exact integer lifting (below, ``"bspline2"``), but periodic
 wrapping suits images poorly: on camera, coins and brick it codes 1–4 % larger than 5/3.  It is
-offered by :func:`lift` and decoded wherever a bundle names it, but since the lossless coder
-(:mod:`wavecore.losslesscoder`) the encoder chooses from ``CANDIDATE_SETS[0]`` only: coding a
-second choice doubled the encoding time, and ``bspline2`` won none of scikit-image's pictures.
+offered per level all the same and wins where it wins (the default encoder codes the choices
+with and without it).  With ``effort="max"`` (the lossless coder, :mod:`wavecore.losslesscoder`)
+the encoder chooses from ``CANDIDATE_SETS[0]`` only: coding a second choice doubled that
+coder's encoding time, and ``bspline2`` won none of scikit-image's pictures.
 
 The 5/3 lifting is the standard reversible wavelet, accepts every length (``n`` samples split
 into ``ceil(n/2)`` coarse and ``floor(n/2)`` details), so a lossless image needs no padding, and
@@ -110,10 +111,11 @@ __all__ = [
 #: The reversible filters, by the names the bundle header uses.
 FILTERS = ("legall53", "haar", "bspline2", "511c")
 #: The candidate sets of :func:`filter_choices`: without and with the closed ``bspline2``, which
-#: entropy ranks too well.  The encoder uses the first (one choice, coded once).
+#: entropy ranks too well.  The default encoder codes a choice from each and keeps the smaller;
+#: ``effort="max"`` uses the first (one choice, coded once).
 CANDIDATE_SETS = (("legall53", "haar", "511c"), FILTERS)
-#: The depths (levels) :func:`best_depth` tried for the block coder, before the lossless coder
-#: and :func:`choose_depth` (kept for callers of :func:`best_depth`): the
+#: The depths (levels) a default lossless encode tries when none is given (:func:`best_depth`,
+#: the block coder; ``effort="max"`` takes :func:`choose_depth` instead): the
 #: context coder's prediction of the coarse band (LOCO-I's median edge detector) codes it
 #: better than further 5/3 levels do.  On scikit-image's pictures, bytes at depths
 #: 1 / 2 / 3 / 5: camera 124,826 / 124,811 / 124,985 / 125,148; coins 68,456 / 68,252 / 68,437
