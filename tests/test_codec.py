@@ -377,9 +377,10 @@ def test_the_public_signatures_are_the_issues_contract() -> None:
     import inspect as pyinspect
 
     expected = {
-        # Issue 12: photographs default to cdf97, the measured rate–distortion winner.
+        # Issue 12: photographs default to cdf97, the measured rate–distortion winner; it
+        # added ``effort`` (the opt-in lossless coder) after the old parameters.
         "encode_image": "(image, *, wavelet='cdf97', level=None, keep=None, quality=None, "
-        "bpp=None, lossless=False)",
+        "bpp=None, lossless=False, effort='default')",
         # The contract's parameters, in order; ``wavelet`` was added after them (the upload
         # page compares B-spline and Haar curves), which extends the contract without changing it.
         # Issue 15 added ``boundary`` (beside ``closed``, whose default became None so that

@@ -170,6 +170,16 @@ def test_lossless_coarse_levels_are_thumbnails() -> None:
         assert coarse.dtype == np.uint8
     flat = np.full((45, 70), 77, np.uint8)
     assert np.all(wavecore.decode(wavecore.encode_image(flat, lossless=True), level=2) == 77)
+    # effort="max" coded without levels (the picture predicted): the thumbnail is lifted after
+    # decoding
+    whole = wavecore.encode_image(image, lossless=True, level=0, effort="max")
+    for k in range(4):
+        assert np.array_equal(wavecore.decode(whole, level=k), lossless.coarser(image, k))
+    assert wavecore.decode(whole, level=2, region=(slice(1, 4), slice(2, 9))).shape == (3, 7, 3)
+    # the default coder's bundles keep their levels' limit
+    plain = wavecore.encode_image(image, lossless=True, level=0)
+    with pytest.raises(wavecore.InvalidParameter, match="deeper than the bundle's 0 levels"):
+        wavecore.decode(plain, level=1)
 
 
 def test_lossless_keep_at_decode_time_is_lossy_but_close() -> None:
@@ -289,3 +299,41 @@ def test_a_colour_weight_out_of_range_is_refused_by_name() -> None:
         assert binheader.unpack(packed)["colour"] == f"rct-p{weight}"
         with pytest.raises(wavecore.BundleError, match="colour"):
             wavecore.bundle.check_header(binheader.unpack(packed))
+
+
+@pytest.mark.parametrize("effort", ["default", "max"])
+def test_both_efforts_are_exact_whole_by_region_and_by_level(effort: str) -> None:
+    rng = np.random.default_rng(11)
+    for image in (
+        rng.integers(0, 256, (50, 37, 3), dtype=np.uint8),
+        rng.integers(0, 65536, (33, 46), dtype=np.uint16),
+    ):
+        bundle = wavecore.encode_image(image, lossless=True, effort=effort)
+        assert np.array_equal(wavecore.decode(bundle), image)
+        region = (slice(7, 29), slice(3, 31))
+        assert np.array_equal(wavecore.decode(bundle, region=region), image[region])
+        half = tuple(-(-n // 2) for n in image.shape[:2])
+        assert wavecore.decode(bundle, level=1).shape == half + image.shape[2:]
+
+
+def test_max_effort_is_the_lossless_coder_and_default_the_block_coder() -> None:
+    image = np.random.default_rng(12).integers(0, 256, (40, 44), dtype=np.uint8)
+    plain = wavecore.inspect(wavecore.encode_image(image, lossless=True))["header"]["cparams"]
+    most = wavecore.inspect(wavecore.encode_image(image, lossless=True, effort="max"))
+    assert plain.get("version") == 4 and "block" in plain
+    assert most["header"]["cparams"]["version"] == 5 and most["levels"] in (0, 1)
+
+
+@pytest.mark.parametrize("effort", ["fast", "MAX", "", None, 2])
+def test_an_unknown_effort_is_refused_by_name(effort: object) -> None:
+    with pytest.raises(wavecore.InvalidParameter, match=r"effort must be one of 'default', 'max'"):
+        wavecore.encode_image(np.zeros((8, 8), np.uint8), lossless=True, effort=effort)  # type: ignore[arg-type]
+
+
+def test_max_effort_needs_lossless() -> None:
+    image = np.zeros((8, 8), np.uint8)
+    with pytest.raises(wavecore.InvalidParameter, match=r"effort='max' applies only with lossless"):
+        wavecore.encode_image(image, effort="max")
+    with pytest.raises(wavecore.InvalidParameter, match=r"effort='max' applies only with lossless"):
+        wavecore.encode_image(image, quality=30, effort="max")
+    assert wavecore.decode(wavecore.encode_image(image, effort="default")).shape == (8, 8)

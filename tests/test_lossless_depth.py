@@ -1,4 +1,5 @@
-"""Lossless depth choice (wavecore.lossless.best_depth, LOSSLESS_DEPTHS)."""
+"""Lossless depth choice: the default (wavecore.lossless.best_depth, LOSSLESS_DEPTHS), and
+``effort="max"`` (wavecore.lossless.choose_depth: prediction alone, or one level)."""
 
 from __future__ import annotations
 
@@ -63,3 +64,43 @@ def test_tiny_images_stay_exact() -> None:
     for shape in [(1, 1), (2, 3), (5, 4, 3), (3, 9)]:
         image = _texture(shape, 4)
         assert np.array_equal(wavecore.decode(wavecore.encode_image(image, lossless=True)), image)
+
+
+@pytest.mark.parametrize("shape", [(96, 80), (64, 72, 3)])
+def test_max_effort_depth_is_the_entropy_choice_and_exact(shape: tuple[int, ...]) -> None:
+    image = _texture(shape, 1)
+    bundle = wavecore.encode_image(image, lossless=True, effort="max")
+    assert np.array_equal(wavecore.decode(bundle), image)
+    header = wavecore.inspect(bundle)["header"]
+    assert header["levels"] in (0, 1)
+    # The bundle is the very one an explicit level with the chosen filters gives.
+    explicit = wavecore.encode_image(image, lossless=True, level=header["levels"], effort="max")
+    assert bundle == explicit
+
+
+def test_max_effort_takes_one_haar_level_of_a_pixel_repeated_picture() -> None:
+    """Haar details of a 2x nearest-neighbour enlargement are all zero: one level pays."""
+    small = _texture((40, 36), 5)
+    big = np.kron(small, np.ones((2, 2), dtype=np.uint8))
+    bundle = wavecore.encode_image(big, lossless=True, effort="max")
+    assert wavecore.inspect(bundle)["header"]["lifting"] == ["haar"]
+    assert np.array_equal(wavecore.decode(bundle), big)
+    # and it is smaller than prediction alone
+    alone = wavecore.encode_image(big, lossless=True, level=0, effort="max")
+    assert len(bundle) < len(alone)
+
+
+def test_max_effort_codes_noise_by_prediction_alone() -> None:
+    image = _texture((80, 96), 6)
+    assert lossless.choose_depth(image.astype(np.int64)) == []
+    bundle = wavecore.encode_image(image, lossless=True, effort="max")
+    assert wavecore.inspect(bundle)["levels"] == 0
+
+
+def test_max_effort_keeps_an_explicit_level() -> None:
+    image = _texture((96, 80), 2)
+    bundle = wavecore.encode_image(image, lossless=True, level=4, effort="max")
+    assert wavecore.inspect(bundle)["levels"] == 4
+    assert np.array_equal(wavecore.decode(bundle), image)
+    with pytest.raises(wavecore.InvalidParameter, match="too deep"):
+        wavecore.encode_image(image, lossless=True, level=8, effort="max")

@@ -67,3 +67,32 @@ def test_frozen_predicted_colour_bundle_decodes_exactly() -> None:
     assert np.array_equal(wavecore.decode(COLOUR_BUNDLE), image)
     region = wavecore.decode_region(COLOUR_BUNDLE, (slice(3, 9), slice(4, 11)))
     assert np.array_equal(region, image[3:9, 4:11])
+
+
+# sha256 and length of the default lossless bundles that branch ``integrate`` (commit 40c0b01,
+# before the opt-in ``effort="max"`` coder existed) wrote for the pictures below: the default
+# path must keep writing these very bytes.
+INTEGRATE_DEFAULT = {
+    "u16": (6288, "c030bcf48f1e9149b134b64a4c6bf7bceb1d082be053fe3ba51880b1d3838097"),
+    "camera_level1": (124672, "8fb046b22fe3ca74acdb49bd34d4eba97cfaac9f2d4e50d8c6d3cbd1b5ac9d6b"),
+}
+
+
+def _u16_picture() -> np.ndarray:
+    i, j = np.mgrid[0:60, 0:50]
+    return ((i * j * 37 + (i * 7919 + j * 104729) % 251) * 13 % 65536).astype(np.uint16)
+
+
+def test_default_lossless_bundles_are_integrates_bytes() -> None:
+    import hashlib
+
+    from skimage import data
+
+    bundles = {
+        "u16": wavecore.encode_image(_u16_picture(), lossless=True),
+        "camera_level1": wavecore.encode_image(data.camera(), lossless=True, level=1),
+    }
+    for name, bundle in bundles.items():
+        assert (len(bundle), hashlib.sha256(bundle).hexdigest()) == INTEGRATE_DEFAULT[name], name
+    # and the frozen colour bundle above was written by that default path at level 2
+    assert wavecore.encode_image(_colour_image(), lossless=True, level=2) == COLOUR_BUNDLE

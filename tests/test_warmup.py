@@ -50,7 +50,8 @@ SWEEP = textwrap.dedent(
             else:
                 info = np.iinfo(dtype)
                 image = (info.min + values * (int(info.max) - int(info.min))).astype(dtype)
-            cases = targets + ([{"lossless": True}] if dtype in ("uint8", "uint16") else [])
+            exact = [{"lossless": True}, {"lossless": True, "effort": "max"}]
+            cases = targets + (exact if dtype in ("uint8", "uint16") else [])
             for target in cases:
                 every_way(wavecore.encode_image(image, **target))
     for dims in (1, 2, 3):

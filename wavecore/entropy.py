@@ -36,6 +36,7 @@ from numba import njit
 from .blockcoder import BLOCK_SIZE, decode_blocks, encode_blocks
 from .errors import BundleError, InvalidParameter
 from .layout import as_levels, is_band_group
+from .losslesscoder import LOSSLESS_VERSION, decode_lossless_levels
 
 __all__ = ["CODERS", "decode_levels", "encode_levels"]
 
@@ -191,6 +192,8 @@ def decode_levels(
         msg = f"{len(chunks)} chunks given for {len(layout)} band entries"
         raise BundleError(msg)
     layout = layout[: len(chunks)]
+    if params["coder"] == "context" and params.get("version") == LOSSLESS_VERSION:
+        return decode_lossless_levels(chunks, shapes, params)  # lossless bundles' own coder
     if params["coder"] == "context":
         levels = _decode_context(chunks, layout, params)
     else:

@@ -77,6 +77,8 @@ def _images(dtype: str) -> Callable[[], None]:
                 _decode_every_way(encode_image(image, wavelet=wavelet, keep=0.2))
             if dtype in ("uint8", "uint16"):
                 _decode_every_way(encode_image(image, lossless=True))
+                # The opt-in lossless coder (wavecore.losslesscoder) has kernels of its own.
+                _decode_every_way(encode_image(image, lossless=True, effort="max"))
         _decode_every_way(encode_image(image))  # the default, 40 dB
         decode(encode_image(image[..., :3], bpp=8.0))
         if dtype == "uint8":

@@ -60,6 +60,26 @@ def test_lossless_is_exact(tmp_path: Path, images: Path) -> None:
     assert np.array_equal(np.asarray(Image.open(tmp_path / "exact.png")), original)
 
 
+def test_lossless_effort_max(
+    tmp_path: Path, images: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = images / "img2.png"
+    original = np.asarray(Image.open(source))
+    bundle = tmp_path / "max.wcb"
+    assert main(["encode", str(source), str(bundle), "--lossless", "--effort", "max"]) == 0
+    assert bundle.read_bytes() == wavecore.encode_image(original, lossless=True, effort="max")
+    assert np.array_equal(wavecore.decode(bundle.read_bytes()), original)
+    capsys.readouterr()
+    # a value the library refuses, and max without --lossless, are reported, not raised
+    assert (
+        main(["encode", str(source), str(tmp_path / "x.wcb"), "--lossless", "--effort", "hard"])
+        == 1
+    )
+    assert "effort must be one of 'default', 'max', not 'hard'" in capsys.readouterr().err
+    assert main(["encode", str(source), str(tmp_path / "y.wcb"), "--effort", "max"]) == 1
+    assert "applies only with lossless" in capsys.readouterr().err
+
+
 def test_a_folder_and_a_glob_give_a_table(
     tmp_path: Path, images: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -111,6 +111,22 @@ async def test_lossless_and_multipart_bundle(client: httpx.AsyncClient) -> None:
     assert np.array_equal(np.load(io.BytesIO(r.content)), image)
 
 
+async def test_lossless_effort_max(client: httpx.AsyncClient) -> None:
+    image = test_image((40, 33), seed=4)
+    upload = {"file": ("in.png", image_file(image), "image/png")}
+    versions = {}
+    for effort in ("default", "max"):
+        r = await client.post(
+            "/v1/images/encode", files=upload, data={"lossless": "true", "effort": effort}
+        )
+        assert r.status_code == 200, r.text
+        # the library's own bundle for that effort, decoded exactly
+        assert r.content == wavecore.encode_image(image, lossless=True, effort=effort)
+        assert np.array_equal(wavecore.decode(r.content), image)
+        versions[effort] = wavecore.inspect(r.content)["header"]["cparams"]["version"]
+    assert versions == {"default": 4, "max": 5}  # the block coder, and the lossless coder
+
+
 async def test_curve_round_trip(client: httpx.AsyncClient) -> None:
     points = circle(70)
     r = await client.post(

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from .. import curvesets, grids
+from .. import lossless as _lossless
 from ..blockcoder import (
     BLOCK_SIZES,
     band_counts,
@@ -24,6 +25,7 @@ from ..blockcoder import (
 from ..bundle import Bundle, read_bundle
 from ..errors import BundleError, InvalidParameter
 from ..layout import band_names, is_band_group
+from ..losslesscoder import LOSSLESS_VERSION
 from ..regions import band_masks, check_region, windowed_inverse
 from ..resample import coarse_extent
 from ..threshold import check_share
@@ -160,6 +162,19 @@ def decode(
             raise InvalidParameter(msg)
         level = drop_levels
     parsed, plan = _open(bundle)
+    if (
+        plan.levels <= 1
+        and plan.levels < level <= _lossless.deepest(plan.shape)
+        and plan.transform.lossless
+        and (parsed.header.get("cparams") or {}).get("version") == LOSSLESS_VERSION
+    ):
+        # A bundle of the lossless coder (effort="max"), whose default depth is 0 or 1 levels:
+        # the deeper thumbnail is lifted from the decoded picture (wavecore.lossless.coarser).
+        # Bundles of the block coder keep their levels' limit, as before that coder.
+        slices = None if region is None else _region_slices(plan, int(level), region)
+        coded = decode(bundle, keep=keep, level=plan.levels, damaged=damaged)
+        thumbnail = _lossless.coarser(coded, int(level) - plan.levels)
+        return thumbnail if slices is None else np.ascontiguousarray(thumbnail[slices])
     if level > plan.levels:
         msg = f"level {level} is deeper than the bundle's {plan.levels} levels"
         raise InvalidParameter(msg)
