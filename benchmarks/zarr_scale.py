@@ -269,6 +269,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pyramid-tile", type=int, default=1024)
     parser.add_argument("--pyramid-lossless", action="store_true", help="lossless, not 40 dB")
     parser.add_argument(
+        "--pyramid-max-error",
+        type=float,
+        default=0.0,
+        help="code the pyramid to this max_error (the CLI's --max-error), not 40 dB",
+    )
+    parser.add_argument(
         "--memory-chunks",
         default="",
         help="only measure one process's peak memory coding chunks of these sides (256,512,1024)",
@@ -539,7 +545,11 @@ def pyramid_run(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     from wavecore.scale import synthetic_rgb, write_pyramid
 
     side, tile = args.pyramid, args.pyramid_tile
-    config = {"lossless": True} if args.pyramid_lossless else {"psnr": 40.0}
+    config: dict[str, Any] = {"psnr": 40.0}
+    if args.pyramid_lossless:
+        config = {"lossless": True}
+    elif args.pyramid_max_error:
+        config = {"max_error": args.pyramid_max_error}
     c, client = cluster(2)
     try:
         client.run(warm_up)
