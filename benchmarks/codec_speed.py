@@ -203,7 +203,7 @@ STAGES = (
     ("colour", "wavecore.codec.samples", "ycbcr_from"),
     ("colour", "wavecore.codec.samples", "to_integers"),
     ("error metrics", "wavecore.codec.samples", "measure_errors"),
-    ("rate estimate", "wavecore.codec.ratecontrol", "_log_histogram"),
+    ("rate estimate", "wavecore.codec.ratecontrol", "_log_histograms"),
     ("header", "wavecore.bundle", "write_bundle"),
     ("header", "wavecore.bundle", "read_bundle"),
 )

@@ -56,7 +56,7 @@ from ..quantize import (
     quantize_bands,
 )
 from ..threshold import remove_smallest
-from ..transform import run_rows
+from ..transform import run_rows, run_slices
 from .decode import decode
 from .plan import DEFAULT_CODER
 from .plan import Plan as _Plan
@@ -458,41 +458,56 @@ class _LossyEncoder:
                 axes=self.plan.axes,
             )
             out = []
+            flat, scales, roundings = [], [], []
             for index, (entry, weights) in enumerate(zip(self.kept, levels, strict=True)):
                 bands = entry if isinstance(entry, tuple | list) else (entry,)
                 rounding = APPROX_ROUNDING if index == 0 else DEFAULT_ROUNDING
                 for band, weight in zip(bands, weights, strict=True):
-                    values = np.ascontiguousarray(band, dtype=np.float64).reshape(-1)
-                    counts, top = _log_histogram(values, 1.0 / weight)
-                    octave, step = np.divmod(np.arange(counts.size), _OCTAVE_BINS)
-                    centres = 2.0 ** (top - _OCTAVES + octave - 1) * (
-                        2.0 + (2 * step + 1) / _OCTAVE_BINS
-                    )  # the middle of each bin, halfway along its mantissa range
-                    centres[0] = 0.0  # everything tiny, zeros included
-                    used = counts > 0
-                    out.append((counts[used].astype(np.float64), centres[used], rounding))
+                    flat.append(np.ascontiguousarray(band, dtype=np.float64).reshape(-1))
+                    scales.append(1.0 / weight)
+                    roundings.append(rounding)
+            for (counts, top), rounding in zip(
+                _log_histograms(flat, scales), roundings, strict=True
+            ):
+                octave, step = np.divmod(np.arange(counts.size), _OCTAVE_BINS)
+                centres = 2.0 ** (top - _OCTAVES + octave - 1) * (
+                    2.0 + (2 * step + 1) / _OCTAVE_BINS
+                )  # the middle of each bin, halfway along its mantissa range
+                centres[0] = 0.0  # everything tiny, zeros included
+                used = counts > 0
+                out.append((counts[used].astype(np.float64), centres[used], rounding))
             self._histogram_cache = (self.kept_fraction, out)
         return self._histogram_cache[1]
 
 
-def _log_histogram(values: np.ndarray, scale: float) -> tuple[np.ndarray, int]:
-    """``_kernels.log_histogram(values, scale, _OCTAVE_BINS, _OCTAVES)`` in slices over the
-    threads: a largest value, then counts, both exact whatever the slicing (a maximum, and
-    integer counts added up)."""
-    parts: list[Any] = []
-    run_rows(
-        lambda lo, hi: parts.append(largest_scaled(values[lo:hi], scale)), values.size, values.size
-    )
-    top = int(top_octave(max(parts, default=0.0)))
+def _log_histograms(bands: list[np.ndarray], scales: list[float]) -> list[tuple[np.ndarray, int]]:
+    """``_kernels.log_histogram(band, scale, _OCTAVE_BINS, _OCTAVES)`` of every flat band, in
+    two parallel regions over all the bands (slices of each): the largest values, then the
+    counts, both exact whatever the slicing (a maximum, and integer counts added up)."""
+    sizes = [band.size for band in bands]
+    largest = [0.0] * len(bands)
+    parts: list[tuple[int, Any]] = []
+
+    def find_largest(item: int, lo: int, hi: int) -> None:
+        parts.append((item, largest_scaled(bands[item][lo:hi], scales[item])))
+
+    run_slices(sizes, find_largest)
+    for item, value in parts:
+        largest[item] = max(largest[item], value)
+    tops = [int(top_octave(value)) for value in largest]
     parts.clear()
-    run_rows(
-        lambda lo, hi: parts.append(
-            log_histogram_counts(values[lo:hi], scale, _OCTAVE_BINS, _OCTAVES, top)
-        ),
-        values.size,
-        values.size,
-    )
-    return np.sum(parts, axis=0), top
+
+    def count(item: int, lo: int, hi: int) -> None:
+        counts = log_histogram_counts(
+            bands[item][lo:hi], scales[item], _OCTAVE_BINS, _OCTAVES, tops[item]
+        )
+        parts.append((item, counts))
+
+    run_slices(sizes, count)
+    totals = [np.zeros(_OCTAVE_BINS * _OCTAVES, dtype=np.int64) for _ in bands]
+    for item, counts in parts:
+        totals[item] += counts
+    return list(zip(totals, tops, strict=True))
 
 
 class _Search:
