@@ -510,13 +510,13 @@ class _LossyEncoder:
             for (counts, top), rounding in zip(
                 _log_histograms(flat, scales), roundings, strict=True
             ):
-                octave, step = np.divmod(np.arange(counts.size), _OCTAVE_BINS)
+                used = np.flatnonzero(counts)  # (only the bins in use: a third of them)
+                octave, step = np.divmod(used, _OCTAVE_BINS)
                 centres = 2.0 ** (top - _OCTAVES + octave - 1) * (
                     2.0 + (2 * step + 1) / _OCTAVE_BINS
                 )  # the middle of each bin, halfway along its mantissa range
-                centres[0] = 0.0  # everything tiny, zeros included
-                used = counts > 0
-                out.append((counts[used].astype(np.float64), centres[used], rounding))
+                centres[used == 0] = 0.0  # bin 0: everything tiny, zeros included
+                out.append((counts[used].astype(np.float64), centres, rounding))
             self._histogram_cache = (self.kept_fraction, out)
         return self._histogram_cache[1]
 
