@@ -2,7 +2,8 @@
 
 Run with ``.venv/bin/python benchmarks/codec_speed.py`` (``--size 1024`` for a quick look,
 ``--profile`` to print where our time goes, ``--stages`` for a table of each stage's wall,
-CPU and calling-thread (serial) time on one thread and on the default threads, ``--write``
+CPU and serial time (the calling thread's, outside parallel regions) on one thread and on the
+default threads, ``--write``
 to put the table into ``docs/benchmarks.md``).  Everything is timed in this one process, on
 the same pictures, as medians of ``--repeat`` runs:
 
@@ -203,7 +204,7 @@ STAGES = (
     ("colour", "wavecore.codec.samples", "ycbcr_from"),
     ("colour", "wavecore.codec.samples", "to_integers"),
     ("error metrics", "wavecore.codec.samples", "measure_errors"),
-    ("rate estimate", "wavecore.codec.ratecontrol", "_log_histogram"),
+    ("rate estimate", "wavecore.codec.ratecontrol", "_log_histograms"),
     ("header", "wavecore.bundle", "write_bundle"),
     ("header", "wavecore.bundle", "read_bundle"),
 )
@@ -215,8 +216,10 @@ def _kernel_seconds() -> float:
 
 
 def stage_table(run: Callable[[], object], repeat: int) -> list[str]:
-    """Per stage: wall, CPU of all threads, CPU of the calling thread (the serial part), the
-    kernel's part of the CPU (``sys``: page faults on fresh memory, mostly), calls.
+    """Per stage: wall, CPU of all threads, the serial part (CPU of the calling thread outside
+    the parallel regions of ``wavecore.transform.run_calls``, in which the calling thread
+    works as one of the threads), the kernel's part of the CPU (``sys``: page faults on fresh
+    memory, mostly), calls.
 
     Medians are not additive, so these are means over ``repeat`` runs.  Only calls made from
     the calling thread and not nested in another timed stage count.
@@ -229,8 +232,23 @@ def stage_table(run: Callable[[], object], repeat: int) -> list[str]:
     inside = [False]
     main = threading.get_ident()
 
+    # The calling thread's CPU inside parallel regions: its share of the parallel work.
+    shared = [0.0]
+
     def clocks() -> tuple[float, float, float, float]:
-        return time.perf_counter(), time.process_time(), time.thread_time(), _kernel_seconds()
+        serial = time.thread_time() - shared[0]
+        return time.perf_counter(), time.process_time(), serial, _kernel_seconds()
+
+    regions = wavecore.transform.run_calls
+
+    def region(calls: Any) -> None:
+        if threading.get_ident() != main:
+            return regions(calls)
+        start = time.thread_time()
+        try:
+            return regions(calls)
+        finally:
+            shared[0] += time.thread_time() - start
 
     def timed(label: str, function: Callable[..., Any]) -> Callable[..., Any]:
         def call(*args: Any, **kwargs: Any) -> Any:
@@ -249,7 +267,8 @@ def stage_table(run: Callable[[], object], repeat: int) -> list[str]:
 
         return call
 
-    replaced: list[tuple[Any, str, Any]] = []
+    replaced: list[tuple[Any, str, Any]] = [(wavecore.transform, "run_calls", regions)]
+    wavecore.transform.run_calls = region  # type: ignore[assignment]
     for label, module_name, name in STAGES:
         original = getattr(sys.modules[module_name], name, None)
         if original is None:

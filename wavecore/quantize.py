@@ -38,7 +38,7 @@ from .filters import get_wavelet
 from .layout import as_levels, from_levels
 from .multilevel import waverec, waverec2
 from .norms import basis_norms
-from .transform import run_rows
+from .transform import run_rows, run_slices
 
 __all__ = [
     "ClosedLoopFit",
@@ -209,15 +209,19 @@ def quantize_bands(
     levels = as_levels(coeffs)
     weights = band_weights(coeffs, wavelet=wavelet, boundary=boundary, axes=axes)
     out_levels: list[list[np.ndarray]] = []
+    jobs: list[
+        tuple[np.ndarray, float, float, np.ndarray]
+    ] = []  # flat values, 1/step, rounding, out
     for index, (bands, level_weights) in enumerate(zip(levels, weights, strict=True)):
         band_rounding = APPROX_ROUNDING if index == 0 else float(rounding)
         level_q = []
         for band, weight in zip(bands, level_weights, strict=True):
             values = np.ascontiguousarray(band, dtype=np.float64)
             q = np.empty(values.shape, dtype=np.int32)
-            _quantize_flat(values.reshape(-1), 1.0 / (step * weight), band_rounding, q.reshape(-1))
+            jobs.append((values.reshape(-1), 1.0 / (step * weight), band_rounding, q.reshape(-1)))
             level_q.append(q)
         out_levels.append(level_q)
+    _quantize_all(jobs)
     params = {
         "name": QUANTIZER_NAME,
         "step": step,
@@ -296,6 +300,7 @@ def dequantize_bands(
         raise InvalidParameter(msg)
     targets = None if out is None else as_levels(out)
     out_levels = []
+    jobs: list[tuple[np.ndarray, bool, float, np.ndarray]] = []  # flat q, detail?, step, out
     for index, bands in enumerate(levels):
         level_weights = weights[index]
         if not isinstance(level_weights, list) or len(level_weights) != len(bands):
@@ -308,11 +313,11 @@ def dequantize_bands(
             if q.dtype.kind not in "iu":
                 msg = f"quantized coefficients must be integers, not {q.dtype}"
                 raise InvalidParameter(msg)
-            offset = 0.0 if index == 0 else reconstruction_offset(q, rounding)
             values = _writable_target(targets, index, k, q.shape)
-            _dequantize_flat(np.ravel(q), offset, band_step, values.reshape(-1))
+            jobs.append((np.ravel(q), index > 0, band_step, values.reshape(-1)))
             restored.append(values)
         out_levels.append(restored)
+    _dequantize_all(jobs, rounding)
     return from_levels(qcoeffs, out_levels)
 
 
@@ -581,25 +586,46 @@ class ClosedLoopFit:
         return from_levels(self.coeffs, fitted), params
 
 
-def _quantize_flat(
-    values: np.ndarray, inverse_step: float, rounding: float, out: np.ndarray
+def _quantize_all(jobs: list[tuple[np.ndarray, float, float, np.ndarray]]) -> None:
+    """The dead-zone quantizer's compiled pass over every band (flat values, inverse step,
+    rounding, flat output) in one parallel region: one hand-off for all the bands, and the
+    small ones run beside the large ones instead of alone on the calling thread.  Elementwise,
+    so the integers do not depend on the slicing (or on the thread count)."""
+
+    def run(item: int, lo: int, hi: int) -> None:
+        values, inverse_step, rounding, out = jobs[item]
+        _kernels.deadzone_quantize(values[lo:hi], inverse_step, rounding, MAX_INDEX, out[lo:hi])
+
+    run_slices([job[0].size for job in jobs], run)
+
+
+def _dequantize_all(
+    jobs: list[tuple[np.ndarray, bool, float, np.ndarray]], rounding: float
 ) -> None:
-    """The dead-zone quantizer's compiled pass over a flat band, in slices over the threads.
+    """Dequantize every band (flat integers, whether a detail band, band step, flat output) in
+    two parallel regions: the detail bands' counts for their offsets
+    (:func:`reconstruction_offset`: whole numbers, whatever the slicing), then the values."""
+    details = [k for k, job in enumerate(jobs) if job[1]]
+    counts = np.zeros((len(jobs), 2), dtype=np.int64)
+    parts: list[tuple[int, int, int]] = []
 
-    Elementwise, so the result does not depend on how it is sliced (or on the thread count).
-    """
-    run_rows(
-        lambda lo, hi: _kernels.deadzone_quantize(
-            values[lo:hi], inverse_step, rounding, MAX_INDEX, out[lo:hi]
-        ),
-        values.size,
-        values.size,
-    )
+    def count(item: int, lo: int, hi: int) -> None:
+        ones, more = _kernels.count_ones_and_more(jobs[details[item]][0][lo:hi])
+        parts.append((details[item], int(ones), int(more)))
 
+    run_slices([jobs[k][0].size for k in details], count)
+    for item, ones, more in parts:
+        counts[item] += (ones, more)
+    offsets = [
+        _offset_from_counts(int(counts[k, 0]), int(counts[k, 1]), rounding) if job[1] else 0.0
+        for k, job in enumerate(jobs)
+    ]
 
-def _dequantize_flat(q: np.ndarray, offset: float, step: float, out: np.ndarray) -> None:
-    """The compiled dequantizer over a flat band, in slices over the threads (elementwise)."""
-    run_rows(lambda lo, hi: _kernels.dequantize(q[lo:hi], offset, step, out[lo:hi]), q.size, q.size)
+    def run(item: int, lo: int, hi: int) -> None:
+        q, _, step, out = jobs[item]
+        _kernels.dequantize(q[lo:hi], offsets[item], step, out[lo:hi])
+
+    run_slices([job[0].size for job in jobs], run)
 
 
 # --------------------------------------------------------------------------------------------
