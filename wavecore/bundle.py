@@ -136,6 +136,7 @@ the entropy decoder never produces more values than the subband shapes that foll
 from __future__ import annotations
 
 import binascii
+import contextlib
 import functools
 import json
 import math
@@ -427,7 +428,7 @@ def write_bundle(
     parts = [MAGIC, bytes(version), _varint(len(packed)), packed]
     parts += [_varint(len(chunk)) for chunk in chunks]
     checked = chunks if version >= (3, 0) else chunks[1:]
-    parts += [_U16.pack(binascii.crc_hqx(chunk, 0)) for chunk in checked]
+    parts += [_U16.pack(_crc16(chunk)) for chunk in checked]
     head = b"".join(parts)
     if version >= (3, 0):
         return b"".join([head, _CRC.pack(zlib.crc32(head)), *chunks])
@@ -666,20 +667,51 @@ def _plan_weights(
     return tuple(tuple(entry) for entry in weights)
 
 
+class _StoredChunk(bytes):
+    """A chunk in 3.0's stored form, with its CRC-16 once computed."""
+
+    crc16: int | None = None
+
+
 def _with_block_checks(header: dict[str, Any], chunks: Sequence[bytes]) -> list[bytes]:
     """The chunks in format 3.0's form: block checks and band counts where the coder codes
-    in blocks (context version 4 on), the chunks as they are otherwise."""
+    in blocks (context version 4 on), the chunks as they are otherwise.
+
+    The stored form is kept on the coder's chunk when it takes attributes (the block coder's
+    chunks do): the rate control writes the same chunks twice (a size bound, then the
+    bundle), and the block checks' CRCs of a 2048² picture cost a few milliseconds."""
     # The block structure follows from the plan's band shapes, which the codec package
     # computes; it imports this module, hence the import here.
     from .codec.decode import chunk_block_info
 
+    # What the stored form depends on besides the chunk's bytes: the block structure.
+    layout = ("kind", "fitted", "levels", "wavelet", "boundary", "lifting", "coder", "cparams")
+    key = json.dumps([header.get(name) for name in layout], sort_keys=True)
+    cached = [getattr(chunk, "stored_form", (None, None)) for chunk in chunks]
+    if all(entry[0] == key for entry in cached):
+        return [entry[1] for entry in cached]
     info = chunk_block_info(header, chunks)
     if info is None:
         return list(chunks)
-    return [
-        add_block_checks(chunk, count, counts)
+    stored = [
+        _StoredChunk(add_block_checks(chunk, count, counts))
         for chunk, (count, counts) in zip(chunks, info, strict=True)
     ]
+    for chunk, form in zip(chunks, stored, strict=True):
+        with contextlib.suppress(AttributeError):  # plain bytes keep nothing
+            chunk.stored_form = (key, form)  # type: ignore[attr-defined]
+    return list(stored)
+
+
+def _crc16(chunk: bytes) -> int:
+    """CRC-16/XMODEM of a chunk, remembered on a stored chunk."""
+    known = getattr(chunk, "crc16", None)
+    if known is not None:
+        return int(known)
+    crc = binascii.crc_hqx(chunk, 0)
+    if isinstance(chunk, _StoredChunk):
+        chunk.crc16 = crc
+    return crc
 
 
 def _write_json(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
