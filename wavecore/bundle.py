@@ -687,7 +687,9 @@ def _with_block_checks(header: dict[str, Any], chunks: Sequence[bytes]) -> list[
     # What the stored form depends on besides the chunk's bytes: the block structure.
     layout = ("kind", "fitted", "levels", "wavelet", "boundary", "lifting", "coder", "cparams")
     key = json.dumps([header.get(name) for name in layout], sort_keys=True)
-    cached = [getattr(chunk, "stored_form", (None, None)) for chunk in chunks]
+    cached: list[tuple[str | None, bytes]] = [
+        getattr(chunk, "stored_form", (None, b"")) for chunk in chunks
+    ]
     if all(entry[0] == key for entry in cached):
         return [entry[1] for entry in cached]
     info = chunk_block_info(header, chunks)
