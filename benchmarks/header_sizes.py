@@ -1,13 +1,21 @@
-"""Header sizes of typical bundles in formats 4.0 (compact), 3.0 (binary header) and 1.1 (JSON).
+"""Header sizes of typical bundles in formats 5.0 (curves), 4.0 (compact), 3.0 (binary header)
+and 1.1 (JSON), and the largest curve header over a sweep of curves.
 
     .venv/bin/python benchmarks/header_sizes.py
 
 Each bundle is encoded once; the same header and chunks are then written in each format
 (``write_bundle(..., version=(1, 1))`` is the writer of releases before 2.0), so the payload is
-identical and only the overhead differs.  ``header`` is ``inspect(...)["header_bytes"]``:
-everything but the chunks (preamble, header, chunk table and checks).  The codec writes 4.0
-for curves and 3.0 for images and surfaces; the column of the version it writes is the one
-in bold.  Prints Markdown tables (docs/bundle-format.md quotes them).
+identical and only the overhead differs.  ``header`` is everything but the chunks as the
+coder wrote them (preamble, header, chunk lengths, checks; in 3.0 and 4.0 also the block
+checks and band counts ``write_bundle`` adds inside chunks of several code-blocks).  The
+codec writes 5.0 for curves and 3.0 for images and surfaces; the column of the version it
+writes is the one in bold.  Prints Markdown tables (docs/bundle-format.md quotes them).
+
+``--images`` prints the images' heads alone.  ``--sweep`` (both also run by default) encodes
+curves of 2, 3, 8, 1000 and 50 000 points, 2-D and 3-D, open and closed, smooth and noisy,
+at the default level and at every explicit level the plan allows, and prints the largest
+header for each length and overall, next to the coder's own tables of block lengths (which
+delimit the chunks in 5.0, and are counted as the coder's).
 
 A second table gives the same curves as one-curve *curve sets* (``encode_curves([curve])``, at
 the tolerance ``encode_curve`` uses by default: 1e-3 of the bounding-box diagonal): their
@@ -17,6 +25,7 @@ header is everything but the coded stream (magic, fields, CRC), in both forms.
 from __future__ import annotations
 
 import os
+import sys
 
 import numpy as np
 
@@ -24,6 +33,7 @@ import wavecore
 from wavecore.blockcoder import block_counts, strip_block_checks
 from wavecore.bundle import read_bundle, write_bundle
 from wavecore.codec.plan import plan_from_header
+from wavecore.errors import InvalidParameter
 
 
 def cases() -> dict[str, bytes]:
@@ -111,7 +121,8 @@ def coder_chunks(bundle: bytes) -> list[bytes]:
         [tuple(entry)] if one_axis else [tuple(band) for band in entry] for entry in shapes[1:]
     ]
     cparams = parsed.header["cparams"]
-    if parsed.header["coder"] != "context" or cparams.get("version", 0) < 4:
+    checked = parsed.block_checks  # 3.0 and 4.0; 5.0 stores the chunks as coded
+    if not checked or parsed.header["coder"] != "context" or cparams.get("version", 0) < 4:
         return [bytes(chunk or b"") for chunk in parsed.chunks]
     counts = block_counts(entries, cparams["two_d"], cparams["block"])
     return [
@@ -122,28 +133,113 @@ def coder_chunks(bundle: bytes) -> list[bytes]:
     ]
 
 
-def deep_levels() -> None:
-    """``header_bytes`` of the 50 000-point curve at levels deeper than the default (8)."""
+def _sweep_points(n: int, dims: int, noisy: bool) -> np.ndarray:
+    t = np.linspace(0, 1, n)
+    points = np.stack([t, np.sin(6 * t) * t, np.cos(3 * t)][:dims], 1)
+    if noisy:
+        points = points + np.random.default_rng(5).normal(0, 0.01, points.shape)
+    return points
+
+
+def _table_bytes(bundle: bytes) -> int:
+    """Bytes of the coder's tables of block lengths in a bundle's chunks."""
+    from wavecore.blockcoder import block_table
+    from wavecore.bundle import self_delimiting_blocks
+
+    parsed = read_bundle(bundle)
+    blocks = self_delimiting_blocks(parsed.header)
+    if blocks is None:
+        return 0
+    return sum(
+        block_table(bytes(chunk or b""), count)[0]
+        for chunk, count in zip(parsed.chunks, blocks, strict=True)
+    )
+
+
+def sweep(lengths: tuple[int, ...] = (2, 3, 8, 1000, 50_000)) -> int:
+    """The largest ``encode_curve`` header over lengths, dimensions, boundaries, smooth and
+    noisy points, the default and every explicit level; returns it."""
     print()
-    t = np.linspace(0, 1, 50_000)
-    points = np.stack([t, np.sin(6 * t) * t], 1)
-    levels = (8, 10, 12, 13, 14, 15)
-    print("| 50 000 points, level | " + " | ".join(map(str, levels)) + " |")
-    print("|---|" + "---:|" * len(levels))
-    cells = [
-        wavecore.inspect(wavecore.encode_curve(points, level=k))["header_bytes"] for k in levels
-    ]
-    print("| header bytes | " + " | ".join(f"{c} B" for c in cells) + " |")
+    print(
+        "| length | encodes | largest header | its case | its bundle | coder's block tables in it |"
+    )
+    print("|---:|---:|---:|---|---:|---:|")
+    overall = 0
+    for n in lengths:
+        worst: tuple[int, str, int, int] = (-1, "", 0, 0)
+        count = 0
+        for dims in (2, 3):
+            for closed in (False, True):
+                for noisy in (False, True):
+                    points = _sweep_points(n, dims, noisy)
+                    for level in (None, *range(0, 31)):
+                        try:
+                            bundle = wavecore.encode_curve(points, closed=closed, level=level)
+                        except InvalidParameter:
+                            if level is not None and level > 3:
+                                break  # deeper levels are refused too
+                            continue
+                        count += 1
+                        info = wavecore.inspect(bundle)
+                        size = len(bundle) - sum(len(c) for c in coder_chunks(bundle))
+                        if size > worst[0]:
+                            case = (
+                                f"{dims}-D, {'closed' if closed else 'open'}, "
+                                f"{'noisy' if noisy else 'smooth'}, level "
+                                f"{'default ' if level is None else ''}{info['levels']}"
+                            )
+                            worst = (size, case, len(bundle), _table_bytes(bundle))
+        overall = max(overall, worst[0])
+        print(f"| {n} | {count} | {worst[0]} B | {worst[1]} | {worst[2]} | {worst[3]} B |")
+    print(f"\nlargest curve header over the sweep: {overall} B (target: at most 48)")
+    return overall
+
+
+def image_headers() -> int:
+    """Images as the codec writes them (3.0): the head (``inspect``'s ``header_bytes``:
+    preamble, header, chunk lengths, CRCs) and, apart, the block checks and band counts that
+    3.0 adds inside chunks of several code-blocks (2 bytes a block and a few more a chunk:
+    they grow with the picture, the price of a damaged block losing only itself); returns the
+    largest head."""
+    from skimage import data
+
+    print()
+    print("| image | head (header_bytes) | block checks and band counts |")
+    print("|---|---:|---:|")
+    largest = 0
+    rng = np.random.default_rng(1)
+    pictures = {
+        "camera 512² grey, default": (data.camera(), {}),
+        "astronaut 512² RGB, default": (data.astronaut(), {}),
+        "astronaut 512² RGB, 1 bpp, 6 levels": (data.astronaut(), {"bpp": 1.0, "level": 6}),
+        "astronaut 512² RGB, lossless": (data.astronaut(), {"lossless": True}),
+        "2048 × 1536 RGB noise, 0.5 bpp": (
+            rng.integers(0, 256, (1536, 2048, 3)).astype(np.uint8),
+            {"bpp": 0.5},
+        ),
+        "RGBA 16-bit 300², lossless": (
+            rng.integers(0, 65536, (300, 300, 4)).astype(np.uint16),
+            {"lossless": True},
+        ),
+    }
+    for name, (picture, options) in pictures.items():
+        bundle = wavecore.encode_image(picture, **options)
+        head = wavecore.inspect(bundle)["header_bytes"]
+        inside = len(bundle) - head - sum(len(c) for c in coder_chunks(bundle))
+        largest = max(largest, head)
+        print(f"| {name} | {head} B | {inside} B |")
+    print(f"\nlargest image head: {largest} B (target: at most 96)")
+    return largest
 
 
 def main() -> None:
     print(f"load average {os.getloadavg()[0]:.2f}")
-    versions = ((1, 1), (3, 0), (4, 0))
+    versions = ((1, 1), (3, 0), (4, 0), (5, 0))
     print(
-        "| bundle | levels | payload | header 1.1 | header 3.0 | header 4.0 "
-        "| bundle 1.1 | bundle 3.0 | bundle 4.0 |"
+        "| bundle | levels | payload | header 1.1 | header 3.0 | header 4.0 | header 5.0 "
+        "| bundle 1.1 | bundle 3.0 | bundle 4.0 | bundle 5.0 |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name, bundle in cases().items():
         parsed = read_bundle(bundle)
         chunks = coder_chunks(bundle)
@@ -151,12 +247,12 @@ def main() -> None:
         assert written[parsed.version] == bundle  # the same bytes as the codec wrote
         headers, sizes = [], []
         for version, data in written.items():
-            info = wavecore.inspect(data)
             assert read_bundle(data).header == parsed.header
             bold = "**" if version == parsed.version else ""
-            headers.append(f"{bold}{info['header_bytes']}{bold}")
+            header = len(data) - sum(map(len, chunks))
+            headers.append(f"{bold}{header}{bold}")
             sizes.append(f"{bold}{len(data)}{bold}")
-        payload = len(bundle) - wavecore.inspect(bundle)["header_bytes"]
+        payload = sum(map(len, chunks))
         print(
             f"| {name} | {parsed.header['levels']} | {payload} | "
             + " | ".join(headers + sizes)
@@ -164,8 +260,15 @@ def main() -> None:
         )
     curve_sets()
     curve_headers()
-    deep_levels()
+    image_headers()
+    sweep()
+    print(f"load average {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":
-    main()
+    if "--sweep" in sys.argv:
+        sweep()
+    elif "--images" in sys.argv:
+        image_headers()
+    else:
+        main()

@@ -349,3 +349,36 @@ def test_chunk_views_do_not_copy_the_input() -> None:
     view = parsed.chunks[2]
     assert isinstance(view, memoryview)
     assert view.obj is memoryview(data).obj
+
+
+def test_writing_the_same_coded_chunks_again_reuses_their_block_checks() -> None:
+    # The rate control writes the same chunks twice (a size bound, then the bundle): the
+    # block checks are computed once, and a header of another block structure does not reuse
+    # them.
+    import numpy as np
+
+    import wavecore
+    from wavecore.blockcoder import CodedChunk, strip_block_checks
+    from wavecore.codec.decode import chunk_block_info
+
+    image = np.random.default_rng(3).integers(0, 256, (300, 280), dtype=np.uint8)
+    bundle = wavecore.encode_image(image, level=1, quality=45)
+    parsed = read_bundle(bundle)
+    header = parsed.header
+    stored = [bytes(c or b"") for c in parsed.chunks]
+    counts = [4, 4]  # one level: about 150 × 140 coarse and detail samples, 2 × 2 blocks
+    chunks = []
+    for index, (data, count) in enumerate(zip(stored, counts, strict=True)):
+        coded, _, band_counts = strip_block_checks(data, count, 3 if index else 0)
+        chunk = CodedChunk(coded)
+        chunk.band_counts = band_counts
+        chunks.append(chunk)
+    info = chunk_block_info(header, chunks)
+    assert info is not None and [n for n, _ in info] == counts
+    assert write_bundle(header, chunks) == bundle
+    assert all(getattr(c, "stored_form", None) is not None for c in chunks)
+    assert write_bundle(header, chunks) == bundle  # from the kept forms
+    assert write_bundle(header, [bytes(c) for c in chunks]) == bundle  # plain bytes
+    other = {**header, "cparams": {**header["cparams"], "block": 64}}
+    with pytest.raises(BundleError):  # 64 × 64 blocks: not the structure these chunks have
+        write_bundle(other, chunks)

@@ -1,9 +1,11 @@
-"""Bundle format 4.0, the compact layout ``encode_curve`` writes (docs/bundle-format.md).
+"""Bundle format 4.0, the compact layout ``encode_curve`` wrote before 5.0 (docs/bundle-format.md;
+tests/test_bundle_curve5.py tests 5.0).
 
 What it must keep from 3.0: every field of the header, resolution decodes, damage found per
 group of chunks (and per chunk where chunks are large), ``damaged="zero"``, truncated bundles
 decoding their complete groups.  What it must give: a curve's overhead (``header_bytes``,
-everything but the chunks) at most 48 bytes at every length from 8 to 50 000 points.
+everything but the chunks) at most 48 bytes at every length from 8 to 50 000 points at the
+default levels (5.0 holds it at every level).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from wavecore import BundleError, binheader, decode, inspect
 from wavecore.bundle import (
     COMPACT_MAGIC,
     COMPACT_VERSION,
+    CURVE_VERSION,
     FORMAT_VERSION,
     GROUP_BYTES,
     MAGIC,
@@ -40,6 +43,12 @@ GOLDEN = Path(__file__).resolve().parent / "golden"
 MANIFEST = json.loads((GOLDEN / "MANIFEST.json").read_text())
 
 
+def _as_4_0(bundle: bytes) -> bytes:
+    """The header and chunks of a (5.0) bundle written in 4.0."""
+    parsed = read_bundle(bundle)
+    return write_bundle(parsed.header, [bytes(c or b"") for c in parsed.chunks], version=(4, 0))
+
+
 def _curve(n: int, dims: int) -> np.ndarray:
     t = np.linspace(0, 1, n)
     return np.stack([t, np.sin(6 * t) * t, np.cos(3 * t)][:dims], axis=1)
@@ -50,7 +59,7 @@ def _curve(n: int, dims: int) -> np.ndarray:
 def test_a_curve_header_is_at_most_48_bytes_at_every_length(n: int, closed: bool) -> None:
     # issue 11's target, for the curves benchmarks/header_sizes.py measures (2-D and 3-D).
     for dims in (2, 3):
-        bundle = wavecore.encode_curve(_curve(n, dims), closed=closed)
+        bundle = _as_4_0(wavecore.encode_curve(_curve(n, dims), closed=closed))
         info = inspect(bundle)
         assert info["version"] == "4.0"
         assert info["header_bytes"] <= 48, (n, dims, closed, info["header_bytes"])
@@ -61,7 +70,9 @@ def test_a_curve_header_stays_small_at_explicit_levels() -> None:
     # Each level beyond the default adds about one byte (its chunk's length); 13 levels of a
     # 50 000-point curve still fit in 48 bytes.
     points = _curve(50_000, 2)
-    sizes = [inspect(wavecore.encode_curve(points, level=k))["header_bytes"] for k in (2, 8, 13)]
+    sizes = [
+        inspect(_as_4_0(wavecore.encode_curve(points, level=k)))["header_bytes"] for k in (2, 8, 13)
+    ]
     assert sizes[-1] <= 48 and sizes == sorted(sizes)
 
 
@@ -70,15 +81,16 @@ def test_images_and_surfaces_are_still_written_in_3_0() -> None:
     assert inspect(wavecore.encode_image(image))["version"] == "3.0"
     assert inspect(wavecore.encode_surface(image.astype(float)))["version"] == "3.0"
     assert written_version({"kind": "image"}) == FORMAT_VERSION == (3, 0)
-    assert written_version({"kind": "curve"}) == COMPACT_VERSION == (4, 0)
+    assert written_version({"kind": "curve"}) == CURVE_VERSION == (5, 0)
+    assert COMPACT_VERSION == (4, 0)
 
 
 def test_the_preamble_is_four_bytes_and_never_the_old_magic() -> None:
     bundle = BUNDLES["compact curve"]
     assert bundle[:4] == COMPACT_MAGIC + bytes(COMPACT_VERSION) == b"\x89W\x04\x00"
     assert MAGIC[:2] == COMPACT_MAGIC and MAGIC[2] == ord("V")  # never read as a major
-    with pytest.raises(BundleError, match=r"unsupported bundle format version 5\.0"):
-        read_bundle(COMPACT_MAGIC + bytes([5, 0]) + bundle[4:])
+    with pytest.raises(BundleError, match=r"unsupported bundle format version 6\.0"):
+        read_bundle(COMPACT_MAGIC + bytes([6, 0]) + bundle[4:])
     with pytest.raises(BundleError, match=r"unsupported bundle format version 4\.0"):
         read_bundle(MAGIC + bytes([4, 0]) + bundle[4:])  # 4.x never has the long magic
     with pytest.raises(BundleError, match="truncated while reading the preamble"):
@@ -253,7 +265,7 @@ def test_with_header_keeps_the_chunks() -> None:
     changed = with_header(bundle, {**header, "psnr": 12.5})
     assert read_bundle(changed).header == {**header, "psnr": 12.5}
     assert changed.endswith(bytes(b"".join(split(bundle)[1])))
-    with pytest.raises(BundleError, match=r"complete 4\.x bundle"):
+    with pytest.raises(BundleError, match=r"complete 4\.x or 5\.x bundle"):
         with_header(BUNDLES["closed curve"], header)
 
 

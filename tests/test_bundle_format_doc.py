@@ -1,5 +1,5 @@
 """The worked examples of docs/bundle-format.md are what the code gives: "Inspecting a bundle"
-(an image, format 3.0) and the 4.0 curve taken apart byte by byte.
+(an image, format 3.0) and the 5.0 curve taken apart byte by byte.
 
 The examples' text is generated here from the code's own output and compared with the file:
 when the format or the coder changes, this test fails and
@@ -51,9 +51,10 @@ def _number(data: bytes, at: int) -> int:
 
 
 def curve_fields(bundle: bytes) -> list[tuple[str, bytes]]:
-    """A 4.0 curve bundle with no pads, extension or scale, split into its documented fields."""
-    assert bundle[:4] == b"\x89W\x04\x00"
-    fields = [("preamble: magic `89 57`, major 4, minor 0", bundle[:4])]
+    """A 5.0 curve bundle with no pads, extension or scale, split into its documented fields
+    (the chunks: their table of block lengths, then the coded block)."""
+    assert bundle[:4] == b"\x89W\x05\x00"
+    fields = [("preamble: magic `89 57`, major 5, minor 0", bundle[:4])]
     flags = bundle[4:8]
     assert flags[1] >> 6 == 0 and not flags[3] >> 6 & 1 and not flags[2] >> 7  # the simple case
     fields.append(("flags (4 bytes)", flags))
@@ -77,21 +78,29 @@ def curve_fields(bundle: bytes) -> list[tuple[str, bytes]]:
     fields.append(("`max_error`, a number", bundle[at:end]))
     at = end
     levels = bundle[8]
-    for index in range(levels + 1):
-        end = _varint(bundle, at)
-        fields.append((f"length of chunk {index}", bundle[at:end]))
-        at = end
+    assert levels == 1  # two chunks: two groups of one chunk each
     info = wavecore.inspect(bundle)
-    total = sum(c["bytes"] for c in info["chunks"])
-    assert total <= 1024  # one group
-    chunks = bundle[len(bundle) - total :]
-    fields.append(("CRC-16 of the one group (chunks 0 … L)", bundle[at : at + 2]))
-    assert struct.unpack("<H", bundle[at : at + 2])[0] == binascii.crc_hqx(chunks, 0)
-    at += 2
+    sizes = [c["bytes"] for c in info["chunks"]]
+    starts = [len(bundle) - sum(sizes), len(bundle) - sizes[1]]
+    for index, start in enumerate(starts):
+        crc = binascii.crc_hqx(bundle[start : start + sizes[index]], 0)
+        fields.append((f"CRC-16 of group {index} (chunk {index})", bundle[at : at + 2]))
+        assert struct.unpack("<H", bundle[at : at + 2])[0] == crc
+        at += 2
     fields.append(("head check: CRC-16 of all the above", bundle[at : at + 2]))
     assert struct.unpack("<H", bundle[at : at + 2])[0] == binascii.crc_hqx(bundle[:at], 0)
     at += 2
-    assert at == info["header_bytes"] == len(bundle) - total
+    assert at == info["header_bytes"] == starts[0]
+    for index, size in enumerate(sizes):
+        end = _varint(bundle, at)
+        length = bundle[at] if end == at + 1 else None
+        assert length is not None and end - at + length == size  # the table delimits it
+        fields.append(
+            (f"chunk {index}: its one block's length (the coder's table)", bundle[at:end])
+        )
+        fields.append((f"chunk {index}: the block, {length} bytes", bundle[end : end + length]))
+        at = end + length
+    assert at == len(bundle)
     return fields
 
 
@@ -105,12 +114,14 @@ def render_curve() -> str:
         "|---:|---|---|",
     ]
     for name, raw in curve_fields(bundle):
-        lines.append(f"| {len(raw)} | `{raw.hex(' ')}` | {name} |")
+        shown = raw.hex(" ") if len(raw) <= 8 else raw[:6].hex(" ") + " …"
+        lines.append(f"| {len(raw)} | `{shown}` | {name} |")
     header = info["header"]
     lines += [
         "",
         f"{info['header_bytes']} bytes besides the {len(bundle) - info['header_bytes']} of its "
-        f"{info['levels'] + 1} chunks; the header says `peak` {header['peak']!r}, `step` "
+        f"{info['levels'] + 1} chunks ({len(bundle)} in all); the header says `peak` "
+        f"{header['peak']!r}, `step` "
         f"{header['qparams']['step']!r} (a float32), `psnr` {header['psnr']!r}, `max_error` "
         f"{header['max_error']!r}, and the weights {header['qparams']['weights']!r} "
         "come from the plan.",
@@ -210,7 +221,7 @@ def test_the_worked_example_matches_the_code() -> None:
 
 def test_the_curve_example_matches_the_code() -> None:
     assert _current(CURVE_BEGIN, CURVE_END) == render_curve(), (
-        "docs/bundle-format.md's 4.0 curve example no longer matches the code: run "
+        "docs/bundle-format.md's 5.0 curve example no longer matches the code: run "
         "`python tests/test_bundle_format_doc.py` to rewrite it, and review the diff"
     )
 

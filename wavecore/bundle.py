@@ -1,10 +1,20 @@
 """The coefficient bundle: a versioned binary container, coarse to fine.
 
-This docstring summarises format versions 4.0 (written for curves) and 3.0 (written for images
-and surfaces), and 2.0 and 1.x, which are still read; ``docs/bundle-format.md`` is the
+This docstring summarises format versions 5.0 (written for curves) and 3.0 (written for images
+and surfaces), and 4.0, 2.0 and 1.x, which are still read; ``docs/bundle-format.md`` is the
 specification.  Like NumPy's ``.npy`` format, a bundle is a
 fixed preamble, a bounded self-describing header, then the payload.  All integers are
 little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
+
+Layout (5.0)
+------------
+``89 57``, the major version ``5`` and the minor ``0``; the binary header in its 4.0 form;
+each chunk's length as a varint *only* when the coder's chunks do not delimit themselves
+(:func:`self_delimiting_blocks`: the ``context`` coder version 4 starts each chunk with the
+lengths of its code-blocks, so the bundle needs no copy of them); a CRC-16 of each group of
+:func:`curve_groups` (the coarse chunks, then the finest); the CRC-16 of every byte before
+it; the chunks exactly as the coder wrote them (no block checks).  A curve's overhead stays
+under 48 bytes whatever its length and levels.
 
 Layout (4.0)
 ------------
@@ -126,6 +136,7 @@ the entropy decoder never produces more values than the subband shapes that foll
 from __future__ import annotations
 
 import binascii
+import contextlib
 import functools
 import json
 import math
@@ -136,12 +147,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from . import binheader
-from .blockcoder import add_block_checks
+from .blockcoder import BLOCK_SIZES, add_block_checks, block_table
 from .errors import BundleError
 
 __all__ = [
     "COMPACT_MAGIC",
     "COMPACT_VERSION",
+    "CURVE_VERSION",
     "GROUP_BYTES",
     "MAGIC",
     "MAX_CHUNKS",
@@ -149,6 +161,7 @@ __all__ = [
     "MAX_HEADER_SIZE",
     "Bundle",
     "chunk_groups",
+    "curve_groups",
     "deflate_header",
     "derived_weights",
     "inflate_header",
@@ -171,8 +184,17 @@ FORMAT_VERSION = (3, 0)
 #: weights, chunks checked in groups and the head by a CRC-16; see ``docs/bundle-format.md``),
 #: is written for curves, and is the newest version this module reads.
 COMPACT_VERSION = (4, 0)
+#: 5.0, the curve layout (a new major version: a 4.0 reader would misread it), written for
+#: curves since 2026-11-23: 4.0's preamble (major 5) and header; no chunk lengths when the
+#: coder's chunks delimit themselves (context coder version 4: each chunk starts with the
+#: lengths of its code-blocks), at most two CRC-16s over the chunks (:func:`curve_groups`),
+#: no block checks.  Every curve's overhead is then at most 48 bytes.  The newest version
+#: this module reads.
+CURVE_VERSION = (5, 0)
 #: The major versions this module reads.
-READ_MAJORS = (1, 2, 3, 4)
+READ_MAJORS = (1, 2, 3, 4, 5)
+#: The majors that start with :data:`COMPACT_MAGIC` (a 4-byte preamble).
+_SHORT_MAJORS = (COMPACT_VERSION[0], CURVE_VERSION[0])
 #: 4.0's preamble: these two bytes, then the major and the minor version (one byte each).  The
 #: third byte of :data:`MAGIC` (``V``) is never a major version, so the two never meet.
 COMPACT_MAGIC = b"\x89W"
@@ -341,13 +363,13 @@ class _Reader:
 
 
 def written_version(header: dict[str, Any]) -> tuple[int, int]:
-    """The version :func:`write_bundle` writes by default: 4.0 for curves, 3.0 for the rest.
+    """The version :func:`write_bundle` writes by default: 5.0 for curves, 3.0 for the rest.
 
-    Images and surfaces stay in 3.0: their headers are 45 to 93 bytes already, and 4.0's
-    grouped chunk checks and shorter head check would weaken their damage handling for a
-    few bytes (see ``docs/bundle-format.md``).
+    Images and surfaces stay in 3.0: their headers are 45 to 93 bytes already, and the
+    compact layouts' grouped chunk checks and shorter head check would weaken their damage
+    handling for a few bytes (see ``docs/bundle-format.md``).
     """
-    return COMPACT_VERSION if header.get("kind") == "curve" else FORMAT_VERSION
+    return CURVE_VERSION if header.get("kind") == "curve" else FORMAT_VERSION
 
 
 def write_bundle(
@@ -375,9 +397,9 @@ def write_bundle(
     ...           "boundary": ["open"], "levels": 0, "colour": "none", "quantizer": "none",
     ...           "qparams": {}, "coder": "raw", "cparams": {}, "peak": 1.0, "psnr": None,
     ...           "max_error": 0.0}
-    >>> data = write_bundle(header, [b"abc"])  # a curve: format 4.0
+    >>> data = write_bundle(header, [b"abc"])  # a curve: format 5.0
     >>> data[:4], read_bundle(data).chunk(0)
-    (b'\\x89W\\x04\\x00', b'abc')
+    (b'\\x89W\\x05\\x00', b'abc')
     >>> read_bundle(write_bundle(header, [b"abc"], version=(3, 0))).version
     (3, 0)
     """
@@ -389,12 +411,12 @@ def write_bundle(
         version = written_version(header)
     if version[0] == 1:
         return _write_json(header, chunks)
-    if version == COMPACT_VERSION:
-        return _write_compact(header, chunks)
+    if version in (COMPACT_VERSION, CURVE_VERSION):
+        return _write_compact(header, chunks, version)
     if version not in ((2, 0), FORMAT_VERSION):
         msg = (
-            f"cannot write bundle format version {version}; use {COMPACT_VERSION}, "
-            f"{FORMAT_VERSION}, (2, 0) or (1, 1)"
+            f"cannot write bundle format version {version}; use {CURVE_VERSION}, "
+            f"{COMPACT_VERSION}, {FORMAT_VERSION}, (2, 0) or (1, 1)"
         )
         raise BundleError(msg)
     packed = binheader.pack(header)
@@ -406,7 +428,7 @@ def write_bundle(
     parts = [MAGIC, bytes(version), _varint(len(packed)), packed]
     parts += [_varint(len(chunk)) for chunk in chunks]
     checked = chunks if version >= (3, 0) else chunks[1:]
-    parts += [_U16.pack(binascii.crc_hqx(chunk, 0)) for chunk in checked]
+    parts += [_U16.pack(_crc16(chunk)) for chunk in checked]
     head = b"".join(parts)
     if version >= (3, 0):
         return b"".join([head, _CRC.pack(zlib.crc32(head)), *chunks])
@@ -414,8 +436,19 @@ def write_bundle(
     return b"".join([head, _CRC.pack(crc), *chunks])
 
 
-def _write_compact(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
-    """Format 4.0: preamble, header, chunk lengths, a CRC-16 per group, the head's CRC-16."""
+def _write_compact(
+    header: dict[str, Any], chunks: Sequence[bytes], version: tuple[int, int]
+) -> bytes:
+    """Formats 4.0 and 5.0: preamble, header, chunk lengths (5.0: unless the chunks delimit
+    themselves), a CRC-16 per group, the head's CRC-16, the chunks (4.0: with block checks)."""
+    packed = _compact_header(header)
+    if version == CURVE_VERSION:
+        return _curve_bytes(packed, header, chunks)
+    return _compact_bytes(packed, _with_block_checks(header, chunks))
+
+
+def _compact_header(header: dict[str, Any]) -> bytes:
+    """The header in 4.0's form (5.0 has the same), weights left out when the plan gives them."""
     derived = False
     weights = header["qparams"].get("weights")
     if header["quantizer"] == "deadzone" and weights is not None:
@@ -427,7 +460,7 @@ def _write_compact(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
     if len(packed) > MAX_HEADER_SIZE:
         msg = f"header is {len(packed)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
         raise BundleError(msg)
-    return _compact_bytes(packed, _with_block_checks(header, chunks))
+    return packed
 
 
 def _compact_bytes(packed: bytes, chunks: Sequence[bytes]) -> bytes:
@@ -443,24 +476,121 @@ def _compact_bytes(packed: bytes, chunks: Sequence[bytes]) -> bytes:
     return b"".join([head, _U16.pack(binascii.crc_hqx(head, 0)), *chunks])
 
 
+def _curve_bytes(packed: bytes, header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
+    """A 5.0 bundle from its packed header and the chunks as the coder wrote them."""
+    blocks = self_delimiting_blocks(header)
+    parts = [COMPACT_MAGIC, bytes(CURVE_VERSION), packed]
+    if blocks is None:
+        parts += [_varint(len(chunk)) for chunk in chunks]
+    else:
+        for index, (chunk, count) in enumerate(zip(chunks, blocks, strict=True)):
+            if _delimited_length(memoryview(chunk), count) != len(chunk):
+                msg = (
+                    f"chunk {index} is not as the block coder writes it: its table of {count} "
+                    f"block length(s) does not add up to its {len(chunk)} bytes"
+                )
+                raise BundleError(msg)
+    for first, last in curve_groups(len(chunks)):
+        crc = 0
+        for chunk in chunks[first : last + 1]:
+            crc = binascii.crc_hqx(chunk, crc)
+        parts.append(_U16.pack(crc))
+    head = b"".join(parts)
+    return b"".join([head, _U16.pack(binascii.crc_hqx(head, 0)), *map(bytes, chunks)])
+
+
+def _delimited_length(view: memoryview, count: int) -> int | None:
+    """The length of a block-coded chunk at the start of ``view``: its table of ``count``
+    block lengths plus those lengths; None when the table is cut short or does not fit."""
+    try:
+        read, lengths = block_table(view, count)
+    except BundleError:
+        return None
+    return read + int(lengths.sum())
+
+
+def self_delimiting_blocks(header: dict[str, Any]) -> list[int] | None:
+    """How many code-blocks each chunk holds, when the header's coder writes chunks that
+    delimit themselves (the ``context`` coder, version 4: a chunk starts with the byte length
+    of each of its blocks); else None.  Format 5.0 then stores no chunk lengths.
+
+    Raises
+    ------
+    BundleError
+        If the header does not describe a consistent plan.
+    """
+    cparams = header["cparams"]
+    if header["coder"] != "context" or cparams.get("version") != 4:
+        return None
+    two_d, block = cparams.get("two_d"), cparams.get("block")
+    if not isinstance(two_d, bool) or isinstance(block, bool) or block not in BLOCK_SIZES:
+        return None
+    # The plan imports this module (through the codec); hence here.
+    from .codec.plan import plan_from_header
+
+    plan = plan_from_header(header)
+    try:
+        layout = plan.band_shapes()
+        # The block coder's grid (docs/bundle-format.md, "Blocks"): B × B positions (1 × B²
+        # for bands of one axis) over the largest rows and columns of the chunk's bands.
+        # Counted here from the shapes alone, in time linear in the levels, before the
+        # head check: blockcoder.block_counts builds the coder's whole tables (cost grows
+        # with the channels and blocks a crafted header may declare).
+        rows, cols = (block, block) if two_d else (1, block * block)
+        counts = []
+        for index, entry in enumerate(layout):
+            bands = [entry] if index == 0 or len(plan.axes) == 1 else list(entry)
+            dims = [_plane_rows_cols(tuple(band), two_d) for band in bands]
+            height, width = max(d[0] for d in dims), max(d[1] for d in dims)
+            counts.append(-(-height // rows) * -(-width // cols))
+        return counts
+    except BundleError:
+        raise
+    except Exception as exc:  # a crafted header that passed every check
+        msg = f"the header's code-blocks cannot be counted: {type(exc).__name__}: {exc}"
+        raise BundleError(msg[:300]) from exc
+
+
+def _plane_rows_cols(band: tuple[int, ...], two_d: bool) -> tuple[int, int]:
+    """Rows and columns of a band's planes as the block coder sees them (1-D bands and bands
+    coded on one axis: one row of samples)."""
+    if not band:
+        return 1, 1
+    if two_d and len(band) >= 2:
+        return int(band[0]), int(band[1])
+    return 1, int(band[0])
+
+
+def curve_groups(count: int) -> list[tuple[int, int]]:
+    """Format 5.0's groups of chunks, ``(first, last)`` each: chunks 0 … N − 2 (the coarse
+    levels) and the finest chunk, N − 1; one group when there is one chunk.
+
+    >>> curve_groups(1), curve_groups(2), curve_groups(9)
+    ([(0, 0)], [(0, 0), (1, 1)], [(0, 7), (8, 8)])
+    """
+    return [(0, 0)] if count <= 1 else [(0, count - 2), (count - 1, count - 1)]
+
+
 def with_header(bundle: bytes, header: dict[str, Any]) -> bytes:
-    """A complete 4.0 ``bundle`` with its header replaced by ``header`` (same chunks).
+    """A complete 4.0 or 5.0 ``bundle`` with its header replaced by ``header`` (same chunks,
+    same version).
 
     For an encoder that adjusts a header field after coding (``encode_curve`` stores a float32
     step when that keeps its tolerance); the header is checked as :func:`write_bundle` checks.
     """
     parsed = read_bundle(bundle)
-    if parsed.version[0] != COMPACT_VERSION[0] or parsed.available != len(parsed.chunks):
-        msg = "with_header takes a complete 4.x bundle"
+    if parsed.version[0] not in _SHORT_MAJORS or parsed.available != len(parsed.chunks):
+        msg = "with_header takes a complete 4.x or 5.x bundle"
         raise BundleError(msg)
     check_header(header)
     if header["levels"] != parsed.header["levels"]:
         msg = "with_header cannot change the number of levels"
         raise BundleError(msg)
-    weights = header["qparams"].get("weights")
-    derived = header["quantizer"] == "deadzone" and derived_weights(header) == weights
-    packed = binheader.pack(header, major=COMPACT_VERSION[0], derived_weights=derived)
-    return _compact_bytes(packed, [bytes(chunk or b"") for chunk in parsed.chunks])
+    packed = _compact_header(header)
+    chunks = [bytes(chunk or b"") for chunk in parsed.chunks]
+    if parsed.version[0] == CURVE_VERSION[0]:
+        return _curve_bytes(packed, header, chunks)
+    return _compact_bytes(packed, chunks)
 
 
 def chunk_groups(lengths: Sequence[int], limit: int = GROUP_BYTES) -> list[tuple[int, int]]:
@@ -537,20 +667,53 @@ def _plan_weights(
     return tuple(tuple(entry) for entry in weights)
 
 
+class _StoredChunk(bytes):
+    """A chunk in 3.0's stored form, with its CRC-16 once computed."""
+
+    crc16: int | None = None
+
+
 def _with_block_checks(header: dict[str, Any], chunks: Sequence[bytes]) -> list[bytes]:
     """The chunks in format 3.0's form: block checks and band counts where the coder codes
-    in blocks (context version 4 on), the chunks as they are otherwise."""
+    in blocks (context version 4 on), the chunks as they are otherwise.
+
+    The stored form is kept on the coder's chunk when it takes attributes (the block coder's
+    chunks do): the rate control writes the same chunks twice (a size bound, then the
+    bundle), and the block checks' CRCs of a 2048² picture cost a few milliseconds."""
     # The block structure follows from the plan's band shapes, which the codec package
     # computes; it imports this module, hence the import here.
     from .codec.decode import chunk_block_info
 
+    # What the stored form depends on besides the chunk's bytes: the block structure.
+    layout = ("kind", "fitted", "levels", "wavelet", "boundary", "lifting", "coder", "cparams")
+    key = json.dumps([header.get(name) for name in layout], sort_keys=True)
+    cached: list[tuple[str | None, bytes]] = [
+        getattr(chunk, "stored_form", (None, b"")) for chunk in chunks
+    ]
+    if all(entry[0] == key for entry in cached):
+        return [entry[1] for entry in cached]
     info = chunk_block_info(header, chunks)
     if info is None:
         return list(chunks)
-    return [
-        add_block_checks(chunk, count, counts)
+    stored = [
+        _StoredChunk(add_block_checks(chunk, count, counts))
         for chunk, (count, counts) in zip(chunks, info, strict=True)
     ]
+    for chunk, form in zip(chunks, stored, strict=True):
+        with contextlib.suppress(AttributeError):  # plain bytes keep nothing
+            chunk.stored_form = (key, form)  # type: ignore[attr-defined]
+    return list(stored)
+
+
+def _crc16(chunk: bytes) -> int:
+    """CRC-16/XMODEM of a chunk, remembered on a stored chunk."""
+    known = getattr(chunk, "crc16", None)
+    if known is not None:
+        return int(known)
+    crc = binascii.crc_hqx(chunk, 0)
+    if isinstance(chunk, _StoredChunk):
+        chunk.crc16 = crc
+    return crc
 
 
 def _write_json(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
@@ -601,14 +764,16 @@ def read_bundle(data: Any) -> Bundle:
     start = bytes(reader.view[:3])
     if len(start) == 3 and start[:2] == COMPACT_MAGIC and start[2] != MAGIC[2]:
         major, minor = reader.take(4, "the preamble")[2:]
-        if major != COMPACT_VERSION[0]:
+        if major not in _SHORT_MAJORS:
             msg = (
                 f"unsupported bundle format version {major}.{minor}: this wavecore reads major "
                 f"versions {', '.join(map(str, READ_MAJORS))} (up to "
-                f"{COMPACT_VERSION[0]}.{COMPACT_VERSION[1]} fully); use a wavecore release that "
+                f"{CURVE_VERSION[0]}.{CURVE_VERSION[1]} fully); use a wavecore release that "
                 "knows this version"
             )
             raise BundleError(msg)
+        if major == CURVE_VERSION[0]:
+            return _read_curve(reader, major, minor)
         return _read_compact(reader, major, minor)
     magic, major, minor = reader.unpack(_MAGIC_AND_VERSION, "the preamble")
     if magic != MAGIC:
@@ -618,7 +783,7 @@ def read_bundle(data: Any) -> Bundle:
         msg = (
             f"unsupported bundle format version {major}.{minor}: this wavecore reads major "
             f"versions {', '.join(map(str, READ_MAJORS))} (up to "
-            f"{COMPACT_VERSION[0]}.{COMPACT_VERSION[1]} fully); use a wavecore release that "
+            f"{CURVE_VERSION[0]}.{CURVE_VERSION[1]} fully); use a wavecore release that "
             "knows this version"
         )
         raise BundleError(msg)
@@ -685,13 +850,7 @@ def _read_compact(reader: _Reader, major: int, minor: int) -> Bundle:
         msg = "the header or chunk table is corrupt: the header CRC-16 does not match"
         raise BundleError(msg)
     if derived:  # only once the header is known to be intact
-        qparams = header["qparams"]
-        header["qparams"] = {
-            "name": qparams["name"],
-            "step": qparams["step"],
-            "weights": derived_weights(header),
-            "rounding": qparams["rounding"],
-        }
+        _add_derived_weights(header)
     chunks = list(_take_chunks(reader, lengths))
     groups = [(0, 0)] * count
     for first, last in spans:
@@ -707,6 +866,70 @@ def _read_compact(reader: _Reader, major: int, minor: int) -> Bundle:
         block_checks=True,
         groups=tuple(groups),
     )
+
+
+def _add_derived_weights(header: dict[str, Any]) -> None:
+    qparams = header["qparams"]
+    header["qparams"] = {
+        "name": qparams["name"],
+        "step": qparams["step"],
+        "weights": derived_weights(header),
+        "rounding": qparams["rounding"],
+    }
+
+
+def _read_curve(reader: _Reader, major: int, minor: int) -> Bundle:
+    """Format 5.x: the header (no length before it), the chunk lengths unless the chunks
+    delimit themselves, a CRC-16 per group of :func:`curve_groups`, the CRC-16 of all that;
+    the chunks as the coder wrote them.  Every 5.x minor version is read as 5.0."""
+    header, reader.offset, derived = binheader.unpack_from(reader.view, reader.offset)
+    check_header(header)
+    count = header["levels"] + 1
+    blocks = self_delimiting_blocks(header)
+    lengths = None
+    if blocks is None:
+        lengths = [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
+    spans = curve_groups(count)
+    crcs = [0] * count
+    for number, (first, last) in enumerate(spans):
+        (crc,) = reader.unpack(_U16, f"the CRC-16 of group {number}")
+        crcs[first : last + 1] = [crc] * (last + 1 - first)
+    head_end = reader.offset
+    (crc,) = reader.unpack(_U16, "the header CRC-16")
+    if binascii.crc_hqx(reader.view[:head_end], 0) != crc:
+        msg = "the header or chunk table is corrupt: the header CRC-16 does not match"
+        raise BundleError(msg)
+    if derived:  # only once the header is known to be intact
+        _add_derived_weights(header)
+    if lengths is None:
+        assert blocks is not None
+        lengths = _delimited_lengths(reader, blocks)
+    chunks = list(_take_chunks(reader, lengths))
+    groups = [(0, 0)] * count
+    for first, last in spans:
+        groups[first : last + 1] = [(first, last)] * (last + 1 - first)
+        if any(chunk is None for chunk in chunks[first : last + 1]):
+            chunks[first : last + 1] = [None] * (last + 1 - first)  # a group is read whole
+    return Bundle((major, minor), header, tuple(chunks), tuple(crcs), "crc16", groups=tuple(groups))
+
+
+def _delimited_lengths(reader: _Reader, blocks: Sequence[int]) -> list[int]:
+    """The lengths of self-delimiting chunks, from their tables of block lengths; a chunk
+    whose table is cut short or does not fit in what remains (a truncated bundle) is missing,
+    and so is every chunk after it (its length is 1 more than the bytes that remain)."""
+    lengths: list[int] = []
+    offset = reader.offset
+    missing = len(reader.view) - offset + 1
+    for count in blocks:
+        length = None
+        if offset < len(reader.view):
+            length = _delimited_length(reader.view[offset:], count)
+        if length is None:  # cut short: this chunk and every later one are missing
+            lengths += [missing] * (len(blocks) - len(lengths))
+            break
+        lengths.append(length)
+        offset += length
+    return lengths
 
 
 def _take_chunks(reader: _Reader, lengths: Sequence[int]) -> tuple[memoryview | None, ...]:

@@ -138,6 +138,24 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             grey.astype(np.uint8),
             {"quality": 40.0, "format_version": (4, 0)},
         ),
+        # Format 5.0 (the curve layout encode_curve writes: no chunk lengths where the block
+        # coder's chunks delimit themselves, two CRC-16 groups, no block checks): the same
+        # curves as 4.0's, a noisy curve of 10 levels whose finest chunk is kilobytes, and an
+        # image written in 5.0 on purpose (tests/test_bundle_curve5.py codes a curve whose
+        # finest band spans two code-blocks: its decoded array is too large to commit).
+        "v5_0_curve_default": ("curve", open_curve, {}),
+        "v5_0_curve_closed_3d_keep": ("curve", closed_curve, {"closed": True, "keep": 0.5}),
+        "v5_0_curve_series_haar": (
+            "curve",
+            np.sin(np.linspace(0, 9, 77)) * 40.0,
+            {"wavelet": "haar", "tolerance": 0.05},
+        ),
+        "v5_0_curve_noisy_deep": ("curve", noisy_curve, {"tolerance": 0.002, "level": 9}),
+        "v5_0_image_grey_u8": (
+            "image",
+            grey.astype(np.uint8),
+            {"quality": 40.0, "format_version": (5, 0)},
+        ),
         # Format 1.2 (the JSON header with ``scale``), written by the 1.x writer that
         # ``write_bundle(..., version=(1, 1))`` keeps: no earlier golden bundle had it.
         "surface_scaled_v1_2": (
