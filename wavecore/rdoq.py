@@ -52,11 +52,17 @@ __all__ = [
 #: Whether the image encoder's rate control re-decides the indices after each open-loop
 #: quantization (:func:`choose_indices`), and how: ``METHOD = "fast"`` runs
 #: :func:`adapt_deadzone` (one compiled pass, a dead zone that depends on the neighbourhood),
-#: ``"full"`` the greedy RDOQ of :func:`optimise_indices`.  The full one saves 1.5 % of the
-#: bits at equal PSNR on the tuning pictures (BD-rate, cdf97, through ``encode_image(bpp=...)``)
-#: but took 4.6x the encode time of a 2048² RGB picture at 1 bpp (four passes of 1.2-1.9 s, and
-#: its sizes stray from the rate search's predictions, which then codes more often); the fast
-#: one is the default (``benchmarks/rate_distortion.py --rdoq`` measures either).
+#: ``"full"`` the greedy RDOQ of :func:`optimise_indices`.  BD-rate through
+#: ``encode_image(bpp=...)`` on the tuning pictures (cdf97, 0.25-2 bpp,
+#: ``benchmarks/rate_distortion.py --rdoq``): fast -1.11 % grey, -1.32 % colour; full -1.39 %
+#: grey, -2.18 % colour.  Off, because of what it costs the ``bpp`` search, not the pass itself:
+#: on a 2048² RGB picture the fast pass takes about 0.15 s (the full one 1.2-1.9 s) and runs
+#: twice (the size sample, the coding), but the sizes it gives stray from the search's
+#: predictions, so its codings land above the budget more often and are trimmed
+#: (``ratecontrol._trim_to_budget``), whose candidates (values of magnitude 1 in sparse
+#: blocks) are just the ones this already removed: at 1 bpp the encode took 1.6-2.1x the time
+#: with either (2 bpp: 3.7x, trims that fail and code again; 0.5 bpp: +6-14 %).  Turning it
+#: on needs a search that predicts with it (and a trim that knows it), in ``ratecontrol``.
 ENABLED = False
 METHOD = "fast"
 
