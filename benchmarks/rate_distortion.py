@@ -352,10 +352,17 @@ def coder_bd_rates(names: tuple[str, ...] = GREY, wavelet: str = "bspline2") -> 
     return out
 
 
-def rdoq_bd_rates(names: tuple[str, ...] = IMAGES, wavelet: str = "cdf97") -> dict[str, float]:
-    """BD-rate of ``encode_image(..., bpp=r)`` with RDOQ (``wavecore.rdoq``) against without,
-    over the peers' exact rates (0.25–2 bpp), and the ratio of the encode times (same run)."""
+def rdoq_bd_rates(
+    names: tuple[str, ...] = IMAGES, wavelet: str = "cdf97", method: str = "fast"
+) -> dict[str, float]:
+    """BD-rate of ``encode_image(..., bpp=r)`` with RDOQ (``wavecore.rdoq``, its ``method``:
+    ``"fast"``, the neighbourhood's dead zone, or ``"full"``, the greedy search) against
+    without, over the peers' exact rates (0.25–2 bpp), and the ratio of the encode times (same
+    run)."""
     from wavecore import rdoq
+
+    was_enabled, was_method = rdoq.ENABLED, rdoq.METHOD
+    rdoq.METHOD = method
 
     out = {}
     for name in names:
@@ -371,15 +378,23 @@ def rdoq_bd_rates(names: tuple[str, ...] = IMAGES, wavelet: str = "cdf97") -> di
                 rates.append(8 * len(bundle) / (image.shape[0] * image.shape[1]))
                 qualities.append(psnr(wavecore.decode(bundle), image))
             curves[enabled] = (rates, qualities, time.perf_counter() - start)
-        rdoq.ENABLED = False
+        rdoq.ENABLED = was_enabled
         (r0, q0, t0), (r1, q1, t1) = curves[False], curves[True]
         out[name] = bd_rate(r0, q0, r1, q1)
         print(
-            f"{name:10s} {wavelet}: BD-rate of RDOQ (lambda {rdoq.LAMBDA}) {out[name]:+.2f} %, "
+            f"{name:10s} {wavelet}: BD-rate of RDOQ ({method}) {out[name]:+.2f} %, "
             f"encode time x{t1 / t0:.2f} ({t0:.2f} s -> {t1:.2f} s for 7 rates)",
             flush=True,
         )
-    print(f"mean: {np.mean(list(out.values())):+.2f} %", flush=True)
+    rdoq.METHOD = was_method
+    grey = [v for n, v in out.items() if n in GREY]
+    colour = [v for n, v in out.items() if n not in GREY]
+    print(
+        f"mean: {np.mean(list(out.values())):+.2f} %"
+        + (f", grey {np.mean(grey):+.2f} %" if grey else "")
+        + (f", colour {np.mean(colour):+.2f} %" if colour else ""),
+        flush=True,
+    )
     return out
 
 
@@ -641,7 +656,8 @@ def main() -> None:
     parser.add_argument(
         "--rdoq",
         action="store_true",
-        help="only print the BD-rate of cdf97 with RDOQ against without (tuning pictures)",
+        help="only print the BD-rate of cdf97 with RDOQ against without (tuning pictures); "
+        "with --peers: the peers' tables with RDOQ on",
     )
     parser.add_argument(
         "--peers",
@@ -652,7 +668,18 @@ def main() -> None:
         "--side", type=int, default=0, help="--peers: shrink to this longest side (0: full size)"
     )
     parser.add_argument("--write", action="store_true", help="--peers: write docs and plot")
+    parser.add_argument(
+        "--rdoq-method",
+        choices=("fast", "full"),
+        default="fast",
+        help="--rdoq: which RDOQ to measure; with --peers: run the encoder with it on",
+    )
     args = parser.parse_args()
+    if args.peers and args.rdoq:
+        from wavecore import rdoq
+
+        rdoq.ENABLED, rdoq.METHOD = True, args.rdoq_method
+        args.rdoq = False
     if args.peers:
         run_peers(("camera",) if args.quick else IMAGES, args.side or None, args.write)
         return
@@ -660,7 +687,7 @@ def main() -> None:
         coder_bd_rates()
         return
     if args.rdoq:
-        rdoq_bd_rates(("camera",) if args.quick else IMAGES)
+        rdoq_bd_rates(("camera",) if args.quick else IMAGES, method=args.rdoq_method)
         return
     names = ("camera",) if args.quick else IMAGES
     log = Path(args.from_log).read_text() if args.from_log else None

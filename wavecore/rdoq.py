@@ -33,19 +33,38 @@ import numpy as np
 from numba import njit
 
 from . import _blockkernels as kernels
+from .errors import InvalidParameter
 from .layout import as_levels
 from .quantize import reconstruction_offset
 from .transform import run_rows
 
-__all__ = ["ENABLED", "LAMBDA", "TOP_ROUNDING", "optimise_indices"]
+__all__ = [
+    "ENABLED",
+    "FAST_ROUNDINGS",
+    "LAMBDA",
+    "METHOD",
+    "TOP_ROUNDING",
+    "adapt_deadzone",
+    "choose_indices",
+    "optimise_indices",
+]
 
-#: Whether the image encoder's rate control runs RDOQ after each open-loop quantization.  Off:
-#: on the tuning pictures it saves 1.5 % of the bits at equal PSNR (BD-rate, cdf97, through
-#: ``encode_image(bpp=...)``; ``benchmarks/rate_distortion.py --rdoq``), but costs about as
-#: much time as the block coding itself, per quantization, and the rate searches predict size
-#: and error from the dead-zone quantizer, so they need more codings to land with it (see the
-#: counts in ``tests/test_ratecontrol.py``).  Turn on where bits matter more than time.
+#: Whether the image encoder's rate control re-decides the indices after each open-loop
+#: quantization (:func:`choose_indices`), and how: ``METHOD = "fast"`` runs
+#: :func:`adapt_deadzone` (one compiled pass, a dead zone that depends on the neighbourhood),
+#: ``"full"`` the greedy RDOQ of :func:`optimise_indices`.  BD-rate through
+#: ``encode_image(bpp=...)`` on the tuning pictures (cdf97, 0.25-2 bpp,
+#: ``benchmarks/rate_distortion.py --rdoq``): fast -1.11 % grey, -1.32 % colour; full -1.39 %
+#: grey, -2.18 % colour.  Off, because of what it costs the ``bpp`` search, not the pass itself:
+#: on a 2048² RGB picture the fast pass takes about 0.15 s (the full one 1.2-1.9 s) and runs
+#: twice (the size sample, the coding), but the sizes it gives stray from the search's
+#: predictions, so its codings land above the budget more often and are trimmed
+#: (``ratecontrol._trim_to_budget``), whose candidates (values of magnitude 1 in sparse
+#: blocks) are just the ones this already removed: at 1 bpp the encode took 1.6-2.1x the time
+#: with either (2 bpp: 3.7x, trims that fail and code again; 0.5 bpp: +6-14 %).  Turning it
+#: on needs a search that predicts with it (and a trim that knows it), in ``ratecontrol``.
 ENABLED = False
+METHOD = "fast"
 
 #: The Lagrange multiplier in units of the band step squared per bit (see the module text).
 LAMBDA = 0.1
@@ -327,3 +346,182 @@ def optimise_indices(
                 else:
                     band[...] = plane
     return qcoeffs
+
+
+# --------------------------------------------------------------------------------------------
+# The fast variant: a dead zone that depends on the neighbourhood (one compiled pass)
+# --------------------------------------------------------------------------------------------
+
+#: The dead zone's ``rounding`` by how busy a detail's neighbourhood is, in the dead-zone
+#: quantizer's own integers (``A``: the sum of ``|q|`` over its eight neighbours, the other
+#: orientations at the same place and, for the second and third channels, the first one at the
+#: same place, as the coder's contexts see them): ``A = 0``, ``1 <= A <= 2``, ``A >= 3``, for
+#: the first channel (luma) and then for the others (chroma).  A 1 costs some 6-8 bits where
+#: everything around is 0 (its zero flag under a quiet context, often its tile's flag, the
+#: unary length and the sign) and 2-3 bits among busy neighbours, so the edge between 0 and 1
+#: moves from the quantizer's ``1 - 0.27`` to 0.95 in quiet places and to 0.67 in busy ones.
+#: Tuned by BD-rate on the tuning pictures (cdf97, open loop, 9 fixed steps): luma quiet 0.15 /
+#: 0.1 / 0.05 gave -1.11 / -1.27 / -1.30 % on grey; a busy rounding above 0.35 (promoting more
+#: values to 1) lost (0.45: +0.15 %); chroma with luma's values -1.01 %, with its own, a wider
+#: dead zone (0, 0.12, 0.27), -1.36 % on the astronaut.
+FAST_ROUNDINGS = (0.05, 0.22, 0.33, 0.0, 0.12, 0.27)
+
+
+#: While a level is re-decided, a changed index is stored as ``_MARK + 4 (new + 1) + (old + 1)``
+#: (far above any index the quantizer makes, ``MAX_INDEX = 2**30``), so that the neighbours
+#: still read the dead zone's index whichever thread got there first: the result does not
+#: depend on the threads.  A second pass writes the new indices.
+_MARK = np.int32(1 << 30) + np.int32(1 << 29)
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _original(v):
+    """The dead zone's ``|index|`` of a stored value (marked or not)."""
+    if v >= _MARK:
+        return abs(np.int64((v - _MARK) % 4) - 1)
+    return abs(np.int64(v))
+
+
+@njit(nogil=True, cache=True)
+def _neighbourhood_deadzone(q, x, inverse_steps, lo, hi, rounding, marked):
+    """Re-decide between 0 and 1 the details of rows ``lo .. hi - 1`` of one level (marked).
+
+    ``q``: three ``(H, W, C)`` int32 bands, the dead zone's indices; ``x``: their values;
+    ``inverse_steps``: per band.  Larger indices stay as they are.  ``marked[i]`` is set where
+    row ``i`` of some band holds a changed index (see ``_MARK``; ``_unmark`` finishes).
+    """
+    # Only values between the busiest and the quietest edge depend on the neighbourhood: the
+    # rest keep the dead zone's index, and most details are skipped at once.
+    lowest, highest = 1.0 - max(rounding), 1.0 - min(rounding)
+    for k in range(3):
+        band, values = q[k], x[k]
+        rows, cols, channels = band.shape
+        inverse = inverse_steps[k]
+        for i in range(lo, min(hi, rows)):
+            for j in range(cols):
+                for c in range(channels):
+                    value = values[i, j, c] * inverse
+                    if not lowest <= abs(value) < highest:
+                        continue
+                    a = np.int64(0)
+                    for di in range(-1, 2):
+                        ii = i + di
+                        if ii < 0 or ii >= rows:
+                            continue
+                        for dj in range(-1, 2):
+                            jj = j + dj
+                            if (di or dj) and 0 <= jj < cols:
+                                a += _original(band[ii, jj, c])
+                    for other in range(3):
+                        if other != k:
+                            sib = q[other]
+                            if i < sib.shape[0] and j < sib.shape[1]:
+                                a += _original(sib[i, j, c])
+                    if c > 0:
+                        a += _original(band[i, j, 0])
+                    first = 3 if c > 0 else 0
+                    r = rounding[first + (0 if a == 0 else (1 if a <= 2 else 2))]
+                    new = 0
+                    if abs(value) >= 1.0 - r:
+                        new = 1 if value > 0 else -1
+                    old = np.int64(band[i, j, c])
+                    if new != old:
+                        band[i, j, c] = _MARK + 4 * (new + 1) + (old + 1)
+                        marked[i] = True
+
+
+@njit(nogil=True, cache=True)
+def _unmark(q, marked, lo, hi):
+    """The new indices in place of the marks, in rows ``lo .. hi - 1`` that hold any."""
+    for k in range(3):
+        band = q[k]
+        rows, cols, channels = band.shape
+        for i in range(lo, min(hi, rows)):
+            if not marked[i]:
+                continue
+            for j in range(cols):
+                for c in range(channels):
+                    v = band[i, j, c]
+                    if v >= _MARK:
+                        band[i, j, c] = (v - _MARK) // 4 - 1
+
+
+def adapt_deadzone(
+    coeffs: Sequence[Any],
+    qcoeffs: Sequence[Any],
+    params: dict[str, Any],
+    *,
+    roundings: Sequence[float] = FAST_ROUNDINGS,
+) -> Any:
+    """Re-decide the 0/1 details of an image's quantization with a dead zone that depends on
+    the neighbourhood, in place (the cheap stand-in for :func:`optimise_indices`).
+
+    Parameters
+    ----------
+    coeffs, qcoeffs, params
+        As for :func:`optimise_indices` (2-D levels of three bands each).
+    roundings : sequence of 3 or 6 floats
+        The dead zone's ``rounding`` for quiet, middling and busy neighbourhoods, for every
+        channel or (6) for the first channel and then the others (``FAST_ROUNDINGS``).
+
+    Returns
+    -------
+    list
+        ``qcoeffs`` itself (the coarse band is left as it is).
+    """
+    levels = as_levels(qcoeffs)
+    values = as_levels(coeffs)
+    step = float(params["step"])
+    rounding = tuple(float(r) for r in roundings)
+    if len(rounding) == 3:
+        rounding = rounding + rounding
+    if len(rounding) != 6 or not all(0.0 <= r < 1.0 for r in rounding):
+        msg = f"roundings must be 3 or 6 numbers in [0, 1), not {roundings!r}"
+        raise InvalidParameter(msg)
+    for bands, originals, weights in zip(
+        levels[1:], values[1:], params["weights"][1:], strict=True
+    ):
+        if len(bands) != 3:
+            return qcoeffs
+
+        def three_d(a: np.ndarray, dtype: Any) -> np.ndarray:
+            a = np.ascontiguousarray(a, dtype=dtype)
+            return a if a.ndim == 3 else a.reshape(*a.shape[:2], -1)
+
+        q = tuple(three_d(b, np.int32) for b in bands)
+        x = tuple(three_d(v, np.float64) for v in originals)
+        inverse = np.array([1.0 / (step * w) for w in weights], dtype=np.float64)
+        _adapt_level(q, x, inverse, rounding)
+        for band, new in zip(bands, q, strict=True):
+            if not np.may_share_memory(band, new):
+                band[...] = new.reshape(band.shape)
+    return qcoeffs
+
+
+def _adapt_level(
+    q: tuple[np.ndarray, ...], x: tuple[np.ndarray, ...], inverse: np.ndarray, rounding: tuple
+) -> None:
+    """:func:`_neighbourhood_deadzone`, then :func:`_unmark`, over the threads by rows."""
+    rows = max(b.shape[0] for b in q)
+    marked = np.zeros(rows, dtype=np.bool_)
+    work = sum(b.size for b in q)
+
+    def decide(lo: int, hi: int) -> None:
+        _neighbourhood_deadzone(q, x, inverse, lo, hi, rounding, marked)
+
+    def finish(lo: int, hi: int) -> None:
+        _unmark(q, marked, lo, hi)
+
+    run_rows(decide, rows, work)
+    run_rows(finish, rows, work)
+
+
+def choose_indices(coeffs: Sequence[Any], qcoeffs: Sequence[Any], params: dict[str, Any]) -> Any:
+    """The encoder's re-decision of an image's detail indices, in place, by ``METHOD``:
+    :func:`adapt_deadzone` (``"fast"``) or :func:`optimise_indices` (``"full"``).
+
+    Returns ``qcoeffs`` itself.
+    """
+    if METHOD == "full":
+        return optimise_indices(coeffs, qcoeffs, params)
+    return adapt_deadzone(coeffs, qcoeffs, params)

@@ -332,7 +332,7 @@ class _LossyEncoder:
                 )
                 self.closed_loops += closed
             if rdoq.ENABLED and self.plan.kind == "image" and not self._refines:
-                q = rdoq.optimise_indices(self.kept, q, params)  # the closed loop aims alone
+                q = rdoq.choose_indices(self.kept, q, params)  # the closed loop aims alone
             cached = self._quantized[closed] = (key, q, params)
         return cached[1], cached[2]
 
