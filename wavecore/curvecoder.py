@@ -959,14 +959,16 @@ def snap_set(points, offsets, closed, step, tolerance):
     step and a half of it along the curve): a vertex may sit off its point along the curve,
     not across it.  Where none of them is (a sharp corner), the ``5**d`` around it (the
     polyline two and a half steps each way).  The ends of an open curve take their nearest
-    lattice point.  Returns the
-    lattice and whether every point found one (the ends: within ``tolerance`` of their point).
+    lattice point.  Returns the lattice and 0 where a point found none (the ends: within
+    ``tolerance`` of their point), 1 where every point found one among the ``3**d``, 2 where
+    some needed the ``5**d``.
     """
     total, d = points.shape
     lattice = np.empty((total, d), dtype=np.int64)
     base = np.empty(d, dtype=np.int64)
     cand = np.empty((1, d))
     count = 3**d
+    wide = 1
     for c in range(len(offsets) - 1):
         first, stop = offsets[c], offsets[c + 1]
         n = stop - first
@@ -983,7 +985,7 @@ def snap_set(points, offsets, closed, step, tolerance):
                     g = base[j] * step - points[k, j]
                     gap2 += g * g
                 if np.sqrt(gap2) > tolerance:
-                    return lattice, False
+                    return lattice, 0
                 continue
             own2 = 0.0
             for j in range(d):
@@ -1013,6 +1015,7 @@ def snap_set(points, offsets, closed, step, tolerance):
                         lattice[k, j] = base[j] + rest % 3 - 1
                         rest //= 3
             if best > tolerance:  # none of the 3**d: the 5**d around (a sharp corner)
+                wide = 2
                 lo = _reach(points, first, n, ring, i, -1, 2.5 * step)
                 hi = _reach(points, first, n, ring, i, 1, 2.5 * step)
                 for t in range(5**d):
@@ -1033,8 +1036,8 @@ def snap_set(points, offsets, closed, step, tolerance):
                         lattice[k, j] = base[j] + rest % 5 - 2
                         rest //= 5
             if best > tolerance:
-                return lattice, False
-    return lattice, True
+                return lattice, 0
+    return lattice, wide
 
 
 @njit(cache=True, nogil=True)

@@ -1087,7 +1087,8 @@ def _encode_vertex(
             continue
         step = tolerance * factor
         if not largest / step < _VERTEX_LIMIT:
-            return None
+            return best
+        snapped = 1
         if reach > 1:
             lattice, snapped = curvecoder.snap_set(points, offsets, closed, step, tolerance)
             if not snapped:
@@ -1229,7 +1230,7 @@ def _encode_vertex(
             stream, head = best_plane
             limit = VERTEX_PER_BYTE * (len(stream) + 16)
             if len(arrays) > limit or int(counts_written.sum()) * d > limit:
-                return None
+                return best
             out = bytearray(MAGIC)
             out.append(PLANE_VERSION)
             out += struct.pack("<H", head)
@@ -1241,11 +1242,14 @@ def _encode_vertex(
                 out += encode_varint(len(meta_bytes)) + meta_bytes
             out += stream
             out += struct.pack("<I", zlib.crc32(out))
-            best = bytes(out)
+            if best is None or len(out) < len(best):
+                best = bytes(out)
+            if snapped == 2 or not straight_fits:
+                continue  # kept only through a fallback: the next finer step may be smaller
             break
         limit = VERTEX_PER_BYTE * (len(stream) + 16)
         if len(arrays) > limit or int(counts.sum()) * d > limit:
-            return None
+            return best
         out = bytearray(MAGIC)
         out.append(VERTEX_VERSION)
         out += encode_varint((meta_bytes is not None) | closed_mode << 2 | order << 4)
@@ -1258,7 +1262,10 @@ def _encode_vertex(
             out += encode_varint(len(meta_bytes)) + meta_bytes
         out += stream
         out += struct.pack("<I", zlib.crc32(out))
-        best = bytes(out)
+        if best is None or len(out) < len(best):
+            best = bytes(out)
+        if snapped == 2:
+            continue  # kept only through a fallback: the next finer step may be smaller
         break  # the coarsest step that keeps the bound (finer ones measured: never smaller)
     return best
 
