@@ -1195,13 +1195,18 @@ def _encode_vertex(
                 continue  # neither form keeps the bound at this step: the next finer one
             best_plane: tuple[bytes, int] | None = None
             counts_written = counts
+            start_rows: dict[int, np.ndarray] = {}
             for kept_vertices, kept_bulges, candidate in plane:
                 sizes = counts if kept_bulges is None else bulged_counts
                 for from_last in (False, True):
                     placed = kept_vertices
                     placed_bulges = kept_bulges
                     if from_last:
-                        starts = _from_last_starts(kept_vertices, sizes, closed)
+                        if id(kept_vertices) not in start_rows:  # bulged: one for all orders
+                            start_rows[id(kept_vertices)] = _from_last_starts(
+                                kept_vertices, sizes, closed
+                            )
+                        starts = start_rows[id(kept_vertices)]
                         placed = np.ascontiguousarray(kept_vertices[starts])
                         placed_bulges = None if kept_bulges is None else kept_bulges[starts]
                     coded = curvecoder.encode_set(
