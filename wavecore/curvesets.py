@@ -1080,6 +1080,7 @@ def _encode_vertex(
     closed_mode = 2 if len(set(flags)) > 1 else (1 if flags[0] else 0)
     largest = float(np.max(np.abs(points)))
     best: bytes | None = None
+    weighed = False
     for factor in sorted(VERTEX_STEPS, reverse=True):
         index = VERTEX_STEPS.index(factor)
         reach = factor * math.sqrt(d) / 2
@@ -1198,7 +1199,7 @@ def _encode_vertex(
             start_rows: dict[int, np.ndarray] = {}
             for kept_vertices, kept_bulges, candidate in plane:
                 sizes = counts if kept_bulges is None else bulged_counts
-                for from_last in (False, True):
+                for from_last in (False, True) if len(arrays) > 1 else (False,):
                     placed = kept_vertices
                     placed_bulges = kept_bulges
                     if from_last:
@@ -1249,8 +1250,9 @@ def _encode_vertex(
             out += struct.pack("<I", zlib.crc32(out))
             if best is None or len(out) < len(best):
                 best = bytes(out)
-            if snapped == 2 or not straight_fits:
-                continue  # kept only through a fallback: the next finer step may be smaller
+            if (snapped == 2 or not straight_fits) and not weighed:
+                weighed = True  # kept only through a fallback: the next finer step may be
+                continue  # smaller (one more step is weighed, so the cost stays bounded)
             break
         limit = VERTEX_PER_BYTE * (len(stream) + 16)
         if len(arrays) > limit or int(counts.sum()) * d > limit:
@@ -1269,8 +1271,9 @@ def _encode_vertex(
         out += struct.pack("<I", zlib.crc32(out))
         if best is None or len(out) < len(best):
             best = bytes(out)
-        if snapped == 2:
-            continue  # kept only through a fallback: the next finer step may be smaller
+        if snapped == 2 and not weighed:
+            weighed = True  # kept only through a fallback: the next finer step may be smaller
+            continue
         break  # the coarsest step that keeps the bound (finer ones measured: never smaller)
     return best
 
