@@ -66,8 +66,9 @@ def test_smooth_outlines_pick_a_frame_predictor_and_keep_the_bound() -> None:
         np.stack([r * np.cos(t) * (1 + 0.2 * np.cos(3 * t)), r * np.sin(t)], 1) for r in (1, 2)
     ]
     bundle = wavecore.encode_curves(rings, closed=True, tolerance=1e-4, method="vertex")
-    flags = bundle[5]
-    assert flags >> 4 in curvecoder.FRAME_ORDERS  # the predictor the encoder kept
+    assert bundle[4] == curvesets.PLANE_VERSION  # plane sets: version 4's 2-byte head
+    head = int.from_bytes(bundle[5:7], "little")
+    assert (head >> 3) & 7 in curvecoder.FRAME_ORDERS  # the predictor the encoder kept
     for ring, back in zip(rings, wavecore.decode(bundle), strict=True):
         assert _to_ring(ring, back) <= 1e-4 and _to_ring(back, ring) <= 1e-4
     assert curvesets.inspect_curves(bundle)["method"] == "vertex"

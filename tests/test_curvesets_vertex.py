@@ -62,7 +62,8 @@ def test_vertex_form_keeps_the_bound(tolerance: float, d: int) -> None:
     curves = [_walk(500, 1, d), _walk(30, 2, d), _walk(2, 3, d), _walk(1, 4, d), _walk(3, 5, d)]
     closed = [False, True, True, False, True]
     bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
-    assert bundle[4] in (curvesets.VERTEX_VERSION, curvesets.BULGED_VERSION)
+    # plane sets are written as version 4, others as version 2
+    assert bundle[4] == (curvesets.PLANE_VERSION if d == 2 else curvesets.VERTEX_VERSION)
     out = wavecore.decode_curves(bundle)
     assert out.closed == closed and out.tolerance == tolerance
     for original, back, flag in zip(curves, out.curves, closed, strict=True):
@@ -178,12 +179,13 @@ def test_crafted_vertex_bundles_give_curves_or_bundle_error() -> None:
         tolerance=0.01,
         method="vertex",
     )
-    assert bundle[4] == curvesets.BULGED_VERSION  # the ring's arcs are bulged segments
+    assert bundle[4] == curvesets.PLANE_VERSION
+    assert bundle[5] & 0x40  # the ring's arcs are bulged segments
     rng = np.random.default_rng(9)
     for trial in range(450):
         body = bytearray(bundle[:-4])
-        if trial % 5 == 0:  # the same stream read as the other vertex version
-            body[4] = curvesets.VERTEX_VERSION
+        if trial % 5 == 0:  # the same bytes read as another vertex version
+            body[4] = (curvesets.VERTEX_VERSION, curvesets.BULGED_VERSION)[trial % 2]
         if trial % 3 == 0:  # cut or extend the stream
             body = body[: int(rng.integers(5, len(body)))] + bytes(int(rng.integers(0, 9)))
         for _ in range(int(rng.integers(1, 4))):
@@ -249,6 +251,11 @@ FROZEN = {
         "8957564303090002050106021978daab56ca4bcc4d55b2524a2bcaaf4acd53aa0500343605f0b8fd09"
         "2ed58c5de4deb85a7f9ba76ddd0398f5e0e7b6c14f77e74e8587d393788e"
     ),
+    # version 4 (plane curves, 2-byte head), written by the release that introduced it
+    "plane": (
+        "8957564304450c0501021978daab56ca4bcc4d55b2524a2bcaaf4acd53aa0500343605f0b8fd092ed5"
+        "8c5de4deb85a7f9ba76ddd0398f5e0e7b6c14f77e74e85877ea31a6a"
+    ),
 }
 
 
@@ -261,8 +268,8 @@ def test_frozen_bundles_of_both_forms_still_decode(form: str) -> None:
     assert got.closed == [True, False] and got.tolerance == 0.01
     assert got.metadata == {"name": "frozen"}
     info = wavecore.inspect(bytes.fromhex(FROZEN[form]))
-    assert info["method"] == ("vertex" if form == "bulged" else form)
-    assert info["version"] == {"wavelet": "1", "vertex": "2", "bulged": "3"}[form]
+    assert info["method"] == ("wavelet" if form == "wavelet" else "vertex")
+    assert info["version"] == {"wavelet": "1", "vertex": "2", "bulged": "3", "plane": "4"}[form]
     for original, back, flag in zip((ring, walk), got.curves, got.closed, strict=True):
         assert _both_ways(original, back, flag) <= 0.01
 
@@ -353,15 +360,15 @@ def test_bulged_segments_keep_the_bound_in_fewer_bytes(tolerance: float, dtype: 
     curves[-1] = curves[-1].astype(dtype)
     closed = [True, True, True, True, False]
     bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
-    assert bundle[4] == curvesets.BULGED_VERSION
+    assert bundle[4] == curvesets.PLANE_VERSION and bundle[5] & 0x40  # bulged segments
     out = wavecore.decode_curves(bundle)
     assert out.closed == closed
     for original, back, flag in zip(curves, out.curves, closed, strict=True):
         assert back.dtype == original.dtype
         assert _both_ways(original, back, flag) <= out.tolerance
-    # the same vertices without bulges: the version-2 stream the encoder weighed it against
+    # the same vertices without bulges: the stream the encoder weighed it against
     stream_v3 = len(bundle)
-    assert wavecore.inspect(bundle)["version"] == "3"
+    assert wavecore.inspect(bundle)["version"] == "4"
     plain = _plain_vertex_size(curves, closed, tolerance)
     assert stream_v3 < plain
 
@@ -374,7 +381,7 @@ def _plain_vertex_size(curves, closed, tolerance) -> int:
         bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
     finally:
         curvesets._bulged_stream = original
-    assert bundle[4] == curvesets.VERTEX_VERSION
+    assert bundle[4] == curvesets.PLANE_VERSION and not bundle[5] & 0x40
     return len(bundle)
 
 
@@ -396,3 +403,63 @@ def test_bulged_polylines_lie_on_their_parabolas() -> None:
     left = np.array([-chord[1], chord[0]])
     along = (closing - [4.0, 3.0]) @ chord / 5
     assert np.allclose((closing - [4.0, 3.0]) @ left, 0.5 * 4 * along * (1 - along))
+
+
+@pytest.mark.parametrize("from_last", [False, True])
+@pytest.mark.parametrize("bulged", [False, True])
+def test_version_4_coder_round_trips(from_last: bool, bulged: bool) -> None:
+    rng = np.random.default_rng(21)
+    lattice = np.cumsum(rng.integers(-40, 41, size=(240, 2)), axis=0)
+    lattice[60:70] = rng.integers(-(1 << 40), 1 << 40, size=(10, 2))  # huge steps too
+    counts = np.array([1, 59, 100, 2, 78])
+    closed = np.array([1, 1, 0, 1, 1])
+    repeated = np.array([0, 1, 0, 0, 1])
+    bulges = rng.integers(-9, 10, size=240) if bulged else None
+    for order in (0, 3, 4):
+        stream = curvecoder.encode_set(
+            lattice, counts, closed, repeated, 2, order, bulges, from_last
+        )
+        back = curvecoder.decode_bulged_set(stream, 5, 2, 2, False, 240, order, bulged, from_last)
+        assert back is not None
+        for got, want in zip(back[:4], (lattice, counts, closed, repeated), strict=True):
+            assert np.array_equal(got, want)
+        if bulges is not None:
+            want = bulges.copy()
+            want[[0, 60]] = 0  # a lone vertex's and an open curve's first row: no segment
+            assert np.array_equal(back[4], want)
+
+
+def test_starts_from_the_previous_last_vertex_keep_each_polygon() -> None:
+    # three rings side by side: each start is one of its corners, the polygon the same, and
+    # the chosen starts cost no more bits than the rings' first vertices
+    rings = []
+    for k in range(3):
+        square = np.array([[0, 0], [10, 0], [10, 10], [5, 14], [0, 10]]) + [20 * k, 3 * k]
+        rings.append(np.roll(square, k + 1, axis=0))
+    vertices = np.concatenate(rings).astype(np.int64)
+    counts = np.array([5, 5, 5])
+    closed = np.array([1, 1, 1])
+    rows = curvesets._from_last_starts(vertices, counts, closed)
+    placed = vertices[rows]
+    for k in range(3):
+        got = placed[5 * k : 5 * k + 5]
+        shifts = [np.roll(rings[k], -s, axis=0) for s in range(5)]
+        assert any(np.array_equal(got, shift) for shift in shifts)
+
+    def bits(v: np.ndarray) -> float:
+        firsts = v[[0, 5, 10]]
+        lasts = np.array([[0, 0], v[4], v[9]])
+        return float(curvesets._coded_bits(firsts - lasts).sum())
+
+    assert bits(placed) <= bits(vertices)
+
+
+def test_version_4_header_is_shorter_than_version_3s() -> None:
+    # plane float64 sets: no dimension, dtype or step byte (they are in the 2-byte head)
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    ring = np.stack([np.cos(t), np.sin(t)], 1)
+    bundle = wavecore.encode_curves([ring], closed=True, tolerance=0.01, method="vertex")
+    info = wavecore.inspect(bundle)
+    assert info["version"] == "4"
+    # magic 4, version 1, head 2, tolerance 2 (0.01 as a short decimal), count 1, CRC 4
+    assert info["header_bytes"] == 14

@@ -249,7 +249,19 @@ def _across_prediction(zx, zy, u):
 
 @njit(cache=True, nogil=True)
 def _code_set(
-    buf, st, lattice, counts, closed, repeated, closed_mode, d, order, decoding, bulges, bulged
+    buf,
+    st,
+    lattice,
+    counts,
+    closed,
+    repeated,
+    closed_mode,
+    d,
+    order,
+    decoding,
+    bulges,
+    bulged,
+    from_last,
 ):
     """Code (or decode into ``lattice``, ``counts``, ``closed``, ``repeated``) a whole set.
 
@@ -259,6 +271,8 @@ def _code_set(
     With ``bulged`` (version 3), each segment's bulge follows the vertex that ends it (a
     closed curve's closing segment after its last vertex), kept in ``bulges`` at the row of
     the segment's end (the closing segment's at the curve's first row).
+    With ``from_last`` (version 4), a curve's first vertex is coded from the previous curve's
+    last vertex rather than its first.
     Returns the number of vertices (decoding: those written; -1 if the stream declares more
     than ``lattice`` holds).
     """
@@ -282,8 +296,10 @@ def _code_set(
             if m > limit - at:
                 return -1
             counts[c] = m
-        # the first vertex: a step from the previous curve's first vertex
+        # the first vertex: a step from the previous curve's first (or last) vertex
         for j in range(d):
+            if from_last and at > 0:
+                start[j] = lattice[at - 1, j]
             value = 0 if decoding else lattice[at, j] - start[j]
             value = _signed(
                 st, buf, models, _KIND_START + min(j, 3), 12 + min(j, 3), value, decoding
@@ -439,9 +455,11 @@ def encode_set(
     closed_mode: int,
     order: int = 0,
     bulges: np.ndarray | None = None,
+    from_last: bool = False,
 ) -> bytes:
     """The range-coded stream of a set of lattice curves (see :func:`decode_set`); with
-    ``bulges`` (one per vertex row: the bulge of the segment ending there), version 3's."""
+    ``bulges`` (one per vertex row: the bulge of the segment ending there), version 3's;
+    ``from_last`` (version 4) codes a curve's first vertex from the previous curve's last."""
     d = lattice.shape[1]
     bulged = bulges is not None
     bulges = np.zeros(len(lattice), dtype=np.int64) if bulges is None else bulges
@@ -461,6 +479,7 @@ def encode_set(
         False,
         np.ascontiguousarray(bulges, dtype=np.int64),
         bulged,
+        bool(from_last),
     )
     _finish_stream(st, out)
     size = int(st[_POS])
@@ -497,8 +516,10 @@ def decode_bulged_set(
     max_vertices: int,
     order: int,
     bulged: bool,
+    from_last: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """As :func:`decode_set`, and the bulges (zeros unless ``bulged``: version 3)."""
+    """As :func:`decode_set`, and the bulges (zeros unless ``bulged``: version 3);
+    ``from_last`` as in :func:`encode_set` (version 4)."""
     buf = np.frombuffer(bytes(data), dtype=np.uint8).copy()  # one compiled signature
     st = np.array([0, MASK32, 0, 1, 0, 0], dtype=np.int64)
     code = 0
@@ -512,7 +533,19 @@ def decode_bulged_set(
     repeated = np.zeros(count, dtype=np.int64)
     bulges = np.zeros(max_vertices, dtype=np.int64)
     total = _code_set(
-        buf, st, lattice, counts, closed, repeated, closed_mode, d, order, True, bulges, bulged
+        buf,
+        st,
+        lattice,
+        counts,
+        closed,
+        repeated,
+        closed_mode,
+        d,
+        order,
+        True,
+        bulges,
+        bulged,
+        bool(from_last),
     )
     if total < 0:
         return None
@@ -924,14 +957,18 @@ def snap_set(points, offsets, closed, step, tolerance):
     Each point takes, among the ``3**d`` lattice points around its rounded position, the one
     nearest to it of those within ``tolerance`` of its original polyline (within a lattice
     step and a half of it along the curve): a vertex may sit off its point along the curve,
-    not across it.  The ends of an open curve take their nearest lattice point.  Returns the
-    lattice and whether every point found one (the ends: within ``tolerance`` of their point).
+    not across it.  Where none of them is (a sharp corner), the ``5**d`` around it (the
+    polyline two and a half steps each way).  The ends of an open curve take their nearest
+    lattice point.  Returns the lattice and 0 where a point found none (the ends: within
+    ``tolerance`` of their point), 1 where every point found one among the ``3**d``, 2 where
+    some needed the ``5**d``.
     """
     total, d = points.shape
     lattice = np.empty((total, d), dtype=np.int64)
     base = np.empty(d, dtype=np.int64)
     cand = np.empty((1, d))
     count = 3**d
+    wide = 1
     for c in range(len(offsets) - 1):
         first, stop = offsets[c], offsets[c + 1]
         n = stop - first
@@ -948,7 +985,7 @@ def snap_set(points, offsets, closed, step, tolerance):
                     g = base[j] * step - points[k, j]
                     gap2 += g * g
                 if np.sqrt(gap2) > tolerance:
-                    return lattice, False
+                    return lattice, 0
                 continue
             own2 = 0.0
             for j in range(d):
@@ -977,9 +1014,30 @@ def snap_set(points, offsets, closed, step, tolerance):
                     for j in range(d):
                         lattice[k, j] = base[j] + rest % 3 - 1
                         rest //= 3
+            if best > tolerance:  # none of the 3**d: the 5**d around (a sharp corner)
+                wide = 2
+                lo = _reach(points, first, n, ring, i, -1, 2.5 * step)
+                hi = _reach(points, first, n, ring, i, 1, 2.5 * step)
+                for t in range(5**d):
+                    rest = t
+                    own2 = 0.0
+                    for j in range(d):
+                        cand[0, j] = (base[j] + rest % 5 - 2) * step
+                        rest //= 5
+                        g = cand[0, j] - points[k, j]
+                        own2 += g * g
+                    if own2 >= best_own:
+                        continue
+                    if not _near_original(cand, 0, points, first, n, ring, lo, hi, d, tolerance):
+                        continue
+                    best, best_own = 0.0, own2
+                    rest = t
+                    for j in range(d):
+                        lattice[k, j] = base[j] + rest % 5 - 2
+                        rest //= 5
             if best > tolerance:
-                return lattice, False
-    return lattice, True
+                return lattice, 0
+    return lattice, wide
 
 
 @njit(cache=True, nogil=True)

@@ -99,6 +99,9 @@ VERTEX_VERSION = 2
 #: The vertex form with bulged segments (parabolas between vertices): the same layout as
 #: version 2, each segment's bulge in the stream after the curve's vertices.
 BULGED_VERSION = 3
+#: Versions 2 and 3 for plane curves with a shorter header, and a curve's first vertex
+#: optionally coded from the previous curve's last (docs/curves.md, version 4).
+PLANE_VERSION = 4
 METHODS = ("auto", "wavelet", "vertex")
 #: Lattice steps of the vertex form, as multiples of the tolerance (a byte indexes this table).
 #: A vertex moves by at most ``step * sqrt(d) / 2`` when rounded, which must stay within the
@@ -894,6 +897,71 @@ def _cheapest_starts(
     return rows
 
 
+#: A closed curve's start (version 4, first vertex from the previous curve's last) is chosen
+#: among at most this many of its corners, so that the choice costs ``O(curves · 16²)``.
+_START_CHOICES = 16
+
+
+def _coded_bits(gaps: np.ndarray) -> np.ndarray:
+    """About how many bits the coder spends on lattice differences (per row): a bit length
+    in unary and its bits, and a sign."""
+    gaps = np.abs(gaps)
+    return np.sum(2 * np.ceil(np.log2(gaps + 1)) + (gaps != 0), axis=-1)
+
+
+def _from_last_starts(vertices: np.ndarray, counts: np.ndarray, closed: np.ndarray) -> np.ndarray:
+    """Row order of the kept vertices that starts each closed curve at the corner (a turn of
+    more than 45°) from which the set's first vertices cost the fewest bits when each is
+    coded from the previous curve's last vertex (version 4's ``from_last``).
+
+    A closed curve's last vertex is the one before its start, so each curve's choice moves
+    the next curve's reference: the starts are chosen together, by dynamic programming over
+    the curves (at most :data:`_START_CHOICES` corners each, the ones nearest the previous
+    curve's first vertex).  The polygons stay the same.
+    """
+    rows = np.arange(len(vertices))
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    choices: list[np.ndarray] = []
+    previous_first = np.zeros(vertices.shape[1], dtype=np.int64)
+    for c in range(len(counts)):
+        first, m = int(offsets[c]), int(counts[c])
+        options = np.zeros(1, dtype=np.int64)
+        if closed[c] and m > 2:
+            ring = vertices[first : first + m].astype(np.float64)
+            before = ring - np.roll(ring, 1, axis=0)
+            after = np.roll(ring, -1, axis=0) - ring
+            norms = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
+            turn = np.einsum("ij,ij->i", before, after) / np.maximum(norms, 1e-300)
+            corners = np.flatnonzero(turn < _CORNER_COSINE)
+            if len(corners) > _START_CHOICES:
+                bits = _coded_bits(vertices[first + corners] - previous_first)
+                corners = corners[np.argsort(bits, kind="stable")[:_START_CHOICES]]
+            if len(corners):
+                options = corners.astype(np.int64)
+        choices.append(options)
+        previous_first = vertices[first + options[0]]
+    if not len(counts):
+        return rows
+    # cost[i]: the fewest bits up to curve c when it starts at choices[c][i]
+    cost = _coded_bits(vertices[offsets[0] + choices[0]])
+    back: list[np.ndarray] = []
+    for c in range(1, len(counts)):
+        first, m_prev = int(offsets[c - 1]), int(counts[c - 1])
+        lasts = vertices[first + (choices[c - 1] - 1) % m_prev]  # the vertex before each start
+        starts = vertices[int(offsets[c]) + choices[c]]
+        total = cost[:, None] + _coded_bits(starts[None, :, :] - lasts[:, None, :])
+        back.append(np.argmin(total, axis=0))
+        cost = total[back[-1], np.arange(len(choices[c]))]
+    pick = int(np.argmin(cost))
+    for c in range(len(counts) - 1, -1, -1):
+        first, m = int(offsets[c]), int(counts[c])
+        start = int(choices[c][pick])
+        rows[first : first + m] = np.roll(rows[first : first + m], -start)
+        if c:
+            pick = int(back[c - 1][pick])
+    return rows
+
+
 def _bulged_polylines(
     lattice: np.ndarray,
     counts: np.ndarray,
@@ -925,9 +993,10 @@ def _bulged_stream(
     step: float,
     tolerance: float,
     dtype: np.dtype[Any],
-) -> tuple[bytes, int] | None:
-    """The stream of version 3 (bulged segments) and its predictor, or None where its
-    measured bound fails.  The fewest parabolic spans (:func:`curvecoder.bulged_reach_set`,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Version 3's vertices (bulged segments), each curve's count and each segment's bulge,
+    or None where its measured bound fails.  The fewest parabolic spans
+    (:func:`curvecoder.bulged_reach_set`,
     :func:`curvecoder.optimal_bulged_set`) on the points' own lattice points; a curve whose
     measured bound fails is simplified again with stricter spans, then straight ones, and at
     last takes ``fallback_keep`` and ``fallback_lattice`` (version 2's choice) unbulged."""
@@ -976,14 +1045,7 @@ def _bulged_stream(
         if np.any(strict[worst > tolerance] == 3):
             return None
         strict[worst > tolerance] += 1
-    best: tuple[bytes, int] | None = None
-    for order in _VERTEX_ORDERS:
-        coded = curvecoder.encode_set(
-            vertices, counts, closed, repeated, closed_mode, order, bulges
-        )
-        if best is None or len(coded) < len(best[0]):
-            best = (coded, order)
-    return best
+    return vertices, counts, bulges
 
 
 def _encode_vertex(
@@ -1018,6 +1080,7 @@ def _encode_vertex(
     closed_mode = 2 if len(set(flags)) > 1 else (1 if flags[0] else 0)
     largest = float(np.max(np.abs(points)))
     best: bytes | None = None
+    weighed = False
     for factor in sorted(VERTEX_STEPS, reverse=True):
         index = VERTEX_STEPS.index(factor)
         reach = factor * math.sqrt(d) / 2
@@ -1025,7 +1088,8 @@ def _encode_vertex(
             continue
         step = tolerance * factor
         if not largest / step < _VERTEX_LIMIT:
-            return None
+            return best
+        snapped = 1
         if reach > 1:
             lattice, snapped = curvecoder.snap_set(points, offsets, closed, step, tolerance)
             if not snapped:
@@ -1067,8 +1131,11 @@ def _encode_vertex(
         trial_lattice = np.ascontiguousarray(moved[rows])
         keep = np.ascontiguousarray(keep[rows])
         kept = _lattice_values(trial_lattice[keep], step, dtype).astype(np.float64)
-        if not np.all(curvecoder.check_set(trial_points, offsets, closed, keep, kept) <= tolerance):
-            continue
+        straight_fits = bool(
+            np.all(curvecoder.check_set(trial_points, offsets, closed, keep, kept) <= tolerance)
+        )
+        if not straight_fits and d != 2:
+            continue  # (plane sets may still keep the bound with bulged segments, below)
         points_r, lattice = trial_points, trial_lattice
         counts = np.add.reduceat(keep, offsets[:-1]).astype(np.int64)
         again = np.array(repeated, dtype=np.int64)
@@ -1077,7 +1144,8 @@ def _encode_vertex(
         # along the curve towards its predictions
         stream = b""
         order = -1
-        for candidate in _VERTEX_ORDERS:
+        plane: list[tuple[np.ndarray, np.ndarray | None, int]] = []  # version 4's candidates
+        for candidate in _VERTEX_ORDERS if straight_fits else ():
             if candidate in curvecoder.FRAME_ORDERS and d != 2:
                 continue  # the frame predictors are for plane curves
             vertices = np.ascontiguousarray(lattice[keep])
@@ -1098,11 +1166,14 @@ def _encode_vertex(
                     curvecoder.check_set(points_r, offsets, closed, keep, moved) <= tolerance
                 ):
                     vertices = np.ascontiguousarray(lattice[keep])
+            if d == 2:
+                if straight_fits:
+                    plane.append((vertices, None, candidate))
+                continue
             coded = curvecoder.encode_set(vertices, counts, closed, again, closed_mode, candidate)
             if order < 0 or len(coded) < len(stream):
                 stream, order = coded, candidate
-        version = VERTEX_VERSION
-        if d == 2:  # parabolas between the vertices, where that writes fewer bytes
+        if d == 2:  # parabolas between the vertices too; every choice coded as version 4
             bulged = _bulged_stream(
                 plain_points,
                 plain_lattice,
@@ -1117,14 +1188,77 @@ def _encode_vertex(
                 tolerance,
                 dtype,
             )
-            if bulged is not None and len(bulged[0]) < len(stream):
-                stream, order = bulged
-                version = BULGED_VERSION
+            bulged_counts = counts
+            if bulged is not None:
+                bulged_vertices, bulged_counts, segment_bulges = bulged
+                plane += [(bulged_vertices, segment_bulges, o) for o in _VERTEX_ORDERS]
+            if not plane:
+                continue  # neither form keeps the bound at this step: the next finer one
+            best_plane: tuple[bytes, int] | None = None
+            counts_written = counts
+            start_rows: dict[int, np.ndarray] = {}
+            for kept_vertices, kept_bulges, candidate in plane:
+                sizes = counts if kept_bulges is None else bulged_counts
+                for from_last in (False, True) if len(arrays) > 1 else (False,):
+                    placed = kept_vertices
+                    placed_bulges = kept_bulges
+                    if from_last:
+                        if id(kept_vertices) not in start_rows:  # bulged: one for all orders
+                            start_rows[id(kept_vertices)] = _from_last_starts(
+                                kept_vertices, sizes, closed
+                            )
+                        starts = start_rows[id(kept_vertices)]
+                        placed = np.ascontiguousarray(kept_vertices[starts])
+                        placed_bulges = None if kept_bulges is None else kept_bulges[starts]
+                    coded = curvecoder.encode_set(
+                        placed,
+                        sizes,
+                        closed,
+                        again,
+                        closed_mode,
+                        candidate,
+                        placed_bulges,
+                        from_last,
+                    )
+                    head = (
+                        (meta_bytes is not None)
+                        | closed_mode << 1
+                        | candidate << 3
+                        | (kept_bulges is not None) << 6
+                        | from_last << 7
+                        | (dtype.name != "float64") << 8
+                        | index << 9
+                    )
+                    if best_plane is None or len(coded) < len(best_plane[0]):
+                        best_plane = (coded, head)
+                        counts_written = sizes
+            assert best_plane is not None
+            stream, head = best_plane
+            limit = VERTEX_PER_BYTE * (len(stream) + 16)
+            if len(arrays) > limit or int(counts_written.sum()) * d > limit:
+                return best
+            out = bytearray(MAGIC)
+            out.append(PLANE_VERSION)
+            out += struct.pack("<H", head)
+            if dtype.name != "float64":
+                out.append(DTYPES.index(dtype.name))
+            out += tolerance_bytes
+            out += encode_varint(len(arrays))
+            if meta_bytes is not None:
+                out += encode_varint(len(meta_bytes)) + meta_bytes
+            out += stream
+            out += struct.pack("<I", zlib.crc32(out))
+            if best is None or len(out) < len(best):
+                best = bytes(out)
+            if (snapped == 2 or not straight_fits) and not weighed:
+                weighed = True  # kept only through a fallback: the next finer step may be
+                continue  # smaller (one more step is weighed, so the cost stays bounded)
+            break
         limit = VERTEX_PER_BYTE * (len(stream) + 16)
         if len(arrays) > limit or int(counts.sum()) * d > limit:
-            return None
+            return best
         out = bytearray(MAGIC)
-        out.append(version)
+        out.append(VERTEX_VERSION)
         out += encode_varint((meta_bytes is not None) | closed_mode << 2 | order << 4)
         out.append(DTYPES.index(dtype.name))
         out += encode_varint(d)
@@ -1135,7 +1269,11 @@ def _encode_vertex(
             out += encode_varint(len(meta_bytes)) + meta_bytes
         out += stream
         out += struct.pack("<I", zlib.crc32(out))
-        best = bytes(out)
+        if best is None or len(out) < len(best):
+            best = bytes(out)
+        if snapped == 2 and not weighed:
+            weighed = True  # kept only through a fallback: the next finer step may be smaller
+            continue
         break  # the coarsest step that keeps the bound (finer ones measured: never smaller)
     return best
 
@@ -1143,31 +1281,50 @@ def _encode_vertex(
 def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
     reader = _Reader(data[:-4])
-    reader.take(5, "magic and version")
-    flags = reader.varint("flags", 127)
-    closed_mode = (flags >> 2) & 3
-    order = flags >> 4
-    if flags & 2 or closed_mode == 3 or order not in _VERTEX_ORDERS:
-        msg = f"curve set flags {flags} are not a vertex form's"
-        raise BundleError(msg)
-    dtype_index = reader.take(1, "dtype")[0]
+    reader.take(4, "magic")
+    version = reader.take(1, "version")[0]
+    from_last = False
+    if version == PLANE_VERSION:
+        (head,) = struct.unpack("<H", reader.take(2, "head"))
+        closed_mode = (head >> 1) & 3
+        order = (head >> 3) & 7
+        bulged = bool(head >> 6 & 1)
+        from_last = bool(head >> 7 & 1)
+        step_index = (head >> 9) & 15
+        metadata_given = bool(head & 1)
+        if head >> 13 or closed_mode == 3 or order not in _VERTEX_ORDERS:
+            msg = f"curve set head {head:#06x} is not version {version}'s"
+            raise BundleError(msg)
+        dtype_index = reader.take(1, "dtype")[0] if head >> 8 & 1 else 0
+        d = 2
+    else:
+        flags = reader.varint("flags", 127)
+        closed_mode = (flags >> 2) & 3
+        order = flags >> 4
+        bulged = version == BULGED_VERSION
+        metadata_given = bool(flags & 1)
+        if flags & 2 or closed_mode == 3 or order not in _VERTEX_ORDERS:
+            msg = f"curve set flags {flags} are not a vertex form's"
+            raise BundleError(msg)
+        dtype_index = reader.take(1, "dtype")[0]
+        d = reader.varint("d", 1 << 16)
+        if d < 1:
+            msg = "curve set dimension 0 is invalid"
+            raise BundleError(msg)
     if dtype_index >= len(DTYPES):
         msg = f"curve set names dtype {dtype_index}, unknown"
         raise BundleError(msg)
     dtype = np.dtype(DTYPES[dtype_index])
-    d = reader.varint("d", 1 << 16)
-    if d < 1:
-        msg = "curve set dimension 0 is invalid"
-        raise BundleError(msg)
     tolerance = _read_tolerance(reader)
-    step_index = reader.take(1, "step")[0]
+    if version != PLANE_VERSION:
+        step_index = reader.take(1, "step")[0]
     if step_index >= len(VERTEX_STEPS):
         msg = f"curve set lattice step {step_index} is unknown"
         raise BundleError(msg)
     step = tolerance * VERTEX_STEPS[step_index]
     count = reader.varint("count", MAX_POINTS)
     metadata = None
-    if flags & 1:
+    if metadata_given:
         size = reader.varint("metadata length", len(data))
         try:
             metadata = json.loads(zlib.decompress(reader.take(size, "metadata")))
@@ -1180,14 +1337,20 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         msg = f"curve set declares {count} curves in a {len(stream)}-byte stream"
         raise BundleError(msg)
     capacity = min(limit // d, 1024 + 64 * len(stream))
-    version = data[len(MAGIC)]
-    bulged = version == BULGED_VERSION
     if bulged and d != 2:
         msg = f"curve set version {version} is for plane curves, not of dimension {d}"
         raise BundleError(msg)
     while True:  # grow the vertex buffer only as far as the stream really goes
         result = curvecoder.decode_bulged_set(
-            stream, count, d, closed_mode, closed_mode == 1, capacity, order, bulged
+            stream,
+            count,
+            d,
+            closed_mode,
+            closed_mode == 1,
+            capacity,
+            order,
+            bulged,
+            from_last,
         )
         if result is not None or capacity >= limit // d:
             break
@@ -1224,11 +1387,27 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         "stream": len(stream),
         "step": step,
         "repeated": [bool(r) for r in repeated.tolist()],
+        "closed_mode": closed_mode,
+        "bulged": bulged,
+        "from_last": from_last,
+        "order": order,
+        "coded": (lattice, counts, closed, repeated, bulges),
     }
     curve_set = CurveSet(
         curves, flags_out, tolerance, "none", metadata, [_MODE_VERTEX] * len(curves)
     )
     return curve_set, info
+
+
+def coded_vertices(bundle: Any) -> dict[str, Any]:
+    """What the vertex coder wrote in a vertex-form bundle (versions 2–4), for measurements:
+    ``coded`` (lattice vertices, counts, closed and repeated flags, bulges), ``closed_mode``,
+    ``order``, ``bulged``, ``from_last``, ``step``."""
+    data = _checked(bundle)
+    if not _is_vertex_form(data):
+        msg = "not a vertex-form curve set (version 1 is the wavelet form)"
+        raise BundleError(msg)
+    return _decode_vertex(data)[1]
 
 
 def is_curve_set(data: Any) -> bool:
@@ -1266,7 +1445,7 @@ def _checked(data: Any) -> bytes:
 
 
 def _is_vertex_form(data: bytes) -> bool:
-    return data[len(MAGIC)] in (VERTEX_VERSION, BULGED_VERSION)
+    return data[len(MAGIC)] in (VERTEX_VERSION, BULGED_VERSION, PLANE_VERSION)
 
 
 def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Reader]:
@@ -1277,7 +1456,7 @@ def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Read
     if version != VERSION:
         msg = (
             f"curve set version {version} is not supported "
-            f"(this reader reads {VERSION}, {VERTEX_VERSION} and {BULGED_VERSION})"
+            f"(this reader reads {VERSION}, {VERTEX_VERSION}, {BULGED_VERSION} and {PLANE_VERSION})"
         )
         raise BundleError(msg)
     flags = reader.varint("flags", 31)
