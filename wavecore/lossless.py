@@ -479,8 +479,9 @@ def med_residuals(plane: np.ndarray) -> np.ndarray:
 def _predicted_bits(data: np.ndarray) -> float:
     """First-order entropy of :func:`med_residuals`, channel by channel.
 
-    The residuals are counted by a compiled pass (they lie within the plane's range either
-    side of 0, since the prediction does); the counts, summed as :func:`_entropy_bits` sums
+    The residuals are counted by a compiled pass: they lie within ``±spread``, the width of
+    the plane's range with 0 (every prediction but the first sample's 0 lies within the
+    plane's range); the counts, summed as :func:`_entropy_bits` sums
     them, give the same entropy to the bit at a fraction of the time (a fifth of the
     lossless coder's encode went into the residual arrays)."""
     planes = [data] if data.ndim == 2 else [data[..., c] for c in range(data.shape[2])]
@@ -490,7 +491,7 @@ def _predicted_bits(data: np.ndarray) -> float:
         if flat.size == 0:
             continue
         lo, hi = (int(v) for v in _kernels.value_range(flat.reshape(-1)))
-        spread = hi - lo
+        spread = max(hi, 0) - min(lo, 0)  # the first sample is predicted as 0
         if 2 * spread + 1 > 4 * flat.size + (1 << 16):  # a sparse histogram: count by sorting
             counts = np.unique(med_residuals(flat), return_counts=True)[1]
         else:
