@@ -156,10 +156,15 @@ def time_summary(rows: list[dict[str, Any]]) -> str:
     ours = sum(r["encode"] + r["decode"] for r in rows)
     png = sum(r["png_encode"] + r["png_decode"] for r in rows)
     cpu, png_cpu = sum(r["cpu"] for r in rows), sum(r["png_cpu"] for r in rows)
+    most = sum(r["max_encode"] + r["max_decode"] for r in rows)
+    most_cpu = sum(r["max_cpu"] for r in rows)
     return (
         f"encode + decode, all images: ours {ours:.3f} s, PNG {png:.3f} s ({ours / png:.2f}x); "
         f"CPU ours {cpu:.3f} s, PNG {png_cpu:.3f} s ({cpu / png_cpu:.2f}x); "
-        f"load {load_average()}"
+        f"load {load_average()}\n"
+        f"effort='max', same run: {most:.3f} s ({most / png:.2f}x PNG, {most / ours:.2f}x "
+        f"default); CPU {most_cpu:.3f} s ({most_cpu / png_cpu:.2f}x PNG, "
+        f"{most_cpu / cpu:.2f}x default)"
     )
 
 

@@ -177,3 +177,29 @@ def test_integer_cast_matches_the_float_route(source: type, target: str) -> None
     got = cast(values.reshape(50, 100), target)
     assert got.dtype == np.dtype(target)
     assert np.array_equal(got.reshape(-1), through_floats.astype(target))
+
+
+def _numpy_predicted_bits(data: np.ndarray) -> float:
+    """The first-order entropy of the MED residuals as ``wavecore.lossless`` computed it before
+    its compiled histogram: residual arrays, then ``np.unique``'s counts."""
+    planes = [data] if data.ndim == 2 else [data[..., c] for c in range(data.shape[2])]
+    total = 0.0
+    for plane in planes:
+        counts = np.unique(lossless.med_residuals(plane), return_counts=True)[1]
+        total -= float(np.sum(counts * np.log2(counts / plane.size)))
+    return total
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    hnp.arrays(
+        np.int64,
+        st.tuples(st.integers(1, 9), st.integers(1, 9), st.sampled_from([1, 3])),
+        elements=st.one_of(st.integers(-300, 300), st.integers(-(2**40), 2**40)),
+    )
+)
+def test_predicted_bits_match_the_residual_arrays(data: np.ndarray) -> None:
+    # the entropy that choose_depth compares is the same float, to the bit, whichever way the
+    # residuals are counted (compiled histogram, or np.unique when their range is too wide)
+    plane = data[..., 0] if data.shape[2] == 1 else data
+    assert lossless._predicted_bits(plane) == _numpy_predicted_bits(plane)

@@ -241,7 +241,7 @@ def _error_weight(x, maxweight):
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _wp_predict(values, off, rows, cols, i, j, te, pe, subs):
+def _wp_predict(values, off, rows, cols, i, j, te, pe, subs, wts):
     # i is relative to the stripe's first row; values[off] is that row's first sample
     """The weighted prediction of position ``(i, j)`` (rounded), its value at 3 extra bits,
     and the largest magnitude of the true errors around; ``subs`` receives the four
@@ -264,7 +264,6 @@ def _wp_predict(values, off, rows, cols, i, j, te, pe, subs):
     te_nw = te[prv - 1] if i > 0 and j > 0 else te_n
     te_ne = te[prv + 1] if i > 0 and j + 1 < cols else te_n
     total = np.int64(0)
-    wts = np.empty(WP_N, dtype=np.int64)
     # the sub-predictors' errors, WP_N per position: at N, NW, NE (N again at the ends), W, WW
     up = prv * WP_N
     if i > 0 and 1 < j < cols - 1:  # the common case, without a test per neighbour
@@ -371,7 +370,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
     ``rows * (stripe + 1) // stripes`` of every band, which look at no other stripe of the
     level (so the stripes are coded in parallel).  ``mags`` is scratch of ``values``' size: the
     magnitudes the contexts look at (the coarse band's prediction residuals, the details')."""
-    probs = np.full(MODELS, PROB_INIT << 4, dtype=np.int64)
+    probs = np.full(MODELS, PROB_INIT << 4, dtype=np.int32)  # int32: half the cache
     weights = np.zeros(MIX_SETS * INPUTS, dtype=np.int64)
     for k in range(MIX_SETS):
         weights[k * INPUTS] = WEIGHT_INIT
@@ -387,6 +386,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
             xc = (xc << 8) | byte
             pos += 1
     subs = np.zeros(WP_N, dtype=np.int64)
+    wts = np.zeros(WP_N, dtype=np.int64)  # scratch: allocated once, not per sample
     for p in range(planes.shape[0]):
         full_rows = planes[p, P_ROWS]
         cols = planes[p, P_COLS]
@@ -423,7 +423,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                 s, a, b = _neighbourhood(mags, off, rows, cols, i, j)
                 if approx:
                     pred, pred8, big, wv, nv, nwv, nev = _wp_predict(
-                        values, off, rows, cols, i, j, te, pe, subs
+                        values, off, rows, cols, i, j, te, pe, subs, wts
                     )
                     interior = i > 0 and 0 < j < cols - 1
                     x = 4 * abs(big)
@@ -587,3 +587,33 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
             pos += 1
             x1 = (x1 << 8) & 0xFFFFFFFF
     return pos
+
+
+@njit(nogil=True, cache=True)
+def med_histogram(plane, lo, size):
+    """How often each residual ``r`` of :func:`wavecore.lossless.med_residuals` occurs in a
+    2-D integer plane, at ``counts[r - lo]`` (``size`` bins; the caller bounds the residuals):
+    the same counts without the residual plane's six temporary arrays."""
+    counts = np.zeros(size, dtype=np.int64)
+    rows, cols = plane.shape
+    for i in range(rows):
+        for j in range(cols):
+            x = np.int64(plane[i, j])
+            if i == 0 and j == 0:
+                pred = np.int64(0)
+            elif i == 0:
+                pred = np.int64(plane[0, j - 1])  # the first row: from the west
+            elif j == 0:
+                pred = np.int64(plane[i - 1, 0])  # the first column: from the north
+            else:
+                w = np.int64(plane[i, j - 1])
+                n = np.int64(plane[i - 1, j])
+                nw = np.int64(plane[i - 1, j - 1])
+                if nw >= max(w, n):
+                    pred = min(w, n)
+                elif nw <= min(w, n):
+                    pred = max(w, n)
+                else:
+                    pred = w + n - nw
+            counts[x - pred - lo] += 1
+    return counts

@@ -78,7 +78,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _kernels, layout
+from . import _kernels, _losslesskernels, layout
 from .errors import InvalidParameter
 from .transform import normalize_axis, run_rows
 
@@ -477,9 +477,28 @@ def med_residuals(plane: np.ndarray) -> np.ndarray:
 
 
 def _predicted_bits(data: np.ndarray) -> float:
-    """First-order entropy of :func:`med_residuals`, channel by channel."""
+    """First-order entropy of :func:`med_residuals`, channel by channel.
+
+    The residuals are counted by a compiled pass: they lie within ``±spread``, the width of
+    the plane's range with 0 (every prediction but the first sample's 0 lies within the
+    plane's range); the counts, summed as :func:`_entropy_bits` sums
+    them, give the same entropy to the bit at a fraction of the time (a fifth of the
+    lossless coder's encode went into the residual arrays)."""
     planes = [data] if data.ndim == 2 else [data[..., c] for c in range(data.shape[2])]
-    return _entropy_bits([med_residuals(p) for p in planes])
+    total = 0.0
+    for plane in planes:
+        flat = np.ascontiguousarray(plane, dtype=np.int64)
+        if flat.size == 0:
+            continue
+        lo, hi = (int(v) for v in _kernels.value_range(flat.reshape(-1)))
+        spread = max(hi, 0) - min(lo, 0)  # the first sample is predicted as 0
+        if 2 * spread + 1 > 4 * flat.size + (1 << 16):  # a sparse histogram: count by sorting
+            counts = np.unique(med_residuals(flat), return_counts=True)[1]
+        else:
+            counts = _losslesskernels.med_histogram(flat, -spread, 2 * spread + 1)
+            counts = counts[counts > 0]
+        total -= float(np.sum(counts * np.log2(counts / flat.size)))
+    return total
 
 
 def choose_depth(data: np.ndarray, candidates: Sequence[str] = CANDIDATE_SETS[0]) -> list[str]:

@@ -125,22 +125,35 @@ def stripe_count(rows: int) -> int:
     return max(1, min(MAX_STRIPES, rows // STRIPE_ROWS))
 
 
-def _code(values: np.ndarray, parent: np.ndarray, table: np.ndarray, stripes: int) -> bytes:
-    mags = np.zeros(values.size, dtype=np.int64)
-    parts: list[bytes] = [b""] * stripes
+def _code_all(jobs: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]]) -> list[bytes]:
+    """Code every level (``values, parent, table, stripes`` each): all their stripes at once
+    on the thread pool, since an encoder knows every level's values (a one-level picture's
+    two chunks, each a single stripe, then take both threads instead of one)."""
+    tasks = [(level, stripe) for level, job in enumerate(jobs) for stripe in range(job[3])]
+    scratch = [np.zeros(job[0].size, dtype=np.int64) for job in jobs]
+    parts: list[bytes] = [b""] * len(tasks)
 
     def code(lo: int, hi: int) -> None:
-        for stripe in range(lo, hi):
+        for task in range(lo, hi):
+            level, stripe = tasks[task]
+            values, parent, table, stripes = jobs[level]
+            mags = scratch[level]
             out = np.empty(values.size // stripes + 1024, dtype=np.uint8)
             n = kernels.encode_level(values, mags, parent, table, stripe, stripes, out)
             if n > out.size:
                 out = np.empty(n, dtype=np.uint8)
                 kernels.encode_level(values, mags, parent, table, stripe, stripes, out)
-            parts[stripe] = out[:n].tobytes()
+            parts[task] = out[:n].tobytes()
 
-    run_rows(code, stripes, values.size, pieces=stripes)
-    lengths = b"".join(encode_varint(len(part)) for part in parts[:-1])
-    return lengths + b"".join(parts)
+    run_rows(code, len(tasks), sum(job[0].size for job in jobs), pieces=len(tasks))
+    chunks = []
+    start = 0
+    for job in jobs:
+        mine = parts[start : start + job[3]]
+        start += job[3]
+        lengths = b"".join(encode_varint(len(part)) for part in mine[:-1])
+        chunks.append(lengths + b"".join(mine))
+    return chunks
 
 
 def _split(chunk: bytes, stripes: int, index: int) -> list[np.ndarray]:
@@ -172,23 +185,23 @@ def _split(chunk: bytes, stripes: int, index: int) -> list[np.ndarray]:
 
 
 def _decode_stripes(
-    values: np.ndarray,
-    mags: np.ndarray,
-    ancestors: np.ndarray,
-    table: np.ndarray,
-    parts: list[np.ndarray],
+    levels: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]],
 ) -> None:
-    """Decode every stripe of a level into ``values``, in parallel."""
-    stripes = len(parts)
+    """Decode every stripe of ``levels`` (``values, mags, ancestors, table, parts`` each, none
+    looking at another's values) into their ``values``, all at once on the thread pool."""
+    tasks = [(level, stripe) for level, job in enumerate(levels) for stripe in range(len(job[4]))]
     damaged: list[int] = []
 
     def decode(lo: int, hi: int) -> None:
-        for stripe in range(lo, hi):
+        for task in range(lo, hi):
+            level, stripe = tasks[task]
+            values, mags, ancestors, table, parts = levels[level]
+            stripes = len(parts)
             part = parts[stripe]
             if kernels.decode_level(values, mags, ancestors, table, stripe, stripes, part) < 0:
                 damaged.append(stripe)
 
-    run_rows(decode, stripes, values.size, pieces=stripes)
+    run_rows(decode, len(tasks), sum(job[0].size for job in levels), pieces=len(tasks))
     if damaged:
         msg = f"lossless-coded stripe(s) {sorted(damaged)} decode to values beyond int32"
         raise BundleError(msg)
@@ -198,7 +211,7 @@ def encode_lossless_levels(coeffs: Sequence[Any]) -> tuple[list[bytes], dict[str
     """Code a 2-D decomposition (``wavedec2`` layout, integers, bands ``(rows, cols)`` or
     ``(rows, cols, channels)``) into one chunk per entry, coarse first."""
     levels = as_levels(coeffs, "coeffs")
-    chunks = []
+    jobs = []
     parent: np.ndarray | None = None
     parent_shapes: list[tuple[int, int]] | None = None
     for index, bands in enumerate(levels):
@@ -208,9 +221,9 @@ def encode_lossless_levels(coeffs: Sequence[Any]) -> tuple[list[bytes], dict[str
         table, _, _ = _planes(shapes, channels, index == 0, parent_shapes if index > 1 else None)
         values = _flatten(bands, channels)
         ancestors = parent if index > 1 and parent is not None else np.zeros(0, np.int64)
-        chunks.append(_code(values, ancestors, table, stripe_count(shapes[0][0])))
+        jobs.append((values, ancestors, table, stripe_count(shapes[0][0])))
         parent, parent_shapes = values, shapes
-    return chunks, {"coder": "context", "version": LOSSLESS_VERSION, "two_d": True}
+    return _code_all(jobs), {"coder": "context", "version": LOSSLESS_VERSION, "two_d": True}
 
 
 def decode_lossless_levels(
@@ -227,6 +240,7 @@ def decode_lossless_levels(
     out: list[Any] = []
     parent: np.ndarray | None = None
     parent_shapes: list[tuple[int, int]] | None = None
+    levels = []
     for index, chunk in enumerate(chunks):
         full = _level_shapes(shapes[index])
         dims = [_as_2d(s) for s in full]
@@ -241,9 +255,17 @@ def decode_lossless_levels(
         values = np.zeros(total, dtype=np.int64)
         mags = np.zeros(total, dtype=np.int64)
         ancestors = parent if index > 1 and parent is not None else np.zeros(0, np.int64)
-        stripes = stripe_count(band_shapes[0][0])
-        parts = _split(bytes(chunk), stripes, index)
-        _decode_stripes(values, mags, ancestors, table, parts)
+        parts = _split(bytes(chunk), stripe_count(band_shapes[0][0]), index)
+        levels.append((values, mags, ancestors, table, parts, full, band_shapes, channels))
+        parent, parent_shapes = values, band_shapes
+    # The coarse band and the coarsest details look at no other level: decode them together;
+    # each finer level looks at the level before it (its parent), so it waits for it.
+    groups = [levels[:2]] + [[level] for level in levels[2:]]
+    for group in groups:
+        if group:
+            _decode_stripes([level[:5] for level in group])
+    for values, _, _, _, _, full, band_shapes, channels in levels:
+        total = values.size
         if total and (values.min() < -_MAX_VALUE - 1 or values.max() > _MAX_VALUE):
             msg = "lossless-coded chunk decodes to a value beyond int32"
             raise BundleError(msg)
@@ -258,6 +280,5 @@ def decode_lossless_levels(
             planes = per_band[b]
             band = planes[0] if len(full_shape) == 2 else np.stack(planes, axis=-1)
             bands.append(band.astype(np.int32))
-        out.append(bands[0] if index == 0 else tuple(bands))
-        parent, parent_shapes = values, band_shapes
+        out.append(bands[0] if len(out) == 0 else tuple(bands))
     return out
