@@ -840,6 +840,18 @@ def _read_compact(reader: _Reader, major: int, minor: int) -> Bundle:
     count = header["levels"] + 1
     lengths = [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
     spans = chunk_groups(lengths)
+    crcs = _read_group_crcs(reader, spans, count)
+    if derived:  # only once the header is known to be intact
+        _add_derived_weights(header)
+    chunks, groups = _grouped(_take_chunks(reader, lengths), spans, count)
+    return Bundle((major, minor), header, chunks, crcs, "crc16", block_checks=True, groups=groups)
+
+
+def _read_group_crcs(
+    reader: _Reader, spans: Sequence[tuple[int, int]], count: int
+) -> tuple[int, ...]:
+    """Each chunk's group CRC-16 (one stored per group), after checking the header CRC-16
+    that follows them over everything read so far."""
     crcs = [0] * count
     for number, (first, last) in enumerate(spans):
         (crc,) = reader.unpack(_U16, f"the CRC-16 of group {number}")
@@ -849,23 +861,21 @@ def _read_compact(reader: _Reader, major: int, minor: int) -> Bundle:
     if binascii.crc_hqx(reader.view[:head_end], 0) != crc:
         msg = "the header or chunk table is corrupt: the header CRC-16 does not match"
         raise BundleError(msg)
-    if derived:  # only once the header is known to be intact
-        _add_derived_weights(header)
-    chunks = list(_take_chunks(reader, lengths))
+    return tuple(crcs)
+
+
+def _grouped(
+    read: Sequence[Any], spans: Sequence[tuple[int, int]], count: int
+) -> tuple[tuple[Any, ...], tuple[tuple[int, int], ...]]:
+    """The chunks with every group that lost one chunk lost whole (a group is read whole),
+    and each chunk's group as ``(first, last)``."""
+    chunks = list(read)
     groups = [(0, 0)] * count
     for first, last in spans:
         groups[first : last + 1] = [(first, last)] * (last + 1 - first)
         if any(chunk is None for chunk in chunks[first : last + 1]):
-            chunks[first : last + 1] = [None] * (last + 1 - first)  # a group is read whole
-    return Bundle(
-        (major, minor),
-        header,
-        tuple(chunks),
-        tuple(crcs),
-        "crc16",
-        block_checks=True,
-        groups=tuple(groups),
-    )
+            chunks[first : last + 1] = [None] * (last + 1 - first)
+    return tuple(chunks), tuple(groups)
 
 
 def _add_derived_weights(header: dict[str, Any]) -> None:
@@ -890,27 +900,14 @@ def _read_curve(reader: _Reader, major: int, minor: int) -> Bundle:
     if blocks is None:
         lengths = [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
     spans = curve_groups(count)
-    crcs = [0] * count
-    for number, (first, last) in enumerate(spans):
-        (crc,) = reader.unpack(_U16, f"the CRC-16 of group {number}")
-        crcs[first : last + 1] = [crc] * (last + 1 - first)
-    head_end = reader.offset
-    (crc,) = reader.unpack(_U16, "the header CRC-16")
-    if binascii.crc_hqx(reader.view[:head_end], 0) != crc:
-        msg = "the header or chunk table is corrupt: the header CRC-16 does not match"
-        raise BundleError(msg)
+    crcs = _read_group_crcs(reader, spans, count)
     if derived:  # only once the header is known to be intact
         _add_derived_weights(header)
     if lengths is None:
         assert blocks is not None
         lengths = _delimited_lengths(reader, blocks)
-    chunks = list(_take_chunks(reader, lengths))
-    groups = [(0, 0)] * count
-    for first, last in spans:
-        groups[first : last + 1] = [(first, last)] * (last + 1 - first)
-        if any(chunk is None for chunk in chunks[first : last + 1]):
-            chunks[first : last + 1] = [None] * (last + 1 - first)  # a group is read whole
-    return Bundle((major, minor), header, tuple(chunks), tuple(crcs), "crc16", groups=tuple(groups))
+    chunks, groups = _grouped(_take_chunks(reader, lengths), spans, count)
+    return Bundle((major, minor), header, chunks, crcs, "crc16", groups=groups)
 
 
 def _delimited_lengths(reader: _Reader, blocks: Sequence[int]) -> list[int]:
