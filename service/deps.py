@@ -26,6 +26,34 @@ def settings_of(request: Request) -> Settings:
     return settings
 
 
+def reject_unknown_query(request: Request) -> None:
+    """Answer 400 when the query string names a parameter the route does not read.
+
+    The image and grid routes take their options as form fields, and the surface route takes
+    them in the body: a ``?bpp=0.5`` there would otherwise be dropped without a word.
+    """
+    route = request.scope.get("route")
+    dependant = getattr(route, "dependant", None)
+    if dependant is None:
+        return
+    known: set[str] = set()
+    pending = [dependant]
+    while pending:  # the route's own parameters and those of its dependencies
+        current = pending.pop()
+        known.update(param.alias for param in current.query_params)
+        pending.extend(current.dependencies)
+    unknown = sorted(set(request.query_params) - known)
+    if unknown:
+        names = ", ".join(repr(name) for name in unknown)
+        accepted = ", ".join(sorted(known)) or "none"
+        raise Problem(
+            "bad-request",
+            f"unknown query parameter {names} for {request.url.path}: its query parameters are "
+            f"{accepted}; options of multipart routes go in form fields, and of JSON routes in "
+            "the body",
+        )
+
+
 def problem_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
     """OpenAPI ``responses`` entries for the problems a route can answer with."""
     return {

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Query, Request
+from fastapi import APIRouter, Depends, Query, Request
 from fastapi.responses import JSONResponse, Response
 from starlette.datastructures import UploadFile
 
@@ -25,6 +25,7 @@ from ..deps import (
     npy_bytes,
     parse_model,
     problem_responses,
+    reject_unknown_query,
     settings_of,
 )
 from ..errors import Problem
@@ -33,7 +34,9 @@ from ..schemas import PointsResult, ReconstructParams
 from ..settings import Settings
 from ..work import run_work
 
-router = APIRouter(prefix="/v1/bundles", tags=["bundles"])
+router = APIRouter(
+    prefix="/v1/bundles", tags=["bundles"], dependencies=[Depends(reject_unknown_query)]
+)
 
 _BODY = {
     "requestBody": {

@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from fastapi import APIRouter, Query, Request
+from fastapi import APIRouter, Depends, Query, Request
 from fastapi.responses import Response
 
 import wavecore
@@ -26,6 +26,7 @@ from ..deps import (
     json_body_openapi,
     problem_responses,
     read_json_bytes,
+    reject_unknown_query,
     settings_of,
 )
 from ..errors import Problem
@@ -40,7 +41,9 @@ from ..schemas import (
 from ..settings import Settings
 from ..work import run_work
 
-router = APIRouter(prefix="/v1/curves", tags=["curves"])
+router = APIRouter(
+    prefix="/v1/curves", tags=["curves"], dependencies=[Depends(reject_unknown_query)]
+)
 
 
 def _limits(settings: Settings) -> dict[str, Any]:

@@ -5,19 +5,19 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 import numpy as np
-from fastapi import APIRouter, File, Form, Request, UploadFile
+from fastapi import APIRouter, Depends, File, Form, Request, UploadFile
 from fastapi.responses import Response
 
 import wavecore
 
 from .. import cost
-from ..deps import BUNDLE_MEDIA_TYPE, problem_responses, settings_of
+from ..deps import BUNDLE_MEDIA_TYPE, problem_responses, reject_unknown_query, settings_of
 from ..errors import Problem
 from ..gridfiles import GridFileError, read_grid_file
 from ..settings import Settings
 from ..work import run_work
 
-router = APIRouter(prefix="/v1/grids", tags=["grids"])
+router = APIRouter(prefix="/v1/grids", tags=["grids"], dependencies=[Depends(reject_unknown_query)])
 
 
 def _figure(value: float | None) -> str:

@@ -7,19 +7,21 @@ import warnings
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from fastapi import APIRouter, File, Form, Request, UploadFile
+from fastapi import APIRouter, Depends, File, Form, Request, UploadFile
 from fastapi.responses import Response
 from PIL import Image
 
 import wavecore
 
 from .. import cost
-from ..deps import BUNDLE_MEDIA_TYPE, problem_responses, settings_of
+from ..deps import BUNDLE_MEDIA_TYPE, problem_responses, reject_unknown_query, settings_of
 from ..imaging import read_image
 from ..settings import Settings
 from ..work import run_work
 
-router = APIRouter(prefix="/v1/images", tags=["images"])
+router = APIRouter(
+    prefix="/v1/images", tags=["images"], dependencies=[Depends(reject_unknown_query)]
+)
 
 
 def _format(value: float | None) -> str:

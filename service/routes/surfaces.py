@@ -6,7 +6,7 @@ import json
 from typing import Any
 
 import numpy as np
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Depends, Request
 from fastapi.responses import Response
 from starlette.datastructures import UploadFile
 
@@ -20,6 +20,7 @@ from ..deps import (
     problem_responses,
     read_json_bytes,
     read_npy,
+    reject_unknown_query,
     settings_of,
 )
 from ..errors import Problem
@@ -28,7 +29,9 @@ from ..schemas import SurfaceEncodeRequest, SurfaceOptions, SurfaceUploadParams
 from ..settings import Settings
 from ..work import run_work
 
-router = APIRouter(prefix="/v1/surfaces", tags=["surfaces"])
+router = APIRouter(
+    prefix="/v1/surfaces", tags=["surfaces"], dependencies=[Depends(reject_unknown_query)]
+)
 
 _UPLOAD_SCHEMA = {
     "type": "object",

@@ -147,6 +147,32 @@ async def test_validation_errors_name_the_field(client: httpx.AsyncClient) -> No
     assert "keep" in body["detail"]
 
 
+@pytest.mark.parametrize(
+    ("path", "request_kwargs", "name"),
+    [
+        ("/v1/images/encode", image(PNG), "bpp"),
+        ("/v1/grids/encode", surface_npy(_npy(np.zeros((8, 8)))), "max_error"),
+        ("/v1/surfaces/encode", {"json": {"grid": [[0.0] * 8] * 8}}, "keep"),
+        ("/v1/curves/encode", {"json": {"points": [[0, 0], [1, 1], [2, 0]] * 3}}, "tolerence"),
+        ("/v1/bundles/reconstruct", {"content": IMAGE_BUNDLE}, "levle"),
+    ],
+    ids=["image-form-route", "grid-form-route", "surface-body-route", "curve-typo", "bundle-typo"],
+)
+async def test_unknown_query_parameters_are_refused_not_ignored(
+    client: httpx.AsyncClient, path: str, request_kwargs: dict[str, Any], name: str
+) -> None:
+    # A target in the query string of a route that reads it elsewhere would otherwise be
+    # dropped silently, and the caller would get a bundle coded to the default.
+    r = await client.post(path, params={name: "1"}, **request_kwargs)
+    body = _check_problem(r, 400, "bad-request")
+    assert repr(name) in body["detail"]
+
+
+async def test_declared_query_parameters_still_pass(client: httpx.AsyncClient) -> None:
+    r = await client.post("/v1/bundles/reconstruct", params={"level": 1}, content=IMAGE_BUNDLE)
+    assert r.status_code == 200, r.text
+
+
 async def test_bomb_refused_by_the_header_before_decoding(
     make_client: Callable[..., httpx.AsyncClient],
 ) -> None:
