@@ -96,3 +96,67 @@ def test_default_lossless_bundles_are_integrates_bytes() -> None:
         assert (len(bundle), hashlib.sha256(bundle).hexdigest()) == INTEGRATE_DEFAULT[name], name
     # and the frozen colour bundle above was written by that default path at level 2
     assert wavecore.encode_image(_colour_image(), lossless=True, level=2) == COLOUR_BUNDLE
+
+
+# Bundles of the lossless coder (``effort="max"``, the context coder's version 5), frozen as
+# commit 791a382 wrote them: later work on its kernels (speed, a new version) must keep
+# decoding them.  The grey one is the picture predicted without levels in two stripes (400
+# rows: the weighted predictor, the stripes' split); the colour one has two 5/3 levels (the
+# details' parent, sibling and first-channel contexts).
+MAX_GREY_BUNDLE = base64.b64decode(
+    "iVdWQg0KGgoDAA4QMFQwAJADBgDoPxUACMIKk7FCTmiGoAWBhy+kN8BW60Bc226jOhpqUtZgbQT/DCJo5K70S7gU"
+    "JJTMmdqdK3epDc63zcrdaFizZv6I/oqRMYoCbltlsIIoCxUMsuD8xHTVrlFeWzH+2ok68/+QT1I9BZ01AQkuGxYa"
+    "uDWBAfduCWe9HWPYmr/Fd2cKT3U4DlrMuCNBSuKIKIUViRzQYF7+rp4wet1KToXDYfH00bnEEpTn16AeSu7ZqY3Y"
+    "stYwjZUAW6R4rW6Ox12rdZpUJiWLG8MTOHHauKRXGxSwJ7Sbrv4YuHEdcu0qg8w4kok3xbiv4CxnHFBV1zV8q+wP"
+    "mf8ngU4a1a00r+Pi2mrePwhU+aPrudJmCnhyD6wLhG2jRswN5UhVVQNtD5+subZPqQZEPeZvxLe9wRVcWJ1rasB/"
+    "+QWljJwoiWHFHMsa77T+HS8KRYauIDefzHSjiWIs0V3PiWfDA9l2uYcJ4O9d7UuBI/B7mU8LuMVdNpqgHVTtAhkH"
+    "J+cyD1jOcBEmbDtk1FsSmYGqi8amIj+6bg3u5YVlYtOd6/oJDlS3kRWNavxMrA/YXps0s7i/D1z0AKwXK3QV2KWk"
+    "ZnnzdOJF0WmFcxdMD++NjITtYrQ575GS20PVmnP3PjB/vOm5SVBvA4JXzSkjKAhz4NEEemMiqMxc+ca5yf9riAC1"
+    "E2Tp+q2ssl+BanTNNdSWfctAHCVMowLv7ekadqKhPMW8KgAD4A6OnN679NQZZQCfbs+g3McqKr6kvtdyKJpAsxFq"
+    "4mGuwgrtO+q8WmWaRXfmRvBn1LHHLVnlJRt7i1pVIzMvytrCNZvl7XWZgEUfD4JI5BGiqA8B7EGqbISljplD5+1H"
+    "s1OeNfP6+sOGXh23hW7v45MuP8OmNjof0UgqDMrgf5hRwBSqQ2KorlA3B7jSwRcBflcNamGaA/s+wwmwvxVrHzye"
+    "V2lYBpbdB5iSpMGyw7zvUGYwOmux7VySHSx8laW/L4FibJH/l4uCJfa0aBDJdQXr0fSCYbkOfL+duzXlmDYSRLr/"
+    "x4ZypeB+yU/OBXcw7HhBZCBIaVaGnbK1MQy2YASom8zd8rWPnytFEMinGxZBWO+WFrgT4eTW6n7Pa87+YEhkFLzo"
+    "srUwVNsgV1jcJH9EMXmdZJNs2pmHqsjfiHv5PqOgY0KHKulYlYRO+S8K+b5WTBl5prvyk+9hx5JPBYAsXi1wMDW+"
+    "ym5OhDF6S7akrrYU3bS82LRk3rDj/TdbXfoGU09IrjO4jnjV2bWKUPHAYhiUI/NNigx88lTyDN6iPr2PVtLCeKU5"
+    "lqyFXU8ws1hZcMPclDWxLuUA8XWMPDKSTcEJA0RcC1B8VxD1YO541M/GizRdSD6TiQPc49e+/i60+bn02CUUeoEY"
+    "I+Y+cCPxh5gGf4IwuDVboMVqRJKQAQfLjh25ck2jIh3ZSCWXtdLEQ6k2zZ/FEIDJwWaFwNo8qRGZkO+ojzUpK1s0"
+    "OoLBY3lvWyLwML/jX3Rn0C5aB3Lpy4nVZxC0gdAUO6M5uA1M3195t60brhItr/O0f99NfwR14faT7gZ1mCZ5Z0O/"
+    "rte2XVnXTHNELZildHKxG9JBgBAHYH3sQq3aVDeMFn243L7ZXAgsZeSCTTtLjCmrj5qAyRkXhNODRA2hYGkl7/tJ"
+    "W2hTecddMifcMWQoXxZ2xegj4TgzxahRePv3w967aHIqiUNvh1PWKM0k/u/HJs1qj5q2R2sHJlnm8m8ohT3160Yn"
+    "y4DlGG4LtFym0czQXmWhN5Ij1GZGx0Dm4VvLHGzV9oedzroxW0ZxqqjSPRpLQrdOhVJBUN3U/HLzzDo="
+)
+MAX_COLOUR_BUNDLE = base64.b64decode(
+    "iVdWQg0KGgoDABAsMFQwAhgUAxACAOg/FQAITowB/wJOVhyszCSitsETAdMS8b5gRFv3B7lAOJb9nIRZqSdJ5RDm"
+    "raUv9ZcGKgOaKdGuHmzcafiTraleQaihLhJu3WVEE0lG4hWKrxzMtxnNiIQlGMYpYhJ7Jpq1mOwgFr7KbC733y+b"
+    "8CYuDmxHc7UxW9/BtKs4+H/C1boVYxIgMiefHZsDEuewyw0RpCDt9btNKJyxvqXx3z0t+TmNxPrYrm5y/LyqyZAj"
+    "Xx+rSyt9zKq0Z/4N3sM9RbH/bRiUQCGJJ0//4jnKVMmHbjznLbqw/9spUUpfCZVGCA140Szr04JwZnyHa+FRuR73"
+    "LtXk4n2BZGw8Bdm7wq3+TuADcx82n66RRGr0vLCgC3VmgH7U5iwwF49PIB+VL/toteyU/iFDv2vtwhKI4db10Vdq"
+    "5OzsTb7Kjphq9gJu4JLg4szW1ePK3bhNqOelLmvFcIue2LpXEVs/B2YTSahl8l+Mr2iWNFAbIcRWHvht8G2BB38n"
+    "DDT7PgxksRnj8GqTpp69i97no3Eq5ij4y1iAAuzaa6Jf7O0e+WBa5THpeTrr8W3tG64TsXAq5BE5DtEm0dyIS7rf"
+    "yjXn6QG27oavPNPb215bojzRjbmYFsa6oHafDPhG9Vcnljh9vFIzu1gL2YjQeLjMkGqHeraPR55UsEYXKsmxi1Vh"
+    "1VcLvNlDW29O/oAd3Ev5feVyPLsOF1LJCD7MQ7AnCRlrpd4tm1INiTdtd8NK8wzzo/quQotKyiHfeqbyy1aMnA9W"
+    "pG6k09XK9Ug1YTyuShH1jpTyEkrxUKqs3gwV5GVmrKFPdcraae7npEqzXCrbUFeHAA=="
+)
+
+
+def _max_grey_image() -> np.ndarray:
+    i, j = np.mgrid[0:400, 0:6]
+    return ((i * 3 + j * 17 + (i * j) % 7 + (i * 7919 + j * 104729) % 11) % 256).astype(np.uint8)
+
+
+def _max_colour_image() -> np.ndarray:
+    i, j = np.mgrid[0:24, 0:20]
+    green = 80 + (i * j * (24 - i)) // 9 + (i * 7 + j * 3) % 5
+    chroma = (j * (20 - j) * 2 + i * i) // 5 - 15 + (i * 5 + j) % 3
+    rgb = np.stack([green + chroma, green, green + chroma // 2], -1)
+    return np.clip(rgb, 0, 255).astype(np.uint8)
+
+
+def test_frozen_lossless_coder_bundles_decode_exactly() -> None:
+    grey, colour = wavecore.inspect(MAX_GREY_BUNDLE), wavecore.inspect(MAX_COLOUR_BUNDLE)
+    assert grey["header"]["levels"] == 0 and colour["header"]["levels"] == 2
+    for info in (grey, colour):
+        assert info["header"]["cparams"]["version"] == 5
+    assert np.array_equal(wavecore.decode(MAX_GREY_BUNDLE), _max_grey_image())
+    assert np.array_equal(wavecore.decode(MAX_COLOUR_BUNDLE), _max_colour_image())
