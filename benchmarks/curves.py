@@ -327,6 +327,49 @@ def simplification_ideas(sets: list) -> None:
         print(f"{name}: " + "; ".join(cells), flush=True)
 
 
+# --- version 5's priors (``--train-priors``) ----------------------------------------------------
+
+#: Training glyphs: fonts matplotlib ships that the benchmark does not measure, another text.
+TRAIN_FONTS = ("DejaVu Sans Mono", "DejaVu Serif Display", "cmss10", "cmtt10", "cmb10")
+TRAIN_TEXT = "Quick zebras jump over 13 lazy fox dogs, ship 4780 bytes! (Hm: 5 & 9?) gwyQ"
+
+
+def train_priors() -> str:
+    """The final models of version 4's streams on the training glyphs (every tolerance of
+    the sweep and between), averaged into :data:`wavecore.curvecoder`'s prior table."""
+    from wavecore import curvecoder
+    from wavecore.curvesets import coded_vertices
+
+    global TEXT
+    kept_text, TEXT = TEXT, TRAIN_TEXT
+    try:
+        sets = [glyph_contours(family) for family in TRAIN_FONTS]
+    finally:
+        TEXT = kept_text
+    states = []
+    for contours in sets:
+        for relative in (0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1):
+            bundle = wavecore.encode_curves(
+                contours, tolerance=relative * GLYPH_SIZE, method="vertex"
+            )
+            info = coded_vertices(bundle)
+            lattice, counts, closed, repeated, bulges = info["coded"]
+            models = curvecoder.initial_models(False)
+            curvecoder.encode_set(
+                lattice,
+                counts,
+                closed,
+                repeated,
+                info["closed_mode"],
+                info["order"],
+                bulges if info["bulged"] else None,
+                info["from_last"],
+                models=models,
+            )
+            states.append(models)
+    return curvecoder.trained_table(states)
+
+
 # --- the run -------------------------------------------------------------------------------
 
 
@@ -437,7 +480,15 @@ def main() -> None:
         action="store_true",
         help="only the vertex counts of greedy reach against an optimal simplification",
     )
+    parser.add_argument(
+        "--train-priors",
+        action="store_true",
+        help="print version 5's prior table, learnt on fonts and text the benchmark does not use",
+    )
     args = parser.parse_args()
+    if args.train_priors:
+        print(train_priors())
+        return
     sets = []
     for family in FONTS[:1] if args.quick else FONTS:
         contours = glyph_contours(family)

@@ -19,6 +19,9 @@ from hypothesis import strategies as st
 import wavecore
 from wavecore import curvecoder, curvesets
 
+#: the versions of a plane set of the vertex form (5: version 4 with learnt priors)
+_PLANE = (curvesets.PLANE_VERSION, curvesets.PRIOR_VERSION)
+
 
 def _to_polyline(source: np.ndarray, target: np.ndarray, closed: bool) -> float:
     nodes = np.concatenate([target, target[:1]]) if closed and len(target) > 2 else target
@@ -63,7 +66,7 @@ def test_vertex_form_keeps_the_bound(tolerance: float, d: int) -> None:
     closed = [False, True, True, False, True]
     bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
     # plane sets are written as version 4, others as version 2
-    assert bundle[4] == (curvesets.PLANE_VERSION if d == 2 else curvesets.VERTEX_VERSION)
+    assert bundle[4] in (_PLANE if d == 2 else (curvesets.VERTEX_VERSION,))
     out = wavecore.decode_curves(bundle)
     assert out.closed == closed and out.tolerance == tolerance
     for original, back, flag in zip(curves, out.curves, closed, strict=True):
@@ -179,7 +182,7 @@ def test_crafted_vertex_bundles_give_curves_or_bundle_error() -> None:
         tolerance=0.01,
         method="vertex",
     )
-    assert bundle[4] == curvesets.PLANE_VERSION
+    assert bundle[4] in _PLANE
     assert bundle[5] & 0x40  # the ring's arcs are bulged segments
     rng = np.random.default_rng(9)
     for trial in range(450):
@@ -360,7 +363,7 @@ def test_bulged_segments_keep_the_bound_in_fewer_bytes(tolerance: float, dtype: 
     curves[-1] = curves[-1].astype(dtype)
     closed = [True, True, True, True, False]
     bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
-    assert bundle[4] == curvesets.PLANE_VERSION and bundle[5] & 0x40  # bulged segments
+    assert bundle[4] in _PLANE and bundle[5] & 0x40  # bulged segments
     out = wavecore.decode_curves(bundle)
     assert out.closed == closed
     for original, back, flag in zip(curves, out.curves, closed, strict=True):
@@ -368,7 +371,7 @@ def test_bulged_segments_keep_the_bound_in_fewer_bytes(tolerance: float, dtype: 
         assert _both_ways(original, back, flag) <= out.tolerance
     # the same vertices without bulges: the stream the encoder weighed it against
     stream_v3 = len(bundle)
-    assert wavecore.inspect(bundle)["version"] == "4"
+    assert wavecore.inspect(bundle)["version"] in ("4", "5")
     plain = _plain_vertex_size(curves, closed, tolerance)
     assert stream_v3 < plain
 
@@ -381,7 +384,7 @@ def _plain_vertex_size(curves, closed, tolerance) -> int:
         bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
     finally:
         curvesets._bulged_stream = original
-    assert bundle[4] == curvesets.PLANE_VERSION and not bundle[5] & 0x40
+    assert bundle[4] in _PLANE and not bundle[5] & 0x40
     return len(bundle)
 
 
@@ -460,6 +463,36 @@ def test_version_4_header_is_shorter_than_version_3s() -> None:
     ring = np.stack([np.cos(t), np.sin(t)], 1)
     bundle = wavecore.encode_curves([ring], closed=True, tolerance=0.01, method="vertex")
     info = wavecore.inspect(bundle)
-    assert info["version"] == "4"
+    assert info["version"] in ("4", "5")
     # magic 4, version 1, head 2, tolerance 2 (0.01 as a short decimal), count 1, CRC 4
     assert info["header_bytes"] == 14
+
+
+@pytest.mark.parametrize("priors", [False, True])
+def test_version_5_priors_round_trip_and_differ(priors: bool) -> None:
+    rng = np.random.default_rng(55)
+    lattice = np.cumsum(rng.integers(-30, 31, size=(120, 2)), axis=0)
+    counts = np.array([40, 50, 30])
+    closed = np.array([1, 1, 1])
+    repeated = np.zeros(3, dtype=np.int64)
+    bulges = rng.integers(-5, 6, size=120)
+    stream = curvecoder.encode_set(lattice, counts, closed, repeated, 1, 4, bulges, True, priors)
+    back = curvecoder.decode_bulged_set(stream, 3, 2, 1, True, 120, 4, True, True, priors)
+    assert back is not None
+    assert np.array_equal(back[0], lattice) and np.array_equal(back[1], counts)
+    # the priors are part of the format: read without them, the same stream is another set
+    other = curvecoder.decode_bulged_set(stream, 3, 2, 1, True, 120, 4, True, True, not priors)
+    assert other is None or not np.array_equal(other[0], lattice)
+
+
+def test_glyph_like_set_written_as_version_5_keeps_the_bound() -> None:
+    # rounded closed outlines (arcs and corners), as glyphs are; the encoder keeps version 5
+    # where its priors pay, and the bound holds whichever version it writes
+    t = np.linspace(0, 2 * np.pi, 97)[:-1]
+    curves = [
+        np.stack([3 * np.cos(t) + k * 7, 4 * np.sin(t) + np.sin(3 * t)], axis=1) for k in range(6)
+    ]
+    bundle = wavecore.encode_curves(curves, tolerance=0.05, method="vertex")
+    assert bundle[4] in _PLANE
+    for original, decoded in zip(curves, wavecore.decode(bundle), strict=True):
+        assert _both_ways(original, decoded, True) <= 0.05

@@ -75,6 +75,96 @@ FLAG_BASE = SIGN_BASE + SIGN_SIZE
 FLAG_SIZE = 4
 MODELS = FLAG_BASE + FLAG_SIZE
 
+#: Version 5's starting probabilities: ``"index:value"`` pairs, ``value / 256`` the
+#: probability of a 0 bit (models not listed start at one half).  Learnt on glyphs that
+#: benchmarks/curves.py does not measure (other fonts and text: ``python
+#: benchmarks/curves.py --train-priors`` prints this table), so that a small set does not pay
+#: for learning what every outline shares.
+_PRIOR_TABLE = (
+    "0:9 1:27 2:89 3:129 4:203 5:229 6:214 49:32 50:29 51:46 52:70 53:82 54:92 55:118 56:136 "
+    "57:145 58:192 59:229 98:90 99:75 100:96 101:104 102:116 103:130 104:122 105:161 106:171 "
+    "107:176 245:47 246:57 247:92 248:109 249:120 250:164 251:192 252:223 253:161 294:63 "
+    "295:110 296:141 297:151 298:153 299:149 343:55 344:84 345:133 346:150 347:136 348:190 "
+    "392:33 393:71 394:137 396:153 397:157 398:193 441:36 442:44 443:70 444:130 445:143 446:199 "
+    "447:205 490:18 491:33 492:67 493:78 494:150 495:188 496:159 539:9 540:19 541:38 542:88 "
+    "543:111 544:179 545:144 588:41 589:10 590:16 591:18 592:94 593:123 594:131 1078:63 1079:58 "
+    "1080:75 1081:121 1082:110 1083:139 1084:159 1085:191 1086:201 1127:17 1128:56 1129:72 "
+    "1130:95 1131:104 1132:119 1133:131 1134:138 1135:159 1274:103 1275:98 1276:115 1277:145 "
+    "1278:111 1279:111 1323:51 1324:102 1325:139 1326:159 1327:132 1372:18 1373:79 1374:124 "
+    "1375:196 1376:136 1470:98 1471:87 1472:69 1473:85 1474:150 1475:144 1476:214 1519:101 "
+    "1520:101 1521:153 1522:203 1523:188 1568:46 1569:59 1570:146 1571:161 1572:143 1573:152 "
+    "1617:11 1618:44 1619:107 1620:143 1621:112 1622:169 1666:87 1667:65 1668:50 1669:59 "
+    "1670:86 1671:142 1672:199 1715:66 1716:76 1717:91 1718:118 1719:169 1720:205 1764:79 "
+    "1765:95 1766:125 1767:144 1768:165 1813:49 1814:55 1815:115 1816:140 1817:107 1818:119 "
+    "1819:196 1862:107 1863:69 1864:81 1865:67 1866:99 1867:89 1868:187 1869:182 1911:47 "
+    "1912:72 1913:52 1914:98 1915:155 1916:182 1917:186 1960:60 1961:27 1962:39 1963:120 "
+    "1964:150 1965:195 2009:22 2010:59 2011:93 2012:81 2013:132 2014:125 2015:179 2016:135 "
+    "2058:122 2059:32 2060:28 2061:46 2062:84 2107:29 2108:75 2109:32 2110:64 2111:110 2112:153 "
+    "2113:190 2156:39 2157:58 2158:22 2159:69 2160:100 2161:222 2205:16 2206:43 2207:77 2208:73 "
+    "2209:105 2210:175 2211:153 2352:48 2353:61 2354:48 2355:76 2356:53 2357:75 2358:189 "
+    "2401:43 2402:33 2403:35 2404:126 2405:123 2406:103 2407:120 2597:9 2598:23 2599:43 2600:21 "
+    "2601:76 2602:163 4459:92 4460:76 4461:83 4462:106 4463:117 4464:155 4508:82 4509:56 "
+    "4510:94 4511:85 4512:121 4513:150 4514:164 4557:87 4558:54 4559:53 4560:92 4561:113 "
+    "4562:122 4563:148 4564:193 4606:86 4607:41 4608:39 4609:83 4611:133 4612:148 4613:180 "
+    "4614:187 4655:78 4656:29 4657:52 4658:77 4659:102 4660:137 4661:148 4662:171 4663:200 "
+    "4704:65 4705:37 4706:33 4707:74 4708:89 4709:122 4710:155 4711:185 4712:156 4713:222 "
+    "4753:61 4754:14 4755:25 4756:56 4757:47 4758:108 4759:129 4760:196 4761:225 4802:82 4803:9 "
+    "4804:8 4805:29 4806:26 4807:80 4808:119 4809:141 4810:217 4851:99 4852:15 4853:17 4854:20 "
+    "4855:49 4856:103 5243:0 5244:10 5245:38 5246:82 5247:100 5248:147 5249:174 5250:184 "
+    "5251:217 5292:15 5293:22 5294:45 5295:82 5296:81 5297:125 5298:141 5299:146 5300:196 "
+    "5341:10 5342:18 5343:58 5344:87 5345:106 5346:150 5347:161 5348:213 5390:3 5391:14 5392:39 "
+    "5393:83 5394:104 5395:156 5396:177 5397:198 5439:5 5440:14 5441:21 5442:38 5443:87 "
+    "5444:142 5445:198 5446:210 5447:204 5488:4 5489:5 5490:7 5491:20 5492:66 5493:102 5494:192 "
+    "5495:223 5496:217 5537:12 5538:13 5539:17 5540:38 5541:37 5542:121 5543:167 5544:206 "
+    "5545:223 5586:11 5587:12 5588:11 5589:15 5590:19 5591:64 5592:123 5593:171 5594:221 "
+    "5635:12 5636:14 5637:12 5638:12 5639:19 5640:29 5641:43 5642:157 5643:210 5684:20 5685:20 "
+    "5686:20 5687:20 5688:20 5689:20 5690:44 5691:41 5692:221 6076:203 6125:187 6174:186 "
+    "6175:208 6223:192 6224:148 6272:164 6274:209 6275:215 6321:148 6322:125 6323:196 6324:205 "
+    "6370:153 6371:138 6372:223 6373:212 6419:169 6420:150 6421:196 6422:204 6469:53 6470:122 "
+    "6471:218 6472:223 6517:94 6518:64 6519:117 6520:215 6521:201 6566:95 6567:71 6568:125 "
+    "6569:217 6570:207 6615:67 6616:62 6617:136 6618:211 6619:220 6664:150 6665:56 6666:54 "
+    "6667:103 6668:216 6669:229 6713:143 6714:58 6715:68 6716:111 6717:195 6718:207 6762:100 "
+    "6763:68 6764:91 6765:123 6766:210 6767:205 6811:45 6812:25 6813:60 6814:129 6815:219 "
+    "6816:240 6956:142 7004:161 7005:136 7052:166 7053:157 7054:142 7100:157 7101:144 7102:141 "
+    "7148:165 7149:156 7150:129 7196:180 7197:162 7198:131 7244:180 7245:156 7246:139 7292:173 "
+    "7293:155 7294:113 7340:196 7341:168 7342:134 9212:133 9213:142 9214:108 9215:133 9216:134 "
+    "9217:119 9224:196 9228:161 9229:139 9230:135 9231:120 9233:247 9234:183 9235:158 9236:183 "
+    "9237:180 9239:192 9240:131 9241:6 9242:255 "
+)
+#: A model with a prior starts at this adaptation count (its first updates move it less).
+PRIOR_COUNT = 2
+
+
+def _parse_priors(table: str) -> np.ndarray:
+    models = np.empty(2 * MODELS, dtype=np.int64)
+    models[0::2] = PROB_HALF
+    models[1::2] = 0
+    for pair in table.split():
+        index, value = (int(x) for x in pair.split(":"))
+        models[2 * index] = (2 * value + 1) << (PROB_BITS - 9)
+        models[2 * index + 1] = PRIOR_COUNT
+    return models
+
+
+def initial_models(priors: bool) -> np.ndarray:
+    """The coder's starting models: every probability one half, or version 5's priors."""
+    return (_PRIORS if priors else _HALVES).copy()
+
+
+def trained_table(states: list[np.ndarray], least: int = 4) -> str:
+    """The prior table (:data:`_PRIOR_TABLE`'s form) from the final models of coded sets: per
+    model, the mean probability over the sets that used it, where at least ``least`` did."""
+    stack = np.stack(states)
+    used = stack[:, 1::2] > 0
+    mean = np.where(used, stack[:, 0::2], 0).sum(axis=0) / np.maximum(used.sum(axis=0), 1)
+    pairs = []
+    for index in np.flatnonzero(used.sum(axis=0) >= least).tolist():
+        value = int(np.clip(mean[index] / (1 << (PROB_BITS - 8)), 0, 255))
+        if value != 127 and value != 128:
+            pairs.append(f"{index}:{value}")
+    return " ".join(pairs)
+
+
 # state fields
 _LOW, _RANGE, _CACHE, _CSIZE, _POS, _CODE = 0, 1, 2, 3, 4, 5
 
@@ -262,6 +352,7 @@ def _code_set(
     bulges,
     bulged,
     from_last,
+    models,
 ):
     """Code (or decode into ``lattice``, ``counts``, ``closed``, ``repeated``) a whole set.
 
@@ -277,10 +368,6 @@ def _code_set(
     than ``lattice`` holds).
     """
     plain = order if order < 3 else 0  # the frame predictors' steps without a frame
-    models = np.empty(2 * MODELS, dtype=np.int64)
-    for i in range(MODELS):
-        models[2 * i] = PROB_HALF
-        models[2 * i + 1] = 0
     start = np.zeros(d, dtype=np.int64)
     previous_step = np.zeros(d, dtype=np.int64)
     previous_residual = np.zeros(d, dtype=np.int64)
@@ -456,6 +543,8 @@ def encode_set(
     order: int = 0,
     bulges: np.ndarray | None = None,
     from_last: bool = False,
+    priors: bool = False,
+    models: np.ndarray | None = None,
 ) -> bytes:
     """The range-coded stream of a set of lattice curves (see :func:`decode_set`); with
     ``bulges`` (one per vertex row: the bulge of the segment ending there), version 3's;
@@ -466,6 +555,7 @@ def encode_set(
     capacity = 64 + 16 * lattice.size + 8 * len(counts)
     out = np.zeros(capacity, dtype=np.uint8)
     st = np.array([0, MASK32, 0, 1, 0, 0], dtype=np.int64)
+    models = initial_models(priors) if models is None else models
     _code_set(
         out,
         st,
@@ -480,6 +570,7 @@ def encode_set(
         np.ascontiguousarray(bulges, dtype=np.int64),
         bulged,
         bool(from_last),
+        models,
     )
     _finish_stream(st, out)
     size = int(st[_POS])
@@ -517,6 +608,7 @@ def decode_bulged_set(
     order: int,
     bulged: bool,
     from_last: bool = False,
+    priors: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """As :func:`decode_set`, and the bulges (zeros unless ``bulged``: version 3);
     ``from_last`` as in :func:`encode_set` (version 4)."""
@@ -546,6 +638,7 @@ def decode_bulged_set(
         bulges,
         bulged,
         bool(from_last),
+        initial_models(priors),
     )
     if total < 0:
         return None
@@ -1595,3 +1688,7 @@ def optimal_bulged_set(
         if ring == n:
             bulges[first] = 0
     return keep
+
+
+_HALVES = _parse_priors("")
+_PRIORS = _parse_priors(_PRIOR_TABLE)

@@ -102,6 +102,9 @@ BULGED_VERSION = 3
 #: Versions 2 and 3 for plane curves with a shorter header, and a curve's first vertex
 #: optionally coded from the previous curve's last (docs/curves.md, version 4).
 PLANE_VERSION = 4
+#: Version 4's layout, the coder's models started at learnt priors rather than one half
+#: (docs/curves.md, version 5).
+PRIOR_VERSION = 5
 METHODS = ("auto", "wavelet", "vertex")
 #: Lattice steps of the vertex form, as multiples of the tolerance (a byte indexes this table).
 #: A vertex moves by at most ``step * sqrt(d) / 2`` when rounded, which must stay within the
@@ -1194,7 +1197,7 @@ def _encode_vertex(
                 plane += [(bulged_vertices, segment_bulges, o) for o in _VERTEX_ORDERS]
             if not plane:
                 continue  # neither form keeps the bound at this step: the next finer one
-            best_plane: tuple[bytes, int] | None = None
+            best_plane: tuple[bytes, int, int] | None = None
             counts_written = counts
             start_rows: dict[int, np.ndarray] = {}
             for kept_vertices, kept_bulges, candidate in plane:
@@ -1210,16 +1213,24 @@ def _encode_vertex(
                         starts = start_rows[id(kept_vertices)]
                         placed = np.ascontiguousarray(kept_vertices[starts])
                         placed_bulges = None if kept_bulges is None else kept_bulges[starts]
-                    coded = curvecoder.encode_set(
-                        placed,
-                        sizes,
-                        closed,
-                        again,
-                        closed_mode,
-                        candidate,
-                        placed_bulges,
-                        from_last,
-                    )
+                    coded_by_version = [
+                        (
+                            curvecoder.encode_set(
+                                placed,
+                                sizes,
+                                closed,
+                                again,
+                                closed_mode,
+                                candidate,
+                                placed_bulges,
+                                from_last,
+                                priors=version == PRIOR_VERSION,
+                            ),
+                            version,
+                        )
+                        for version in (PLANE_VERSION, PRIOR_VERSION)
+                    ]
+                    coded, version = min(coded_by_version, key=lambda pair: len(pair[0]))
                     head = (
                         (meta_bytes is not None)
                         | closed_mode << 1
@@ -1230,15 +1241,15 @@ def _encode_vertex(
                         | index << 9
                     )
                     if best_plane is None or len(coded) < len(best_plane[0]):
-                        best_plane = (coded, head)
+                        best_plane = (coded, head, version)
                         counts_written = sizes
             assert best_plane is not None
-            stream, head = best_plane
+            stream, head, plane_version = best_plane
             limit = VERTEX_PER_BYTE * (len(stream) + 16)
             if len(arrays) > limit or int(counts_written.sum()) * d > limit:
                 return best
             out = bytearray(MAGIC)
-            out.append(PLANE_VERSION)
+            out.append(plane_version)
             out += struct.pack("<H", head)
             if dtype.name != "float64":
                 out.append(DTYPES.index(dtype.name))
@@ -1284,7 +1295,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     reader.take(4, "magic")
     version = reader.take(1, "version")[0]
     from_last = False
-    if version == PLANE_VERSION:
+    if version in (PLANE_VERSION, PRIOR_VERSION):
         (head,) = struct.unpack("<H", reader.take(2, "head"))
         closed_mode = (head >> 1) & 3
         order = (head >> 3) & 7
@@ -1316,7 +1327,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         raise BundleError(msg)
     dtype = np.dtype(DTYPES[dtype_index])
     tolerance = _read_tolerance(reader)
-    if version != PLANE_VERSION:
+    if version not in (PLANE_VERSION, PRIOR_VERSION):
         step_index = reader.take(1, "step")[0]
     if step_index >= len(VERTEX_STEPS):
         msg = f"curve set lattice step {step_index} is unknown"
@@ -1351,6 +1362,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
             order,
             bulged,
             from_last,
+            version == PRIOR_VERSION,
         )
         if result is not None or capacity >= limit // d:
             break
@@ -1445,7 +1457,7 @@ def _checked(data: Any) -> bytes:
 
 
 def _is_vertex_form(data: bytes) -> bool:
-    return data[len(MAGIC)] in (VERTEX_VERSION, BULGED_VERSION, PLANE_VERSION)
+    return data[len(MAGIC)] in (VERTEX_VERSION, BULGED_VERSION, PLANE_VERSION, PRIOR_VERSION)
 
 
 def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Reader]:
@@ -1456,7 +1468,8 @@ def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Read
     if version != VERSION:
         msg = (
             f"curve set version {version} is not supported "
-            f"(this reader reads {VERSION}, {VERTEX_VERSION}, {BULGED_VERSION} and {PLANE_VERSION})"
+            f"(this reader reads {VERSION}, {VERTEX_VERSION}, {BULGED_VERSION}, {PLANE_VERSION} "
+            f"and {PRIOR_VERSION})"
         )
         raise BundleError(msg)
     flags = reader.varint("flags", 31)
