@@ -6,6 +6,13 @@ specification.  Like NumPy's ``.npy`` format, a bundle is a
 fixed preamble, a bounded self-describing header, then the payload.  All integers are
 little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
 
+Layout (6.0)
+------------
+5.0's layout with major ``6``, except that a chunk of more than one code-block is stored in
+3.0's checked form (block CRC-16s, band counts, prefix check) and is in no group
+(:func:`checked_groups`): a damaged block of a long curve loses only itself and a region reads
+only its blocks.  Written for curves unless the checks would pass 48 bytes (then 5.0).
+
 Layout (5.0)
 ------------
 ``89 57``, the major version ``5`` and the minor ``0``; the binary header in its 4.0 form;
@@ -397,7 +404,8 @@ class _Reader:
 
 
 def written_version(header: dict[str, Any]) -> tuple[int, int]:
-    """The version :func:`write_bundle` writes by default: 5.0 for curves, 3.0 for the rest.
+    """The version :func:`write_bundle` writes by default: 6.0 for curves (5.0 when 6.0's block
+    checks would pass :data:`CURVE_OVERHEAD_LIMIT`), 3.0 for the rest.
 
     Images and surfaces stay in 3.0: their headers are 45 to 93 bytes already, and the
     compact layouts' grouped chunk checks and shorter head check would weaken their damage
