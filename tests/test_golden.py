@@ -64,7 +64,7 @@ def test_the_6_0_golden_has_chunks_that_check_their_blocks() -> None:
     # The point of 6.0: this golden's two chunks have two code-blocks each, stored with their
     # block checks (so the golden covers that path of the reader), and a damaged block of the
     # coarse chunk is found by name and, with damaged="zero", loses only itself.
-    bundle = (GOLDEN / "v6_0_series_two_blocks.wvb").read_bytes()
+    bundle = (GOLDEN / "v6_0_curve_series_two_blocks.wvb").read_bytes()
     parsed = read_bundle(bundle)
     assert parsed.version == (6, 0) and parsed.checked == ((2, 0), (2, 1))
     _, lengths = block_table(bytes(parsed.chunks[0]), 2)

@@ -161,7 +161,7 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
         # of 33 000 points at one level whose two chunks have two blocks each (float32 keeps
         # its decoded array small enough to commit).
         "v6_0_curve_default": ("curve", open_curve, {}),
-        "v6_0_series_two_blocks": (
+        "v6_0_curve_series_two_blocks": (
             "curve",
             (np.sin(40 * np.linspace(0, 1, 33_000)) * np.linspace(0, 1, 33_000)).astype(np.float32),
             {"level": 1, "tolerance": 1e-3},
