@@ -234,12 +234,12 @@ def image_headers() -> int:
 
 def main() -> None:
     print(f"load average {os.getloadavg()[0]:.2f}")
-    versions = ((1, 1), (3, 0), (4, 0), (5, 0))
+    versions = ((1, 1), (3, 0), (4, 0), (5, 0), (6, 0))
     print(
         "| bundle | levels | payload | header 1.1 | header 3.0 | header 4.0 | header 5.0 "
-        "| bundle 1.1 | bundle 3.0 | bundle 4.0 | bundle 5.0 |"
+        "| header 6.0 | bundle 1.1 | bundle 3.0 | bundle 4.0 | bundle 5.0 | bundle 6.0 |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name, bundle in cases().items():
         parsed = read_bundle(bundle)
         chunks = coder_chunks(bundle)

@@ -24,6 +24,7 @@ from test_bundle_fuzz import BUNDLES, assemble4, packed_header, split
 
 import wavecore
 from wavecore import BundleError, binheader, decode, inspect
+from wavecore.blockcoder import strip_block_checks
 from wavecore.bundle import (
     COMPACT_MAGIC,
     COMPACT_VERSION,
@@ -44,9 +45,14 @@ MANIFEST = json.loads((GOLDEN / "MANIFEST.json").read_text())
 
 
 def _as_4_0(bundle: bytes) -> bytes:
-    """The header and chunks of a (5.0) bundle written in 4.0."""
+    """The header and chunks of a (5.0 or 6.0) bundle written in 4.0."""
     parsed = read_bundle(bundle)
-    return write_bundle(parsed.header, [bytes(c or b"") for c in parsed.chunks], version=(4, 0))
+    checked = parsed.checked or (None,) * len(parsed.chunks)
+    chunks = [  # as the coder wrote them: 6.0 adds block checks to chunks of several blocks
+        bytes(c or b"") if own is None else strip_block_checks(bytes(c or b""), *own)[0]
+        for c, own in zip(parsed.chunks, checked, strict=True)
+    ]
+    return write_bundle(parsed.header, chunks, version=(4, 0))
 
 
 def _curve(n: int, dims: int) -> np.ndarray:
@@ -81,7 +87,7 @@ def test_images_and_surfaces_are_still_written_in_3_0() -> None:
     assert inspect(wavecore.encode_image(image))["version"] == "3.0"
     assert inspect(wavecore.encode_surface(image.astype(float)))["version"] == "3.0"
     assert written_version({"kind": "image"}) == FORMAT_VERSION == (3, 0)
-    assert written_version({"kind": "curve"}) == CURVE_VERSION == (5, 0)
+    assert written_version({"kind": "curve"}) == CURVE_VERSION == (6, 0)
     assert COMPACT_VERSION == (4, 0)
 
 
@@ -89,8 +95,8 @@ def test_the_preamble_is_four_bytes_and_never_the_old_magic() -> None:
     bundle = BUNDLES["compact curve"]
     assert bundle[:4] == COMPACT_MAGIC + bytes(COMPACT_VERSION) == b"\x89W\x04\x00"
     assert MAGIC[:2] == COMPACT_MAGIC and MAGIC[2] == ord("V")  # never read as a major
-    with pytest.raises(BundleError, match=r"unsupported bundle format version 6\.0"):
-        read_bundle(COMPACT_MAGIC + bytes([6, 0]) + bundle[4:])
+    with pytest.raises(BundleError, match=r"unsupported bundle format version 7\.0"):
+        read_bundle(COMPACT_MAGIC + bytes([7, 0]) + bundle[4:])
     with pytest.raises(BundleError, match=r"unsupported bundle format version 4\.0"):
         read_bundle(MAGIC + bytes([4, 0]) + bundle[4:])  # 4.x never has the long magic
     with pytest.raises(BundleError, match="truncated while reading the preamble"):
@@ -265,7 +271,7 @@ def test_with_header_keeps_the_chunks() -> None:
     changed = with_header(bundle, {**header, "psnr": 12.5})
     assert read_bundle(changed).header == {**header, "psnr": 12.5}
     assert changed.endswith(bytes(b"".join(split(bundle)[1])))
-    with pytest.raises(BundleError, match=r"complete 4\.x or 5\.x bundle"):
+    with pytest.raises(BundleError, match=r"complete 4\.x, 5\.x or 6\.x bundle"):
         with_header(BUNDLES["closed curve"], header)
 
 

@@ -51,10 +51,11 @@ def _number(data: bytes, at: int) -> int:
 
 
 def curve_fields(bundle: bytes) -> list[tuple[str, bytes]]:
-    """A 5.0 curve bundle with no pads, extension or scale, split into its documented fields
+    """A 6.0 curve bundle (laid out as 5.0: its chunks are of one block) with no pads,
+    extension or scale, split into its documented fields
     (the chunks: their table of block lengths, then the coded block)."""
-    assert bundle[:4] == b"\x89W\x05\x00"
-    fields = [("preamble: magic `89 57`, major 5, minor 0", bundle[:4])]
+    assert bundle[:4] == b"\x89W\x06\x00"
+    fields = [("preamble: magic `89 57`, major 6, minor 0", bundle[:4])]
     flags = bundle[4:8]
     assert flags[1] >> 6 == 0 and not flags[3] >> 6 & 1 and not flags[2] >> 7  # the simple case
     fields.append(("flags (4 bytes)", flags))

@@ -6,6 +6,13 @@ specification.  Like NumPy's ``.npy`` format, a bundle is a
 fixed preamble, a bounded self-describing header, then the payload.  All integers are
 little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
 
+Layout (6.0)
+------------
+5.0's layout with major ``6``, except that a chunk of more than one code-block is stored in
+3.0's checked form (block CRC-16s, band counts, prefix check) and is in no group
+(:func:`checked_groups`): a damaged block of a long curve loses only itself and a region reads
+only its blocks.  Written for curves unless the checks would pass 48 bytes (then 5.0).
+
 Layout (5.0)
 ------------
 ``89 57``, the major version ``5`` and the minor ``0``; the binary header in its 4.0 form;
@@ -147,13 +154,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from . import binheader
-from .blockcoder import BLOCK_SIZES, add_block_checks, block_table
+from .blockcoder import BLOCK_SIZES, CHECK_BYTES, add_block_checks, block_table, strip_block_checks
 from .errors import BundleError
 
 __all__ = [
     "COMPACT_MAGIC",
     "COMPACT_VERSION",
     "CURVE_VERSION",
+    "CURVE_VERSION_5",
     "GROUP_BYTES",
     "MAGIC",
     "MAX_CHUNKS",
@@ -190,11 +198,22 @@ COMPACT_VERSION = (4, 0)
 #: lengths of its code-blocks), at most two CRC-16s over the chunks (:func:`curve_groups`),
 #: no block checks.  Every curve's overhead is then at most 48 bytes.  The newest version
 #: this module reads.
-CURVE_VERSION = (5, 0)
+CURVE_VERSION_5 = (5, 0)
+#: 6.0, the curve layout with block checks (a new major version: a 5.0 reader would misread
+#: it), written for curves since 2026-11-23, evening: 5.0, except that a chunk of *more than
+#: one* code-block is stored in 3.0's checked form (a CRC-16 per block, its bands' counts, a
+#: prefix check: :func:`wavecore.blockcoder.add_block_checks`) and is in no group
+#: (:func:`checked_groups`), so a damaged block loses only itself and a region reads only its
+#: blocks.  A curve whose chunks are all of one block (up to about 33 000 points) pays nothing
+#: more than in 5.0.  The newest version this module reads.
+CURVE_VERSION = (6, 0)
+#: Issue 11's bound on a curve's overhead (everything but the coder's chunks, block checks
+#: included): a curve whose 6.0 block checks would pass it is written as 5.0.
+CURVE_OVERHEAD_LIMIT = 48
 #: The major versions this module reads.
-READ_MAJORS = (1, 2, 3, 4, 5)
+READ_MAJORS = (1, 2, 3, 4, 5, 6)
 #: The majors that start with :data:`COMPACT_MAGIC` (a 4-byte preamble).
-_SHORT_MAJORS = (COMPACT_VERSION[0], CURVE_VERSION[0])
+_SHORT_MAJORS = (COMPACT_VERSION[0], CURVE_VERSION_5[0], CURVE_VERSION[0])
 #: 4.0's preamble: these two bytes, then the major and the minor version (one byte each).  The
 #: third byte of :data:`MAGIC` (``V``) is never a major version, so the two never meet.
 COMPACT_MAGIC = b"\x89W"
@@ -260,6 +279,10 @@ class Bundle:
     #: 4.0: for each chunk, the first and last chunk of its group; one CRC-16 (``crcs`` holds
     #: it for every chunk of the group) checks the group's bytes.  None: a check per chunk.
     groups: tuple[tuple[int, int], ...] | None = None
+    #: 6.0: for each chunk that carries its own block checks (more than one code-block), its
+    #: ``(blocks, bands)``; it is in no group, and it is intact when its prefix check and every
+    #: block's CRC-16 match.  None for every other chunk (and in other versions).
+    checked: tuple[tuple[int, int] | None, ...] | None = None
     _verified: dict[int, bool] = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -300,6 +323,12 @@ class Bundle:
         return self.chunks[index] is not None and self._matches(index)
 
     def _matches(self, index: int) -> bool:
+        own = self.checked[index] if self.checked is not None else None
+        if own is not None:
+            key = -1 - index  # each checked chunk's blocks are checked once
+            if key not in self._verified:
+                self._verified[key] = _blocks_match(self.chunks[index], *own)
+            return self._verified[key]
         if self.groups is None:
             data = self.chunks[index]
             return data is not None and _chunk_check(data, self.checksum) == self.crcs[index]
@@ -313,6 +342,18 @@ class Bundle:
                 crc = binascii.crc_hqx(part, crc)
             self._verified[first] = whole and crc == self.crcs[index]
         return self._verified[first]
+
+
+def _blocks_match(data: memoryview | None, blocks: int, bands: int) -> bool:
+    """Whether a chunk in 3.0's checked form is whole: its prefix check and every block's
+    CRC-16 match."""
+    if data is None:
+        return False
+    try:
+        _, bad, _ = strip_block_checks(data, blocks, bands)
+    except BundleError:
+        return False
+    return not bad.any()
 
 
 def _chunk_check(data: bytes | memoryview, checksum: str) -> int:
@@ -363,7 +404,8 @@ class _Reader:
 
 
 def written_version(header: dict[str, Any]) -> tuple[int, int]:
-    """The version :func:`write_bundle` writes by default: 5.0 for curves, 3.0 for the rest.
+    """The version :func:`write_bundle` writes by default: 6.0 for curves (5.0 when 6.0's block
+    checks would pass :data:`CURVE_OVERHEAD_LIMIT`), 3.0 for the rest.
 
     Images and surfaces stay in 3.0: their headers are 45 to 93 bytes already, and the
     compact layouts' grouped chunk checks and shorter head check would weaken their damage
@@ -409,14 +451,16 @@ def write_bundle(
         raise BundleError(msg)
     if version is None:
         version = written_version(header)
+        if version == CURVE_VERSION:
+            return _curve_bundle(header, chunks)
     if version[0] == 1:
         return _write_json(header, chunks)
-    if version in (COMPACT_VERSION, CURVE_VERSION):
+    if version in (COMPACT_VERSION, CURVE_VERSION_5, CURVE_VERSION):
         return _write_compact(header, chunks, version)
     if version not in ((2, 0), FORMAT_VERSION):
         msg = (
             f"cannot write bundle format version {version}; use {CURVE_VERSION}, "
-            f"{COMPACT_VERSION}, {FORMAT_VERSION}, (2, 0) or (1, 1)"
+            f"{CURVE_VERSION_5}, {COMPACT_VERSION}, {FORMAT_VERSION}, (2, 0) or (1, 1)"
         )
         raise BundleError(msg)
     packed = binheader.pack(header)
@@ -442,9 +486,29 @@ def _write_compact(
     """Formats 4.0 and 5.0: preamble, header, chunk lengths (5.0: unless the chunks delimit
     themselves), a CRC-16 per group, the head's CRC-16, the chunks (4.0: with block checks)."""
     packed = _compact_header(header)
-    if version == CURVE_VERSION:
+    if version == CURVE_VERSION_5:
         return _curve_bytes(packed, header, chunks)
+    if version == CURVE_VERSION:
+        return _checked_curve_bytes(packed, header, _with_block_checks(header, chunks))
     return _compact_bytes(packed, _with_block_checks(header, chunks))
+
+
+def _curve_bundle(header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
+    """A curve as :func:`write_bundle` writes it by default: 6.0, unless its block checks
+    would take its overhead past :data:`CURVE_OVERHEAD_LIMIT`; then 5.0.
+
+    The checks cost 2 bytes a block and the band counts 2 to 6 bytes a chunk, only in chunks
+    of more than one block; that passes the limit only where padding to very deep levels
+    makes several chunks of several blocks (levels 14 and 15 of a 50 000-point curve, padded
+    to 65 538 points: 53 to 59 bytes); such a curve is written as 5.0, whose damaged blocks
+    lose their group and whose regions read whole bands.
+    """
+    packed = _compact_header(header)
+    stored = _with_block_checks(header, chunks)
+    checked = _checked_curve_bytes(packed, header, stored)
+    if len(checked) - sum(len(chunk) for chunk in chunks) <= CURVE_OVERHEAD_LIMIT:
+        return checked
+    return _curve_bytes(packed, header, chunks)
 
 
 def _compact_header(header: dict[str, Any]) -> bytes:
@@ -479,7 +543,7 @@ def _compact_bytes(packed: bytes, chunks: Sequence[bytes]) -> bytes:
 def _curve_bytes(packed: bytes, header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
     """A 5.0 bundle from its packed header and the chunks as the coder wrote them."""
     blocks = self_delimiting_blocks(header)
-    parts = [COMPACT_MAGIC, bytes(CURVE_VERSION), packed]
+    parts = [COMPACT_MAGIC, bytes(CURVE_VERSION_5), packed]
     if blocks is None:
         parts += [_varint(len(chunk)) for chunk in chunks]
     else:
@@ -519,11 +583,30 @@ def self_delimiting_blocks(header: dict[str, Any]) -> list[int] | None:
     BundleError
         If the header does not describe a consistent plan.
     """
+    if header["cparams"].get("version") != 4:
+        return None
+    layout = block_layout(header)
+    return None if layout is None else layout[0]
+
+
+def block_layout(header: dict[str, Any]) -> tuple[list[int], list[int]] | None:
+    """How many code-blocks each chunk holds and how many bands it has (0 for chunk 0, whose
+    band counts are never stored), when the header's coder codes in independent blocks (the
+    ``context`` coder, version 4 on); else None.
+
+    Raises
+    ------
+    BundleError
+        If the header does not describe a consistent plan.
+    """
     cparams = header["cparams"]
-    if header["coder"] != "context" or cparams.get("version") != 4:
+    version = cparams.get("version")
+    if header["coder"] != "context" or isinstance(version, bool) or not isinstance(version, int):
         return None
     two_d, block = cparams.get("two_d"), cparams.get("block")
-    if not isinstance(two_d, bool) or isinstance(block, bool) or block not in BLOCK_SIZES:
+    if version < 4 or not isinstance(two_d, bool) or isinstance(block, bool):
+        return None
+    if block not in BLOCK_SIZES:
         return None
     # The plan imports this module (through the codec); hence here.
     from .codec.plan import plan_from_header
@@ -537,13 +620,14 @@ def self_delimiting_blocks(header: dict[str, Any]) -> list[int] | None:
         # head check: blockcoder.block_counts builds the coder's whole tables (cost grows
         # with the channels and blocks a crafted header may declare).
         rows, cols = (block, block) if two_d else (1, block * block)
-        counts = []
+        counts, band_numbers = [], []
         for index, entry in enumerate(layout):
             bands = [entry] if index == 0 or len(plan.axes) == 1 else list(entry)
             dims = [_plane_rows_cols(tuple(band), two_d) for band in bands]
             height, width = max(d[0] for d in dims), max(d[1] for d in dims)
             counts.append(-(-height // rows) * -(-width // cols))
-        return counts
+            band_numbers.append(len(bands) if index else 0)
+        return counts, band_numbers
     except BundleError:
         raise
     except Exception as exc:  # a crafted header that passed every check
@@ -571,25 +655,106 @@ def curve_groups(count: int) -> list[tuple[int, int]]:
     return [(0, 0)] if count <= 1 else [(0, count - 2), (count - 1, count - 1)]
 
 
+def checked_groups(blocks: Sequence[int]) -> list[tuple[int, int]]:
+    """Format 6.0's groups of chunks, ``(first, last)`` each, from each chunk's number of
+    code-blocks: a chunk of more than one block checks itself and is in no group.  When no
+    chunk has several blocks, the groups of 5.0 (:func:`curve_groups`); else the leading
+    chunks of one block form one group, and any later chunk of one block is a group of its
+    own (the block coder's chunks grow coarse to fine, so there is none).
+
+    >>> checked_groups([1, 1, 1]), checked_groups([1, 1, 2]), checked_groups([2, 2])
+    ([(0, 1), (2, 2)], [(0, 1)], [])
+    """
+    if all(count <= 1 for count in blocks):
+        return curve_groups(len(blocks))
+    leading = 0
+    while blocks[leading] <= 1:
+        leading += 1
+    groups = [(0, leading - 1)] if leading else []
+    groups += [(i, i) for i in range(leading, len(blocks)) if blocks[i] <= 1]
+    return groups
+
+
+def _checked_curve_bytes(packed: bytes, header: dict[str, Any], chunks: Sequence[bytes]) -> bytes:
+    """A 6.0 bundle from its packed header and the chunks in their stored form (chunks of
+    several blocks with their block checks, as :func:`_with_block_checks` makes them)."""
+    layout = block_layout(header)
+    count = len(chunks)
+    blocks, bands = layout if layout is not None else ([1] * count, [0] * count)
+    parts = [COMPACT_MAGIC, bytes(CURVE_VERSION), packed]
+    if self_delimiting_blocks(header) is None:
+        parts += [_varint(len(chunk)) for chunk in chunks]
+    else:
+        for index, chunk in enumerate(chunks):
+            length = _checked_length(memoryview(chunk), blocks[index], bands[index])
+            if length != len(chunk):
+                msg = (
+                    f"chunk {index} is not as the block coder writes it: its table of "
+                    f"{blocks[index]} block length(s) does not add up to its {len(chunk)} bytes"
+                )
+                raise BundleError(msg)
+    for first, last in checked_groups(blocks):
+        crc = 0
+        for chunk in chunks[first : last + 1]:
+            crc = binascii.crc_hqx(chunk, crc)
+        parts.append(_U16.pack(crc))
+    head = b"".join(parts)
+    return b"".join([head, _U16.pack(binascii.crc_hqx(head, 0)), *map(bytes, chunks)])
+
+
+def _checked_length(view: memoryview, blocks: int, bands: int) -> int | None:
+    """The stored length of a self-delimiting chunk at the start of ``view`` (6.0): its
+    table, and for a chunk of several blocks its block checks, band counts and prefix check,
+    then the blocks; None when that is cut short or does not fit."""
+    if blocks <= 1:
+        return _delimited_length(view, blocks)
+    try:
+        read, lengths = block_table(view, blocks)
+    except BundleError:
+        return None
+    position = read + CHECK_BYTES * blocks
+    for _ in range(2 * bands):  # the band counts, two varints a band
+        for count in range(binheader.MAX_VARINT_BYTES + 1):
+            if position >= len(view) or count == binheader.MAX_VARINT_BYTES:
+                return None
+            position += 1
+            if not view[position - 1] & 0x80:
+                break
+    total = position + CHECK_BYTES + int(lengths.sum())
+    return total if total <= len(view) else None
+
+
 def with_header(bundle: bytes, header: dict[str, Any]) -> bytes:
-    """A complete 4.0 or 5.0 ``bundle`` with its header replaced by ``header`` (same chunks,
-    same version).
+    """A complete 4.0, 5.0 or 6.0 ``bundle`` with its header replaced by ``header`` (same
+    chunks, same version; but a 5.0 or 6.0 *curve* is written as :func:`write_bundle` writes
+    a curve by default, 6.0 unless its checks would pass :data:`CURVE_OVERHEAD_LIMIT`, since
+    a shorter header may make room for them).
 
     For an encoder that adjusts a header field after coding (``encode_curve`` stores a float32
     step when that keeps its tolerance); the header is checked as :func:`write_bundle` checks.
     """
     parsed = read_bundle(bundle)
     if parsed.version[0] not in _SHORT_MAJORS or parsed.available != len(parsed.chunks):
-        msg = "with_header takes a complete 4.x or 5.x bundle"
+        msg = "with_header takes a complete 4.x, 5.x or 6.x bundle"
         raise BundleError(msg)
     check_header(header)
     if header["levels"] != parsed.header["levels"]:
         msg = "with_header cannot change the number of levels"
         raise BundleError(msg)
-    packed = _compact_header(header)
     chunks = [bytes(chunk or b"") for chunk in parsed.chunks]
-    if parsed.version[0] == CURVE_VERSION[0]:
+    curve = header["kind"] == "curve" == parsed.header["kind"]
+    if curve and parsed.version[0] in (CURVE_VERSION_5[0], CURVE_VERSION[0]):
+        checked = parsed.checked or (None,) * len(chunks)
+        coded = [  # as the coder wrote them
+            chunk if own is None else strip_block_checks(chunk, *own)[0]
+            for chunk, own in zip(chunks, checked, strict=True)
+        ]
+        return _curve_bundle(header, coded)
+    packed = _compact_header(header)
+    if parsed.version[0] == CURVE_VERSION_5[0]:
         return _curve_bytes(packed, header, chunks)
+    if parsed.version[0] == CURVE_VERSION[0]:
+        return _checked_curve_bytes(packed, header, chunks)  # already in their stored form
     return _compact_bytes(packed, chunks)
 
 
@@ -772,8 +937,10 @@ def read_bundle(data: Any) -> Bundle:
                 "knows this version"
             )
             raise BundleError(msg)
-        if major == CURVE_VERSION[0]:
+        if major == CURVE_VERSION_5[0]:
             return _read_curve(reader, major, minor)
+        if major == CURVE_VERSION[0]:
+            return _read_checked_curve(reader, major, minor)
         return _read_compact(reader, major, minor)
     magic, major, minor = reader.unpack(_MAGIC_AND_VERSION, "the preamble")
     if magic != MAGIC:
@@ -910,17 +1077,56 @@ def _read_curve(reader: _Reader, major: int, minor: int) -> Bundle:
     return Bundle((major, minor), header, chunks, crcs, "crc16", groups=groups)
 
 
-def _delimited_lengths(reader: _Reader, blocks: Sequence[int]) -> list[int]:
-    """The lengths of self-delimiting chunks, from their tables of block lengths; a chunk
-    whose table is cut short or does not fit in what remains (a truncated bundle) is missing,
-    and so is every chunk after it (its length is 1 more than the bytes that remain)."""
+def _read_checked_curve(reader: _Reader, major: int, minor: int) -> Bundle:
+    """Format 6.x: 5.0 with chunks of several blocks in 3.0's checked form and in no group
+    (:func:`checked_groups`).  Every 6.x minor version is read as 6.0."""
+    header, reader.offset, derived = binheader.unpack_from(reader.view, reader.offset)
+    check_header(header)
+    count = header["levels"] + 1
+    layout = block_layout(header)
+    blocks, bands = layout if layout is not None else ([1] * count, [0] * count)
+    lengths = None
+    if self_delimiting_blocks(header) is None:
+        lengths = [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
+    spans = checked_groups(blocks)
+    crcs = _read_group_crcs(reader, spans, count)
+    if derived:  # only once the header is known to be intact
+        _add_derived_weights(header)
+    if lengths is None:
+        lengths = _delimited_lengths(reader, blocks, bands)
+    chunks, groups = _grouped(_take_chunks(reader, lengths), spans, count)
+    checked = tuple((blocks[i], bands[i]) if blocks[i] > 1 else None for i in range(count))
+    return Bundle(
+        (major, minor),
+        header,
+        chunks,
+        crcs,
+        "crc16",
+        block_checks=True,
+        groups=groups,
+        checked=checked,
+    )
+
+
+def _delimited_lengths(
+    reader: _Reader, blocks: Sequence[int], bands: Sequence[int] | None = None
+) -> list[int]:
+    """The lengths of self-delimiting chunks, from their tables of block lengths (6.0, with
+    ``bands``: chunks of several blocks carry their block checks); a chunk whose table is cut
+    short or does not fit in what remains (a truncated bundle) is missing, and so is every
+    chunk after it (its length is 1 more than the bytes that remain)."""
     lengths: list[int] = []
     offset = reader.offset
     missing = len(reader.view) - offset + 1
-    for count in blocks:
+    for index, count in enumerate(blocks):
         length = None
         if offset < len(reader.view):
-            length = _delimited_length(reader.view[offset:], count)
+            view = reader.view[offset:]
+            length = (
+                _delimited_length(view, count)
+                if bands is None
+                else _checked_length(view, count, bands[index])
+            )
         if length is None:  # cut short: this chunk and every later one are missing
             lengths += [missing] * (len(blocks) - len(lengths))
             break

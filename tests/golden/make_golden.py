@@ -156,6 +156,16 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             grey.astype(np.uint8),
             {"quality": 40.0, "format_version": (5, 0)},
         ),
+        # Format 6.0 (the curve layout with block checks in chunks of more than one code-block):
+        # the default curve (every chunk of one block: laid out as 5.0), and a float32 series
+        # of 33 000 points at one level whose two chunks have two blocks each (float32 keeps
+        # its decoded array small enough to commit).
+        "v6_0_curve_default": ("curve", open_curve, {}),
+        "v6_0_curve_series_two_blocks": (
+            "curve",
+            (np.sin(40 * np.linspace(0, 1, 33_000)) * np.linspace(0, 1, 33_000)).astype(np.float32),
+            {"level": 1, "tolerance": 1e-3},
+        ),
         # Format 1.2 (the JSON header with ``scale``), written by the 1.x writer that
         # ``write_bundle(..., version=(1, 1))`` keeps: no earlier golden bundle had it.
         "surface_scaled_v1_2": (
