@@ -131,12 +131,13 @@ def test_bpp_runs_the_closed_loop_at_most_twice_and_codes_it_once_each(
     assert 0.975 * bpp <= actual <= bpp
     if wavelet == "cdf97":  # no closed loop: it does not pay for this nearly orthogonal one
         assert calls.closed_loops == 0
+        assert calls.trial_codings == 1  # (other open loops quantize a sample of blocks)
     else:
         # Before, every trial was a closed loop (2 to 4 on these pictures, 6 on the sawtooth).
         assert 1 <= calls.closed_loops <= 2
         assert calls.final_codings == calls.closed_loops  # each closed loop coded exactly once
-    # The trials are open-loop quantizations, each coded once (and a handful suffice).
-    assert calls.trial_codings == calls.open_loops <= 12
+    # The trials are open-loop quantizations, each coded at most once (a handful suffice).
+    assert calls.trial_codings <= calls.open_loops <= 12
 
 
 def test_bpp_runs_one_closed_loop_on_the_first_run_picture(calls: Calls) -> None:
@@ -234,18 +235,20 @@ _BLOCKS_512 = 9
 @pytest.mark.parametrize(
     "name", ["camera", "coins", "moon", "brick", "astronaut", "ramp", "texture"]
 )
-@pytest.mark.parametrize("bpp", [0.5, 2.0])
-def test_bpp_in_open_loop_is_coded_at_most_twice(calls: Calls, name: str, bpp: float) -> None:
+@pytest.mark.parametrize("bpp", [0.25, 0.5, 1.0, 2.0])
+def test_bpp_in_open_loop_is_coded_once(calls: Calls, name: str, bpp: float) -> None:
     image = picture(name)
+    ratecontrol.coding_counts.reset()
     bundle = encode_image(image, bpp=bpp)  # cdf97: open loop
     pixels = image.shape[0] * image.shape[1]
     assert 0.975 * bpp <= 8 * len(bundle) / pixels <= bpp
-    # A full coding lands in the window or a little above it (then a few blocks are coded
-    # again, details removed); only a prediction far off needs a second full coding (before,
-    # two or three on these pictures).
+    # One full coding, predicted from a sample of the blocks where the levels have several;
+    # it lands in the window or near it, and then a few blocks get details removed or added
+    # and are coded again (before, two or three full codings on these pictures).
     assert calls.closed_loops == 0
-    assert 1 <= calls.trial_codings <= 2
-    assert calls.blocks_recoded <= 2 * _BLOCKS_512
+    assert calls.trial_codings == 1
+    assert ratecontrol.coding_counts.full_codings == 1
+    assert ratecontrol.coding_counts.blocks_recoded <= 2 * _BLOCKS_512
 
 
 def test_bpp_on_the_sawtooth_codes_fewer_times(calls: Calls) -> None:
@@ -253,8 +256,10 @@ def test_bpp_on_the_sawtooth_codes_fewer_times(calls: Calls) -> None:
     bundle = encode_image(image, bpp=1.0)
     assert 0.975 <= 8 * len(bundle) / image.shape[0] ** 2 <= 1.0
     # Its size jumps with the step: the search used to code it seven times, with a removal of
-    # details at the end; the trim of a coding just above the budget saves three of them.
-    assert calls.trial_codings <= 4
+    # details at the end; the trim of a coding just above the budget saves some of them.  (The
+    # sample of blocks predicts it badly, its blocks differ too much: one more than the four
+    # of the search without a sample.)
+    assert calls.trial_codings <= 5
 
 
 @pytest.mark.parametrize(
