@@ -31,7 +31,7 @@ from ..resample import coarse_extent
 from ..threshold import check_share
 from .plan import Plan, plan_from_header
 from .samples import finish, reconstruct_finished, unscaled
-from .stages import pipeline
+from .stages import pipeline, quantizer_of
 
 #: The values of ``decode``'s ``damaged`` argument.
 DAMAGED_MODES = ("strict", "zero")
@@ -434,7 +434,8 @@ def _decode_blocks(
     counts = block_counts(entries, two_d, block)
     if masks is not None and two_d != (len(masks[0][0]) == 2):
         masks = None  # a layout the masks do not describe: decode every block
-    if not parsed.block_checks and parsed.header["quantizer"] == "deadzone":
+    uses_counts = quantizer_of(parsed.header).uses_band_counts
+    if not parsed.block_checks and uses_counts:
         # Before 3.0 the band counts that place dequantized values are not stored: they
         # come from every block of the band (see fill_stand_ins).
         masks = None
@@ -445,7 +446,7 @@ def _decode_blocks(
     )
     chunks, skip, stored = _read_chunks(parsed, entries, counts, wanted, damaged)
     levels = decode_blocks(chunks, entries, two_d, block, skip=skip)
-    if parsed.header["quantizer"] == "deadzone" and skip.any():
+    if uses_counts and skip.any():
         fill_stand_ins(levels, entries, two_d, block, skip, stored)
     out: list[Any] = []
     for index, arrays in enumerate(levels):
@@ -505,12 +506,12 @@ def _decode_window_blocks(
             entry_origins.append(tuple(lo for lo, _ in spans))
         cuts.append(entry_cuts)
         origins.append(entry_origins)
-    deadzone = parsed.header["quantizer"] == "deadzone"
-    missing = [i for i in range(1, len(entries)) if stored[i] is None] if deadzone else []
+    uses_counts = stages.quantizer.uses_band_counts
+    missing = [i for i in range(1, len(entries)) if stored[i] is None] if uses_counts else []
     parts, totals = decode_block_windows(chunks, entries, two_d, block, skip, cuts, missing)
     qcoeffs: list[Any] = [parts[0][0]]
     for index, bands in enumerate(parts[1:], start=1):
-        known = (stored[index] or totals[index]) if deadzone else [None] * len(bands)
+        known = (stored[index] or totals[index]) if uses_counts else [None] * len(bands)
         given = [
             part if counts_ is None else _with_stand_ins(part, *counts_)
             for part, counts_ in zip(bands, known, strict=True)

@@ -47,7 +47,7 @@ from .samples import (
     scaled_tolerance,
     unscaled,
 )
-from .stages import LOSSLESS_WAVELET, NoQuantizer, get_coder, get_colour
+from .stages import LOSSLESS_WAVELET, NoQuantizer, get_coder, get_colour, quantizer_of
 
 # Freed working arrays stay mapped between codings instead of being faulted in afresh by each
 # (a tenth of a 512² encode's CPU time; see wavecore._heap).
@@ -415,13 +415,14 @@ def _with_float32_step(
     """
     header = read_bundle(bundle).header
     qparams = header["qparams"]
-    if header["quantizer"] != "deadzone":
+    field = quantizer_of(header).step_field
+    if field is None:
         return bundle
-    step = float(qparams["step"])
+    step = float(qparams[field])
     single = float(np.float32(step))
     if single == step or not (math.isfinite(single) and single > 0):
         return bundle
-    trial = {**header, "qparams": {**qparams, "step": single}}
+    trial = {**header, "qparams": {**qparams, field: single}}
     decoded = decode(with_header(bundle, trial))
     if plan.scale:
         decoded = np.ldexp(decoded, -plan.scale)
