@@ -23,7 +23,10 @@ are ≤ 0.7× for the 2048² picture and ≤ 1× for the 512² one), megapixels 
 the CPU seconds of the same runs (all threads of the process; on a loaded machine wall time
 depends on what else runs, CPU time much less) with our CPU total over OpenJPEG's.
 Our figures are repeated with one thread (``WAVECORE_THREADS=1`` for the library's pool and one
-numba thread), and the two-thread speed-up is printed.  The machine may be shared: the load
+numba thread), the one-thread and default-thread runs interleaved in ``--repeat`` pairs (so a
+change of load hits both sides of a pair), and the two-thread speed-up is printed twice: as the
+ratio of the two medians and as the median (with quartiles) of the per-pair ratios, the steadier
+figure on a noisy host.  The machine may be shared: the load
 average is printed at the start and the end, and only ratios from the same run should be
 compared.
 """
@@ -306,15 +309,44 @@ def stage_table(run: Callable[[], object], repeat: int) -> list[str]:
     return lines
 
 
-def measure_ours(
-    image: np.ndarray, options: dict[str, Any], repeat: int
-) -> tuple[bytes, float, float]:
-    bundle = wavecore.encode_image(image, **options)
-    t_enc = median_time(lambda: wavecore.encode_image(image, **options), repeat)
-    cpu_enc = CPU["last"]
-    t_dec = median_time(lambda: wavecore.decode(bundle), repeat)
-    CPU["enc"], CPU["dec"] = cpu_enc, CPU["last"]
-    return bundle, t_enc, t_dec
+def paired_threads(
+    image: np.ndarray, options: dict[str, Any], bundle: bytes, repeat: int
+) -> dict[str, Any]:
+    """One-thread and default-thread runs interleaved in pairs (1, 2, 1, 2, ...), so a change of
+    the machine's load hits both sides of a pair alike: the median of the per-pair ratios is
+    the two-thread speed-up that the noise of a shared host disturbs least.  Returns the
+    medians (wall and CPU) of each side and the median and quartiles of the pairs' ratios."""
+    walls: dict[str, list[list[float]]] = {"enc": [[], []], "dec": [[], []]}
+    cpus: dict[str, list[list[float]]] = {"enc": [[], []], "dec": [[], []]}
+    for _ in range(repeat):
+        for side, threads in ((0, 1), (1, None)):
+            set_threads(threads)
+            try:
+                for what, run in (
+                    ("enc", lambda: wavecore.encode_image(image, **options)),
+                    ("dec", lambda: wavecore.decode(bundle)),
+                ):
+                    start, cpu_start = time.perf_counter(), time.process_time()
+                    run()
+                    walls[what][side].append(time.perf_counter() - start)
+                    cpus[what][side].append(time.process_time() - cpu_start)
+            finally:
+                set_threads(None)
+
+    def median(values: list[float]) -> float:
+        return float(np.median(values))
+
+    ratios = {w: np.array(walls[w][0]) / np.array(walls[w][1]) for w in ("enc", "dec")}
+    return {
+        "one": (median(walls["enc"][0]), median(walls["dec"][0])),
+        "two": (median(walls["enc"][1]), median(walls["dec"][1])),
+        "one cpu": (median(cpus["enc"][0]), median(cpus["dec"][0])),
+        "two cpu": (median(cpus["enc"][1]), median(cpus["dec"][1])),
+        "ratio": (float(np.median(ratios["enc"])), float(np.median(ratios["dec"]))),
+        "quartiles": tuple(
+            "{:.2f}-{:.2f}".format(*np.percentile(ratios[w], [25, 75])) for w in ("enc", "dec")
+        ),
+    }
 
 
 def run_case(
@@ -356,7 +388,11 @@ def run_case(
         )
 
     for label, options in cases.items():
-        bundle, t_enc, t_dec = measure_ours(image, options, repeat)
+        bundle = wavecore.encode_image(image, **options)
+        # Our default-thread and one-thread figures come from the same interleaved pairs.
+        paired = paired_threads(image, options, bundle, repeat)
+        t_enc, t_dec = paired["two"]
+        CPU["enc"], CPU["dec"] = paired["two cpu"]
         peers: list[Peer] = [OpenJPEG(image, len(bundle))]
         if imagecodecs is not None:
             peers.append(OpenJPH(image, len(bundle)))
@@ -373,16 +409,13 @@ def run_case(
             line(peer.name, p_enc, p_dec, len(peer.blob), quality, ref, (c_enc, CPU["last"]))
         quality = psnr(wavecore.decode(bundle), image)
         line(label, t_enc, t_dec, len(bundle), quality, ref, ours_cpu)
-        set_threads(1)
-        try:
-            _, one_enc, one_dec = measure_ours(image, options, repeat)
-        finally:
-            set_threads(None)
-        one_cpu = (CPU["enc"], CPU["dec"])
-        line(f"{label} 1 thr", one_enc, one_dec, len(bundle), quality, ref, one_cpu)
+        line(f"{label} 1 thr", *paired["one"], len(bundle), quality, ref, paired["one cpu"])
         say(
-            f"{'':14s} two threads over one: encode {one_enc / t_enc:.2f}x, "
-            f"decode {one_dec / t_dec:.2f}x"
+            f"{'':14s} two threads over one ({repeat} interleaved pairs): medians' ratio "
+            f"encode {paired['one'][0] / paired['two'][0]:.2f}x, "
+            f"decode {paired['one'][1] / paired['two'][1]:.2f}x; median of the pairs' "
+            f"ratios encode {paired['ratio'][0]:.2f}x, decode {paired['ratio'][1]:.2f}x "
+            f"(quartiles {paired['quartiles'][0]}, {paired['quartiles'][1]})"
         )
         if stages:
             bundle = wavecore.encode_image(image, **options)
@@ -414,7 +447,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=2048)
     parser.add_argument("--rate", type=float, default=1.0)
-    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument(
+        "--repeat",
+        type=int,
+        default=15,
+        help="runs per median, and interleaved 1-/2-thread pairs (15: about a minute per "
+        "codec for the 2048² picture on 2 cores)",
+    )
     parser.add_argument("--wavelets", default="bspline2,cdf97")
     parser.add_argument("--skip-grey", action="store_true", help="only the RGB picture")
     parser.add_argument("--skip-rgb", action="store_true", help="only the grey picture")

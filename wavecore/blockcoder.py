@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from . import _blockkernels as kernels
+from . import _blocktables as tables
 from . import _kernels as sample_kernels
 from .errors import BundleError
 from .transform import run_rows
@@ -183,19 +184,8 @@ def _build_structure(
 
 
 def _block_sizes(planes: np.ndarray, blocks: np.ndarray) -> np.ndarray:
-    """Coefficients per block (for sharing the work out evenly)."""
-    total = np.zeros(len(blocks), dtype=np.int64)
-    for p in range(len(planes)):
-        rows, cols = planes[p, kernels.P_ROWS], planes[p, kernels.P_COLS]
-        inside = (blocks[:, kernels.B_PLANE_LO] <= p) & (p < blocks[:, kernels.B_PLANE_HI])
-        height = np.clip(
-            np.minimum(blocks[:, kernels.B_ROW1], rows) - blocks[:, kernels.B_ROW0], 0, None
-        )
-        width = np.clip(
-            np.minimum(blocks[:, kernels.B_COL1], cols) - blocks[:, kernels.B_COL0], 0, None
-        )
-        total += np.where(inside, height * width, 0)
-    return total
+    """Coefficients per block (for sharing the work out evenly): one compiled pass."""
+    return tables.block_sizes(planes, blocks)
 
 
 def _cuts(weights: np.ndarray, spans: int) -> np.ndarray:
@@ -364,7 +354,9 @@ def _code_some(
     flat = np.empty(total, dtype=np.int32)
     views = _plane_views(entries, two_d)
     sources, targets = [], []
-    for (p, r0, r1, c0, c1), offset in zip(pieces, sub_planes[:, kernels.P_OFFSET], strict=True):
+    for (p, r0, r1, c0, c1), offset in zip(
+        pieces.tolist(), sub_planes[:, kernels.P_OFFSET].tolist(), strict=True
+    ):
         if r1 > r0 and c1 > c0:
             sources.append(views[p][r0:r1, c0:c1])
             targets.append(flat[offset : offset + (r1 - r0) * (c1 - c0)].reshape(r1 - r0, c1 - c0))
@@ -386,32 +378,16 @@ def _code_some(
 
 def _compact_tables(
     planes: np.ndarray, blocks: np.ndarray, indices: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int, int, int, int]], int]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Plane and block tables that hold only blocks ``indices``, each with planes of its own:
     the region of every plane of its level that the block covers, cut where the plane ends,
-    and the block at their corner.  Also where each compact plane comes from (``(plane,
-    row0, row1, col0, col1)`` of the original tables) and their total size."""
-    sub_planes: list[np.ndarray] = []
-    sub_blocks = np.empty((len(indices), kernels.BLOCK_FIELDS), dtype=np.int64)
-    pieces: list[tuple[int, int, int, int, int]] = []
-    offset = 0
-    for k, index in enumerate(indices.tolist()):
-        lo, hi, r0, c0, r1, c1 = blocks[index, : kernels.BLOCK_FIELDS].tolist()
-        first = len(sub_planes)
-        for p in range(lo, hi):
-            row = planes[p].copy()
-            height = max(0, min(r1, int(row[kernels.P_ROWS])) - r0)
-            width = max(0, min(c1, int(row[kernels.P_COLS])) - c0)
-            row[kernels.P_OFFSET], row[kernels.P_ROWS], row[kernels.P_COLS] = offset, height, width
-            for slot in (kernels.P_SIB1, kernels.P_SIB2, kernels.P_LUMA):
-                if row[slot] >= 0:
-                    row[slot] += first - lo
-            sub_planes.append(row)
-            pieces.append((p, r0, r0 + height, c0, c0 + width))
-            offset += height * width
-        sub_blocks[k] = (first, len(sub_planes), 0, 0, r1 - r0, c1 - c0)
-    table = np.array(sub_planes, dtype=np.int64).reshape(-1, kernels.PLANE_FIELDS)
-    return table, sub_blocks, pieces, offset
+    and the block at their corner.  Also where each compact plane comes from (rows of
+    ``(plane, row0, row1, col0, col1)`` of the original tables) and their total size.  One
+    compiled pass (``_blocktables.compact_tables``), not a Python loop per block and plane."""
+    sub_planes, sub_blocks, pieces, total = tables.compact_tables(
+        planes, blocks, np.asarray(indices, dtype=np.int64)
+    )
+    return sub_planes, sub_blocks, pieces, int(total)
 
 
 def block_lengths(
@@ -760,10 +736,9 @@ def add_block_checks(
         return bytes(chunk)
     read, lengths = block_table(chunk, count)
     ends = read + np.cumsum(lengths)
-    starts = ends - lengths
+    checks = tables.crc16_spans(np.frombuffer(chunk, dtype=np.uint8), ends - lengths, ends)
     prefix = bytearray(chunk[:read])
-    for s, e in zip(starts.tolist(), ends.tolist(), strict=True):
-        prefix += binascii.crc_hqx(chunk[s:e], 0).to_bytes(CHECK_BYTES, "little")
+    prefix += checks.astype("<u2").tobytes()
     for ones, more in counts or ():
         prefix += encode_varint(ones) + encode_varint(more)
     prefix += binascii.crc_hqx(prefix, 0).to_bytes(CHECK_BYTES, "little")
@@ -823,9 +798,9 @@ def strip_block_checks(
     checks = np.frombuffer(chunk, dtype="<u2", count=count, offset=read)
     ends = payload + np.cumsum(lengths)
     starts = ends - lengths
-    indices = range(count) if verify is None else np.flatnonzero(verify[:count]).tolist()
-    for b in indices:
-        bad[b] = binascii.crc_hqx(chunk[starts[b] : ends[b]], 0) != int(checks[b])
+    indices = np.arange(count) if verify is None else np.flatnonzero(verify[:count])
+    found = tables.crc16_spans(data, starts[indices], ends[indices])
+    bad[indices] = found != checks[indices]
     counts = [(int(values[2 * k]), int(values[2 * k + 1])) for k in range(bands)]
     return chunk[:read] + chunk[payload:], bad, counts or None
 

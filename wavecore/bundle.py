@@ -515,7 +515,11 @@ def _compact_header(header: dict[str, Any]) -> bytes:
     """The header in 4.0's form (5.0 has the same), weights left out when the plan gives them."""
     derived = False
     weights = header["qparams"].get("weights")
-    if header["quantizer"] == "deadzone" and weights is not None:
+    # The codec's stage registry says which quantizers' weights the plan derives; imported
+    # here because the codec package imports this module.
+    from .codec.stages import quantizer_of
+
+    if weights is not None and quantizer_of(header).derivable_weights:
         try:
             derived = derived_weights(header) == weights
         except BundleError:

@@ -39,9 +39,14 @@ The package, one module per concern:
   transform both ways, and the error metrics (PSNR, largest error);
 * :mod:`.ratecontrol`: the searches for a step that meets ``quality``, ``bpp`` or
   ``tolerance``;
-* :mod:`.encode`: the front ends ``encode_image``/``encode_curve``/``encode_surface``, and the
-  lossless pipeline;
-* :mod:`.decode`: ``decode`` (the pipeline backwards, through the registry) and ``inspect``.
+* :mod:`.encode`: the front ends ``encode_image``/``encode_curve``/``encode_surface``;
+* :mod:`.reversible`: the lossless pipeline (reversible colour, integer lifting, its coders);
+* :mod:`.fixedstep`: a surface coded at one given step, what the grid containers build on;
+* :mod:`.decode`: ``decode`` (the pipeline backwards, through the registry) and ``inspect``;
+* :mod:`.chunks`: the coded chunks read for decoding, whole or block by block, checked, only
+  the blocks a region needs, damaged blocks zeroed;
+* :mod:`.extents`: what a decode at a level returns (shape, offsets) and a region checked
+  against it.
 
 The coefficient layout lives in :mod:`wavecore.layout`, the default level in
 :func:`wavecore.default_level`.

@@ -11,19 +11,18 @@ from typing import Any
 import numpy as np
 
 from .. import _heap
-from .. import lossless as _lossless
 from ..arguments import closed_flags
-from ..bundle import read_bundle, with_header, write_bundle
-from ..entropy import encode_levels
+from ..bundle import read_bundle, with_header
 from ..errors import BundleError, InvalidParameter
 from ..filters import get_wavelet
-from ..losslesscoder import encode_lossless_levels
-from ..multilevel import default_level
-from ..quantize import DEFAULT_ROUNDING, dequantize_bands, quantize_bands
 from ..threshold import check_share
 from .decode import decode
+
+# The one-step surface coding's first home, where wavecore.grids and wavecore.gridcore find it.
+from .fixedstep import bundle_from_quantized as bundle_from_quantized
+from .fixedstep import coded_units
+from .fixedstep import encode_surface_at_step as encode_surface_at_step
 from .plan import (
-    DEFAULT_CODER,
     MAX_CURVE_LEVELS,
     MAX_IMAGE_LEVELS,
     Plan,
@@ -35,19 +34,17 @@ from .plan import (
     positive,
 )
 from .ratecontrol import encode_lossy
+from .reversible import encode_lossless_image
 from .samples import (
-    decompose,
-    finish,
     fitted_samples,
     is_opaque,
     measure_errors,
     peak_of,
-    reconstruct,
     scaled,
     scaled_tolerance,
     unscaled,
 )
-from .stages import LOSSLESS_WAVELET, NoQuantizer, get_coder, get_colour
+from .stages import quantizer_of
 
 # Freed working arrays stay mapped between codings instead of being faulted in afresh by each
 # (a tenth of a 512² encode's CPU time; see wavecore._heap).
@@ -168,7 +165,7 @@ def encode_image(
         if keep is not None or quality is not None or bpp is not None:
             msg = "lossless=True cannot be combined with keep, quality or bpp"
             raise InvalidParameter(msg)
-        return _encode_lossless(arr, level, effort)
+        return encode_lossless_image(arr, level, effort)
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
     quality = None if quality is None else positive(quality, "quality", "a PSNR in dB")
     bpp = None if bpp is None else positive(bpp, "bpp", "bits per pixel")
@@ -195,113 +192,6 @@ def encode_image(
         opaque=is_opaque(arr),
     )
     return encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None)
-
-
-def _encode_lossless(arr: np.ndarray, level: int | None, effort: str = "default") -> bytes:
-    dtype = dtype_name(arr, "image", integer_only=True)
-    colour = _lossless.lossless_colour(arr)  # RCT, with Cr predicted from Cb where that pays
-    data = get_colour({"id": colour}).forward(arr).astype(np.int64, copy=False)
-    # At most as many levels as leave every subband non-empty (5/3 fits any size unpadded).
-    deepest = min(arr.shape[:2]).bit_length() - 1
-    if effort == "max":
-        return _encode_lossless_max(arr, data, dtype, colour, level, deepest)
-    search = level is None
-    if level is None:  # the depths of LOSSLESS_DEPTHS that fit, tried by _lossless_bundle
-        level = min(default_level(arr.shape[:2], MAX_IMAGE_LEVELS), deepest)
-        level = min(level, max(_lossless.LOSSLESS_DEPTHS))
-    elif level > deepest:
-        msg = (
-            f"level {level} is too deep for a lossless {arr.shape[0]}×{arr.shape[1]} image: "
-            f"at most {deepest} levels leave every subband non-empty"
-        )
-        raise InvalidParameter(msg)
-    # First-order entropy only guides the choice of filters (the context coder ranks them
-    # differently), so code the choice with and without the closed bspline2 and keep the smaller.
-    choices = _lossless.filter_choices(data, level)
-    bundles = [
-        _lossless_bundle(arr, data, dtype, colour, level, lifting, search=search)
-        for lifting in choices
-    ]
-    return min(bundles, key=len)
-
-
-def _encode_lossless_max(
-    arr: np.ndarray, data: np.ndarray, dtype: str, colour: str, level: int | None, deepest: int
-) -> bytes:
-    """``effort="max"``: the lossless coder (:mod:`wavecore.losslesscoder`), about twice the
-    time of the default path and a few per cent smaller."""
-    if level is None:  # none (prediction) or one level, by entropy (wavecore.lossless)
-        lifting = _lossless.choose_depth(data)
-    elif level > deepest:
-        msg = (
-            f"level {level} is too deep for a lossless {arr.shape[0]}×{arr.shape[1]} image: "
-            f"at most {deepest} levels leave every subband non-empty"
-        )
-        raise InvalidParameter(msg)
-    else:
-        lifting = _lossless.choose_filters(data, level, candidates=_lossless.CANDIDATE_SETS[0])
-    level = len(lifting)
-    # The lossless coder (wavecore.losslesscoder: the context coder's version 5).
-    chunks, cparams = encode_lossless_levels(_lossless.forward(data, level, (0, 1), lifting))
-    return _lossless_header(arr, dtype, colour, level, lifting, cparams, chunks)
-
-
-def _lossless_bundle(
-    arr: np.ndarray,
-    data: np.ndarray,
-    dtype: str,
-    colour: str,
-    level: int,
-    lifting: list[str],
-    search: bool = False,
-) -> bytes:
-    coder = get_coder({"id": DEFAULT_CODER})
-    coded: list[dict[str, Any]] = []
-
-    def code(coeffs: list[Any]) -> list[bytes]:
-        chunks, params = coder.encode(coeffs)
-        coded.append(params)
-        return chunks
-
-    # No level given: the depth that codes smallest (wavecore.lossless.LOSSLESS_DEPTHS).
-    depths = tuple(d for d in _lossless.LOSSLESS_DEPTHS if d <= level) if search else ()
-    level, chunks = _lossless.best_depth(data, lifting, code, depths or (level,))
-    lifting = lifting[:level]
-    return _lossless_header(arr, dtype, colour, level, lifting, coded[0], chunks)
-
-
-def _lossless_header(
-    arr: np.ndarray,
-    dtype: str,
-    colour: str,
-    level: int,
-    lifting: list[str],
-    cparams: dict[str, Any],
-    chunks: list[bytes],
-) -> bytes:
-    plan = Plan(
-        "image",
-        arr.shape,
-        dtype,
-        LOSSLESS_WAVELET,
-        ("symmetric", "symmetric"),
-        level,
-        colour,
-        ((0, 0), (0, 0)),
-        arr.shape,
-        peak_of(arr, dtype, "image"),
-        tuple(lifting),
-    )
-    header = plan.header()
-    header.update(
-        quantizer=NoQuantizer.codec_id,
-        qparams={},
-        coder=str(cparams.get("coder", DEFAULT_CODER)),
-        cparams=cparams,
-        psnr=None,
-        max_error=0.0,
-    )
-    return write_bundle(header, chunks)
 
 
 @_refuses_as_parameter
@@ -415,13 +305,14 @@ def _with_float32_step(
     """
     header = read_bundle(bundle).header
     qparams = header["qparams"]
-    if header["quantizer"] != "deadzone":
+    field = quantizer_of(header).step_field
+    if field is None:
         return bundle
-    step = float(qparams["step"])
+    step = float(qparams[field])
     single = float(np.float32(step))
     if single == step or not (math.isfinite(single) and single > 0):
         return bundle
-    trial = {**header, "qparams": {**qparams, "step": single}}
+    trial = {**header, "qparams": {**qparams, field: single}}
     decoded = decode(with_header(bundle, trial))
     if plan.scale:
         decoded = np.ldexp(decoded, -plan.scale)
@@ -526,15 +417,10 @@ def encode_surface(
         # PSNR against the plan's peak is measured on exactly what decode returns; the tiny
         # margin keeps the conversion's rounding from leaving the RMSE a hair above the target.
         target = positive(rmse, "rmse", "a root-mean-square error")
-        quality = 20.0 * math.log10(plan.peak / _unscaled_rmse(target, scale)) + 1e-6
+        quality = 20.0 * math.log10(plan.peak / coded_units(target, scale)) + 1e-6
         if quality <= 0:  # any coding meets so loose a target: code coarsely
             quality = 1e-3
     return encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None)
-
-
-def _unscaled_rmse(rmse: float, scale: int) -> float:
-    """An RMSE in the original's units → the coded units of a scaled plan."""
-    return math.ldexp(rmse, -scale) if scale else rmse
 
 
 def _bounded_surface(
@@ -552,95 +438,3 @@ def _bounded_surface(
         boundary=("closed" if flags[0] else "open", "closed" if flags[1] else "open"),
         max_error=max_error,
     )
-
-
-def encode_surface_at_step(
-    grid: Any,
-    step: float,
-    *,
-    level: int | None = None,
-    wavelet: str = "cdf97",
-    boundary: tuple[str, str] = ("open", "open"),
-    rounding: float = DEFAULT_ROUNDING,
-) -> tuple[bytes, np.ndarray]:
-    """A surface bundle quantized once at ``step`` (the base step of the dead-zone quantizer,
-    in the data's units): no search and no closed-loop refinement, the fastest lossy coding.
-
-    Returns the bundle and what :func:`wavecore.decode` returns for it (the encoder's own
-    reconstruction, from the same integers and parameters; decoded again only if the stored
-    parameters did not survive the header exactly).  For :mod:`wavecore.grids`, whose outlier
-    pass needs a core of a known step, not a PSNR; not part of the public API.
-    """
-    arr = as_array(grid, "grid")
-    level = level_arg(level)
-    dtype = dtype_name(arr, "grid")
-    arr, scale = scaled(arr)
-    # No copy of float64 data (the transform only reads it); a Zarr chunk's peak memory.
-    data = np.asarray(arr, dtype=np.float64)
-    bank = get_wavelet(wavelet)
-    fitted, pads, levels = fit(data, level, bank.name, boundary, MAX_IMAGE_LEVELS)
-    plan = Plan(
-        "surface",
-        arr.shape,
-        dtype,
-        bank.name,
-        tuple(boundary),
-        levels,
-        "none",
-        pads,
-        fitted.shape,
-        peak_of(data, dtype, "surface"),
-        scale=scale,
-    )
-    coded_step = positive(_unscaled_rmse(step, scale), "step", "a quantizer step")
-    bounds = list(plan.boundary)
-    coeffs = decompose(plan, fitted)
-    quantized, qparams = quantize_bands(
-        coeffs,
-        coded_step,
-        wavelet=plan.wavelet,
-        boundary=bounds,
-        axes=plan.axes,
-        rounding=rounding,
-        refine=0,
-    )
-    del coeffs  # each full-size temporary is let go once used: peak memory per Zarr chunk
-    return bundle_from_quantized(plan, quantized, qparams, arr, "input")
-
-
-def bundle_from_quantized(
-    plan: Plan, quantized: list[Any], qparams: dict[str, Any], coded: np.ndarray, what: str
-) -> tuple[bytes, np.ndarray]:
-    """Code a surface plan's quantized bands into its bundle, measured on what the decoder
-    returns: the bundle and that output.  ``coded`` is the (scaled) samples the plan was made
-    from; ``what`` names them in the error a bundle that cannot be stored raises."""
-    bounds = list(plan.boundary)
-    chunks, cparams = encode_levels(quantized, coder=DEFAULT_CODER)
-    dequantized = dequantize_bands(
-        quantized, qparams, wavelet=plan.wavelet, boundary=bounds, axes=plan.axes
-    )
-    del quantized
-    samples = reconstruct(plan, dequantized)
-    del dequantized
-    output = finish(plan, samples, 0)
-    del samples
-    scale = plan.scale
-    decoded = np.ldexp(output, -scale) if scale else output
-    psnr, largest = measure_errors(plan, coded, decoded)
-    header = plan.header()
-    header.update(
-        quantizer=str(qparams.get("name", "deadzone")),
-        qparams=qparams,
-        coder=str(cparams.get("coder", DEFAULT_CODER)),
-        cparams=cparams,
-        psnr=psnr,
-        max_error=unscaled(largest, scale),
-    )
-    try:
-        bundle = write_bundle(header, chunks)
-    except BundleError as exc:
-        msg = f"this {what} cannot be stored in a bundle: {exc}"
-        raise InvalidParameter(msg) from exc
-    if read_bundle(bundle).header.get("qparams") != qparams:
-        output = decode(bundle)  # the header rounded a parameter: take the decoder's result
-    return bundle, output

@@ -321,6 +321,16 @@ def transform_of(wavelet: str, boundary: Sequence[str], lifting: Sequence[str]) 
 
 class Quantizer(Stage):
     kind = "quantizer"
+    #: Whether its dequantization places values by each band's counts of nonzero values, so a
+    #: block that is lost or not read gets stand-ins from those counts (``fill_stand_ins``)
+    #: and, before bundle format 3.0 (which stores the counts), every block must be read.
+    uses_band_counts: ClassVar[bool] = False
+    #: The ``qparams`` field that holds one global step (which the encoder may round to a
+    #: float32), or None when it has none.
+    step_field: ClassVar[str | None] = None
+    #: Whether its ``qparams`` may hold per-band weights that the plan derives (which the
+    #: compact header then leaves out).
+    derivable_weights: ClassVar[bool] = False
 
     def decode(self, qcoeffs: list[Any], geometry: Geometry) -> list[Any]:
         raise NotImplementedError
@@ -331,6 +341,9 @@ class DeadzoneQuantizer(Quantizer):
     """:func:`wavecore.quantize.quantize_bands`' weighted dead-zone quantizer."""
 
     codec_id = "deadzone"
+    uses_band_counts = True
+    step_field = "step"
+    derivable_weights = True
 
     def __init__(self, params: dict[str, Any]) -> None:
         self.params = params
@@ -491,6 +504,11 @@ def get_quantizer(config: dict[str, Any]) -> Quantizer:
     return stage
 
 
+def quantizer_of(header: dict[str, Any]) -> Quantizer:
+    """The quantizer stage a header names (``quantizer`` and ``qparams``)."""
+    return get_quantizer({**header["qparams"], "id": header["quantizer"]})
+
+
 def get_coder(config: dict[str, Any]) -> Coder:
     """:func:`get_stage` for an entropy coder."""
     stage = get_stage("coder", config)
@@ -521,11 +539,10 @@ def pipeline(header: dict[str, Any]) -> Pipeline:
     and ``qparams``, ``coder`` and ``cparams``, and ``colour``; each becomes one stage config.
     """
     transform = transform_config(header["wavelet"], header["boundary"], header.get("lifting"))
-    quantizer = {**header["qparams"], "id": header["quantizer"]}
     coder = {**header["cparams"], "id": header["coder"]}
     return Pipeline(
         get_colour({"id": header["colour"]}),
         get_transform(transform),
-        get_quantizer(quantizer),
+        quantizer_of(header),
         get_coder(coder),
     )
