@@ -28,7 +28,7 @@ from wavecore.bundle import (
     write_bundle,
 )
 
-decode_module = importlib.import_module("wavecore.codec.decode")
+chunks_module = importlib.import_module("wavecore.codec.chunks")
 
 
 def _curve(n: int, dims: int, noise: float = 0.0) -> np.ndarray:
@@ -132,13 +132,13 @@ def test_a_damaged_block_keeps_the_dequantizer_of_a_full_decode() -> None:
 def test_a_region_of_a_long_curve_reads_only_its_blocks(monkeypatch: pytest.MonkeyPatch) -> None:
     clean = decode(LONG_BUNDLE)
     seen: list[int] = []
-    original = decode_module.decode_block_windows
+    original = chunks_module.decode_block_windows
 
     def spy(chunks, entries, two_d, block, skip, *args, **kwargs):  # type: ignore[no-untyped-def]
         seen.append(int((~skip).sum()))
         return original(chunks, entries, two_d, block, skip, *args, **kwargs)
 
-    monkeypatch.setattr(decode_module, "decode_block_windows", spy)
+    monkeypatch.setattr(chunks_module, "decode_block_windows", spy)
     region = (slice(100, 300),)
     assert np.array_equal(decode(LONG_BUNDLE, region=region), clean[region])
     total = sum(c[0] if c else 1 for c in read_bundle(LONG_BUNDLE).checked)

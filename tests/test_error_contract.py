@@ -209,15 +209,15 @@ def test_an_encoder_turns_a_bundle_limit_into_invalid_parameter(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """Whatever the bundle writer refuses is the input's fault when an encoder wrote it."""
-    from wavecore.codec import encode as front_ends
-    from wavecore.codec import ratecontrol
+    from wavecore.codec import fixedstep, ratecontrol, reversible
 
     def refuse(header: dict[str, Any], chunks: Any) -> bytes:
         raise BundleError("header is 70000 bytes, more than MAX_HEADER_SIZE")
 
-    # Lossy bundles are written by the rate control, lossless ones by their own pipeline.
-    monkeypatch.setattr(ratecontrol, "write_bundle", refuse)
-    monkeypatch.setattr(front_ends, "write_bundle", refuse)
+    # Lossy bundles are written by the rate control, lossless ones by their own pipeline,
+    # and surfaces at a fixed step by theirs.
+    for writer in (ratecontrol, reversible, fixedstep):
+        monkeypatch.setattr(writer, "write_bundle", refuse)
     for encode in (
         lambda: wavecore.encode_image(BASE, quality=30),
         lambda: wavecore.encode_image(BASE.astype(np.uint8), lossless=True),
