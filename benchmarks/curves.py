@@ -26,8 +26,8 @@ at wavecore's measured deviation; the baselines are also run at looser settings
 (``PEER_EXTRA_TOLERANCES``) so that it is always an interpolation between two measured points,
 and the script stops rather than clamp.
 
-Run ``python benchmarks/curves.py --write`` to rewrite the table in ``docs/benchmarks.md`` and
-the figure ``docs/figures/curves_rate.png``.
+Run ``python benchmarks/curves.py --write`` to redraw the figure ``docs/figures/curves_rate.png``;
+the table and summary lines it prints are what ``docs/benchmarks.md`` quotes.
 """
 
 from __future__ import annotations
@@ -473,7 +473,7 @@ def table(rows: list[dict]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--write", action="store_true", help="rewrite the docs table and figure")
+    parser.add_argument("--write", action="store_true", help="redraw docs/figures/curves_rate.png (the printed table is what the docs quote)")
     parser.add_argument("--quick", action="store_true", help="one font, a short track")
     parser.add_argument(
         "--ideas",
