@@ -473,7 +473,11 @@ def table(rows: list[dict]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--write", action="store_true", help="redraw docs/figures/curves_rate.png (the printed table is what the docs quote)")
+    parser.add_argument(
+        "--write",
+        action="store_true",
+        help="redraw docs/figures/curves_rate.png (the printed table is what the docs quote)",
+    )
     parser.add_argument("--quick", action="store_true", help="one font, a short track")
     parser.add_argument(
         "--ideas",
