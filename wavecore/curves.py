@@ -10,10 +10,10 @@ whose length already fits is used as it is, so that it comes back exactly.
 >>> t = np.linspace(0, 2 * np.pi, 100, endpoint=False)
 >>> flower = np.stack([np.cos(t), np.sin(t)], axis=1) * (1 + 0.2 * np.cos(7 * t))[:, None]
 >>> dec = wavecore.decompose_curve(flower, closed=True)
->>> dec.level, dec.length, dec.coarse().shape        # 100 points re-sampled to 104
-(3, 104, (13, 2))
+>>> dec.level, dec.length, dec.coarse().shape        # 100 points re-sampled to 96
+(4, 96, (6, 2))
 >>> dec.reconstruct(keep=0.0).shape                  # the smooth outline, details removed
-(104, 2)
+(96, 2)
 >>> dec.reconstruct(match_input=True).shape          # back at the input's 100 positions
 (100, 2)
 """
@@ -29,8 +29,10 @@ from .arguments import closed_flags
 from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import (
+    DEFAULT_MOST_CURVE_LEVELS,
     as_int,
     check_level_bound,
+    default_level,
     growth_limit,
     wavedec,
     waverec,
@@ -40,8 +42,6 @@ from .threshold import keep_largest
 from .transform import as_float_array
 
 __all__ = ["CurveDecomposition", "decompose_curve", "fitting_length", "transfer_details"]
-
-_MIN_COARSE_POINTS = 8  # the default level stops before the outline gets coarser than this
 
 
 def fitting_length(
@@ -74,19 +74,6 @@ def fitting_length(
     below = step * k_below + rule.extra
     above = step * max(k_min, -(-(n - rule.extra) // step)) + rule.extra
     return below if n - below < above - n else above
-
-
-def _default_level(n: int, boundary: str, wavelet: str | FilterBank) -> int:
-    rule = get_wavelet(wavelet).rule(boundary)
-    level = 1
-    while True:
-        m = fitting_length(n, level + 1, boundary, wavelet)
-        coarse = m
-        for _ in range(level + 1):
-            coarse = rule.coarse_length(coarse)
-        if coarse < _MIN_COARSE_POINTS or abs(m - n) > max(2, n // 8):
-            return level
-        level += 1
 
 
 def _as_points(points: Any, name: str) -> tuple[np.ndarray, bool]:
@@ -245,8 +232,10 @@ def decompose_curve(
     points : array_like, shape (n, d) or (n,)
         The curve.  A closed curve may or may not repeat its first point at the end.
     level : int, optional
-        Number of levels.  Default: as many as keep the coarsest outline at 8 points or more,
-        without re-sampling the curve by more than an eighth of its length.
+        Number of levels.  Default: the library's one rule, as :func:`wavecore.encode_curve`
+        uses it (:func:`wavecore.default_level` of ``[n]`` with ``most=8``): the most levels,
+        up to 8, with ``n >= 4 * 2**level``, so that the curve is re-sampled by at most an
+        eighth of its length.
     closed : bool, keyword-only
         Periodic (closed boundary) or endpoint interpolating (open boundary, the default).
     wavelet : str, keyword-only
@@ -285,7 +274,9 @@ def decompose_curve(
         arr = arr[:-1]
     n = len(arr)
     if level is None:
-        level = _default_level(n, boundary, bank)
+        # The library's one rule, as encode_curve uses it: at most 8 levels, at least 4 coarse
+        # points, so the fitting length is within an eighth of n (no large re-sampling).
+        level = default_level([n], DEFAULT_MOST_CURVE_LEVELS)
     level = as_int(level, "level", minimum=1)
     check_level_bound(
         level,
