@@ -27,7 +27,7 @@ import numpy as np
 
 from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet
-from .multilevel import as_int, valid_length, wavedecn, waverecn
+from .multilevel import as_int, default_level, wavedecn, waverecn
 from .resample import GridFit, fit_grid
 from .threshold import keep_largest
 from .transform import as_float_array
@@ -126,8 +126,9 @@ def decompose_surface(
         Points ``(U, V, d)`` (usually ``d = 3``) or a height field ``(U, V)``.  A closed
         direction must not repeat its first row (or column) at the end.
     level : int, optional
-        Levels per direction.  Default: as many as keep the coarse net at 5 or more samples
-        per direction without padding a direction by more than an eighth (at least 1).
+        Levels per direction.  Default: the library's one rule, :func:`wavecore.default_level`
+        (:func:`wavecore.encode_surface`'s too): up to 5, keeping the coarse net at about 4
+        samples per direction or more (at least 1).
     boundary : str or (str, str), keyword-only
         ``"open"`` or ``"closed"`` for both directions, or one per direction:
         ``("closed", "open")`` for a surface of revolution (u around, v along the axis),
@@ -163,26 +164,11 @@ def decompose_surface(
         msg = "a surface must be finite (no NaN or infinity)"
         raise InvalidParameter(msg)
     bank = get_wavelet(wavelet)
-    bounds = [boundary] * 2 if isinstance(boundary, str) else list(boundary)
     if level is None:
-        level = 1
-        while all(
-            _deeper_fits(n, level + 1, b, bank) for n, b in zip(arr.shape[:2], bounds, strict=False)
-        ):
-            level += 1
+        level = default_level(arr.shape[:2])  # the library's one rule, as encode_surface's
     level = as_int(level, "level", minimum=1)
     fitted, grid_fit = fit_grid(
         arr, level, axes=(0, 1), boundary=boundary, wavelet=bank, method=fit
     )
     coeffs = wavedecn(fitted, bank, grid_fit.boundaries, level, axes=(0, 1))
     return SurfaceDecomposition(coeffs, grid_fit, bank.name, arr.ndim == 2)
-
-
-def _deeper_fits(n: int, level: int, boundary: str, bank: FilterBank) -> bool:
-    """Whether ``level`` levels keep 5+ coarse samples and need padding of at most n / 8."""
-    rule = bank.rule(boundary)
-    m = valid_length(n, level, boundary, bank)
-    coarse = m
-    for _ in range(level):
-        coarse = rule.coarse_length(coarse)
-    return coarse >= 5 and m - n <= max(2, n // 8)
