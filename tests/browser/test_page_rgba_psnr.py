@@ -13,7 +13,9 @@ import pytest
 
 from .test_page import figure, number, wait_for_bundle
 
-pytestmark = pytest.mark.browser
+# `long` like every browser module (pyproject: "all are also long"): launching Chromium and
+# loading the page took ~20-30 s of the default run; CI runs it in its `-m long` step.
+pytestmark = [pytest.mark.browser, pytest.mark.long]
 
 
 def test_the_sample_picture_meets_the_pages_psnr_target(page: Any) -> None:
