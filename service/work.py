@@ -111,13 +111,15 @@ def _worker_pid(pause: float) -> int:
     return os.getpid()
 
 
-def _give_back_memory() -> None:
-    """Return the failed job's freed memory to the system, so the worker idles small again.
+def _give_back_memory(collect: bool = True) -> None:
+    """Return a job's freed memory to the system, so the worker idles small again.
 
-    After large frees glibc raises its mmap threshold, so the job's last big arrays came from
-    the heap, which ``malloc_trim`` gives back.
+    ``wavecore`` makes glibc keep freed arrays in its heap for the next coding
+    (``wavecore._heap``); ``malloc_trim`` gives them back.  ``collect`` first runs the garbage
+    collector, for a failed job whose arrays may sit in reference cycles.
     """
-    gc.collect()
+    if collect:
+        gc.collect()
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL("libc.so.6").malloc_trim(0)
 
@@ -140,11 +142,13 @@ def _run_job(fn: Callable[..., T], args: tuple[Any, ...], kwargs: dict[str, Any]
     the failed job's frames, and so its arrays, alive in the idle worker.
     """
     try:
-        return fn(*args, **kwargs)
+        result = fn(*args, **kwargs)
     except Exception as exc:
         error = _sendable_error(exc)
-    if isinstance(error, MemoryError):
-        _give_back_memory()
+    else:
+        _give_back_memory(collect=False)
+        return result
+    _give_back_memory(collect=isinstance(error, MemoryError))
     raise error
 
 

@@ -2,23 +2,25 @@
 
 glibc hands the free memory at the top of its heap back to the system once more than its trim
 threshold lies there, and takes it back page by page, each page a fault, on the next growth;
-arrays above its mmap threshold are mapped and unmapped afresh each time.  An encode frees its
-working arrays (a 512² grey picture: a few MB of float bands, integers and reconstructions) and
-the next one faults them in again: 1 200 page faults and about 2.5 ms of system time per
-``encode_image(camera)``, a tenth of its CPU time (measured with ``getrusage``).  Two settings
-keep them mapped:
+arrays above its mmap threshold (at most 32 MiB) are mapped and unmapped afresh each time.  An
+encode frees its working arrays and the next one faults them in again: a 512² grey
+``encode_image(camera)`` faulted 1 200 pages (about 2.5 ms of system time, a tenth of its CPU),
+and a 2048² RGB encode at 1 bpp, whose float planes are 32 MiB each, 2 700 pages an encode and
+1 000 a decode even with the pad and threshold below.  Page faults are also where two threads
+lose most against one: the kernel serialises them on the process's address space.  Three
+settings keep that memory mapped:
 
-* ``M_TOP_PAD``, 16 MiB: that much free memory past the top stays mapped when the heap
-  shrinks.  The 512² grey encode then faults about 40 times (4 MiB left 1 100 faults).
-* ``M_MMAP_THRESHOLD``, 32 MiB, glibc's own ceiling for the threshold it adapts: setting the
-  pad stops that adaptation, so the threshold is set to where it would end up.  Without it a
-  2048² RGB encode faulted twice as often; with it, fewer times than with glibc's defaults
-  (5 700 against 8 900 faults per encode, about 0 against 5 200 per decode).
+* ``M_MMAP_MAX`` 0: no array gets a mapping of its own; every one comes from the heap, whose
+  freed memory is reused by the next coding (the 2048² RGB encode then faults about 10 pages).
+* ``M_TRIM_THRESHOLD``, 256 MiB: the heap gives back the free memory at its top only beyond
+  that much, so a process holds at most about 256 MiB more than its arrays need between
+  codings (``malloc_trim`` gives it back at once: the service's workers call it after each job).
+* ``M_TOP_PAD``, 16 MiB: the heap grows by at least that much, so a small coding's growth
+  costs few system calls.
 
-At most the pad stays resident beyond what the arrays need (the largest resident size of a
-2048² RGB encode and decode grew by about 4 MB, 0.7 %).  The settings are the process's, so
-they are made once, only on glibc, and never over the user's own tuning of glibc's allocator
-(``MALLOC_*`` environment variables or ``GLIBC_TUNABLES``), which takes precedence.
+The settings are the process's, so they are made once, only on glibc, and never over the
+user's own tuning of glibc's allocator (``MALLOC_*`` environment variables or
+``GLIBC_TUNABLES``), which takes precedence.
 """
 
 from __future__ import annotations
@@ -29,14 +31,15 @@ import os
 import platform
 
 #: glibc's ``mallopt`` parameter numbers (malloc.h).
+_M_TRIM_THRESHOLD = -1
 _M_TOP_PAD = -2
-_M_MMAP_THRESHOLD = -3
+_M_MMAP_MAX = -4
+TRIM_THRESHOLD_BYTES = 256 << 20
 TOP_PAD_BYTES = 16 << 20
-MMAP_THRESHOLD_BYTES = 32 << 20
 
 
 def keep_freed_memory() -> bool:
-    """Set glibc's top pad and mmap threshold (see the module docstring); whether they were.
+    """Make glibc keep freed memory mapped (see the module docstring); whether it was set.
 
     Nothing happens off glibc, or when the environment already tunes glibc's allocator.
     """
@@ -46,7 +49,11 @@ def keep_freed_memory() -> bool:
         return False
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        threshold = libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES)
-        return bool(threshold and libc.mallopt(_M_TOP_PAD, TOP_PAD_BYTES))
+        settings = (
+            (_M_MMAP_MAX, 0),
+            (_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES),
+            (_M_TOP_PAD, TOP_PAD_BYTES),
+        )
+        return all([libc.mallopt(parameter, value) for parameter, value in settings])
     except (OSError, AttributeError):  # pragma: no cover - a libc without mallopt
         return False

@@ -121,6 +121,24 @@ def _rss_mib(pid: int) -> float:
     return 0.0
 
 
+async def test_a_worker_gives_a_finished_jobs_memory_back(tmp_path: Path) -> None:
+    """wavecore keeps freed arrays in glibc's heap for the next coding (wavecore._heap); a
+    worker trims it after each job, so an idle worker stays small."""
+    pool = WorkPool(Settings(concurrency=1))
+    slot = pool.admit()
+    assert slot is not None
+    pid_file = tmp_path / "pid"
+    assert await pool.run(slot, pool_jobs.allocate, str(pid_file), 64 << 20) == 1
+    pid = int(pid_file.read_text())
+    idle = _rss_mib(pid)
+    # 192 MiB: under the heap's trim threshold, so glibc alone would keep it all
+    assert await pool.run(slot, pool_jobs.allocate, str(pid_file), 192 << 20) == 3
+    assert int(pid_file.read_text()) == pid
+    assert _rss_mib(pid) < idle + 96
+    slot.release()
+    pool.processes.stop()
+
+
 @pytest.mark.slow
 async def test_a_worker_over_its_memory_cap_gives_a_413_and_shrinks_back(
     tmp_path: Path,
