@@ -27,6 +27,7 @@ from __future__ import annotations
 import binascii
 import functools
 import itertools
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -88,8 +89,8 @@ def _plane_dims(band_shape: tuple[int, ...], two_d: bool) -> tuple[int, int, int
     if not band_shape:
         return 1, 1, 1
     if two_d and len(band_shape) >= 2:
-        return int(band_shape[0]), int(band_shape[1]), int(np.prod(band_shape[2:], dtype=np.int64))
-    return 1, int(band_shape[0]), int(np.prod(band_shape[1:], dtype=np.int64))
+        return int(band_shape[0]), int(band_shape[1]), int(math.prod(band_shape[2:]))
+    return 1, int(band_shape[0]), int(math.prod(band_shape[1:]))
 
 
 _LayoutKey = tuple[tuple[tuple[int, ...], ...], ...]
