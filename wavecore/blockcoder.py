@@ -627,6 +627,8 @@ def decode_block_windows(
 
 #: Rows of planes per copy task: about this many values, so that the tasks balance.
 _COPY_TASK = 1 << 16
+#: At most this many pieces (runs of tasks) a copy is cut into for the threads.
+_COPY_PIECES = 16
 
 
 def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: int) -> None:
@@ -646,7 +648,9 @@ def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: in
         for k, row_lo, row_hi in tasks[lo:hi]:
             targets[k][row_lo:row_hi] = sources[k][row_lo:row_hi]
 
-    run_rows(run, len(tasks), total)
+    # Many pieces: a copy's time varies with the page faults of its target rows (fresh
+    # memory), and in two pieces a thread one slow piece could leave the other thread idle.
+    run_rows(run, len(tasks), total, pieces=min(len(tasks), _COPY_PIECES))
 
 
 # --------------------------------------------------------------------------------------------
