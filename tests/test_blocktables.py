@@ -26,6 +26,29 @@ def test_crc16_spans_is_crc_hqx(data: bytes, cuts: list[int]) -> None:
     assert found.tolist() == expected
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.binary(max_size=2000), st.integers(0, 0xFFFF), st.integers(0, 20))
+def test_crc16_is_crc_hqx(data: bytes, start: int, skip: int) -> None:
+    """Eight bytes a step, the running value carried in, any length (and views of bytes)
+    give ``binascii.crc_hqx``'s value, on both sides of the short-data threshold."""
+    assert tables.crc16(data, start) == binascii.crc_hqx(data, start)
+    view = memoryview(data)[skip:]
+    assert tables.crc16(view, start) == binascii.crc_hqx(view, start)
+    array = np.frombuffer(data, dtype=np.uint8)
+    lo = min(skip, len(data))
+    assert tables.crc16_update(array, lo, len(data), start) == binascii.crc_hqx(data[lo:], start)
+
+
+def test_crc16_continues_over_parts() -> None:
+    """A CRC continued over the parts of a long chunk is the whole chunk's CRC (the bundle's
+    group checks are computed that way)."""
+    data = np.random.default_rng(7).integers(0, 256, 100_003, dtype=np.uint8).tobytes()
+    crc = 0
+    for lo in range(0, len(data), 30_001):
+        crc = tables.crc16(data[lo : lo + 30_001], crc)
+    assert crc == binascii.crc_hqx(data, 0) == tables.crc16(data)
+
+
 def _random_tables(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Two levels of three planes each (sizes cut short at the edges), blocks of 4 x 4."""
     planes, blocks = [], []

@@ -258,3 +258,22 @@ def test_activity_bins_are_exact_at_every_edge() -> None:
     for num, den in pairs:
         expected = sum(1000 * int(num) > int(e) * int(den) for e in _EDGES_MILLI)
         assert _bin(np.int64(num), np.int64(den), _EDGES_MILLI, _EDGES_AT_MOST) == expected
+
+
+@pytest.mark.parametrize("coder", CODERS)
+def test_int32_range_is_checked_for_wider_integers_only(coder: str) -> None:
+    """int32 extremes (and narrower dtypes) are coded; int64 or uint32 values past int32's
+    range are refused, whatever the dtype's width lets through the skipped check."""
+    extremes = np.array([[-(2**31), 2**31 - 1], [0, 5]], dtype=np.int32)
+    chunks, params = encode_levels([extremes], coder=coder)
+    assert np.array_equal(decode_levels(chunks, [(2, 2)], params)[0], extremes)
+    narrow = np.array([[-128, 127], [0, 3]], dtype=np.int8)
+    chunks, params = encode_levels([narrow], coder=coder)
+    assert np.array_equal(decode_levels(chunks, [(2, 2)], params)[0], narrow)
+    for wide in (
+        np.array([[2**31, 0], [0, 0]], dtype=np.int64),
+        np.array([[-(2**31) - 1, 0], [0, 0]], dtype=np.int64),
+        np.array([[2**31, 0], [0, 0]], dtype=np.uint32),
+    ):
+        with pytest.raises(InvalidParameter, match="int32"):
+            encode_levels([wide], coder=coder)

@@ -4,6 +4,7 @@ once, errors reach the caller, nested regions finish, and slices cover each item
 from __future__ import annotations
 
 import threading
+from typing import Any
 
 import numpy as np
 import pytest
@@ -70,3 +71,60 @@ def test_slices_cover_every_element_once(threads: int, sizes: list[int]) -> None
 
     run_slices(sizes, mark)
     assert all((marks == 1).all() for marks in seen)
+
+
+def test_threaded_passes_give_the_same_bits_as_one_thread(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The passes that run in threads from 2^17 elements (a 512² picture's finest 2-D level
+    both ways, the last level straight into integers, the open loop's prediction over its small
+    bands) give exactly the values of one thread: the rate control's steps depend on them."""
+    from skimage import data
+
+    import wavecore.quantize
+    import wavecore.transform
+    from wavecore import wavedec2, waverec2
+    from wavecore.filters import get_wavelet
+    from wavecore.quantize import OpenLoopDistortion
+    from wavecore.transform import synthesis_2d_integers
+
+    regions: list[int] = []
+
+    def counted(calls: list[Any]) -> None:
+        regions.append(len(calls))
+        run_calls(calls)
+
+    monkeypatch.setattr(wavecore.transform, "run_calls", counted)
+    monkeypatch.setattr(wavecore.quantize, "run_calls", counted)
+    image = data.camera().astype(np.float64)
+    results = {}
+    for count in ("1", "2"):
+        monkeypatch.setenv("WAVECORE_THREADS", count)
+        regions.clear()
+        coeffs = wavedec2(image, "cdf97", level=4)
+        predict = OpenLoopDistortion(coeffs, wavelet="cdf97", boundary="open")
+        coarse = waverec2(coeffs[:-1], "cdf97")
+        cH, cV, cD = coeffs[-1]
+        integers = synthesis_2d_integers(
+            (coarse, cV, cH, cD),
+            get_wavelet("cdf97"),
+            ("open", "open"),
+            ((0, 512), (0, 512)),
+            np.dtype(np.uint8),
+            None,
+        )
+        assert integers is not None
+        results[count] = (
+            [np.asarray(b) for b in (coeffs[0], *coeffs[-1])],
+            waverec2(coeffs, "cdf97"),
+            integers,
+            [predict(step) for step in (0.5, 3.0, 17.0)],
+        )
+        # The predictions always hand their bands to run_calls (which runs them in order on
+        # one thread); with two, the analysis and both finest syntheses run in regions too.
+        assert len(regions) == (3 if count == "1" else 3 + 1 + 1 + 1), regions
+    one, two = results["1"], results["2"]
+    for a, b in zip(one[0], two[0], strict=True):
+        assert np.array_equal(a, b)
+    assert np.array_equal(one[1], two[1])
+    assert np.array_equal(one[2], two[2])
+    assert one[3] == two[3]
+    assert np.abs(one[1] - image).max() < 1e-6  # and it is the transform, not a stand-in

@@ -9,6 +9,8 @@ block or per plane.
 
 from __future__ import annotations
 
+import binascii
+
 import numpy as np
 from numba import njit
 
@@ -29,20 +31,74 @@ from ._blockkernels import (
 )
 
 
-def _crc16_table() -> np.ndarray:
-    """The byte-at-a-time table of CRC-16/XMODEM (polynomial 0x1021, MSB first): the CRC that
-    ``binascii.crc_hqx(data, 0)`` computes, which bundles store."""
-    table = np.zeros(256, dtype=np.int64)
+def _crc16_tables(slices: int) -> np.ndarray:
+    """Slicing-by-``slices`` tables of CRC-16/XMODEM (polynomial 0x1021, MSB first, the CRC
+    that ``binascii.crc_hqx(data, 0)`` computes, which bundles store): row ``k`` holds the
+    CRC of each byte followed by ``k`` zero bytes (row 0 is the byte-at-a-time table)."""
+    tables = np.zeros((slices, 256), dtype=np.int64)
     for byte in range(256):
         crc = byte << 8
         for _ in range(8):
             crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
             crc &= 0xFFFF
-        table[byte] = crc
-    return table
+        tables[0, byte] = crc
+    for k in range(1, slices):
+        previous = tables[k - 1]
+        tables[k] = ((previous << 8) & 0xFFFF) ^ tables[0, previous >> 8]
+    return tables
 
 
-CRC16_TABLE = _crc16_table()
+#: Bytes per step of :func:`crc16_update`: eight table look-ups per step, independent of
+#: each other, instead of a chain of eight (about six times the byte-at-a-time speed).
+CRC16_SLICES = 8
+CRC16_TABLES = _crc16_tables(CRC16_SLICES)
+CRC16_TABLE = CRC16_TABLES[0].copy()
+#: Below this many bytes :func:`crc16` leaves the work to ``binascii`` (no dispatch).
+_SHORT_CRC = 256
+
+
+@njit(nogil=True, cache=True)
+def crc16_update(data: np.ndarray, lo: int, hi: int, crc: int) -> int:
+    """``binascii.crc_hqx(data[lo:hi], crc)``, eight bytes a step.
+
+    The CRC is linear (no final xor), so the running value, xored into the next two bytes,
+    is carried like message bytes: eight bytes then add up from the slicing tables."""
+    tables = CRC16_TABLES
+    i = lo
+    while i + 8 <= hi:
+        b0 = data[i] ^ (crc >> 8)
+        b1 = data[i + 1] ^ (crc & 0xFF)
+        crc = (
+            tables[7, b0]
+            ^ tables[6, b1]
+            ^ tables[5, data[i + 2]]
+            ^ tables[4, data[i + 3]]
+            ^ tables[3, data[i + 4]]
+            ^ tables[2, data[i + 5]]
+            ^ tables[1, data[i + 6]]
+            ^ tables[0, data[i + 7]]
+        )
+        i += 8
+    while i < hi:
+        crc = ((crc << 8) & 0xFFFF) ^ tables[0, ((crc >> 8) ^ data[i]) & 0xFF]
+        i += 1
+    return crc
+
+
+def crc16(data: bytes | bytearray | memoryview, crc: int = 0) -> int:
+    """CRC-16/XMODEM of ``data`` continued from ``crc``: ``binascii.crc_hqx(data, crc)``, by
+    :func:`crc16_update` for all but short data, without holding the GIL.
+
+    Examples
+    --------
+    >>> import binascii
+    >>> crc16(bytes(range(256)) * 3, 7) == binascii.crc_hqx(bytes(range(256)) * 3, 7)
+    True
+    """
+    if len(data) < _SHORT_CRC:
+        return binascii.crc_hqx(data, crc)
+    array = np.frombuffer(data, dtype=np.uint8)
+    return int(crc16_update(array, 0, array.size, crc))
 
 
 @njit(nogil=True, cache=True)
@@ -51,10 +107,7 @@ def crc16_spans(data: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.nd
     of the bytes ``data``."""
     out = np.empty(starts.size, dtype=np.int64)
     for k in range(starts.size):
-        crc = 0
-        for i in range(starts[k], ends[k]):
-            crc = ((crc << 8) & 0xFFFF) ^ CRC16_TABLE[((crc >> 8) ^ data[i]) & 0xFF]
-        out[k] = crc
+        out[k] = crc16_update(data, starts[k], ends[k], 0)
     return out
 
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 import binascii
 import functools
 import itertools
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -88,8 +89,8 @@ def _plane_dims(band_shape: tuple[int, ...], two_d: bool) -> tuple[int, int, int
     if not band_shape:
         return 1, 1, 1
     if two_d and len(band_shape) >= 2:
-        return int(band_shape[0]), int(band_shape[1]), int(np.prod(band_shape[2:], dtype=np.int64))
-    return 1, int(band_shape[0]), int(np.prod(band_shape[1:], dtype=np.int64))
+        return int(band_shape[0]), int(band_shape[1]), int(math.prod(band_shape[2:]))
+    return 1, int(band_shape[0]), int(math.prod(band_shape[1:]))
 
 
 _LayoutKey = tuple[tuple[tuple[int, ...], ...], ...]
@@ -626,6 +627,8 @@ def decode_block_windows(
 
 #: Rows of planes per copy task: about this many values, so that the tasks balance.
 _COPY_TASK = 1 << 16
+#: At most this many pieces (runs of tasks) a copy is cut into for the threads.
+_COPY_PIECES = 16
 
 
 def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: int) -> None:
@@ -645,7 +648,9 @@ def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: in
         for k, row_lo, row_hi in tasks[lo:hi]:
             targets[k][row_lo:row_hi] = sources[k][row_lo:row_hi]
 
-    run_rows(run, len(tasks), total)
+    # Many pieces: a copy's time varies with the page faults of its target rows (fresh
+    # memory), and in two pieces a thread one slow piece could leave the other thread idle.
+    run_rows(run, len(tasks), total, pieces=min(len(tasks), _COPY_PIECES))
 
 
 # --------------------------------------------------------------------------------------------

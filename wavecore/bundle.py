@@ -154,6 +154,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from . import binheader
+from ._blocktables import crc16
 from .blockcoder import BLOCK_SIZES, CHECK_BYTES, add_block_checks, block_table, strip_block_checks
 from .errors import BundleError
 
@@ -339,7 +340,7 @@ class Bundle:
                 if part is None:
                     whole = False
                     break
-                crc = binascii.crc_hqx(part, crc)
+                crc = crc16(part, crc)
             self._verified[first] = whole and crc == self.crcs[index]
         return self._verified[first]
 
@@ -358,7 +359,7 @@ def _blocks_match(data: memoryview | None, blocks: int, bands: int) -> bool:
 
 def _chunk_check(data: bytes | memoryview, checksum: str) -> int:
     if checksum == "crc16":
-        return binascii.crc_hqx(data, 0)
+        return crc16(data)
     return zlib.crc32(data)
 
 
@@ -538,7 +539,7 @@ def _compact_bytes(packed: bytes, chunks: Sequence[bytes]) -> bytes:
     for first, last in chunk_groups([len(chunk) for chunk in chunks]):
         crc = 0
         for chunk in chunks[first : last + 1]:
-            crc = binascii.crc_hqx(chunk, crc)
+            crc = crc16(chunk, crc)
         parts.append(_U16.pack(crc))
     head = b"".join(parts)
     return b"".join([head, _U16.pack(binascii.crc_hqx(head, 0)), *chunks])
@@ -561,7 +562,7 @@ def _curve_bytes(packed: bytes, header: dict[str, Any], chunks: Sequence[bytes])
     for first, last in curve_groups(len(chunks)):
         crc = 0
         for chunk in chunks[first : last + 1]:
-            crc = binascii.crc_hqx(chunk, crc)
+            crc = crc16(chunk, crc)
         parts.append(_U16.pack(crc))
     head = b"".join(parts)
     return b"".join([head, _U16.pack(binascii.crc_hqx(head, 0)), *map(bytes, chunks)])
@@ -700,7 +701,7 @@ def _checked_curve_bytes(packed: bytes, header: dict[str, Any], chunks: Sequence
     for first, last in checked_groups(blocks):
         crc = 0
         for chunk in chunks[first : last + 1]:
-            crc = binascii.crc_hqx(chunk, crc)
+            crc = crc16(chunk, crc)
         parts.append(_U16.pack(crc))
     head = b"".join(parts)
     return b"".join([head, _U16.pack(binascii.crc_hqx(head, 0)), *map(bytes, chunks)])
@@ -879,7 +880,7 @@ def _crc16(chunk: bytes) -> int:
     known = getattr(chunk, "crc16", None)
     if known is not None:
         return int(known)
-    crc = binascii.crc_hqx(chunk, 0)
+    crc = crc16(chunk)
     if isinstance(chunk, _StoredChunk):
         chunk.crc16 = crc
     return crc
@@ -998,7 +999,7 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
     if zlib.crc32(first, zlib.crc32(reader.view[:head_end])) != crc:
         msg = "the header, chunk table or chunk 0 is corrupt: the header CRC-32 does not match"
         raise BundleError(msg)
-    crcs[0] = binascii.crc_hqx(first, 0)
+    crcs[0] = crc16(first)
     chunks = _take_chunks(reader, lengths)
     return Bundle((major, minor), header, chunks, tuple(crcs), "crc16")
 

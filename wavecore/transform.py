@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import itertools
+import math
 import os
 import threading
 from collections.abc import Callable, Sequence
@@ -49,6 +50,13 @@ _FEW_TRAILING = 4
 # 1 << 18 a 512² grey picture's encode (its quality search synthesises 512² levels a few
 # hundred times) took 0.30 s on two threads against 0.22 s on one; at 1 << 19, 0.23 s.
 _THREADED_MIN_ELEMENTS = 1 << 19
+
+# The fused 2-D levels (analysis_2d, synthesis_2d, synthesis_2d_integers) do dozens of
+# operations an element in one pass, so smaller levels pay for a region: a 512² grey
+# picture's finest level (2^18 elements, about 1 ms a pass) and a 2048² RGB picture's
+# 256² level ran on the calling thread alone, the largest serial part of their codings.
+# Each row block computes its rows as the whole pass does, so the values do not change.
+_THREADED_MIN_FUSED = 1 << 17
 
 # Read once: the hot paths ask for the thread count hundreds of times per encode.
 _CPUS = os.cpu_count() or 1
@@ -165,15 +173,17 @@ def _run_blocks(
     rows_even: bool = False,
     outer_only: bool = False,
     min_rows: int = 1,
+    least: int = _THREADED_MIN_ELEMENTS,
 ) -> None:
     """Call ``kernel(*args, outer_lo, outer_hi, row_lo, row_hi)`` over blocks, in threads if big.
 
     ``outer_only`` kernels take only ``(outer_lo, outer_hi)``; ``rows_even`` keeps row blocks
     on even boundaries (a synthesis block then starts on a whole pair of fine rows);
-    ``min_rows`` is the fewest rows worth a block of their own when splitting rows.
+    ``min_rows`` is the fewest rows worth a block of their own when splitting rows; ``least``
+    the fewest elements of ``work`` worth threads.
     """
     threads = _thread_count()
-    if threads == 1 or work < _THREADED_MIN_ELEMENTS or (outer_only and outer == 1):
+    if threads == 1 or work < least or (outer_only and outer == 1):
         kernel(*args, 0, outer) if outer_only else kernel(*args, 0, outer, 0, rows)
         return
     blocks = threads * 4
@@ -231,11 +241,10 @@ def run_slices(
     for item in sorted(range(len(sizes)), key=lambda k: -int(sizes[k])):
         size = int(sizes[item])
         pieces = max(1, min(threads * 2, size // least))
-        edges = np.linspace(0, size, pieces + 1).astype(int)
+        # Whole-number edges (np.linspace costs ~10 us a call, and a region may cut 40 bands).
+        edges = [size * k // pieces for k in range(pieces + 1)]
         calls += [
-            functools.partial(call, item, int(lo), int(hi))
-            for lo, hi in itertools.pairwise(edges)
-            if hi > lo
+            functools.partial(call, item, lo, hi) for lo, hi in itertools.pairwise(edges) if hi > lo
         ]
     run_calls(calls)
 
@@ -245,16 +254,18 @@ def run_rows(
     rows: int,
     work: int | None = None,
     pieces: int | None = None,
+    least: int = _THREADED_MIN_ELEMENTS,
 ) -> None:
     """Call ``call(row_lo, row_hi)`` over blocks of ``rows`` rows, in threads if the work is big.
 
     For the codec's compiled per-pixel passes (which release the GIL).  ``work``, the number of
-    elements processed, keeps small jobs on the calling thread; without it a job counts as big.
-    ``pieces`` (default: two per thread) is how many blocks the rows are cut into: uneven work
-    balances better over more, smaller blocks, which the pool hands to whichever thread is free.
+    elements processed, keeps small jobs (below ``least``) on the calling thread; without it a
+    job counts as big.  ``pieces`` (default: two per thread) is how many blocks the rows are cut
+    into: uneven work balances better over more, smaller blocks, which the pool hands to
+    whichever thread is free.
     """
     threads = _thread_count()
-    if threads == 1 or rows < 2 or (work is not None and work < _THREADED_MIN_ELEMENTS):
+    if threads == 1 or rows < 2 or (work is not None and work < least):
         call(0, rows)
         return
     count = threads * 2 if pieces is None else max(1, pieces)
@@ -265,8 +276,8 @@ def run_rows(
 def _view3(arr: np.ndarray, axis: int) -> np.ndarray:
     """A ``(outer, n, inner)`` view of a C-contiguous array around ``axis``."""
     shape = arr.shape
-    outer = int(np.prod(shape[:axis], dtype=np.int64))
-    inner = int(np.prod(shape[axis + 1 :], dtype=np.int64))
+    outer = math.prod(shape[:axis])
+    inner = math.prod(shape[axis + 1 :])
     return arr.reshape(outer, shape[axis], inner)
 
 
@@ -528,8 +539,8 @@ def _synthesis_ring(bank_name: str, boundary: str, m: int) -> int:
 
 def _split_shape(shape: tuple[int, ...], axis: int) -> tuple[int, int, int, int]:
     """``(outer, n0, n1, inner)`` for the axes ``axis`` and ``axis + 1`` of ``shape``."""
-    outer = int(np.prod(shape[:axis], dtype=np.int64))
-    inner = int(np.prod(shape[axis + 2 :], dtype=np.int64))
+    outer = math.prod(shape[:axis])
+    inner = math.prod(shape[axis + 2 :])
     return outer, shape[axis], shape[axis + 1], inner
 
 
@@ -553,7 +564,7 @@ def analysis_2d(
     sizes = ((r0, r1), (r0, s1), (s0, r1), (s0, s1))
     bands = [np.empty((outer, rows, cols * inner), dtype=arr.dtype) for rows, cols in sizes]
     args = (x, mats0["A+"], mats0["B+"], mats1["A+"], mats1["B+"], *bands, inner)
-    _run_blocks(_kernels.analysis_2d, args, outer, max(r0, s0), x.size)
+    _run_blocks(_kernels.analysis_2d, args, outer, max(r0, s0), x.size, least=_THREADED_MIN_FUSED)
     lead, trail = arr.shape[:axis], arr.shape[axis + 2 :]
     aa, ad, da, dd = (
         band.reshape(lead + size + trail) for band, size in zip(bands, sizes, strict=True)
@@ -619,7 +630,16 @@ def synthesis_2d(
     # Each block fills its ring buffers afresh (a few coarse rows' syntheses along axis 1), so
     # a block of a handful of rows would mostly redo its neighbours' work: the 8 rows of a
     # padded 1 × N image took 4 times the work in 8 blocks.
-    _run_blocks(_kernels.synthesis_2d, args, outer, m0, f.size, rows_even=True, min_rows=32)
+    _run_blocks(
+        _kernels.synthesis_2d,
+        args,
+        outer,
+        m0,
+        f.size,
+        rows_even=True,
+        min_rows=32,
+        least=_THREADED_MIN_FUSED,
+    )
     return f.reshape((*lead, m0, m1, *trail))
 
 
@@ -676,5 +696,6 @@ def synthesis_2d_integers(
         row1 - row0,
         (row1 - row0) * m1 * inner,
         pieces=max(1, min(_thread_count() * 2, (row1 - row0) // 32)),
+        least=_THREADED_MIN_FUSED,
     )
     return out.reshape(out.shape[:2] + trail)

@@ -494,13 +494,16 @@ class _LossyEncoder:
                 np.searchsorted(band[beyond], np.arange(1, bands + 1)),
                 np.searchsorted(band[indices >= 1], np.arange(1, bands + 1)),
             ]
+            # ``np.add.reduce`` is the reduction ``np.sum`` runs (the same pairwise sums, to
+            # the bit) without its dispatch, which cost more than the sums: the bpp search
+            # makes about 30 estimates of 48 bands each on the calling thread.
+            add = np.add.reduce
             bits = 0.0
-            first = [0, 0, 0]
-            for b in range(bands):
-                last = [int(end[b]) for end in ends]
-                bits -= float(np.sum(entropy[first[0] : last[0]]))
-                bits += 1.2 * float(np.sum(lengths[first[1] : last[1]]))
-                bits += float(signed[first[2] : last[2]].sum())  # a bit per sign
+            first = (0, 0, 0)
+            for last in zip(*(end.tolist() for end in ends), strict=True):
+                bits -= float(add(entropy[first[0] : last[0]]))
+                bits += 1.2 * float(add(lengths[first[1] : last[1]]))
+                bits += float(add(signed[first[2] : last[2]]))  # a bit per sign
                 first = last
             self._estimates[key] = bits / 8.0 + _HEADER_GUESS
         return self._estimates[key]
