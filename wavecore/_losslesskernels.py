@@ -62,7 +62,7 @@ STATE_CAP = 30
 def _stretch_table() -> np.ndarray:
     """``stretch(p) = ln(p / (1 - p))`` at 12-bit probabilities, in 1 / 256, as integers: the
     inverse of ``_squash`` (computed from it, so the two agree exactly)."""
-    table = np.zeros(4096, dtype=np.int16)  # small tables: the hot loop's L1 cache
+    table = np.zeros(4096, dtype=np.int64)
     pi = 0
     for x in range(-2047, 2048):
         v = _squash_py(x)
@@ -102,7 +102,7 @@ QLOG = np.array(
     ],
     dtype=np.int64,
 )
-SQUASH = np.array([_squash_py(d) for d in range(-2048, 2048)], dtype=np.int16)
+SQUASH = np.array([_squash_py(d) for d in range(-2048, 2048)], dtype=np.int64)
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -146,14 +146,15 @@ def _bit_length(value):
 def _update(models, ctx, bit):
     """A model's probability of a 1 (16 bits, above 4 bits of count) moves towards the bit by
     ``2**-min(count + 1, RATE_LIMIT)``: fast at first, then steadier."""
-    model = np.int64(models[ctx])
-    n = min((model & 15) + 1, RATE_LIMIT)
+    model = models[ctx]
+    n = model & 15
     p = model >> 4
-    # both moves, then a select: the coded bit is a branch the processor cannot predict
-    up = p + ((65536 - p) >> n)
-    down = p - (p >> n)
-    p = up if bit else down
-    models[ctx] = (max(32, min(65504, p)) << 4) | n
+    shift = min(n + 1, RATE_LIMIT)
+    if bit:
+        p += (65536 - p) >> shift
+    else:
+        p -= p >> shift
+    models[ctx] = (max(32, min(65504, p)) << 4) | min(n + 1, RATE_LIMIT)
 
 
 @njit(nogil=True, cache=True, inline="always")
