@@ -195,8 +195,16 @@ def peer_table(rows: list[dict[str, Any]]) -> str:
 
 def max_table(rows: list[dict[str, Any]]) -> str:
     """``effort="max"``: bytes against JPEG XL e7 and WebP lossless, time against PNG."""
-    names = [n for n in rows[0]["peers"] if n.startswith(("JPEG XL", "WebP"))]
-    jxl, webp = (next(n for n in names if n.startswith(p)) for p in ("JPEG XL", "WebP"))
+    # JPEG XL is measured only where imagecodecs is installed (peers.jxl_available): without
+    # it the column says so rather than the table failing.
+    jxl, webp = (
+        next((n for n in rows[0]["peers"] if n.startswith(p)), f"{p} (not installed)")
+        for p in ("JPEG XL", "WebP")
+    )
+
+    def cell(r: dict[str, Any], name: str) -> str:
+        return f"{r['peers'][name]:,}" if name in r["peers"] else "—"
+
     lines = [
         f"| image | max (bytes) | default (bytes) | {jxl} | {webp} | levels "
         "| encode + decode max / PNG (s) |",
@@ -204,8 +212,8 @@ def max_table(rows: list[dict[str, Any]]) -> str:
     ]
     for r in rows:
         lines.append(
-            f"| {r['name']} | {r['max']:,} | {r['ours']:,} | {r['peers'][jxl]:,} "
-            f"| {r['peers'][webp]:,} | {r['max_lifting']} "
+            f"| {r['name']} | {r['max']:,} | {r['ours']:,} | {cell(r, jxl)} "
+            f"| {cell(r, webp)} | {r['max_lifting']} "
             f"| {r['max_encode'] + r['max_decode']:.3f} / {r['png_encode'] + r['png_decode']:.3f} |"
         )
     for group, members in (
@@ -214,10 +222,15 @@ def max_table(rows: list[dict[str, Any]]) -> str:
     ):
         if members:
             most, ours = sum(r["max"] for r in members), sum(r["ours"] for r in members)
-            j, w = (sum(r["peers"][n] for r in members) for n in (jxl, webp))
+            totals = []
+            for n in (jxl, webp):
+                if all(n in r["peers"] for r in members):
+                    theirs = sum(r["peers"][n] for r in members)
+                    totals.append(f"{theirs:,} (max {most / theirs:.3f}×)")
+                else:
+                    totals.append("—")
             lines.append(
-                f"| **{group} total** | {most:,} | {ours:,} | {j:,} (max {most / j:.3f}×) "
-                f"| {w:,} (max {most / w:.3f}×) | | |"
+                f"| **{group} total** | {most:,} | {ours:,} | {totals[0]} | {totals[1]} | | |"
             )
     mine = sum(r["max_encode"] + r["max_decode"] for r in rows)
     png = sum(r["png_encode"] + r["png_decode"] for r in rows)
