@@ -74,6 +74,16 @@ _FRAME_LIMIT = 1 << 20  # steps longer than this (lattice units) are coded witho
 FLAG_BASE = SIGN_BASE + SIGN_SIZE
 FLAG_SIZE = 4
 MODELS = FLAG_BASE + FLAG_SIZE
+#: Version 6's models, after every earlier version's (whose priors index below ``MODELS``):
+#: the copy flag (by the previous curve's), the distance back to the copied curve (unary bit
+#: length and one mantissa model), the fraction's bit count and its bits.
+COPY_BASE = MODELS
+_COPY_DISTANCE = COPY_BASE + 2
+_COPY_SHIFT = _COPY_DISTANCE + _UNARY + 1
+_COPY_FRACTION = _COPY_SHIFT + _UNARY + 1
+#: the finest fraction of a lattice step by which a copy may be translated: ``2**-COPY_SHIFTS``
+COPY_SHIFTS = 6
+ALL_MODELS = _COPY_FRACTION + COPY_SHIFTS
 
 #: Version 5's starting probabilities: ``"index:value"`` pairs, ``value / 256`` the
 #: probability of a 0 bit (models not listed start at one half).  Learnt on glyphs that
@@ -136,7 +146,7 @@ PRIOR_COUNT = 2
 
 
 def _parse_priors(table: str) -> np.ndarray:
-    models = np.empty(2 * MODELS, dtype=np.int64)
+    models = np.empty(2 * ALL_MODELS, dtype=np.int64)
     models[0::2] = PROB_HALF
     models[1::2] = 0
     for pair in table.split():
@@ -154,7 +164,7 @@ def initial_models(priors: bool) -> np.ndarray:
 def trained_table(states: list[np.ndarray], least: int = 4) -> str:
     """The prior table (:data:`_PRIOR_TABLE`'s form) from the final models of coded sets: per
     model, the mean probability over the sets that used it, where at least ``least`` did."""
-    stack = np.stack(states)
+    stack = np.stack(states)[:, : 2 * MODELS]
     used = stack[:, 1::2] > 0
     mean = np.where(used, stack[:, 0::2], 0).sum(axis=0) / np.maximum(used.sum(axis=0), 1)
     pairs = []
@@ -270,6 +280,27 @@ def _magnitude(st, buf, models, kind, value, decoding):
 
 
 @njit(cache=True, nogil=True)
+def _plain_magnitude(st, buf, models, base, value, decoding):
+    """A magnitude ``value >= 0``: its bit length in unary (models ``base + k``), the bits
+    below the leading one with the one model ``base + _UNARY`` (version 6's copies)."""
+    k = 0 if decoding else _bit_length(value)
+    if decoding:
+        while k < MAX_BITS and _bit(st, buf, models, base + k, 0, True):
+            k += 1
+    else:
+        for i in range(k):
+            _bit(st, buf, models, base + i, 1, False)
+        if k < MAX_BITS:
+            _bit(st, buf, models, base + k, 0, False)
+    if k <= 1:
+        return k
+    out = 1
+    for i in range(k - 2, -1, -1):
+        out = (out << 1) | _bit(st, buf, models, base + _UNARY, (value >> i) & 1, decoding)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _signed(st, buf, models, kind, sign_ctx, value, decoding):
     magnitude = _magnitude(st, buf, models, kind, abs(value), decoding)
     if magnitude == 0:
@@ -353,6 +384,9 @@ def _code_set(
     bulged,
     from_last,
     models,
+    copying,
+    sources,
+    fractions,
 ):
     """Code (or decode into ``lattice``, ``counts``, ``closed``, ``repeated``) a whole set.
 
@@ -364,6 +398,11 @@ def _code_set(
     the segment's end (the closing segment's at the curve's first row).
     With ``from_last`` (version 4), a curve's first vertex is coded from the previous curve's
     last vertex rather than its first.
+    With ``copying`` (version 6), each curve after the first has a flag: a *copy* of curve
+    ``sources[c]`` (an earlier one), translated: its first vertex is coded as any curve's, then
+    ``fractions[c] = (k, f_0, …)``: a translation by ``f_j / 2**k`` of a lattice step more, and
+    its vertices and bulges are the source's, moved with its first vertex.  ``sources`` is -1
+    for a curve coded in full.
     Returns the number of vertices (decoding: those written; -1 if the stream declares more
     than ``lattice`` holds).
     """
@@ -373,12 +412,32 @@ def _code_set(
     previous_residual = np.zeros(d, dtype=np.int64)
     at = 0
     limit = len(lattice)
+    rows = np.zeros(len(counts) + 1, dtype=np.int64)  # each curve's first row
+    copied = 0
     for c in range(len(counts)):
+        rows[c] = at
         if closed_mode == 2:
             closed[c] = _bit(st, buf, models, FLAG_BASE, closed[c], decoding)
         if closed[c]:
             repeated[c] = _bit(st, buf, models, FLAG_BASE + 1, repeated[c], decoding)
-        m = _magnitude(st, buf, models, _KIND_COUNT, counts[c] - 1, decoding) + 1
+        source = -1
+        if copying and c > 0:
+            flag = _bit(st, buf, models, COPY_BASE + copied, sources[c] >= 0, decoding)
+            copied = flag
+            if flag:
+                back = 0 if decoding else c - 1 - sources[c]
+                back = _plain_magnitude(st, buf, models, _COPY_DISTANCE, back, decoding)
+                if back > c - 1:
+                    return -1
+                source = c - 1 - back
+                if decoding:
+                    sources[c] = source
+            elif decoding:
+                sources[c] = -1
+        if source >= 0:
+            m = counts[source]
+        else:
+            m = _magnitude(st, buf, models, _KIND_COUNT, counts[c] - 1, decoding) + 1
         if decoding:
             if m > limit - at:
                 return -1
@@ -394,6 +453,35 @@ def _code_set(
             if decoding:
                 lattice[at, j] = start[j] + value
             start[j] = lattice[at, j]
+        if source >= 0:  # a translated copy: the fraction, then the source's shape
+            shift = 0 if decoding else fractions[c, 0]
+            shift = _plain_magnitude(st, buf, models, _COPY_SHIFT, shift, decoding)
+            if shift > COPY_SHIFTS:
+                return -1
+            fractions[c, 0] = shift
+            for j in range(d):
+                value = 0
+                for i in range(shift - 1, -1, -1):
+                    bit = _bit(
+                        st,
+                        buf,
+                        models,
+                        _COPY_FRACTION + i,
+                        (fractions[c, 1 + j] >> i) & 1,
+                        decoding,
+                    )
+                    value = (value << 1) | bit
+                fractions[c, 1 + j] = value
+            first = rows[source]
+            for v in range(1, m):
+                for j in range(d):
+                    lattice[at + v, j] = lattice[at, j] + lattice[first + v, j] - lattice[first, j]
+                if bulged:
+                    bulges[at + v] = bulges[first + v]
+            if bulged:
+                bulges[at] = bulges[first]
+            at += m
+            continue
         length_class = _class(_bit_length(0))
         for j in range(d):
             previous_step[j] = 0
@@ -545,10 +633,19 @@ def encode_set(
     from_last: bool = False,
     priors: bool = False,
     models: np.ndarray | None = None,
+    sources: np.ndarray | None = None,
+    fractions: np.ndarray | None = None,
 ) -> bytes:
     """The range-coded stream of a set of lattice curves (see :func:`decode_set`); with
     ``bulges`` (one per vertex row: the bulge of the segment ending there), version 3's;
-    ``from_last`` (version 4) codes a curve's first vertex from the previous curve's last."""
+    ``from_last`` (version 4) codes a curve's first vertex from the previous curve's last;
+    ``sources`` and ``fractions`` (version 6: both or neither) the copies, as in
+    :func:`_code_set` (the copies' rows of ``lattice`` and ``bulges`` must be their sources',
+    moved)."""
+    copying = sources is not None
+    sources = np.full(len(counts), -1, dtype=np.int64) if sources is None else sources
+    if fractions is None:
+        fractions = np.zeros((len(counts), lattice.shape[1] + 1), dtype=np.int64)
     d = lattice.shape[1]
     bulged = bulges is not None
     bulges = np.zeros(len(lattice), dtype=np.int64) if bulges is None else bulges
@@ -571,6 +668,9 @@ def encode_set(
         bulged,
         bool(from_last),
         models,
+        copying,
+        np.ascontiguousarray(sources, dtype=np.int64),
+        np.ascontiguousarray(fractions, dtype=np.int64),
     )
     _finish_stream(st, out)
     size = int(st[_POS])
@@ -609,9 +709,12 @@ def decode_bulged_set(
     bulged: bool,
     from_last: bool = False,
     priors: bool = False,
+    copies: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """As :func:`decode_set`, and the bulges (zeros unless ``bulged``: version 3);
-    ``from_last`` as in :func:`encode_set` (version 4)."""
+    ``from_last`` as in :func:`encode_set` (version 4).  With ``copies`` (version 6: an
+    array ``(count, d + 2)``), each curve's source (-1 for none) and fraction are written to
+    its rows, as :func:`_code_set` gives them."""
     buf = np.frombuffer(bytes(data), dtype=np.uint8).copy()  # one compiled signature
     st = np.array([0, MASK32, 0, 1, 0, 0], dtype=np.int64)
     code = 0
@@ -624,6 +727,8 @@ def decode_bulged_set(
     closed = np.full(count, 1 if all_closed else 0, dtype=np.int64)
     repeated = np.zeros(count, dtype=np.int64)
     bulges = np.zeros(max_vertices, dtype=np.int64)
+    sources = np.full(count, -1, dtype=np.int64)
+    fractions = np.zeros((count, d + 1), dtype=np.int64)
     total = _code_set(
         buf,
         st,
@@ -639,9 +744,15 @@ def decode_bulged_set(
         bulged,
         bool(from_last),
         initial_models(priors),
+        copies is not None,
+        sources,
+        fractions,
     )
     if total < 0:
         return None
+    if copies is not None:
+        copies[:, 0] = sources
+        copies[:, 1:] = fractions
     return lattice[:total], counts, closed, repeated, bulges[:total]
 
 

@@ -105,6 +105,9 @@ PLANE_VERSION = 4
 #: Version 4's layout, the coder's models started at learnt priors rather than one half
 #: (docs/curves.md, version 5).
 PRIOR_VERSION = 5
+#: Version 5 with copies: a curve may be coded as an earlier curve's vertices and bulges,
+#: translated by a lattice vector and a fraction of a step (docs/curves.md, version 6).
+COPY_VERSION = 6
 METHODS = ("auto", "wavelet", "vertex")
 #: Lattice steps of the vertex form, as multiples of the tolerance (a byte indexes this table).
 #: A vertex moves by at most ``step * sqrt(d) / 2`` when rounded, which must stay within the
@@ -1198,6 +1201,7 @@ def _encode_vertex(
             if not plane:
                 continue  # neither form keeps the bound at this step: the next finer one
             best_plane: tuple[bytes, int, int] | None = None
+            best_inputs: tuple[np.ndarray, np.ndarray, np.ndarray | None, int, bool]
             counts_written = counts
             start_rows: dict[int, np.ndarray] = {}
             for kept_vertices, kept_bulges, candidate in plane:
@@ -1243,7 +1247,13 @@ def _encode_vertex(
                     if best_plane is None or len(coded) < len(best_plane[0]):
                         best_plane = (coded, head, version)
                         counts_written = sizes
+                        best_inputs = (placed, sizes, placed_bulges, candidate, from_last)
             assert best_plane is not None
+            copied = _copied_stream(
+                parts, closed, again, closed_mode, best_inputs, step, tolerance, dtype
+            )
+            if copied is not None and len(copied) < len(best_plane[0]):
+                best_plane = (copied, best_plane[1], COPY_VERSION)
             stream, head, plane_version = best_plane
             limit = VERTEX_PER_BYTE * (len(stream) + 16)
             if len(arrays) > limit or int(counts_written.sum()) * d > limit:
@@ -1289,13 +1299,124 @@ def _encode_vertex(
     return best
 
 
+#: The most point-to-segment distances that copies' checks may measure, per original point
+#: of the set (and a fixed allowance): the copies' cost stays linear in the input.
+_COPY_WORK = 256
+_COPY_CANDIDATES = 8  # earlier curves of the same length compared with a curve
+
+
+def _one_way_exact(source: np.ndarray, target: np.ndarray, closed: bool) -> float:
+    """The largest distance from a point of ``source`` to the polyline ``target`` (closed:
+    with its closing segment), every point against every segment."""
+    a = target if not closed or len(target) < 2 else np.concatenate([target, target[:1]])
+    if len(a) == 1:
+        return float(np.max(np.linalg.norm(source - a[0], axis=1)))
+    start, edge = a[:-1], np.diff(a, axis=0)
+    length2 = np.maximum(np.einsum("ij,ij->i", edge, edge), 1e-300)
+    worst = 0.0
+    for lo in range(0, len(source), 256):
+        p = source[lo : lo + 256, None, :] - start[None]
+        t = np.clip(np.einsum("ijk,jk->ij", p, edge) / length2, 0.0, 1.0)
+        gap = p - t[..., None] * edge[None]
+        worst = max(worst, float(np.sqrt(np.min(np.einsum("ijk,ijk->ij", gap, gap), axis=1)).max()))
+    return worst
+
+
+def _copy_values(
+    vertices: np.ndarray, bulges: np.ndarray | None, closed: bool, step: float, dtype: Any
+) -> np.ndarray:
+    """One curve's decoded polyline from its (fractional) lattice vertices, as decoding
+    computes it."""
+    counts = np.array([len(vertices)], dtype=np.int64)
+    flags = np.array([int(closed)], dtype=np.int64)
+    if bulges is None:
+        return _lattice_values(vertices, step, dtype).astype(np.float64)
+    return _bulged_polylines(vertices, counts, flags, bulges, step, dtype)[0].astype(np.float64)
+
+
+def _copied_stream(
+    parts: list[np.ndarray],
+    closed: np.ndarray,
+    again: np.ndarray,
+    closed_mode: int,
+    inputs: tuple[np.ndarray, np.ndarray, np.ndarray | None, int, bool],
+    step: float,
+    tolerance: float,
+    dtype: Any,
+) -> bytes | None:
+    """Version 6's stream for the chosen coding ``inputs`` (vertices, counts, bulges,
+    predictor, ``from_last``), where some curve is a translate of an earlier one (glyphs of
+    one letter, repeated symbols) and the earlier curve's decoded shape, moved by a lattice
+    vector and a fraction ``f / 2**k`` of a step (the coarsest that does), keeps the bound on
+    it: measured exactly, every point against every segment, both ways.  None where no curve
+    is copied."""
+    vertices, counts, bulges, order, from_last = inputs
+    count = len(parts)
+    rows = np.zeros(count + 1, dtype=np.int64)
+    rows[1:] = np.cumsum(counts)
+    budget = _COPY_WORK * sum(len(p) for p in parts) + (1 << 22)
+    sources = np.full(count, -1, dtype=np.int64)
+    fractions = np.zeros((count, 3), dtype=np.int64)
+    # per curve, its rows (a copy takes its source's count)
+    shapes = [vertices[rows[c] : rows[c + 1]] for c in range(count)]
+    curve_bulges = [None if bulges is None else bulges[rows[c] : rows[c + 1]] for c in range(count)]
+    by_length: dict[int, list[int]] = {}
+    for j, points in enumerate(parts):
+        earlier = by_length.setdefault(len(points), [])
+        for i in earlier[-_COPY_CANDIDATES:]:
+            if closed[i] != closed[j]:
+                continue
+            shift = points - parts[i]
+            if np.ptp(shift, axis=0).max() > tolerance * 1e-3:
+                continue
+            shape = shapes[i] - shapes[i][:1]
+            kept_bulges = curve_bulges[i]
+            target = shapes[i][0] + shift[0] / step  # where the first vertex goes
+            for k in range(curvecoder.COPY_SHIFTS + 1):
+                total = np.rint(target * (1 << k)).astype(np.int64)
+                first, fraction = total >> k, total & ((1 << k) - 1)
+                moved = (shape + first).astype(np.float64) + fraction / (1 << k)
+                decoded = _copy_values(moved, kept_bulges, bool(closed[j]), step, dtype)
+                work = 2 * len(points) * len(decoded)
+                if work > budget:
+                    break
+                budget -= work
+                if (
+                    _one_way_exact(points, decoded, bool(closed[j])) <= tolerance
+                    and _one_way_exact(decoded, points, bool(closed[j])) <= tolerance
+                ):
+                    shapes[j] = shape + first
+                    curve_bulges[j] = kept_bulges
+                    sources[j] = i
+                    fractions[j] = (k, *fraction)
+                    break
+            if sources[j] >= 0:
+                break
+        earlier.append(j)
+    if not np.any(sources >= 0):
+        return None
+    return curvecoder.encode_set(
+        np.ascontiguousarray(np.concatenate(shapes)),
+        np.array([len(v) for v in shapes], dtype=np.int64),
+        closed,
+        again,
+        closed_mode,
+        order,
+        None if bulges is None else np.concatenate(curve_bulges),
+        from_last,
+        priors=True,
+        sources=sources,
+        fractions=fractions,
+    )
+
+
 def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
     reader = _Reader(data[:-4])
     reader.take(4, "magic")
     version = reader.take(1, "version")[0]
     from_last = False
-    if version in (PLANE_VERSION, PRIOR_VERSION):
+    if version in (PLANE_VERSION, PRIOR_VERSION, COPY_VERSION):
         (head,) = struct.unpack("<H", reader.take(2, "head"))
         closed_mode = (head >> 1) & 3
         order = (head >> 3) & 7
@@ -1327,7 +1448,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         raise BundleError(msg)
     dtype = np.dtype(DTYPES[dtype_index])
     tolerance = _read_tolerance(reader)
-    if version not in (PLANE_VERSION, PRIOR_VERSION):
+    if version not in (PLANE_VERSION, PRIOR_VERSION, COPY_VERSION):
         step_index = reader.take(1, "step")[0]
     if step_index >= len(VERTEX_STEPS):
         msg = f"curve set lattice step {step_index} is unknown"
@@ -1351,6 +1472,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     if bulged and d != 2:
         msg = f"curve set version {version} is for plane curves, not of dimension {d}"
         raise BundleError(msg)
+    copies = np.zeros((count, d + 2), dtype=np.int64) if version == COPY_VERSION else None
     while True:  # grow the vertex buffer only as far as the stream really goes
         result = curvecoder.decode_bulged_set(
             stream,
@@ -1362,7 +1484,8 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
             order,
             bulged,
             from_last,
-            version == PRIOR_VERSION,
+            version in (PRIOR_VERSION, COPY_VERSION),
+            copies,
         )
         if result is not None or capacity >= limit // d:
             break
@@ -1377,14 +1500,20 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     if np.any(np.abs(bulges) >= _VERTEX_LIMIT):
         msg = "curve set bulge out of range"
         raise BundleError(msg)
+    places: np.ndarray = lattice
+    if copies is not None and np.any(copies[:, 0] >= 0):  # copies moved by their fractions
+        places = lattice.astype(np.float64)
+        first = np.concatenate([[0], np.cumsum(counts)])
+        for c in np.flatnonzero(copies[:, 0] >= 0).tolist():
+            places[first[c] : first[c + 1]] += copies[c, 2:] / float(1 << copies[c, 1])
     if bulged:
         extra = (curvecoder.BULGE_PARTS - 1) * int(np.count_nonzero(bulges))
         if (len(lattice) + extra) * d > limit:
             msg = f"curve set declares more than {limit} values in a {len(stream)}-byte stream"
             raise BundleError(msg)
-        values, sizes, _ = _bulged_polylines(lattice, counts, closed, bulges, step, dtype)
+        values, sizes, _ = _bulged_polylines(places, counts, closed, bulges, step, dtype)
     else:
-        values, sizes = _lattice_values(lattice, step, dtype), counts
+        values, sizes = _lattice_values(places, step, dtype), counts
     curves = []
     at = 0
     for m, again in zip(sizes.tolist(), repeated.tolist(), strict=True):
@@ -1457,7 +1586,13 @@ def _checked(data: Any) -> bytes:
 
 
 def _is_vertex_form(data: bytes) -> bool:
-    return data[len(MAGIC)] in (VERTEX_VERSION, BULGED_VERSION, PLANE_VERSION, PRIOR_VERSION)
+    return data[len(MAGIC)] in (
+        VERTEX_VERSION,
+        BULGED_VERSION,
+        PLANE_VERSION,
+        PRIOR_VERSION,
+        COPY_VERSION,
+    )
 
 
 def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Reader]:
@@ -1468,8 +1603,8 @@ def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Read
     if version != VERSION:
         msg = (
             f"curve set version {version} is not supported "
-            f"(this reader reads {VERSION}, {VERTEX_VERSION}, {BULGED_VERSION}, {PLANE_VERSION} "
-            f"and {PRIOR_VERSION})"
+            f"(this reader reads {VERSION}, {VERTEX_VERSION}, {BULGED_VERSION}, {PLANE_VERSION}, "
+            f"{PRIOR_VERSION} and {COPY_VERSION})"
         )
         raise BundleError(msg)
     flags = reader.varint("flags", 31)
