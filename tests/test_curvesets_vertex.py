@@ -19,8 +19,9 @@ from hypothesis import strategies as st
 import wavecore
 from wavecore import curvecoder, curvesets
 
-#: the versions of a plane set of the vertex form (5: version 4 with learnt priors)
-_PLANE = (curvesets.PLANE_VERSION, curvesets.PRIOR_VERSION)
+#: the versions of a plane set of the vertex form (5: version 4 with learnt priors; 6: 5 with
+#: translated copies of earlier curves)
+_PLANE = (curvesets.PLANE_VERSION, curvesets.PRIOR_VERSION, curvesets.COPY_VERSION)
 
 
 def _to_polyline(source: np.ndarray, target: np.ndarray, closed: bool) -> float:
@@ -496,3 +497,47 @@ def test_glyph_like_set_written_as_version_5_keeps_the_bound() -> None:
     assert bundle[4] in _PLANE
     for original, decoded in zip(curves, wavecore.decode(bundle), strict=True):
         assert _both_ways(original, decoded, True) <= 0.05
+
+
+@pytest.mark.parametrize("bulged", [False, True])
+def test_version_6_copies_round_trip(bulged: bool) -> None:
+    rng = np.random.default_rng(66)
+    shape = np.cumsum(rng.integers(-30, 31, size=(40, 2)), axis=0)
+    other = np.cumsum(rng.integers(-30, 31, size=(25, 2)), axis=0)
+    lattice = np.concatenate([shape, other, shape + [500, -7], shape - [3, 900]])
+    counts = np.array([40, 25, 40, 40])
+    closed = np.ones(4, dtype=np.int64)
+    repeated = np.zeros(4, dtype=np.int64)
+    one = rng.integers(-5, 6, size=40)
+    bulges = np.concatenate([one, rng.integers(-5, 6, size=25), one, one]) if bulged else None
+    sources = np.array([-1, -1, 0, 2])
+    fractions = np.array([[0, 0, 0], [0, 0, 0], [3, 5, 0], [0, 0, 0]])
+    stream = curvecoder.encode_set(
+        lattice, counts, closed, repeated, 1, 4, bulges, False, True, None, sources, fractions
+    )
+    copies = np.zeros((4, 4), dtype=np.int64)
+    back = curvecoder.decode_bulged_set(stream, 4, 2, 1, True, 200, 4, bulged, False, True, copies)
+    assert back is not None
+    assert np.array_equal(back[0], lattice) and np.array_equal(back[1], counts)
+    if bulges is not None:
+        assert np.array_equal(back[4], bulges)
+    assert np.array_equal(copies[:, 0], sources) and np.array_equal(copies[:, 1:], fractions)
+    # a copy costs its flag, distance, start and fraction: far less than its 40 vertices
+    plain = curvecoder.encode_set(lattice, counts, closed, repeated, 1, 4, bulges, False, True)
+    assert len(stream) < len(plain) - 40
+
+
+@pytest.mark.parametrize("tolerance", [0.3, 0.05, 0.004])
+@pytest.mark.parametrize("offset", [7.0, 7.123456, -3.3])
+def test_translated_curves_are_copies_and_keep_the_bound(tolerance: float, offset: float) -> None:
+    # the same outline at offsets off the lattice (as one letter repeats in a text), and one
+    # other outline: the repeats are copied, and every curve keeps the bound (brute force)
+    t = np.linspace(0, 2 * np.pi, 97)[:-1]
+    shape = np.stack([3 * np.cos(t), 4 * np.sin(t) + np.sin(3 * t)], axis=1)
+    curves = [shape + [k * offset, 0.37 * k] for k in range(5)] + [_ring(80, 2.0) + 20]
+    bundle = wavecore.encode_curves(curves, tolerance=tolerance, method="vertex")
+    assert bundle[4] == curvesets.COPY_VERSION
+    for original, decoded in zip(curves, wavecore.decode(bundle), strict=True):
+        assert _both_ways(original, decoded, True) <= tolerance
+    alone = wavecore.encode_curves([curves[0], curves[-1]], tolerance=tolerance, method="vertex")
+    assert len(bundle) <= len(alone) + 4 * 5  # four copies of at most 5 B each

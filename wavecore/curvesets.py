@@ -1402,7 +1402,7 @@ def _copied_stream(
         again,
         closed_mode,
         order,
-        None if bulges is None else np.concatenate(curve_bulges),
+        None if bulges is None else np.concatenate([b for b in curve_bulges if b is not None]),
         from_last,
         priors=True,
         sources=sources,
@@ -1532,6 +1532,8 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         "bulged": bulged,
         "from_last": from_last,
         "order": order,
+        # version 6: per curve, the copied curve (-1: coded in full) and the fraction's bits
+        "copies": [] if copies is None else copies[:, :2].tolist(),
         "coded": (lattice, counts, closed, repeated, bulges),
     }
     curve_set = CurveSet(
