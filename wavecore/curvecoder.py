@@ -75,15 +75,19 @@ FLAG_BASE = SIGN_BASE + SIGN_SIZE
 FLAG_SIZE = 4
 MODELS = FLAG_BASE + FLAG_SIZE
 #: Version 6's models, after every earlier version's (whose priors index below ``MODELS``):
-#: the copy flag (by the previous curve's), the distance back to the copied curve (unary bit
-#: length and one mantissa model), the fraction's bit count and its bits.
+#: the copy flag (by the previous curve's), "as the previous copy" (its distance back and
+#: translation), the distance back to the copied curve (unary bit length and one mantissa
+#: model), the fraction's bit count and its bits, the translation's lattice vector.
 COPY_BASE = MODELS
-_COPY_DISTANCE = COPY_BASE + 2
+_COPY_REPEAT = COPY_BASE + 2
+_COPY_DISTANCE = _COPY_REPEAT + 1
 _COPY_SHIFT = _COPY_DISTANCE + _UNARY + 1
 _COPY_FRACTION = _COPY_SHIFT + _UNARY + 1
 #: the finest fraction of a lattice step by which a copy may be translated: ``2**-COPY_SHIFTS``
 COPY_SHIFTS = 6
-ALL_MODELS = _COPY_FRACTION + COPY_SHIFTS
+_COPY_MOVE = _COPY_FRACTION + COPY_SHIFTS  # the translation's lattice vector: x, then y
+_COPY_MOVE_SIGN = _COPY_MOVE + 2 * (_UNARY + 1)
+ALL_MODELS = _COPY_MOVE_SIGN + 2
 
 #: Version 5's starting probabilities: ``"index:value"`` pairs, ``value / 256`` the
 #: probability of a 0 bit (models not listed start at one half).  Learnt on glyphs that
@@ -399,9 +403,11 @@ def _code_set(
     With ``from_last`` (version 4), a curve's first vertex is coded from the previous curve's
     last vertex rather than its first.
     With ``copying`` (version 6), each curve after the first has a flag: a *copy* of curve
-    ``sources[c]`` (an earlier one), translated: its first vertex is coded as any curve's, then
-    ``fractions[c] = (k, f_0, …)``: a translation by ``f_j / 2**k`` of a lattice step more, and
-    its vertices and bulges are the source's, moved with its first vertex.  ``sources`` is -1
+    ``sources[c]`` (an earlier one), translated: a bit "as the previous copy" (the same
+    distance back and translation; after the first copy), else the distance back, its first
+    vertex's lattice step from the source's first vertex, and ``fractions[c] = (k, f_0, …)``: a
+    translation by ``f_j / 2**k`` of a lattice step more.  Its count, vertices and bulges are
+    the source's, moved with its first vertex.  ``sources`` is -1
     for a curve coded in full.
     Returns the number of vertices (decoding: those written; -1 if the stream declares more
     than ``lattice`` holds).
@@ -414,6 +420,9 @@ def _code_set(
     limit = len(lattice)
     rows = np.zeros(len(counts) + 1, dtype=np.int64)  # each curve's first row
     copied = 0
+    last_back = -1  # the previous copy's distance back (-1: none yet)
+    last_shift = 0
+    last_move = np.zeros(2 * d, dtype=np.int64)  # its translation: lattice vector, fraction
     for c in range(len(counts)):
         rows[c] = at
         if closed_mode == 2:
@@ -421,15 +430,32 @@ def _code_set(
         if closed[c]:
             repeated[c] = _bit(st, buf, models, FLAG_BASE + 1, repeated[c], decoding)
         source = -1
+        repeat = 0
         if copying and c > 0:
             flag = _bit(st, buf, models, COPY_BASE + copied, sources[c] >= 0, decoding)
             copied = flag
             if flag:
                 back = 0 if decoding else c - 1 - sources[c]
-                back = _plain_magnitude(st, buf, models, _COPY_DISTANCE, back, decoding)
+                if last_back >= 0:  # the previous copy's distance back and translation?
+                    same = 0
+                    if not decoding and back == last_back:
+                        first = rows[sources[c]]
+                        same = 1
+                        for j in range(d):
+                            moved = lattice[at, j] - lattice[first, j]
+                            if moved != last_move[j] or fractions[c, 1 + j] != last_move[d + j]:
+                                same = 0
+                        if fractions[c, 0] != last_shift:
+                            same = 0
+                    repeat = _bit(st, buf, models, _COPY_REPEAT, same, decoding)
+                if repeat:
+                    back = last_back
+                else:
+                    back = _plain_magnitude(st, buf, models, _COPY_DISTANCE, back, decoding)
                 if back > c - 1:
                     return -1
                 source = c - 1 - back
+                last_back = back
                 if decoding:
                     sources[c] = source
             elif decoding:
@@ -442,6 +468,58 @@ def _code_set(
             if m > limit - at:
                 return -1
             counts[c] = m
+        if source >= 0:
+            # a translated copy: the translation from its source's first vertex (a lattice
+            # vector and a fraction of a step), then the source's shape
+            first = rows[source]
+            if repeat:
+                fractions[c, 0] = last_shift
+                for j in range(d):
+                    lattice[at, j] = lattice[first, j] + last_move[j]
+                    fractions[c, 1 + j] = last_move[d + j]
+            else:
+                for j in range(d):
+                    value = 0 if decoding else lattice[at, j] - lattice[first, j]
+                    size = _plain_magnitude(
+                        st, buf, models, _COPY_MOVE + min(j, 1) * (_UNARY + 1), abs(value), decoding
+                    )
+                    if size and _bit(
+                        st, buf, models, _COPY_MOVE_SIGN + min(j, 1), value < 0, decoding
+                    ):
+                        size = -size
+                    lattice[at, j] = lattice[first, j] + size
+                shift = 0 if decoding else fractions[c, 0]
+                shift = _plain_magnitude(st, buf, models, _COPY_SHIFT, shift, decoding)
+                if shift > COPY_SHIFTS:
+                    return -1
+                fractions[c, 0] = shift
+                for j in range(d):
+                    value = 0
+                    for i in range(shift - 1, -1, -1):
+                        bit = _bit(
+                            st,
+                            buf,
+                            models,
+                            _COPY_FRACTION + i,
+                            (fractions[c, 1 + j] >> i) & 1,
+                            decoding,
+                        )
+                        value = (value << 1) | bit
+                    fractions[c, 1 + j] = value
+            last_shift = fractions[c, 0]
+            for j in range(d):
+                last_move[j] = lattice[at, j] - lattice[first, j]
+                last_move[d + j] = fractions[c, 1 + j]
+                start[j] = lattice[at, j]
+            for v in range(1, m):
+                for j in range(d):
+                    lattice[at + v, j] = lattice[at, j] + lattice[first + v, j] - lattice[first, j]
+                if bulged:
+                    bulges[at + v] = bulges[first + v]
+            if bulged:
+                bulges[at] = bulges[first]
+            at += m
+            continue
         # the first vertex: a step from the previous curve's first (or last) vertex
         for j in range(d):
             if from_last and at > 0:
@@ -453,35 +531,6 @@ def _code_set(
             if decoding:
                 lattice[at, j] = start[j] + value
             start[j] = lattice[at, j]
-        if source >= 0:  # a translated copy: the fraction, then the source's shape
-            shift = 0 if decoding else fractions[c, 0]
-            shift = _plain_magnitude(st, buf, models, _COPY_SHIFT, shift, decoding)
-            if shift > COPY_SHIFTS:
-                return -1
-            fractions[c, 0] = shift
-            for j in range(d):
-                value = 0
-                for i in range(shift - 1, -1, -1):
-                    bit = _bit(
-                        st,
-                        buf,
-                        models,
-                        _COPY_FRACTION + i,
-                        (fractions[c, 1 + j] >> i) & 1,
-                        decoding,
-                    )
-                    value = (value << 1) | bit
-                fractions[c, 1 + j] = value
-            first = rows[source]
-            for v in range(1, m):
-                for j in range(d):
-                    lattice[at + v, j] = lattice[at, j] + lattice[first + v, j] - lattice[first, j]
-                if bulged:
-                    bulges[at + v] = bulges[first + v]
-            if bulged:
-                bulges[at] = bulges[first]
-            at += m
-            continue
         length_class = _class(_bit_length(0))
         for j in range(d):
             previous_step[j] = 0

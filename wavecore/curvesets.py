@@ -1361,6 +1361,7 @@ def _copied_stream(
     shapes = [vertices[rows[c] : rows[c + 1]] for c in range(count)]
     curve_bulges = [None if bulges is None else bulges[rows[c] : rows[c + 1]] for c in range(count)]
     by_length: dict[int, list[int]] = {}
+    last: tuple[int, np.ndarray, int, np.ndarray] | None = None  # the previous copy's choice
     for j, points in enumerate(parts):
         earlier = by_length.setdefault(len(points), [])
         for i in earlier[-_COPY_CANDIDATES:]:
@@ -1372,9 +1373,13 @@ def _copied_stream(
             shape = shapes[i] - shapes[i][:1]
             kept_bulges = curve_bulges[i]
             target = shapes[i][0] + shift[0] / step  # where the first vertex goes
+            tries = []
+            if last is not None and last[0] == j - 1 - i:  # as the previous copy: 1 bit
+                tries.append((shapes[i][0] + last[1], last[2], last[3]))
             for k in range(curvecoder.COPY_SHIFTS + 1):
                 total = np.rint(target * (1 << k)).astype(np.int64)
-                first, fraction = total >> k, total & ((1 << k) - 1)
+                tries.append((total >> k, k, total & ((1 << k) - 1)))
+            for first, k, fraction in tries:
                 moved = (shape + first).astype(np.float64) + fraction / (1 << k)
                 decoded = _copy_values(moved, kept_bulges, bool(closed[j]), step, dtype)
                 work = 2 * len(points) * len(decoded)
@@ -1389,6 +1394,7 @@ def _copied_stream(
                     curve_bulges[j] = kept_bulges
                     sources[j] = i
                     fractions[j] = (k, *fraction)
+                    last = (j - 1 - i, first - shapes[i][0], k, fraction)
                     break
             if sources[j] >= 0:
                 break
