@@ -511,11 +511,11 @@ def test_version_6_copies_round_trip(bulged: bool) -> None:
     one = rng.integers(-5, 6, size=40)
     bulges = np.concatenate([one, rng.integers(-5, 6, size=25), one, one]) if bulged else None
     sources = np.array([-1, -1, 0, 2])
-    fractions = np.array([[0, 0, 0], [0, 0, 0], [3, 5, 0], [0, 0, 0]])
+    fractions = np.array([[0, 0, 0, 0], [0, 0, 0, 0], [3, 5, 0, 0], [0, 0, 2, 3]])
     stream = curvecoder.encode_set(
         lattice, counts, closed, repeated, 1, 4, bulges, False, True, None, sources, fractions
     )
-    copies = np.zeros((4, 4), dtype=np.int64)
+    copies = np.zeros((4, 5), dtype=np.int64)
     back = curvecoder.decode_bulged_set(stream, 4, 2, 1, True, 200, 4, bulged, False, True, copies)
     assert back is not None
     assert np.array_equal(back[0], lattice) and np.array_equal(back[1], counts)

@@ -405,10 +405,10 @@ def _code_set(
     With ``copying`` (version 6), each curve after the first has a flag: a *copy* of curve
     ``sources[c]`` (an earlier one), translated: a bit "as the previous copy" (the same
     distance back and translation; after the first copy), else the distance back, its first
-    vertex's lattice step from the source's first vertex, and ``fractions[c] = (k, f_0, …)``: a
-    translation by ``f_j / 2**k`` of a lattice step more.  Its count, vertices and bulges are
-    the source's, moved with its first vertex.  ``sources`` is -1
-    for a curve coded in full.
+    vertex's lattice step from the source's first vertex, and ``fractions[c] = (k_0, f_0, k_1,
+    f_1, …)``: a translation by ``f_j / 2**k_j`` of a lattice step more.  Its count, vertices
+    and bulges are the source's, moved with its first vertex.  ``sources`` is -1 for a curve
+    coded in full.
     Returns the number of vertices (decoding: those written; -1 if the stream declares more
     than ``lattice`` holds).
     """
@@ -421,8 +421,7 @@ def _code_set(
     rows = np.zeros(len(counts) + 1, dtype=np.int64)  # each curve's first row
     copied = 0
     last_back = -1  # the previous copy's distance back (-1: none yet)
-    last_shift = 0
-    last_move = np.zeros(2 * d, dtype=np.int64)  # its translation: lattice vector, fraction
+    last_move = np.zeros(3 * d, dtype=np.int64)  # its translation: lattice vector, fractions
     for c in range(len(counts)):
         rows[c] = at
         if closed_mode == 2:
@@ -442,11 +441,11 @@ def _code_set(
                         first = rows[sources[c]]
                         same = 1
                         for j in range(d):
-                            moved = lattice[at, j] - lattice[first, j]
-                            if moved != last_move[j] or fractions[c, 1 + j] != last_move[d + j]:
+                            if lattice[at, j] - lattice[first, j] != last_move[j]:
                                 same = 0
-                        if fractions[c, 0] != last_shift:
-                            same = 0
+                        for j in range(2 * d):
+                            if fractions[c, j] != last_move[d + j]:
+                                same = 0
                     repeat = _bit(st, buf, models, _COPY_REPEAT, same, decoding)
                 if repeat:
                     back = last_back
@@ -473,10 +472,10 @@ def _code_set(
             # vector and a fraction of a step), then the source's shape
             first = rows[source]
             if repeat:
-                fractions[c, 0] = last_shift
                 for j in range(d):
                     lattice[at, j] = lattice[first, j] + last_move[j]
-                    fractions[c, 1 + j] = last_move[d + j]
+                for j in range(2 * d):
+                    fractions[c, j] = last_move[d + j]
             else:
                 for j in range(d):
                     value = 0 if decoding else lattice[at, j] - lattice[first, j]
@@ -488,12 +487,12 @@ def _code_set(
                     ):
                         size = -size
                     lattice[at, j] = lattice[first, j] + size
-                shift = 0 if decoding else fractions[c, 0]
-                shift = _plain_magnitude(st, buf, models, _COPY_SHIFT, shift, decoding)
-                if shift > COPY_SHIFTS:
-                    return -1
-                fractions[c, 0] = shift
-                for j in range(d):
+                for j in range(d):  # each coordinate's fraction: its bit count, its bits
+                    shift = 0 if decoding else fractions[c, 2 * j]
+                    shift = _plain_magnitude(st, buf, models, _COPY_SHIFT, shift, decoding)
+                    if shift > COPY_SHIFTS:
+                        return -1
+                    fractions[c, 2 * j] = shift
                     value = 0
                     for i in range(shift - 1, -1, -1):
                         bit = _bit(
@@ -501,16 +500,16 @@ def _code_set(
                             buf,
                             models,
                             _COPY_FRACTION + i,
-                            (fractions[c, 1 + j] >> i) & 1,
+                            (fractions[c, 2 * j + 1] >> i) & 1,
                             decoding,
                         )
                         value = (value << 1) | bit
-                    fractions[c, 1 + j] = value
-            last_shift = fractions[c, 0]
+                    fractions[c, 2 * j + 1] = value
             for j in range(d):
                 last_move[j] = lattice[at, j] - lattice[first, j]
-                last_move[d + j] = fractions[c, 1 + j]
                 start[j] = lattice[at, j]
+            for j in range(2 * d):
+                last_move[d + j] = fractions[c, j]
             for v in range(1, m):
                 for j in range(d):
                     lattice[at + v, j] = lattice[at, j] + lattice[first + v, j] - lattice[first, j]
@@ -694,7 +693,7 @@ def encode_set(
     copying = sources is not None
     sources = np.full(len(counts), -1, dtype=np.int64) if sources is None else sources
     if fractions is None:
-        fractions = np.zeros((len(counts), lattice.shape[1] + 1), dtype=np.int64)
+        fractions = np.zeros((len(counts), 2 * lattice.shape[1]), dtype=np.int64)
     d = lattice.shape[1]
     bulged = bulges is not None
     bulges = np.zeros(len(lattice), dtype=np.int64) if bulges is None else bulges
@@ -762,7 +761,7 @@ def decode_bulged_set(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """As :func:`decode_set`, and the bulges (zeros unless ``bulged``: version 3);
     ``from_last`` as in :func:`encode_set` (version 4).  With ``copies`` (version 6: an
-    array ``(count, d + 2)``), each curve's source (-1 for none) and fraction are written to
+    array ``(count, 2 d + 1)``), each curve's source (-1 for none) and fraction are written to
     its rows, as :func:`_code_set` gives them."""
     buf = np.frombuffer(bytes(data), dtype=np.uint8).copy()  # one compiled signature
     st = np.array([0, MASK32, 0, 1, 0, 0], dtype=np.int64)
@@ -777,7 +776,7 @@ def decode_bulged_set(
     repeated = np.zeros(count, dtype=np.int64)
     bulges = np.zeros(max_vertices, dtype=np.int64)
     sources = np.full(count, -1, dtype=np.int64)
-    fractions = np.zeros((count, d + 1), dtype=np.int64)
+    fractions = np.zeros((count, 2 * d), dtype=np.int64)
     total = _code_set(
         buf,
         st,

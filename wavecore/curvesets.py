@@ -1334,6 +1334,19 @@ def _copy_values(
     return _bulged_polylines(vertices, counts, flags, bulges, step, dtype)[0].astype(np.float64)
 
 
+def _fraction_pairs(k: int, fraction: np.ndarray) -> list[int]:
+    """Each coordinate's fraction ``f / 2**k`` as its shortest ``(k_j, f_j)``: a coordinate
+    not moved off the lattice (a copy along a baseline) costs no fraction bits."""
+    pairs = []
+    for f in fraction.tolist():
+        shift = k
+        while shift and not f & 1:
+            f >>= 1
+            shift -= 1
+        pairs += [shift, f]
+    return pairs
+
+
 def _copied_stream(
     parts: list[np.ndarray],
     closed: np.ndarray,
@@ -1356,7 +1369,7 @@ def _copied_stream(
     rows[1:] = np.cumsum(counts)
     budget = _COPY_WORK * sum(len(p) for p in parts) + (1 << 22)
     sources = np.full(count, -1, dtype=np.int64)
-    fractions = np.zeros((count, 3), dtype=np.int64)
+    fractions = np.zeros((count, 4), dtype=np.int64)
     # per curve, its rows (a copy takes its source's count)
     shapes = [vertices[rows[c] : rows[c + 1]] for c in range(count)]
     curve_bulges = [None if bulges is None else bulges[rows[c] : rows[c + 1]] for c in range(count)]
@@ -1393,7 +1406,7 @@ def _copied_stream(
                     shapes[j] = shape + first
                     curve_bulges[j] = kept_bulges
                     sources[j] = i
-                    fractions[j] = (k, *fraction)
+                    fractions[j] = _fraction_pairs(k, fraction)
                     last = (j - 1 - i, first - shapes[i][0], k, fraction)
                     break
             if sources[j] >= 0:
@@ -1478,7 +1491,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     if bulged and d != 2:
         msg = f"curve set version {version} is for plane curves, not of dimension {d}"
         raise BundleError(msg)
-    copies = np.zeros((count, d + 2), dtype=np.int64) if version == COPY_VERSION else None
+    copies = np.zeros((count, 2 * d + 1), dtype=np.int64) if version == COPY_VERSION else None
     while True:  # grow the vertex buffer only as far as the stream really goes
         result = curvecoder.decode_bulged_set(
             stream,
@@ -1511,7 +1524,11 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         places = lattice.astype(np.float64)
         first = np.concatenate([[0], np.cumsum(counts)])
         for c in np.flatnonzero(copies[:, 0] >= 0).tolist():
-            places[first[c] : first[c + 1]] += copies[c, 2:] / float(1 << copies[c, 1])
+            shifts = copies[c, 1::2]
+            if np.any(shifts < 0) or np.any(shifts > curvecoder.COPY_SHIFTS):
+                msg = "curve set copy fraction out of range"  # (the coder refuses these)
+                raise BundleError(msg)
+            places[first[c] : first[c + 1]] += copies[c, 2::2] / (1 << shifts).astype(np.float64)
     if bulged:
         extra = (curvecoder.BULGE_PARTS - 1) * int(np.count_nonzero(bulges))
         if (len(lattice) + extra) * d > limit:
@@ -1538,8 +1555,8 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         "bulged": bulged,
         "from_last": from_last,
         "order": order,
-        # version 6: per curve, the copied curve (-1: coded in full) and the fraction's bits
-        "copies": [] if copies is None else copies[:, :2].tolist(),
+        # version 6: per curve, the copied curve (-1: coded in full) and its fractions' bits
+        "copies": [] if copies is None else copies[:, [0, 1, 3]].tolist(),
         "coded": (lattice, counts, closed, repeated, bulges),
     }
     curve_set = CurveSet(
