@@ -1252,8 +1252,9 @@ def _encode_vertex(
             copied = _copied_stream(
                 parts, closed, again, closed_mode, best_inputs, step, tolerance, dtype
             )
-            if copied is not None and len(copied) < len(best_plane[0]):
-                best_plane = (copied, best_plane[1], COPY_VERSION)
+            if copied is not None and len(copied[0]) < len(best_plane[0]):
+                best_plane = (copied[0], best_plane[1], COPY_VERSION)
+                counts_written = copied[1]  # a copy has its source's count
             stream, head, plane_version = best_plane
             limit = VERTEX_PER_BYTE * (len(stream) + 16)
             if len(arrays) > limit or int(counts_written.sum()) * d > limit:
@@ -1356,13 +1357,13 @@ def _copied_stream(
     step: float,
     tolerance: float,
     dtype: Any,
-) -> bytes | None:
-    """Version 6's stream for the chosen coding ``inputs`` (vertices, counts, bulges,
-    predictor, ``from_last``), where some curve is a translate of an earlier one (glyphs of
-    one letter, repeated symbols) and the earlier curve's decoded shape, moved by a lattice
-    vector and a fraction ``f / 2**k`` of a step (the coarsest that does), keeps the bound on
-    it: measured exactly, every point against every segment, both ways.  None where no curve
-    is copied."""
+) -> tuple[bytes, np.ndarray] | None:
+    """Version 6's stream, and each curve's vertex count, for the chosen coding ``inputs``
+    (vertices, counts, bulges, predictor, ``from_last``), where some curve is a translate of
+    an earlier one (glyphs of one letter, repeated symbols) and the earlier curve's decoded
+    shape, moved by a lattice vector and a fraction of a step (the coarsest that does, or the
+    previous copy's translation), keeps the bound on it: measured exactly, every point against
+    every segment, both ways.  None where no curve is copied."""
     vertices, counts, bulges, order, from_last = inputs
     count = len(parts)
     rows = np.zeros(count + 1, dtype=np.int64)
@@ -1414,9 +1415,10 @@ def _copied_stream(
         earlier.append(j)
     if not np.any(sources >= 0):
         return None
-    return curvecoder.encode_set(
+    written = np.array([len(v) for v in shapes], dtype=np.int64)
+    stream = curvecoder.encode_set(
         np.ascontiguousarray(np.concatenate(shapes)),
-        np.array([len(v) for v in shapes], dtype=np.int64),
+        written,
         closed,
         again,
         closed_mode,
@@ -1427,6 +1429,7 @@ def _copied_stream(
         sources=sources,
         fractions=fractions,
     )
+    return stream, written
 
 
 def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
