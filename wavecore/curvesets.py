@@ -1335,12 +1335,11 @@ def _copy_values(
     return _bulged_polylines(vertices, counts, flags, bulges, step, dtype)[0].astype(np.float64)
 
 
-def _fraction_pairs(k: int, fraction: np.ndarray) -> list[int]:
-    """Each coordinate's fraction ``f / 2**k`` as its shortest ``(k_j, f_j)``: a coordinate
-    not moved off the lattice (a copy along a baseline) costs no fraction bits."""
+def _fraction_pairs(k: np.ndarray, fraction: np.ndarray) -> list[int]:
+    """Each coordinate's fraction ``f_j / 2**k_j`` as its shortest ``(k_j, f_j)``: a
+    coordinate not moved off the lattice (a copy along a baseline) costs no fraction bits."""
     pairs = []
-    for f in fraction.tolist():
-        shift = k
+    for shift, f in zip(k.tolist(), fraction.tolist(), strict=True):
         while shift and not f & 1:
             f >>= 1
             shift -= 1
@@ -1375,7 +1374,7 @@ def _copied_stream(
     shapes = [vertices[rows[c] : rows[c + 1]] for c in range(count)]
     curve_bulges = [None if bulges is None else bulges[rows[c] : rows[c + 1]] for c in range(count)]
     by_length: dict[int, list[int]] = {}
-    last: tuple[int, np.ndarray, int, np.ndarray] | None = None  # the previous copy's choice
+    last: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None  # the previous copy's
     for j, points in enumerate(parts):
         earlier = by_length.setdefault(len(points), [])
         for i in earlier[-_COPY_CANDIDATES:]:
@@ -1390,9 +1389,14 @@ def _copied_stream(
             tries = []
             if last is not None and last[0] == j - 1 - i:  # as the previous copy: 1 bit
                 tries.append((shapes[i][0] + last[1], last[2], last[3]))
-            for k in range(curvecoder.COPY_SHIFTS + 1):
-                total = np.rint(target * (1 << k)).astype(np.int64)
-                tries.append((total >> k, k, total & ((1 << k) - 1)))
+            # the fractions' bits per coordinate, fewest in all first (a copy along a
+            # baseline needs none across it)
+            most = curvecoder.COPY_SHIFTS
+            for bits in range(2 * most + 1):
+                for kx in range(max(0, bits - most), min(most, bits) + 1):
+                    k = np.array([kx, bits - kx], dtype=np.int64)
+                    total = np.rint(target * (1 << k)).astype(np.int64)
+                    tries.append((total >> k, k, total & ((1 << k) - 1)))
             for first, k, fraction in tries:
                 moved = (shape + first).astype(np.float64) + fraction / (1 << k)
                 decoded = _copy_values(moved, kept_bulges, bool(closed[j]), step, dtype)
