@@ -1373,11 +1373,17 @@ def _copied_stream(
     # per curve, its rows (a copy takes its source's count)
     shapes = [vertices[rows[c] : rows[c + 1]] for c in range(count)]
     curve_bulges = [None if bulges is None else bulges[rows[c] : rows[c + 1]] for c in range(count)]
+    phases = np.zeros((count, 2))  # each curve's fraction of a step (0 unless a copy)
     by_length: dict[int, list[int]] = {}
     last: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None  # the previous copy's
     for j, points in enumerate(parts):
         earlier = by_length.setdefault(len(points), [])
-        for i in earlier[-_COPY_CANDIDATES:]:
+        # the newest first (the nearest back), and first of all the one the previous copy's
+        # distance back names (a repeated word: one bit where its translation is the same)
+        newest = earlier[::-1][:_COPY_CANDIDATES]
+        if last is not None and j - 1 - last[0] in earlier:
+            newest.insert(0, j - 1 - last[0])
+        for i in newest:
             if closed[i] != closed[j]:
                 continue
             shift = points - parts[i]
@@ -1385,7 +1391,9 @@ def _copied_stream(
                 continue
             shape = shapes[i] - shapes[i][:1]
             kept_bulges = curve_bulges[i]
-            target = shapes[i][0] + shift[0] / step  # where the first vertex goes
+            # where the first vertex goes (a copied source's decoded points are off its lattice
+            # vertices by its own fraction)
+            target = shapes[i][0] + phases[i] + shift[0] / step
             tries = []
             if last is not None and last[0] == j - 1 - i:  # as the previous copy: 1 bit
                 tries.append((shapes[i][0] + last[1], last[2], last[3]))
@@ -1412,6 +1420,7 @@ def _copied_stream(
                     curve_bulges[j] = kept_bulges
                     sources[j] = i
                     fractions[j] = _fraction_pairs(k, fraction)
+                    phases[j] = fraction / (1 << k)
                     last = (j - 1 - i, first - shapes[i][0], k, fraction)
                     break
             if sources[j] >= 0:
