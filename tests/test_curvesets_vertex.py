@@ -543,3 +543,29 @@ def test_translated_curves_are_copies_and_keep_the_bound(tolerance: float, offse
     # four copies of at most 8 B each (a translation off the lattice, and its fractions),
     # where coding each 96-point outline in full costs far more
     assert len(bundle) <= len(alone) + 4 * 8
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    tolerance=st.floats(1e-3, 1.0),
+    offsets=st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)), min_size=1, max_size=4),
+    dtype=st.sampled_from(["float64", "float32", "int32"]),
+    closed=st.booleans(),
+)
+def test_copies_keep_the_bound_property(
+    seed: int,
+    tolerance: float,
+    offsets: list[tuple[float, float]],
+    dtype: str,
+    closed: bool,
+) -> None:
+    # a walk and its translates (in the output dtype, as decoded): whichever curves become
+    # copies, every curve keeps the bound both ways (brute force)
+    rng = np.random.default_rng(seed)
+    walk = np.cumsum(rng.normal(size=(int(rng.integers(3, 90)), 2)), axis=0) * 4
+    curves = [walk.astype(dtype)] + [(walk + offset).astype(dtype) for offset in offsets]
+    bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
+    for original, back in zip(curves, wavecore.decode(bundle), strict=True):
+        assert back.dtype == original.dtype
+        assert _both_ways(original, back, closed) <= tolerance
