@@ -82,7 +82,7 @@ COPY_BASE = MODELS
 _COPY_REPEAT = COPY_BASE + 2
 _COPY_DISTANCE = _COPY_REPEAT + 1
 _COPY_SHIFT = _COPY_DISTANCE + _UNARY + 1
-_COPY_FRACTION = _COPY_SHIFT + _UNARY + 1
+_COPY_FRACTION = _COPY_SHIFT + 2 * (_UNARY + 1)  # the bit counts' models: x, then y
 #: the finest fraction of a lattice step by which a copy may be translated: ``2**-COPY_SHIFTS``
 COPY_SHIFTS = 6
 _COPY_MOVE = _COPY_FRACTION + COPY_SHIFTS  # the translation's lattice vector: x, then y
@@ -145,6 +145,10 @@ _PRIOR_TABLE = (
     "9217:119 9224:196 9228:161 9229:139 9230:135 9231:120 9233:247 9234:183 9235:158 9236:183 "
     "9237:180 9239:192 9240:131 9241:6 9242:255 "
 )
+#: Version 6's copy models' starting probabilities (as :data:`_PRIOR_TABLE`; their indices are
+#: from :data:`COPY_BASE`, which no earlier version codes), learnt on the same training
+#: glyphs coded as version 6 (``python benchmarks/curves.py --train-priors``, its second line).
+_COPY_PRIOR_TABLE = ""
 #: A model with a prior starts at this adaptation count (its first updates move it less).
 PRIOR_COUNT = 2
 
@@ -165,15 +169,19 @@ def initial_models(priors: bool) -> np.ndarray:
     return (_PRIORS if priors else _HALVES).copy()
 
 
-def trained_table(states: list[np.ndarray], least: int = 4) -> str:
+def trained_table(
+    states: list[np.ndarray], least: int = 4, first: int = 0, stop: int = MODELS
+) -> str:
     """The prior table (:data:`_PRIOR_TABLE`'s form) from the final models of coded sets: per
-    model, the mean probability over the sets that used it, where at least ``least`` did."""
-    stack = np.stack(states)[:, : 2 * MODELS]
+    model of ``first`` up to ``stop`` (version 5's by default; version 6's copy models from
+    :data:`COPY_BASE` to :data:`ALL_MODELS`), the mean probability over the sets that used it,
+    where at least ``least`` did."""
+    stack = np.stack(states)[:, 2 * first : 2 * stop]
     used = stack[:, 1::2] > 0
     mean = np.where(used, stack[:, 0::2], 0).sum(axis=0) / np.maximum(used.sum(axis=0), 1)
     pairs = []
-    for index in np.flatnonzero(used.sum(axis=0) >= least).tolist():
-        value = int(np.clip(mean[index] / (1 << (PROB_BITS - 8)), 0, 255))
+    for index in (first + np.flatnonzero(used.sum(axis=0) >= least)).tolist():
+        value = int(np.clip(mean[index - first] / (1 << (PROB_BITS - 8)), 0, 255))
         if value != 127 and value != 128:
             pairs.append(f"{index}:{value}")
     return " ".join(pairs)
@@ -478,7 +486,10 @@ def _code_set(
                     fractions[c, j] = last_move[d + j]
             else:
                 for j in range(d):
-                    value = 0 if decoding else lattice[at, j] - lattice[first, j]
+                    # x from the previous curve's first vertex (text runs on: the nearest
+                    # start), the others from the source's (a copy on the same baseline: 0)
+                    base = rows[c - 1] if j == 0 else first
+                    value = 0 if decoding else lattice[at, j] - lattice[base, j]
                     size = _plain_magnitude(
                         st, buf, models, _COPY_MOVE + min(j, 1) * (_UNARY + 1), abs(value), decoding
                     )
@@ -486,10 +497,12 @@ def _code_set(
                         st, buf, models, _COPY_MOVE_SIGN + min(j, 1), value < 0, decoding
                     ):
                         size = -size
-                    lattice[at, j] = lattice[first, j] + size
+                    lattice[at, j] = lattice[base, j] + size
                 for j in range(d):  # each coordinate's fraction: its bit count, its bits
                     shift = 0 if decoding else fractions[c, 2 * j]
-                    shift = _plain_magnitude(st, buf, models, _COPY_SHIFT, shift, decoding)
+                    shift = _plain_magnitude(
+                        st, buf, models, _COPY_SHIFT + min(j, 1) * (_UNARY + 1), shift, decoding
+                    )
                     if shift > COPY_SHIFTS:
                         return -1
                     fractions[c, 2 * j] = shift
@@ -1850,4 +1863,4 @@ def optimal_bulged_set(
 
 
 _HALVES = _parse_priors("")
-_PRIORS = _parse_priors(_PRIOR_TABLE)
+_PRIORS = _parse_priors(_PRIOR_TABLE + " " + _COPY_PRIOR_TABLE)
