@@ -374,6 +374,7 @@ def train_copy_priors() -> str:
     """Version 6's copy models: their final states on the training glyphs coded as version 6
     (the copies as the encoder chooses them), averaged as :func:`train_priors` does."""
     from wavecore import curvecoder
+    from wavecore.curvesets import _check_size as check_size
     from wavecore.curvesets import coded_vertices
 
     global TEXT
@@ -394,7 +395,7 @@ def train_copy_priors() -> str:
             lattice, counts, closed, repeated, bulges = info["coded"]
             copies = np.zeros((len(counts), 5), dtype=np.int64)
             curvecoder.decode_bulged_set(  # the copies' sources and fractions
-                bytes(bundle[-4 - info["stream"] : -4]),
+                bytes(bundle[: -check_size(bundle)][-info["stream"] :]),
                 len(counts),
                 2,
                 info["closed_mode"],
@@ -424,9 +425,7 @@ def train_copy_priors() -> str:
             )
             states.append(models)
     print(f"# {len(states)} training sets coded as version 6", file=sys.stderr)
-    return curvecoder.trained_table(
-        states, first=curvecoder.COPY_BASE, stop=curvecoder.ALL_MODELS
-    )
+    return curvecoder.trained_table(states, first=curvecoder.COPY_BASE, stop=curvecoder.ALL_MODELS)
 
 
 # --- the run -------------------------------------------------------------------------------

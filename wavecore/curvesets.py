@@ -68,6 +68,7 @@ crc                 4 bytes: CRC-32 of everything before it
 
 from __future__ import annotations
 
+import binascii
 import json
 import math
 import struct
@@ -108,6 +109,25 @@ PRIOR_VERSION = 5
 #: Version 5 with copies: a curve may be coded as an earlier curve's vertices and bulges,
 #: translated by a lattice vector and a fraction of a step (docs/curves.md, version 6).
 COPY_VERSION = 6
+#: A version-6 bundle of at most this many bytes ends in a CRC-16/XMODEM (2 bytes) instead of
+#: a CRC-32, as bundle format 4.0's groups of chunks up to 1 KiB do: it still finds every
+#: damage of up to 3 bits and every burst of up to 16 in so short a message.
+SHORT_CHECK = 1024
+
+
+def _check_size(data: bytes) -> int:
+    """The bytes of the check that ends ``data`` (a whole curve-set bundle)."""
+    short = len(data) <= SHORT_CHECK and data[len(MAGIC)] == COPY_VERSION
+    return 2 if short else 4
+
+
+def _with_check(out: bytearray, version: int) -> bytes:
+    """``out`` and its check: a CRC-16 for a short version-6 set, else a CRC-32."""
+    if version == COPY_VERSION and len(out) + 2 <= SHORT_CHECK:
+        return bytes(out + struct.pack("<H", binascii.crc_hqx(bytes(out), 0)))
+    return bytes(out + struct.pack("<I", zlib.crc32(out)))
+
+
 METHODS = ("auto", "wavelet", "vertex")
 #: Lattice steps of the vertex form, as multiples of the tolerance (a byte indexes this table).
 #: A vertex moves by at most ``step * sqrt(d) / 2`` when rounded, which must stay within the
@@ -803,12 +823,34 @@ def _pack_tolerance(tolerance: float) -> tuple[float, bytes]:
     return tolerance, encode_varint(0) + struct.pack("<d", tolerance)
 
 
-def _read_tolerance(reader: _Reader) -> float:
+def _compact_tolerance(packed: bytes) -> bytes:
+    """Version 6's form of :func:`_pack_tolerance`'s bytes: a short decimal ``k · 10**e`` as
+    one varint ``2 + 8 zz(e) + (k − 1)`` when ``k`` ≤ 7 (one byte for ``e`` in −8 … 7), else
+    ``2 + 8 zz(e) + 7`` and the varint ``k``; a float as before."""
+    if packed[0] < 2:
+        return packed
+    reader = _Reader(packed)
+    exponent = unzigzag(reader.varint("tolerance", 1 << 12) - 2)
+    mantissa = reader.varint("tolerance", 10**9)
+    while mantissa and mantissa % 10 == 0:  # 10.0 is 100e-1 as written: the same value
+        mantissa //= 10
+        exponent += 1
+    folded = zigzag(exponent)
+    if 1 <= mantissa <= 7:
+        return encode_varint(2 + 8 * folded + mantissa - 1)
+    return encode_varint(2 + 8 * folded + 7) + encode_varint(mantissa)
+
+
+def _read_tolerance(reader: _Reader, compact: bool = False) -> float:
     head = reader.varint("tolerance", 1 << 12)
     if head == 0:
         (tolerance,) = struct.unpack("<d", reader.take(8, "tolerance"))
     elif head == 1:
         (tolerance,) = struct.unpack("<f", reader.take(4, "tolerance"))
+    elif compact:  # version 6: the exponent and a small mantissa in the head
+        low = (head - 2) & 7
+        mantissa = low + 1 if low < 7 else reader.varint("tolerance", 10**9)
+        tolerance = float(f"{mantissa}e{unzigzag((head - 2) >> 3)}")
     else:
         mantissa = reader.varint("tolerance", 10**9)
         tolerance = float(f"{mantissa}e{unzigzag(head - 2)}")
@@ -1264,14 +1306,17 @@ def _encode_vertex(
             out += struct.pack("<H", head)
             if dtype.name != "float64":
                 out.append(DTYPES.index(dtype.name))
-            out += tolerance_bytes
+            if plane_version == COPY_VERSION:
+                out += _compact_tolerance(tolerance_bytes)
+            else:
+                out += tolerance_bytes
             out += encode_varint(len(arrays))
             if meta_bytes is not None:
                 out += encode_varint(len(meta_bytes)) + meta_bytes
             out += stream
-            out += struct.pack("<I", zlib.crc32(out))
-            if best is None or len(out) < len(best):
-                best = bytes(out)
+            written = _with_check(out, plane_version)
+            if best is None or len(written) < len(best):
+                best = written
             if (snapped == 2 or not straight_fits) and not weighed:
                 weighed = True  # kept only through a fallback: the next finer step may be
                 continue  # smaller (one more step is weighed, so the cost stays bounded)
@@ -1447,7 +1492,7 @@ def _copied_stream(
 
 def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
-    reader = _Reader(data[:-4])
+    reader = _Reader(data[: -_check_size(data)])
     reader.take(4, "magic")
     version = reader.take(1, "version")[0]
     from_last = False
@@ -1482,7 +1527,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         msg = f"curve set names dtype {dtype_index}, unknown"
         raise BundleError(msg)
     dtype = np.dtype(DTYPES[dtype_index])
-    tolerance = _read_tolerance(reader)
+    tolerance = _read_tolerance(reader, version == COPY_VERSION)
     if version not in (PLANE_VERSION, PRIOR_VERSION, COPY_VERSION):
         step_index = reader.take(1, "step")[0]
     if step_index >= len(VERTEX_STEPS):
@@ -1619,6 +1664,12 @@ def _checked(data: Any) -> bytes:
     if len(data) < len(MAGIC) + 5:
         msg = f"curve set truncated: {len(data)} bytes"
         raise BundleError(msg)
+    if _check_size(data) == 2:
+        (crc,) = struct.unpack("<H", data[-2:])
+        if binascii.crc_hqx(data[:-2], 0) != crc:
+            msg = "curve set damaged: its CRC-16 does not match"
+            raise BundleError(msg)
+        return data
     (crc,) = struct.unpack("<I", data[-4:])
     if zlib.crc32(data[:-4]) != crc:
         msg = "curve set damaged: its CRC-32 does not match"
