@@ -6,6 +6,7 @@ of the encoder's own check.
 
 from __future__ import annotations
 
+import binascii
 import itertools
 import struct
 import time
@@ -569,3 +570,50 @@ def test_copies_keep_the_bound_property(
     for original, back in zip(curves, wavecore.decode(bundle), strict=True):
         assert back.dtype == original.dtype
         assert _both_ways(original, back, closed) <= tolerance
+
+
+@pytest.mark.parametrize("tolerance", [0.05, 0.3, 10.0, 0.07, 12.5, 1 / 3])
+def test_version_6_short_check_and_tolerance(tolerance: float) -> None:
+    # a short version-6 set ends in a CRC-16 (a long one in a CRC-32) and its tolerance comes
+    # back exactly as the encoder stated it; damage anywhere is found
+    t = np.linspace(0, 2 * np.pi, 97)[:-1]
+    shape = np.stack([3 * np.cos(t), 4 * np.sin(t) + np.sin(3 * t)], axis=1) * tolerance * 20
+    curves = [shape + [k * 7.123456 * tolerance * 20, 0] for k in range(3)]
+    bundle = wavecore.encode_curves(curves, tolerance=tolerance, method="vertex")
+    assert bundle[4] == curvesets.COPY_VERSION
+    assert len(bundle) <= curvesets.SHORT_CHECK
+    body = bundle[:-2]
+    assert struct.unpack("<H", bundle[-2:])[0] == binascii.crc_hqx(body, 0)
+    got = wavecore.decode_curves(bundle)
+    assert got.tolerance <= tolerance and got.tolerance == curvesets._pack_tolerance(tolerance)[0]
+    for original, back in zip(curves, got.curves, strict=True):
+        assert _both_ways(original, back, True) <= got.tolerance
+    for at in range(0, len(bundle), 3):
+        damaged = bytearray(bundle)
+        damaged[at] ^= 0x10
+        with pytest.raises(wavecore.BundleError):
+            wavecore.decode(bytes(damaged))
+
+
+def test_version_6_crafted_bundles_give_curves_or_bundle_error() -> None:
+    # bytes changed and the CRC-16 made to match: curves within the declared limit, or a
+    # BundleError, never another exception
+    t = np.linspace(0, 2 * np.pi, 41)[:-1]
+    shape = np.stack([np.cos(t), np.sin(t) * 0.5], 1)
+    bundle = wavecore.encode_curves(
+        [shape, shape + [3.3, 0.1], _walk(30, 2)], tolerance=0.01, method="vertex"
+    )
+    assert bundle[4] == curvesets.COPY_VERSION and len(bundle) <= curvesets.SHORT_CHECK
+    rng = np.random.default_rng(6)
+    for _ in range(300):
+        body = bytearray(bundle[:-2])
+        for _ in range(int(rng.integers(1, 4))):
+            at = int(rng.integers(6, len(body)))
+            body[at] = int(rng.integers(0, 256))
+        crafted = bytes(body) + struct.pack("<H", binascii.crc_hqx(bytes(body), 0))
+        try:
+            out = wavecore.decode(crafted)
+        except wavecore.BundleError:
+            continue
+        assert all(isinstance(c, np.ndarray) and c.ndim == 2 for c in out)
+        assert sum(c.size for c in out) <= curvesets.VERTEX_PER_BYTE * (len(crafted) + 16)

@@ -1243,7 +1243,8 @@ def _encode_vertex(
             if not plane:
                 continue  # neither form keeps the bound at this step: the next finer one
             best_plane: tuple[bytes, int, int] | None = None
-            best_inputs: tuple[np.ndarray, np.ndarray, np.ndarray | None, int, bool]
+            # every coding tried: its size, head, inputs
+            choices: list[tuple[int, int, tuple[np.ndarray, np.ndarray, Any, int, bool]]] = []
             counts_written = counts
             start_rows: dict[int, np.ndarray] = {}
             for kept_vertices, kept_bulges, candidate in plane:
@@ -1286,17 +1287,22 @@ def _encode_vertex(
                         | (dtype.name != "float64") << 8
                         | index << 9
                     )
+                    inputs = (placed, sizes, placed_bulges, candidate, from_last)
+                    choices.append((len(coded), head, inputs))
                     if best_plane is None or len(coded) < len(best_plane[0]):
                         best_plane = (coded, head, version)
                         counts_written = sizes
-                        best_inputs = (placed, sizes, placed_bulges, candidate, from_last)
             assert best_plane is not None
-            copied = _copied_stream(
-                parts, closed, again, closed_mode, best_inputs, step, tolerance, dtype
-            )
-            if copied is not None and len(copied[0]) < len(best_plane[0]):
-                best_plane = (copied[0], best_plane[1], COPY_VERSION)
-                counts_written = copied[1]  # a copy has its source's count
+            choices.sort(key=lambda choice: choice[0])
+            if len(best_plane[0]) > _COPY_EVERY_CHOICE:
+                choices = choices[:1]  # a large set: copies in its chosen coding only
+            for _, head, inputs in choices:
+                copied = _copied_stream(
+                    parts, closed, again, closed_mode, inputs, step, tolerance, dtype
+                )
+                if copied is not None and len(copied[0]) < len(best_plane[0]):
+                    best_plane = (copied[0], head, COPY_VERSION)
+                    counts_written = copied[1]  # a copy has its source's count
             stream, head, plane_version = best_plane
             limit = VERTEX_PER_BYTE * (len(stream) + 16)
             if len(arrays) > limit or int(counts_written.sum()) * d > limit:
@@ -1345,6 +1351,10 @@ def _encode_vertex(
     return best
 
 
+#: A set whose chosen stream is at most this many bytes has copies tried in every coding
+#: (predictor, bulges, starts), not only the chosen one: a few more bytes found where each is
+#: a larger share, for little time (such sets are quick to code).
+_COPY_EVERY_CHOICE = 256
 #: The most point-to-segment distances that copies' checks may measure, per original point
 #: of the set (and a fixed allowance): the copies' cost stays linear in the input.
 _COPY_WORK = 256
