@@ -148,7 +148,13 @@ _PRIOR_TABLE = (
 #: Version 6's copy models' starting probabilities (as :data:`_PRIOR_TABLE`; their indices are
 #: from :data:`COPY_BASE`, which no earlier version codes), learnt on the same training
 #: glyphs coded as version 6 (``python benchmarks/curves.py --train-priors``, its second line).
-_COPY_PRIOR_TABLE = ""
+_COPY_PRIOR_TABLE = (
+    "9245:199 9246:94 9247:151 9248:12 9249:17 9250:12 9251:20 9252:74 9253:134 9254:211 9255:197 "
+    "9297:125 9298:84 9299:92 9300:174 9301:218 9347:158 9348:240 9349:12 9350:243 9397:116 "
+    "9398:16 9399:123 9400:124 9401:118 9402:156 9403:131 9404:20 9405:29 9406:35 9407:68 9408:84 "
+    "9409:88 9410:121 9411:123 9412:136 9413:200 9414:213 9453:131 9454:239 9455:42 9456:50 "
+    "9457:74 9458:82 9459:90 9460:102 9503:135 9504:202 9505:42 "
+)
 #: A model with a prior starts at this adaptation count (its first updates move it less).
 PRIOR_COUNT = 2
 
