@@ -370,6 +370,64 @@ def train_priors() -> str:
     return curvecoder.trained_table(states)
 
 
+def train_copy_priors() -> str:
+    """Version 6's copy models: their final states on the training glyphs coded as version 6
+    (the copies as the encoder chooses them), averaged as :func:`train_priors` does."""
+    from wavecore import curvecoder
+    from wavecore.curvesets import _check_size as check_size
+    from wavecore.curvesets import coded_vertices
+
+    global TEXT
+    kept_text, TEXT = TEXT, TRAIN_TEXT
+    try:
+        sets = [glyph_contours(family) for family in TRAIN_FONTS]
+    finally:
+        TEXT = kept_text
+    states = []
+    for contours in sets:
+        for relative in (0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1):
+            bundle = wavecore.encode_curves(
+                contours, tolerance=relative * GLYPH_SIZE, method="vertex"
+            )
+            info = coded_vertices(bundle)
+            if info["version"] != 6:
+                continue
+            lattice, counts, closed, repeated, bulges = info["coded"]
+            copies = np.zeros((len(counts), 5), dtype=np.int64)
+            curvecoder.decode_bulged_set(  # the copies' sources and fractions
+                bytes(bundle[: -check_size(bundle)][-info["stream"] :]),
+                len(counts),
+                2,
+                info["closed_mode"],
+                info["closed_mode"] == 1,
+                len(lattice),
+                info["order"],
+                info["bulged"],
+                info["from_last"],
+                True,
+                copies,
+            )
+            models = curvecoder.initial_models(True)
+            models[2 * curvecoder.COPY_BASE :: 2] = curvecoder.PROB_HALF  # learnt from one half
+            models[2 * curvecoder.COPY_BASE + 1 :: 2] = 0
+            curvecoder.encode_set(
+                lattice,
+                counts,
+                closed,
+                repeated,
+                info["closed_mode"],
+                info["order"],
+                bulges if info["bulged"] else None,
+                info["from_last"],
+                models=models,
+                sources=copies[:, 0].copy(),
+                fractions=copies[:, 1:].copy(),
+            )
+            states.append(models)
+    print(f"# {len(states)} training sets coded as version 6", file=sys.stderr)
+    return curvecoder.trained_table(states, first=curvecoder.COPY_BASE, stop=curvecoder.ALL_MODELS)
+
+
 # --- the run -------------------------------------------------------------------------------
 
 
@@ -487,11 +545,13 @@ def main() -> None:
     parser.add_argument(
         "--train-priors",
         action="store_true",
-        help="print version 5's prior table, learnt on fonts and text the benchmark does not use",
+        help="print version 5's prior table and version 6's copy models' (two lines), learnt on "
+        "fonts and text the benchmark does not use",
     )
     args = parser.parse_args()
     if args.train_priors:
         print(train_priors())
+        print(train_copy_priors())
         return
     sets = []
     for family in FONTS[:1] if args.quick else FONTS:

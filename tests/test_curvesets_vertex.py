@@ -6,6 +6,7 @@ of the encoder's own check.
 
 from __future__ import annotations
 
+import binascii
 import itertools
 import struct
 import time
@@ -19,8 +20,9 @@ from hypothesis import strategies as st
 import wavecore
 from wavecore import curvecoder, curvesets
 
-#: the versions of a plane set of the vertex form (5: version 4 with learnt priors)
-_PLANE = (curvesets.PLANE_VERSION, curvesets.PRIOR_VERSION)
+#: the versions of a plane set of the vertex form (5: version 4 with learnt priors; 6: 5 with
+#: translated copies of earlier curves)
+_PLANE = (curvesets.PLANE_VERSION, curvesets.PRIOR_VERSION, curvesets.COPY_VERSION)
 
 
 def _to_polyline(source: np.ndarray, target: np.ndarray, closed: bool) -> float:
@@ -496,3 +498,122 @@ def test_glyph_like_set_written_as_version_5_keeps_the_bound() -> None:
     assert bundle[4] in _PLANE
     for original, decoded in zip(curves, wavecore.decode(bundle), strict=True):
         assert _both_ways(original, decoded, True) <= 0.05
+
+
+@pytest.mark.parametrize("bulged", [False, True])
+def test_version_6_copies_round_trip(bulged: bool) -> None:
+    rng = np.random.default_rng(66)
+    shape = np.cumsum(rng.integers(-30, 31, size=(40, 2)), axis=0)
+    other = np.cumsum(rng.integers(-30, 31, size=(25, 2)), axis=0)
+    lattice = np.concatenate([shape, other, shape + [500, -7], shape - [3, 900]])
+    counts = np.array([40, 25, 40, 40])
+    closed = np.ones(4, dtype=np.int64)
+    repeated = np.zeros(4, dtype=np.int64)
+    one = rng.integers(-5, 6, size=40)
+    bulges = np.concatenate([one, rng.integers(-5, 6, size=25), one, one]) if bulged else None
+    sources = np.array([-1, -1, 0, 2])
+    fractions = np.array([[0, 0, 0, 0], [0, 0, 0, 0], [3, 5, 0, 0], [0, 0, 2, 3]])
+    stream = curvecoder.encode_set(
+        lattice, counts, closed, repeated, 1, 4, bulges, False, True, None, sources, fractions
+    )
+    copies = np.zeros((4, 5), dtype=np.int64)
+    back = curvecoder.decode_bulged_set(stream, 4, 2, 1, True, 200, 4, bulged, False, True, copies)
+    assert back is not None
+    assert np.array_equal(back[0], lattice) and np.array_equal(back[1], counts)
+    if bulges is not None:
+        assert np.array_equal(back[4], bulges)
+    assert np.array_equal(copies[:, 0], sources) and np.array_equal(copies[:, 1:], fractions)
+    # a copy costs its flag, distance, start and fraction: far less than its 40 vertices
+    plain = curvecoder.encode_set(lattice, counts, closed, repeated, 1, 4, bulges, False, True)
+    assert len(stream) < len(plain) - 40
+
+
+@pytest.mark.parametrize("tolerance", [0.3, 0.05, 0.004])
+@pytest.mark.parametrize("offset", [7.0, 7.123456, -3.3])
+def test_translated_curves_are_copies_and_keep_the_bound(tolerance: float, offset: float) -> None:
+    # the same outline at offsets off the lattice (as one letter repeats in a text), and one
+    # other outline: the repeats are copied, and every curve keeps the bound (brute force)
+    t = np.linspace(0, 2 * np.pi, 97)[:-1]
+    shape = np.stack([3 * np.cos(t), 4 * np.sin(t) + np.sin(3 * t)], axis=1)
+    curves = [shape + [k * offset, 0.37 * k] for k in range(5)] + [_ring(80, 2.0) + 20]
+    bundle = wavecore.encode_curves(curves, tolerance=tolerance, method="vertex")
+    assert bundle[4] == curvesets.COPY_VERSION
+    for original, decoded in zip(curves, wavecore.decode(bundle), strict=True):
+        assert _both_ways(original, decoded, True) <= tolerance
+    alone = wavecore.encode_curves([curves[0], curves[-1]], tolerance=tolerance, method="vertex")
+    # four copies of at most 8 B each (a translation off the lattice, and its fractions),
+    # where coding each 96-point outline in full costs far more
+    assert len(bundle) <= len(alone) + 4 * 8
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    tolerance=st.floats(1e-3, 1.0),
+    offsets=st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)), min_size=1, max_size=4),
+    dtype=st.sampled_from(["float64", "float32", "int32"]),
+    closed=st.booleans(),
+)
+def test_copies_keep_the_bound_property(
+    seed: int,
+    tolerance: float,
+    offsets: list[tuple[float, float]],
+    dtype: str,
+    closed: bool,
+) -> None:
+    # a walk and its translates (in the output dtype, as decoded): whichever curves become
+    # copies, every curve keeps the bound both ways (brute force)
+    rng = np.random.default_rng(seed)
+    walk = np.cumsum(rng.normal(size=(int(rng.integers(3, 90)), 2)), axis=0) * 4
+    curves = [walk.astype(dtype)] + [(walk + offset).astype(dtype) for offset in offsets]
+    bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
+    for original, back in zip(curves, wavecore.decode(bundle), strict=True):
+        assert back.dtype == original.dtype
+        assert _both_ways(original, back, closed) <= tolerance
+
+
+@pytest.mark.parametrize("tolerance", [0.05, 0.3, 10.0, 0.07, 12.5, 1 / 3])
+def test_version_6_short_check_and_tolerance(tolerance: float) -> None:
+    # a short version-6 set ends in a CRC-16 (a long one in a CRC-32) and its tolerance comes
+    # back exactly as the encoder stated it; damage anywhere is found
+    t = np.linspace(0, 2 * np.pi, 97)[:-1]
+    shape = np.stack([3 * np.cos(t), 4 * np.sin(t) + np.sin(3 * t)], axis=1) * tolerance * 20
+    curves = [shape + [k * 7.123456 * tolerance * 20, 0] for k in range(3)]
+    bundle = wavecore.encode_curves(curves, tolerance=tolerance, method="vertex")
+    assert bundle[4] == curvesets.COPY_VERSION
+    assert len(bundle) <= curvesets.SHORT_CHECK
+    body = bundle[:-2]
+    assert struct.unpack("<H", bundle[-2:])[0] == binascii.crc_hqx(body, 0)
+    got = wavecore.decode_curves(bundle)
+    assert got.tolerance <= tolerance and got.tolerance == curvesets._pack_tolerance(tolerance)[0]
+    for original, back in zip(curves, got.curves, strict=True):
+        assert _both_ways(original, back, True) <= got.tolerance
+    for at in range(0, len(bundle), 3):
+        damaged = bytearray(bundle)
+        damaged[at] ^= 0x10
+        with pytest.raises(wavecore.BundleError):
+            wavecore.decode(bytes(damaged))
+
+
+def test_version_6_crafted_bundles_give_curves_or_bundle_error() -> None:
+    # bytes changed and the CRC-16 made to match: curves within the declared limit, or a
+    # BundleError, never another exception
+    t = np.linspace(0, 2 * np.pi, 41)[:-1]
+    shape = np.stack([np.cos(t), np.sin(t) * 0.5], 1)
+    bundle = wavecore.encode_curves(
+        [shape, shape + [3.3, 0.1], _walk(30, 2)], tolerance=0.01, method="vertex"
+    )
+    assert bundle[4] == curvesets.COPY_VERSION and len(bundle) <= curvesets.SHORT_CHECK
+    rng = np.random.default_rng(6)
+    for _ in range(300):
+        body = bytearray(bundle[:-2])
+        for _ in range(int(rng.integers(1, 4))):
+            at = int(rng.integers(6, len(body)))
+            body[at] = int(rng.integers(0, 256))
+        crafted = bytes(body) + struct.pack("<H", binascii.crc_hqx(bytes(body), 0))
+        try:
+            out = wavecore.decode(crafted)
+        except wavecore.BundleError:
+            continue
+        assert all(isinstance(c, np.ndarray) and c.ndim == 2 for c in out)
+        assert sum(c.size for c in out) <= curvesets.VERTEX_PER_BYTE * (len(crafted) + 16)

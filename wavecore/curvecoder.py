@@ -74,6 +74,20 @@ _FRAME_LIMIT = 1 << 20  # steps longer than this (lattice units) are coded witho
 FLAG_BASE = SIGN_BASE + SIGN_SIZE
 FLAG_SIZE = 4
 MODELS = FLAG_BASE + FLAG_SIZE
+#: Version 6's models, after every earlier version's (whose priors index below ``MODELS``):
+#: the copy flag (by the previous curve's), "as the previous copy" (its distance back and
+#: translation), the distance back to the copied curve (unary bit length and one mantissa
+#: model), the fraction's bit count and its bits, the translation's lattice vector.
+COPY_BASE = MODELS
+_COPY_REPEAT = COPY_BASE + 2
+_COPY_DISTANCE = _COPY_REPEAT + 1
+_COPY_SHIFT = _COPY_DISTANCE + _UNARY + 1
+_COPY_FRACTION = _COPY_SHIFT + 2 * (_UNARY + 1)  # the bit counts' models: x, then y
+#: the finest fraction of a lattice step by which a copy may be translated: ``2**-COPY_SHIFTS``
+COPY_SHIFTS = 6
+_COPY_MOVE = _COPY_FRACTION + COPY_SHIFTS  # the translation's lattice vector: x, then y
+_COPY_MOVE_SIGN = _COPY_MOVE + 2 * (_UNARY + 1)
+ALL_MODELS = _COPY_MOVE_SIGN + 2
 
 #: Version 5's starting probabilities: ``"index:value"`` pairs, ``value / 256`` the
 #: probability of a 0 bit (models not listed start at one half).  Learnt on glyphs that
@@ -131,12 +145,22 @@ _PRIOR_TABLE = (
     "9217:119 9224:196 9228:161 9229:139 9230:135 9231:120 9233:247 9234:183 9235:158 9236:183 "
     "9237:180 9239:192 9240:131 9241:6 9242:255 "
 )
+#: Version 6's copy models' starting probabilities (as :data:`_PRIOR_TABLE`; their indices are
+#: from :data:`COPY_BASE`, which no earlier version codes), learnt on the same training
+#: glyphs coded as version 6 (``python benchmarks/curves.py --train-priors``, its second line).
+_COPY_PRIOR_TABLE = (
+    "9245:199 9246:94 9247:151 9248:12 9249:17 9250:12 9251:20 9252:74 9253:134 9254:211 9255:197 "
+    "9297:125 9298:84 9299:92 9300:174 9301:218 9347:158 9348:240 9349:12 9350:243 9397:116 "
+    "9398:16 9399:123 9400:124 9401:118 9402:156 9403:131 9404:20 9405:29 9406:35 9407:68 9408:84 "
+    "9409:88 9410:121 9411:123 9412:136 9413:200 9414:213 9453:131 9454:239 9455:42 9456:50 "
+    "9457:74 9458:82 9459:90 9460:102 9503:135 9504:202 9505:42 "
+)
 #: A model with a prior starts at this adaptation count (its first updates move it less).
 PRIOR_COUNT = 2
 
 
 def _parse_priors(table: str) -> np.ndarray:
-    models = np.empty(2 * MODELS, dtype=np.int64)
+    models = np.empty(2 * ALL_MODELS, dtype=np.int64)
     models[0::2] = PROB_HALF
     models[1::2] = 0
     for pair in table.split():
@@ -151,15 +175,19 @@ def initial_models(priors: bool) -> np.ndarray:
     return (_PRIORS if priors else _HALVES).copy()
 
 
-def trained_table(states: list[np.ndarray], least: int = 4) -> str:
+def trained_table(
+    states: list[np.ndarray], least: int = 4, first: int = 0, stop: int = MODELS
+) -> str:
     """The prior table (:data:`_PRIOR_TABLE`'s form) from the final models of coded sets: per
-    model, the mean probability over the sets that used it, where at least ``least`` did."""
-    stack = np.stack(states)
+    model of ``first`` up to ``stop`` (version 5's by default; version 6's copy models from
+    :data:`COPY_BASE` to :data:`ALL_MODELS`), the mean probability over the sets that used it,
+    where at least ``least`` did."""
+    stack = np.stack(states)[:, 2 * first : 2 * stop]
     used = stack[:, 1::2] > 0
     mean = np.where(used, stack[:, 0::2], 0).sum(axis=0) / np.maximum(used.sum(axis=0), 1)
     pairs = []
-    for index in np.flatnonzero(used.sum(axis=0) >= least).tolist():
-        value = int(np.clip(mean[index] / (1 << (PROB_BITS - 8)), 0, 255))
+    for index in (first + np.flatnonzero(used.sum(axis=0) >= least)).tolist():
+        value = int(np.clip(mean[index - first] / (1 << (PROB_BITS - 8)), 0, 255))
         if value != 127 and value != 128:
             pairs.append(f"{index}:{value}")
     return " ".join(pairs)
@@ -270,6 +298,27 @@ def _magnitude(st, buf, models, kind, value, decoding):
 
 
 @njit(cache=True, nogil=True)
+def _plain_magnitude(st, buf, models, base, value, decoding):
+    """A magnitude ``value >= 0``: its bit length in unary (models ``base + k``), the bits
+    below the leading one with the one model ``base + _UNARY`` (version 6's copies)."""
+    k = 0 if decoding else _bit_length(value)
+    if decoding:
+        while k < MAX_BITS and _bit(st, buf, models, base + k, 0, True):
+            k += 1
+    else:
+        for i in range(k):
+            _bit(st, buf, models, base + i, 1, False)
+        if k < MAX_BITS:
+            _bit(st, buf, models, base + k, 0, False)
+    if k <= 1:
+        return k
+    out = 1
+    for i in range(k - 2, -1, -1):
+        out = (out << 1) | _bit(st, buf, models, base + _UNARY, (value >> i) & 1, decoding)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _signed(st, buf, models, kind, sign_ctx, value, decoding):
     magnitude = _magnitude(st, buf, models, kind, abs(value), decoding)
     if magnitude == 0:
@@ -353,6 +402,9 @@ def _code_set(
     bulged,
     from_last,
     models,
+    copying,
+    sources,
+    fractions,
 ):
     """Code (or decode into ``lattice``, ``counts``, ``closed``, ``repeated``) a whole set.
 
@@ -364,6 +416,13 @@ def _code_set(
     the segment's end (the closing segment's at the curve's first row).
     With ``from_last`` (version 4), a curve's first vertex is coded from the previous curve's
     last vertex rather than its first.
+    With ``copying`` (version 6), each curve after the first has a flag: a *copy* of curve
+    ``sources[c]`` (an earlier one), translated: a bit "as the previous copy" (the same
+    distance back and translation; after the first copy), else the distance back, its first
+    vertex's lattice step from the source's first vertex, and ``fractions[c] = (k_0, f_0, k_1,
+    f_1, …)``: a translation by ``f_j / 2**k_j`` of a lattice step more.  Its count, vertices
+    and bulges are the source's, moved with its first vertex.  ``sources`` is -1 for a curve
+    coded in full.
     Returns the number of vertices (decoding: those written; -1 if the stream declares more
     than ``lattice`` holds).
     """
@@ -373,16 +432,112 @@ def _code_set(
     previous_residual = np.zeros(d, dtype=np.int64)
     at = 0
     limit = len(lattice)
+    rows = np.zeros(len(counts) + 1, dtype=np.int64)  # each curve's first row
+    copied = 0
+    last_back = -1  # the previous copy's distance back (-1: none yet)
+    last_move = np.zeros(3 * d, dtype=np.int64)  # its translation: lattice vector, fractions
     for c in range(len(counts)):
+        rows[c] = at
         if closed_mode == 2:
             closed[c] = _bit(st, buf, models, FLAG_BASE, closed[c], decoding)
         if closed[c]:
             repeated[c] = _bit(st, buf, models, FLAG_BASE + 1, repeated[c], decoding)
-        m = _magnitude(st, buf, models, _KIND_COUNT, counts[c] - 1, decoding) + 1
+        source = -1
+        repeat = 0
+        if copying and c > 0:
+            flag = _bit(st, buf, models, COPY_BASE + copied, sources[c] >= 0, decoding)
+            copied = flag
+            if flag:
+                back = 0 if decoding else c - 1 - sources[c]
+                if last_back >= 0:  # the previous copy's distance back and translation?
+                    same = 0
+                    if not decoding and back == last_back:
+                        first = rows[sources[c]]
+                        same = 1
+                        for j in range(d):
+                            if lattice[at, j] - lattice[first, j] != last_move[j]:
+                                same = 0
+                        for j in range(2 * d):
+                            if fractions[c, j] != last_move[d + j]:
+                                same = 0
+                    repeat = _bit(st, buf, models, _COPY_REPEAT, same, decoding)
+                if repeat:
+                    back = last_back
+                else:
+                    back = _plain_magnitude(st, buf, models, _COPY_DISTANCE, back, decoding)
+                if back > c - 1:
+                    return -1
+                source = c - 1 - back
+                last_back = back
+                if decoding:
+                    sources[c] = source
+            elif decoding:
+                sources[c] = -1
+        if source >= 0:
+            m = counts[source]
+        else:
+            m = _magnitude(st, buf, models, _KIND_COUNT, counts[c] - 1, decoding) + 1
         if decoding:
             if m > limit - at:
                 return -1
             counts[c] = m
+        if source >= 0:
+            # a translated copy: the translation from its source's first vertex (a lattice
+            # vector and a fraction of a step), then the source's shape
+            first = rows[source]
+            if repeat:
+                for j in range(d):
+                    lattice[at, j] = lattice[first, j] + last_move[j]
+                for j in range(2 * d):
+                    fractions[c, j] = last_move[d + j]
+            else:
+                for j in range(d):
+                    # x from the previous curve's first vertex (text runs on: the nearest
+                    # start), the others from the source's (a copy on the same baseline: 0)
+                    base = rows[c - 1] if j == 0 else first
+                    value = 0 if decoding else lattice[at, j] - lattice[base, j]
+                    size = _plain_magnitude(
+                        st, buf, models, _COPY_MOVE + min(j, 1) * (_UNARY + 1), abs(value), decoding
+                    )
+                    if size and _bit(
+                        st, buf, models, _COPY_MOVE_SIGN + min(j, 1), value < 0, decoding
+                    ):
+                        size = -size
+                    lattice[at, j] = lattice[base, j] + size
+                for j in range(d):  # each coordinate's fraction: its bit count, its bits
+                    shift = 0 if decoding else fractions[c, 2 * j]
+                    shift = _plain_magnitude(
+                        st, buf, models, _COPY_SHIFT + min(j, 1) * (_UNARY + 1), shift, decoding
+                    )
+                    if shift > COPY_SHIFTS:
+                        return -1
+                    fractions[c, 2 * j] = shift
+                    value = 0
+                    for i in range(shift - 1, -1, -1):
+                        bit = _bit(
+                            st,
+                            buf,
+                            models,
+                            _COPY_FRACTION + i,
+                            (fractions[c, 2 * j + 1] >> i) & 1,
+                            decoding,
+                        )
+                        value = (value << 1) | bit
+                    fractions[c, 2 * j + 1] = value
+            for j in range(d):
+                last_move[j] = lattice[at, j] - lattice[first, j]
+                start[j] = lattice[at, j]
+            for j in range(2 * d):
+                last_move[d + j] = fractions[c, j]
+            for v in range(1, m):
+                for j in range(d):
+                    lattice[at + v, j] = lattice[at, j] + lattice[first + v, j] - lattice[first, j]
+                if bulged:
+                    bulges[at + v] = bulges[first + v]
+            if bulged:
+                bulges[at] = bulges[first]
+            at += m
+            continue
         # the first vertex: a step from the previous curve's first (or last) vertex
         for j in range(d):
             if from_last and at > 0:
@@ -545,10 +700,19 @@ def encode_set(
     from_last: bool = False,
     priors: bool = False,
     models: np.ndarray | None = None,
+    sources: np.ndarray | None = None,
+    fractions: np.ndarray | None = None,
 ) -> bytes:
     """The range-coded stream of a set of lattice curves (see :func:`decode_set`); with
     ``bulges`` (one per vertex row: the bulge of the segment ending there), version 3's;
-    ``from_last`` (version 4) codes a curve's first vertex from the previous curve's last."""
+    ``from_last`` (version 4) codes a curve's first vertex from the previous curve's last;
+    ``sources`` and ``fractions`` (version 6: both or neither) the copies, as in
+    :func:`_code_set` (the copies' rows of ``lattice`` and ``bulges`` must be their sources',
+    moved)."""
+    copying = sources is not None
+    sources = np.full(len(counts), -1, dtype=np.int64) if sources is None else sources
+    if fractions is None:
+        fractions = np.zeros((len(counts), 2 * lattice.shape[1]), dtype=np.int64)
     d = lattice.shape[1]
     bulged = bulges is not None
     bulges = np.zeros(len(lattice), dtype=np.int64) if bulges is None else bulges
@@ -571,6 +735,9 @@ def encode_set(
         bulged,
         bool(from_last),
         models,
+        copying,
+        np.ascontiguousarray(sources, dtype=np.int64),
+        np.ascontiguousarray(fractions, dtype=np.int64),
     )
     _finish_stream(st, out)
     size = int(st[_POS])
@@ -609,9 +776,12 @@ def decode_bulged_set(
     bulged: bool,
     from_last: bool = False,
     priors: bool = False,
+    copies: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """As :func:`decode_set`, and the bulges (zeros unless ``bulged``: version 3);
-    ``from_last`` as in :func:`encode_set` (version 4)."""
+    ``from_last`` as in :func:`encode_set` (version 4).  With ``copies`` (version 6: an
+    array ``(count, 2 d + 1)``), each curve's source (-1 for none) and fraction are written to
+    its rows, as :func:`_code_set` gives them."""
     buf = np.frombuffer(bytes(data), dtype=np.uint8).copy()  # one compiled signature
     st = np.array([0, MASK32, 0, 1, 0, 0], dtype=np.int64)
     code = 0
@@ -624,6 +794,8 @@ def decode_bulged_set(
     closed = np.full(count, 1 if all_closed else 0, dtype=np.int64)
     repeated = np.zeros(count, dtype=np.int64)
     bulges = np.zeros(max_vertices, dtype=np.int64)
+    sources = np.full(count, -1, dtype=np.int64)
+    fractions = np.zeros((count, 2 * d), dtype=np.int64)
     total = _code_set(
         buf,
         st,
@@ -639,9 +811,15 @@ def decode_bulged_set(
         bulged,
         bool(from_last),
         initial_models(priors),
+        copies is not None,
+        sources,
+        fractions,
     )
     if total < 0:
         return None
+    if copies is not None:
+        copies[:, 0] = sources
+        copies[:, 1:] = fractions
     return lattice[:total], counts, closed, repeated, bulges[:total]
 
 
@@ -1691,4 +1869,4 @@ def optimal_bulged_set(
 
 
 _HALVES = _parse_priors("")
-_PRIORS = _parse_priors(_PRIOR_TABLE)
+_PRIORS = _parse_priors(_PRIOR_TABLE + " " + _COPY_PRIOR_TABLE)

@@ -68,6 +68,7 @@ crc                 4 bytes: CRC-32 of everything before it
 
 from __future__ import annotations
 
+import binascii
 import json
 import math
 import struct
@@ -105,6 +106,28 @@ PLANE_VERSION = 4
 #: Version 4's layout, the coder's models started at learnt priors rather than one half
 #: (docs/curves.md, version 5).
 PRIOR_VERSION = 5
+#: Version 5 with copies: a curve may be coded as an earlier curve's vertices and bulges,
+#: translated by a lattice vector and a fraction of a step (docs/curves.md, version 6).
+COPY_VERSION = 6
+#: A version-6 bundle of at most this many bytes ends in a CRC-16/XMODEM (2 bytes) instead of
+#: a CRC-32, as bundle format 4.0's groups of chunks up to 1 KiB do: it still finds every
+#: damage of up to 3 bits and every burst of up to 16 in so short a message.
+SHORT_CHECK = 1024
+
+
+def _check_size(data: bytes) -> int:
+    """The bytes of the check that ends ``data`` (a whole curve-set bundle)."""
+    short = len(data) <= SHORT_CHECK and data[len(MAGIC)] == COPY_VERSION
+    return 2 if short else 4
+
+
+def _with_check(out: bytearray, version: int) -> bytes:
+    """``out`` and its check: a CRC-16 for a short version-6 set, else a CRC-32."""
+    if version == COPY_VERSION and len(out) + 2 <= SHORT_CHECK:
+        return bytes(out + struct.pack("<H", binascii.crc_hqx(bytes(out), 0)))
+    return bytes(out + struct.pack("<I", zlib.crc32(out)))
+
+
 METHODS = ("auto", "wavelet", "vertex")
 #: Lattice steps of the vertex form, as multiples of the tolerance (a byte indexes this table).
 #: A vertex moves by at most ``step * sqrt(d) / 2`` when rounded, which must stay within the
@@ -800,12 +823,34 @@ def _pack_tolerance(tolerance: float) -> tuple[float, bytes]:
     return tolerance, encode_varint(0) + struct.pack("<d", tolerance)
 
 
-def _read_tolerance(reader: _Reader) -> float:
+def _compact_tolerance(packed: bytes) -> bytes:
+    """Version 6's form of :func:`_pack_tolerance`'s bytes: a short decimal ``k · 10**e`` as
+    one varint ``2 + 8 zz(e) + (k − 1)`` when ``k`` ≤ 7 (one byte for ``e`` in −8 … 7), else
+    ``2 + 8 zz(e) + 7`` and the varint ``k``; a float as before."""
+    if packed[0] < 2:
+        return packed
+    reader = _Reader(packed)
+    exponent = unzigzag(reader.varint("tolerance", 1 << 12) - 2)
+    mantissa = reader.varint("tolerance", 10**9)
+    while mantissa and mantissa % 10 == 0:  # 10.0 is 100e-1 as written: the same value
+        mantissa //= 10
+        exponent += 1
+    folded = zigzag(exponent)
+    if 1 <= mantissa <= 7:
+        return encode_varint(2 + 8 * folded + mantissa - 1)
+    return encode_varint(2 + 8 * folded + 7) + encode_varint(mantissa)
+
+
+def _read_tolerance(reader: _Reader, compact: bool = False) -> float:
     head = reader.varint("tolerance", 1 << 12)
     if head == 0:
         (tolerance,) = struct.unpack("<d", reader.take(8, "tolerance"))
     elif head == 1:
         (tolerance,) = struct.unpack("<f", reader.take(4, "tolerance"))
+    elif compact:  # version 6: the exponent and a small mantissa in the head
+        low = (head - 2) & 7
+        mantissa = low + 1 if low < 7 else reader.varint("tolerance", 10**9)
+        tolerance = float(f"{mantissa}e{unzigzag((head - 2) >> 3)}")
     else:
         mantissa = reader.varint("tolerance", 10**9)
         tolerance = float(f"{mantissa}e{unzigzag(head - 2)}")
@@ -1198,6 +1243,8 @@ def _encode_vertex(
             if not plane:
                 continue  # neither form keeps the bound at this step: the next finer one
             best_plane: tuple[bytes, int, int] | None = None
+            # every coding tried: its size, head, inputs
+            choices: list[tuple[int, int, tuple[np.ndarray, np.ndarray, Any, int, bool]]] = []
             counts_written = counts
             start_rows: dict[int, np.ndarray] = {}
             for kept_vertices, kept_bulges, candidate in plane:
@@ -1240,10 +1287,22 @@ def _encode_vertex(
                         | (dtype.name != "float64") << 8
                         | index << 9
                     )
+                    inputs = (placed, sizes, placed_bulges, candidate, from_last)
+                    choices.append((len(coded), head, inputs))
                     if best_plane is None or len(coded) < len(best_plane[0]):
                         best_plane = (coded, head, version)
                         counts_written = sizes
             assert best_plane is not None
+            choices.sort(key=lambda choice: choice[0])
+            if len(best_plane[0]) > _COPY_EVERY_CHOICE:
+                choices = choices[:1]  # a large set: copies in its chosen coding only
+            for _, head, inputs in choices:
+                copied = _copied_stream(
+                    parts, closed, again, closed_mode, inputs, step, tolerance, dtype
+                )
+                if copied is not None and len(copied[0]) < len(best_plane[0]):
+                    best_plane = (copied[0], head, COPY_VERSION)
+                    counts_written = copied[1]  # a copy has its source's count
             stream, head, plane_version = best_plane
             limit = VERTEX_PER_BYTE * (len(stream) + 16)
             if len(arrays) > limit or int(counts_written.sum()) * d > limit:
@@ -1253,14 +1312,17 @@ def _encode_vertex(
             out += struct.pack("<H", head)
             if dtype.name != "float64":
                 out.append(DTYPES.index(dtype.name))
-            out += tolerance_bytes
+            if plane_version == COPY_VERSION:
+                out += _compact_tolerance(tolerance_bytes)
+            else:
+                out += tolerance_bytes
             out += encode_varint(len(arrays))
             if meta_bytes is not None:
                 out += encode_varint(len(meta_bytes)) + meta_bytes
             out += stream
-            out += struct.pack("<I", zlib.crc32(out))
-            if best is None or len(out) < len(best):
-                best = bytes(out)
+            written = _with_check(out, plane_version)
+            if best is None or len(written) < len(best):
+                best = written
             if (snapped == 2 or not straight_fits) and not weighed:
                 weighed = True  # kept only through a fallback: the next finer step may be
                 continue  # smaller (one more step is weighed, so the cost stays bounded)
@@ -1289,13 +1351,162 @@ def _encode_vertex(
     return best
 
 
+#: A set whose chosen stream is at most this many bytes has copies tried in every coding
+#: (predictor, bulges, starts), not only the chosen one: a few more bytes found where each is
+#: a larger share, for little time (such sets are quick to code).
+_COPY_EVERY_CHOICE = 256
+#: The most point-to-segment distances that copies' checks may measure, per original point
+#: of the set (and a fixed allowance): the copies' cost stays linear in the input.
+_COPY_WORK = 256
+_COPY_CANDIDATES = 8  # earlier curves of the same length compared with a curve
+
+
+def _one_way_exact(source: np.ndarray, target: np.ndarray, closed: bool) -> float:
+    """The largest distance from a point of ``source`` to the polyline ``target`` (closed:
+    with its closing segment), every point against every segment."""
+    a = target if not closed or len(target) < 2 else np.concatenate([target, target[:1]])
+    if len(a) == 1:
+        return float(np.max(np.linalg.norm(source - a[0], axis=1)))
+    start, edge = a[:-1], np.diff(a, axis=0)
+    length2 = np.maximum(np.einsum("ij,ij->i", edge, edge), 1e-300)
+    worst = 0.0
+    for lo in range(0, len(source), 256):
+        p = source[lo : lo + 256, None, :] - start[None]
+        t = np.clip(np.einsum("ijk,jk->ij", p, edge) / length2, 0.0, 1.0)
+        gap = p - t[..., None] * edge[None]
+        worst = max(worst, float(np.sqrt(np.min(np.einsum("ijk,ijk->ij", gap, gap), axis=1)).max()))
+    return worst
+
+
+def _copy_values(
+    vertices: np.ndarray, bulges: np.ndarray | None, closed: bool, step: float, dtype: Any
+) -> np.ndarray:
+    """One curve's decoded polyline from its (fractional) lattice vertices, as decoding
+    computes it."""
+    counts = np.array([len(vertices)], dtype=np.int64)
+    flags = np.array([int(closed)], dtype=np.int64)
+    if bulges is None:
+        return _lattice_values(vertices, step, dtype).astype(np.float64)
+    return _bulged_polylines(vertices, counts, flags, bulges, step, dtype)[0].astype(np.float64)
+
+
+def _fraction_pairs(k: np.ndarray, fraction: np.ndarray) -> list[int]:
+    """Each coordinate's fraction ``f_j / 2**k_j`` as its shortest ``(k_j, f_j)``: a
+    coordinate not moved off the lattice (a copy along a baseline) costs no fraction bits."""
+    pairs = []
+    for shift, f in zip(k.tolist(), fraction.tolist(), strict=True):
+        while shift and not f & 1:
+            f >>= 1
+            shift -= 1
+        pairs += [shift, f]
+    return pairs
+
+
+def _copied_stream(
+    parts: list[np.ndarray],
+    closed: np.ndarray,
+    again: np.ndarray,
+    closed_mode: int,
+    inputs: tuple[np.ndarray, np.ndarray, np.ndarray | None, int, bool],
+    step: float,
+    tolerance: float,
+    dtype: Any,
+) -> tuple[bytes, np.ndarray] | None:
+    """Version 6's stream, and each curve's vertex count, for the chosen coding ``inputs``
+    (vertices, counts, bulges, predictor, ``from_last``), where some curve is a translate of
+    an earlier one (glyphs of one letter, repeated symbols) and the earlier curve's decoded
+    shape, moved by a lattice vector and a fraction of a step (the coarsest that does, or the
+    previous copy's translation), keeps the bound on it: measured exactly, every point against
+    every segment, both ways.  None where no curve is copied."""
+    vertices, counts, bulges, order, from_last = inputs
+    count = len(parts)
+    rows = np.zeros(count + 1, dtype=np.int64)
+    rows[1:] = np.cumsum(counts)
+    budget = _COPY_WORK * sum(len(p) for p in parts) + (1 << 22)
+    sources = np.full(count, -1, dtype=np.int64)
+    fractions = np.zeros((count, 4), dtype=np.int64)
+    # per curve, its rows (a copy takes its source's count)
+    shapes = [vertices[rows[c] : rows[c + 1]] for c in range(count)]
+    curve_bulges = [None if bulges is None else bulges[rows[c] : rows[c + 1]] for c in range(count)]
+    phases = np.zeros((count, 2))  # each curve's fraction of a step (0 unless a copy)
+    by_length: dict[int, list[int]] = {}
+    last: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None  # the previous copy's
+    for j, points in enumerate(parts):
+        earlier = by_length.setdefault(len(points), [])
+        # the newest first (the nearest back), and first of all the one the previous copy's
+        # distance back names (a repeated word: one bit where its translation is the same)
+        newest = earlier[::-1][:_COPY_CANDIDATES]
+        if last is not None and j - 1 - last[0] in earlier:
+            newest.insert(0, j - 1 - last[0])
+        for i in newest:
+            if closed[i] != closed[j]:
+                continue
+            shift = points - parts[i]
+            if np.ptp(shift, axis=0).max() > tolerance * 1e-3:
+                continue
+            shape = shapes[i] - shapes[i][:1]
+            kept_bulges = curve_bulges[i]
+            # where the first vertex goes (a copied source's decoded points are off its lattice
+            # vertices by its own fraction)
+            target = shapes[i][0] + phases[i] + shift[0] / step
+            tries = []
+            if last is not None and last[0] == j - 1 - i:  # as the previous copy: 1 bit
+                tries.append((shapes[i][0] + last[1], last[2], last[3]))
+            # the fractions' bits per coordinate, fewest in all first (a copy along a
+            # baseline needs none across it)
+            most = curvecoder.COPY_SHIFTS
+            for bits in range(2 * most + 1):
+                for kx in range(max(0, bits - most), min(most, bits) + 1):
+                    k = np.array([kx, bits - kx], dtype=np.int64)
+                    total = np.rint(target * (1 << k)).astype(np.int64)
+                    tries.append((total >> k, k, total & ((1 << k) - 1)))
+            for first, k, fraction in tries:
+                moved = (shape + first).astype(np.float64) + fraction / (1 << k)
+                decoded = _copy_values(moved, kept_bulges, bool(closed[j]), step, dtype)
+                work = 2 * len(points) * len(decoded)
+                if work > budget:
+                    break
+                budget -= work
+                if (
+                    _one_way_exact(points, decoded, bool(closed[j])) <= tolerance
+                    and _one_way_exact(decoded, points, bool(closed[j])) <= tolerance
+                ):
+                    shapes[j] = shape + first
+                    curve_bulges[j] = kept_bulges
+                    sources[j] = i
+                    fractions[j] = _fraction_pairs(k, fraction)
+                    phases[j] = fraction / (1 << k)
+                    last = (j - 1 - i, first - shapes[i][0], k, fraction)
+                    break
+            if sources[j] >= 0:
+                break
+        earlier.append(j)
+    if not np.any(sources >= 0):
+        return None
+    written = np.array([len(v) for v in shapes], dtype=np.int64)
+    stream = curvecoder.encode_set(
+        np.ascontiguousarray(np.concatenate(shapes)),
+        written,
+        closed,
+        again,
+        closed_mode,
+        order,
+        None if bulges is None else np.concatenate([b for b in curve_bulges if b is not None]),
+        from_last,
+        priors=True,
+        sources=sources,
+        fractions=fractions,
+    )
+    return stream, written
+
+
 def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
-    reader = _Reader(data[:-4])
+    reader = _Reader(data[: -_check_size(data)])
     reader.take(4, "magic")
     version = reader.take(1, "version")[0]
     from_last = False
-    if version in (PLANE_VERSION, PRIOR_VERSION):
+    if version in (PLANE_VERSION, PRIOR_VERSION, COPY_VERSION):
         (head,) = struct.unpack("<H", reader.take(2, "head"))
         closed_mode = (head >> 1) & 3
         order = (head >> 3) & 7
@@ -1326,8 +1537,8 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         msg = f"curve set names dtype {dtype_index}, unknown"
         raise BundleError(msg)
     dtype = np.dtype(DTYPES[dtype_index])
-    tolerance = _read_tolerance(reader)
-    if version not in (PLANE_VERSION, PRIOR_VERSION):
+    tolerance = _read_tolerance(reader, version == COPY_VERSION)
+    if version not in (PLANE_VERSION, PRIOR_VERSION, COPY_VERSION):
         step_index = reader.take(1, "step")[0]
     if step_index >= len(VERTEX_STEPS):
         msg = f"curve set lattice step {step_index} is unknown"
@@ -1351,6 +1562,7 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     if bulged and d != 2:
         msg = f"curve set version {version} is for plane curves, not of dimension {d}"
         raise BundleError(msg)
+    copies = np.zeros((count, 2 * d + 1), dtype=np.int64) if version == COPY_VERSION else None
     while True:  # grow the vertex buffer only as far as the stream really goes
         result = curvecoder.decode_bulged_set(
             stream,
@@ -1362,7 +1574,8 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
             order,
             bulged,
             from_last,
-            version == PRIOR_VERSION,
+            version in (PRIOR_VERSION, COPY_VERSION),
+            copies,
         )
         if result is not None or capacity >= limit // d:
             break
@@ -1377,14 +1590,24 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     if np.any(np.abs(bulges) >= _VERTEX_LIMIT):
         msg = "curve set bulge out of range"
         raise BundleError(msg)
+    places: np.ndarray = lattice
+    if copies is not None and np.any(copies[:, 0] >= 0):  # copies moved by their fractions
+        places = lattice.astype(np.float64)
+        first = np.concatenate([[0], np.cumsum(counts)])
+        for c in np.flatnonzero(copies[:, 0] >= 0).tolist():
+            shifts = copies[c, 1::2]
+            if np.any(shifts < 0) or np.any(shifts > curvecoder.COPY_SHIFTS):
+                msg = "curve set copy fraction out of range"  # (the coder refuses these)
+                raise BundleError(msg)
+            places[first[c] : first[c + 1]] += copies[c, 2::2] / (1 << shifts).astype(np.float64)
     if bulged:
         extra = (curvecoder.BULGE_PARTS - 1) * int(np.count_nonzero(bulges))
         if (len(lattice) + extra) * d > limit:
             msg = f"curve set declares more than {limit} values in a {len(stream)}-byte stream"
             raise BundleError(msg)
-        values, sizes, _ = _bulged_polylines(lattice, counts, closed, bulges, step, dtype)
+        values, sizes, _ = _bulged_polylines(places, counts, closed, bulges, step, dtype)
     else:
-        values, sizes = _lattice_values(lattice, step, dtype), counts
+        values, sizes = _lattice_values(places, step, dtype), counts
     curves = []
     at = 0
     for m, again in zip(sizes.tolist(), repeated.tolist(), strict=True):
@@ -1403,6 +1626,8 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         "bulged": bulged,
         "from_last": from_last,
         "order": order,
+        # version 6: per curve, the copied curve (-1: coded in full) and its fractions' bits
+        "copies": [] if copies is None else copies[:, [0, 1, 3]].tolist(),
         "coded": (lattice, counts, closed, repeated, bulges),
     }
     curve_set = CurveSet(
@@ -1449,6 +1674,12 @@ def _checked(data: Any) -> bytes:
     if len(data) < len(MAGIC) + 5:
         msg = f"curve set truncated: {len(data)} bytes"
         raise BundleError(msg)
+    if _check_size(data) == 2:
+        (crc,) = struct.unpack("<H", data[-2:])
+        if binascii.crc_hqx(data[:-2], 0) != crc:
+            msg = "curve set damaged: its CRC-16 does not match"
+            raise BundleError(msg)
+        return data
     (crc,) = struct.unpack("<I", data[-4:])
     if zlib.crc32(data[:-4]) != crc:
         msg = "curve set damaged: its CRC-32 does not match"
@@ -1457,7 +1688,13 @@ def _checked(data: Any) -> bytes:
 
 
 def _is_vertex_form(data: bytes) -> bool:
-    return data[len(MAGIC)] in (VERTEX_VERSION, BULGED_VERSION, PLANE_VERSION, PRIOR_VERSION)
+    return data[len(MAGIC)] in (
+        VERTEX_VERSION,
+        BULGED_VERSION,
+        PLANE_VERSION,
+        PRIOR_VERSION,
+        COPY_VERSION,
+    )
 
 
 def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Reader]:
@@ -1468,8 +1705,8 @@ def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Read
     if version != VERSION:
         msg = (
             f"curve set version {version} is not supported "
-            f"(this reader reads {VERSION}, {VERTEX_VERSION}, {BULGED_VERSION}, {PLANE_VERSION} "
-            f"and {PRIOR_VERSION})"
+            f"(this reader reads {VERSION}, {VERTEX_VERSION}, {BULGED_VERSION}, {PLANE_VERSION}, "
+            f"{PRIOR_VERSION} and {COPY_VERSION})"
         )
         raise BundleError(msg)
     flags = reader.varint("flags", 31)
