@@ -249,3 +249,19 @@ def test_mutated_bundles_decode_or_raise_bundle_error() -> None:
         except BundleError:
             continue
         assert out.shape == image.shape
+
+
+def test_the_table_cache_keeps_small_layouts_only() -> None:
+    """A layout of many planes (a short curve of 20 000 dimensions, 4 levels: 5 MB of tables)
+    is built afresh, not kept: a crafted header once pinned hundreds of megabytes per layout."""
+    from wavecore import blockcoder
+
+    many = [[(2, 20000)], [(2, 20000)], [(4, 20000)], [(8, 20000)]]
+    small = [[(2, 3)], [(2, 3)], [(4, 3)], [(8, 3)]]
+    blockcoder._cached_structure.cache_clear()
+    for layout in (many, small):
+        shapes = [[tuple(s) for s in level] for level in layout]
+        chunks = encode_blocks([[np.ones(s, np.int32) for s in lv] for lv in shapes], False)
+        assert decode_blocks(chunks, shapes, False, BLOCK_SIZE)[-1][0].shape == shapes[-1][0]
+    info = blockcoder._cached_structure.cache_info()
+    assert info.currsize == 1, info

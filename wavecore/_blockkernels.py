@@ -264,10 +264,22 @@ def _plane_info(planes, p):
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _tile_grid(block):
-    """Tiles per row of the block's tile grid, and tiles per plane (anchored at its corner)."""
-    grid_rows = (block[B_ROW1] - block[B_ROW0] + TILE - 1) // TILE
-    grid_cols = (block[B_COL1] - block[B_COL0] + TILE - 1) // TILE
+def _tile_grid(block, planes):
+    """Tiles per row of the block's tile grid, and tiles per plane (anchored at its corner).
+
+    The grid covers only the part of the block that its planes reach, not the nominal block:
+    a 1-D block is 16 384 coefficients wide, so a short curve of many dimensions (one plane
+    each) needed 2 048 flags per plane however short it was, gigabytes for a crafted header
+    (decoding allocates the flags before it finds the payload corrupt).  A plane's flags keep
+    their (row, column) positions, so the contexts and the coded bits are the same.
+    """
+    r0, c0 = block[B_ROW0], block[B_COL0]
+    r1, c1 = r0 + 1, c0 + 1
+    for p in range(block[B_PLANE_LO], block[B_PLANE_HI]):
+        r1 = max(r1, min(block[B_ROW1], planes[p, P_ROWS]))
+        c1 = max(c1, min(block[B_COL1], planes[p, P_COLS]))
+    grid_rows = (r1 - r0 + TILE - 1) // TILE
+    grid_cols = (c1 - c0 + TILE - 1) // TILE
     return grid_cols, grid_rows * grid_cols
 
 
@@ -537,7 +549,7 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
     """
     low, rng, cache, pending = np.int64(0), np.int64(MASK32), np.int64(0), np.int64(1)
     r0, c0 = block[B_ROW0], block[B_COL0]
-    grid_cols, tiles_per_plane = _tile_grid(block)
+    grid_cols, tiles_per_plane = _tile_grid(block, planes)
     flags[:] = 0
     for p in range(block[B_PLANE_LO], block[B_PLANE_HI]):
         offset, rows, cols = planes[p, P_OFFSET], planes[p, P_ROWS], planes[p, P_COLS]
@@ -653,7 +665,7 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch, flags)
         pos += 1
         code = (code << 8) | byte
     r0, c0 = block[B_ROW0], block[B_COL0]
-    grid_cols, tiles_per_plane = _tile_grid(block)
+    grid_cols, tiles_per_plane = _tile_grid(block, planes)
     flags[:] = 0
     for p in range(block[B_PLANE_LO], block[B_PLANE_HI]):
         offset, rows, cols = planes[p, P_OFFSET], planes[p, P_ROWS], planes[p, P_COLS]
@@ -785,11 +797,12 @@ INITIAL_MODELS = _initial_models()
 
 
 @njit(nogil=True, cache=True)
-def _flags_size(blocks, lo, hi):
+def _flags_size(planes, blocks, lo, hi):
     largest = 1
     for b in range(lo, hi):
         largest = max(
-            largest, _tile_grid(blocks[b])[1] * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO])
+            largest,
+            _tile_grid(blocks[b], planes)[1] * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO]),
         )
     return largest
 
@@ -809,15 +822,21 @@ def encode_span(flat, planes, blocks, lo, hi):
     # from its start into a larger buffer, and at 2 bits per position (as before) every dense
     # block (coarse levels, high rates, lossless) was coded twice.  The pages of ``np.empty``
     # are only mapped as they are written, so unused room costs address space, not memory.
+    # Positions are the coefficients the block holds (its planes clipped to their extent): the
+    # nominal area is 16 384 per plane of a 1-D block, however short the curve.
     room = 0
     for b in range(lo, hi):
-        area = (blocks[b, B_ROW1] - blocks[b, B_ROW0]) * (blocks[b, B_COL1] - blocks[b, B_COL0])
-        room += area * (blocks[b, B_PLANE_HI] - blocks[b, B_PLANE_LO])
+        r0, c0 = blocks[b, B_ROW0], blocks[b, B_COL0]
+        for p in range(blocks[b, B_PLANE_LO], blocks[b, B_PLANE_HI]):
+            rows = min(blocks[b, B_ROW1], planes[p, P_ROWS]) - r0
+            cols = min(blocks[b, B_COL1], planes[p, P_COLS]) - c0
+            if rows > 0 and cols > 0:
+                room += rows * cols
     out = np.empty(max(1024, room), dtype=np.uint8)
     lengths = np.zeros(hi - lo, dtype=np.int64)
     models = np.empty(CONTEXTS, dtype=np.int32)
     scratch = np.empty(_scratch_size(blocks, lo, hi), dtype=np.int64)
-    flags = np.zeros(_flags_size(blocks, lo, hi), dtype=np.int64)
+    flags = np.zeros(_flags_size(planes, blocks, lo, hi), dtype=np.int64)
     pos = 0
     for b in range(lo, hi):
         if _block_is_empty(flat, planes, blocks[b]):
@@ -852,7 +871,7 @@ def decode_span(data, starts, lengths, planes, blocks, flat, lo, hi):
     """
     models = np.empty(CONTEXTS, dtype=np.int32)
     scratch = np.empty(_scratch_size(blocks, lo, hi), dtype=np.int64)
-    flags = np.zeros(_flags_size(blocks, lo, hi), dtype=np.int64)
+    flags = np.zeros(_flags_size(planes, blocks, lo, hi), dtype=np.int64)
     bad = 0
     for b in range(lo, hi):
         if lengths[b] == 0:

@@ -111,7 +111,7 @@ def _structure(
     cached per layout (building them cost some 1 ms of Python per encode or decode of a
     512 × 512 picture, a tenth of its decode) and shared: callers only read them.
     """
-    planes, blocks, per_chunk, total, _ = _cached_structure(_layout_key(layout), two_d, block)
+    planes, blocks, per_chunk, total, _ = _tables(layout, two_d, block)
     return planes, blocks, list(per_chunk), total
 
 
@@ -119,8 +119,38 @@ def _structure_sizes(
     layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block: int
 ) -> tuple[np.ndarray, np.ndarray, list[int], int, np.ndarray]:
     """:func:`_structure` and the coefficients of every block (:func:`_block_sizes`), cached."""
-    planes, blocks, per_chunk, total, sizes = _cached_structure(_layout_key(layout), two_d, block)
+    planes, blocks, per_chunk, total, sizes = _tables(layout, two_d, block)
     return planes, blocks, list(per_chunk), total, sizes
+
+
+#: The largest tables kept in the cache (bytes of the plane and block tables of one layout):
+#: a picture's are kilobytes, but a crafted header declaring a short curve of millions of
+#: dimensions (a plane each) made hundreds of megabytes, which the cache kept after the decode
+#: failed (370 MB for 34 × 1.5 M; 32 such layouts could pin tens of gigabytes).
+_CACHED_TABLE_BYTES = 4 << 20
+
+
+def _table_bytes(layout: _LayoutKey, two_d: bool, block: int) -> int:
+    """What :func:`_cached_structure` would keep for ``layout``, from the shapes alone."""
+    block_rows, block_cols = (block, block) if two_d else (1, block * block)
+    planes = blocks = 0
+    for band_shapes in layout:
+        dims = [_plane_dims(shape, two_d) for shape in band_shapes]
+        planes += sum(d[2] for d in dims)
+        height = max((d[0] for d in dims), default=0)
+        width = max((d[1] for d in dims), default=0)
+        blocks += -(-height // block_rows) * -(-width // block_cols)
+    return 8 * (kernels.PLANE_FIELDS * planes + (kernels.BLOCK_FIELDS + 1) * blocks)
+
+
+def _tables(
+    layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block: int
+) -> tuple[np.ndarray, np.ndarray, tuple[int, ...], int, np.ndarray]:
+    """:func:`_cached_structure`, through the cache only while its tables are small."""
+    key = _layout_key(layout)
+    if _table_bytes(key, two_d, block) > _CACHED_TABLE_BYTES:
+        return _cached_structure.__wrapped__(key, two_d, block)
+    return _cached_structure(key, two_d, block)
 
 
 @functools.lru_cache(maxsize=32)
