@@ -113,11 +113,33 @@ COPY_VERSION = 6
 #: a CRC-32, as bundle format 4.0's groups of chunks up to 1 KiB do: it still finds every
 #: damage of up to 3 bits and every burst of up to 16 in so short a message.
 SHORT_CHECK = 1024
+#: Version 6 starts with a 3-byte preamble instead of the magic and a version byte: the
+#: family's two magic bytes (as bundle formats 4.0–6.0 start) and one byte, ``0x80 | version``.
+#: A bundle's third byte is its major version (3..6) or ``V`` (``\x89WVB``), never 0x80 or
+#: more, so the two kinds never meet.
+SHORT_MAGIC = b"\x89W"
+SHORT_FLAG = 0x80
+
+
+def _preamble(data: bytes) -> tuple[int, int]:
+    """A curve set's version and the length of its preamble (5 bytes, or 3 for version 6).
+
+    ``data`` starts with :data:`MAGIC` or :data:`SHORT_MAGIC` and a byte of 0x80 or more."""
+    if data.startswith(MAGIC):
+        return data[len(MAGIC)], len(MAGIC) + 1
+    return data[len(SHORT_MAGIC)] & 0x7F, len(SHORT_MAGIC) + 1
+
+
+def _preamble_bytes(version: int) -> bytearray:
+    """The preamble a set of ``version`` starts with."""
+    if version == COPY_VERSION:
+        return bytearray(SHORT_MAGIC + bytes([SHORT_FLAG | version]))
+    return bytearray(MAGIC + bytes([version]))
 
 
 def _check_size(data: bytes) -> int:
     """The bytes of the check that ends ``data`` (a whole curve-set bundle)."""
-    short = len(data) <= SHORT_CHECK and data[len(MAGIC)] == COPY_VERSION
+    short = len(data) <= SHORT_CHECK and _preamble(data)[0] == COPY_VERSION
     return 2 if short else 4
 
 
@@ -1307,8 +1329,7 @@ def _encode_vertex(
             limit = VERTEX_PER_BYTE * (len(stream) + 16)
             if len(arrays) > limit or int(counts_written.sum()) * d > limit:
                 return best
-            out = bytearray(MAGIC)
-            out.append(plane_version)
+            out = _preamble_bytes(plane_version)
             out += struct.pack("<H", head)
             if dtype.name != "float64":
                 out.append(DTYPES.index(dtype.name))
@@ -1503,8 +1524,8 @@ def _copied_stream(
 def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
     reader = _Reader(data[: -_check_size(data)])
-    reader.take(4, "magic")
-    version = reader.take(1, "version")[0]
+    version, start = _preamble(data)
+    reader.take(start, "preamble")
     from_last = False
     if version in (PLANE_VERSION, PRIOR_VERSION, COPY_VERSION):
         (head,) = struct.unpack("<H", reader.take(2, "head"))
@@ -1649,7 +1670,12 @@ def coded_vertices(bundle: Any) -> dict[str, Any]:
 
 def is_curve_set(data: Any) -> bool:
     """Whether ``data`` starts like a curve-set bundle (made by :func:`encode_curves`)."""
-    return isinstance(data, bytes | bytearray | memoryview) and bytes(data[:4]) == MAGIC
+    if not isinstance(data, bytes | bytearray | memoryview):
+        return False
+    start = bytes(data[:4])
+    return start == MAGIC or (
+        start[:2] == SHORT_MAGIC and len(start) > 2 and start[2] >= SHORT_FLAG
+    )
 
 
 @dataclass
@@ -1668,11 +1694,25 @@ def _checked(data: Any) -> bytes:
         msg = f"a bundle must be bytes, not {type(data).__name__}"
         raise BundleError(msg)
     data = bytes(data)
-    if not data.startswith(MAGIC):
-        msg = "not a curve-set bundle (the first bytes are not b'\\x89WVC')"
+    if not is_curve_set(data):
+        msg = "not a curve-set bundle (the first bytes are not b'\\x89WVC' nor b'\\x89W\\x86')"
         raise BundleError(msg)
     if len(data) < len(MAGIC) + 5:
         msg = f"curve set truncated: {len(data)} bytes"
+        raise BundleError(msg)
+    version, start = _preamble(data)
+    if not VERSION <= version <= COPY_VERSION:
+        msg = (
+            f"curve set version {version} is not supported (this reader reads {VERSION}, "
+            f"{VERTEX_VERSION}, {BULGED_VERSION}, {PLANE_VERSION}, {PRIOR_VERSION} and "
+            f"{COPY_VERSION}); use a wavecore release that knows this version"
+        )
+        raise BundleError(msg)
+    if (start == len(SHORT_MAGIC) + 1) != (version == COPY_VERSION):
+        # Version 6 has only the short preamble, and versions 1-5 only the magic: a set that
+        # mixes them is damaged (or crafted), not a version to guess at.
+        form = "the 3-byte preamble" if version == COPY_VERSION else "the 4-byte magic"
+        msg = f"curve set version {version} is damaged: it is written with {form}"
         raise BundleError(msg)
     if _check_size(data) == 2:
         (crc,) = struct.unpack("<H", data[-2:])
@@ -1688,7 +1728,7 @@ def _checked(data: Any) -> bytes:
 
 
 def _is_vertex_form(data: bytes) -> bool:
-    return data[len(MAGIC)] in (
+    return _preamble(data)[0] in (
         VERTEX_VERSION,
         BULGED_VERSION,
         PLANE_VERSION,
