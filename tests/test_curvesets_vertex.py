@@ -10,7 +10,6 @@ import binascii
 import itertools
 import struct
 import time
-import zlib
 
 import numpy as np
 import pytest
