@@ -124,3 +124,31 @@ def test_older_versions_keep_their_magic() -> None:
         assert len(wavecore.decode(bundle)) == 1
         with pytest.raises(wavecore.BundleError, match="not a wavecore bundle"):
             read_bundle(bundle)
+
+
+def test_version_6_packs_head_tolerance_and_count_in_three_bytes() -> None:
+    # the fixed part of a short version-6 set: preamble 3, packed head 3, CRC-16 2
+    bundle = _version_6()
+    head, tolerance_byte, count_plus_one = curvesets._unpack_head(bundle[3:6])
+    assert (
+        count_plus_one == 4
+        and tolerance_byte == curvesets._compact_tolerance(curvesets._pack_tolerance(0.1)[1])[0]
+    )
+    assert head & 1 == 0 and head >> 1 & 3 == 1  # no metadata; all closed
+
+
+@pytest.mark.parametrize("tolerance", [0.1, 0.123456789])
+@pytest.mark.parametrize("count", [curvesets._PACKED_COUNTS - 1, curvesets._PACKED_COUNTS + 3])
+def test_version_6_escapes_long_tolerances_and_many_curves(tolerance: float, count: int) -> None:
+    t = np.linspace(0, 2 * np.pi, 13)[:-1]
+    shape = np.stack([np.cos(t), np.sin(t)], 1) * 3
+    curves = [shape + [7.1 * k, 0.3 * (k % 3)] for k in range(count)]
+    bundle = wavecore.encode_curves(curves, closed=True, tolerance=tolerance, method="vertex")
+    assert bundle[:3] == b"\x89W\x86"
+    _, tolerance_byte, count_plus_one = curvesets._unpack_head(bundle[3:6])
+    packed = count < curvesets._PACKED_COUNTS and tolerance == 0.1
+    assert (count_plus_one == count + 1) if packed else (count_plus_one, tolerance_byte) == (0, 0)
+    back = wavecore.decode_curves(bundle)
+    assert len(back.curves) == count and back.tolerance <= tolerance
+    for got, want in zip(back.curves, curves, strict=True):
+        assert np.abs(got.min(0) - want.min(0)).max() <= tolerance * 1.5

@@ -35,8 +35,11 @@ def _version(bundle: bytes) -> int:
 
 
 def _head(bundle: bytes) -> int:
-    """The low byte of a plane set's head (the byte after the preamble)."""
-    return bundle[_start(bundle)]
+    """A plane set's head (version 4's bit layout; version 6 packs it with the tolerance and
+    the count in the 3 bytes after its preamble)."""
+    if _start(bundle) == 3:
+        return curvesets._unpack_head(bundle[3:6])[0]
+    return int.from_bytes(bundle[5:7], "little")
 
 
 def _to_polyline(source: np.ndarray, target: np.ndarray, closed: bool) -> float:

@@ -150,8 +150,8 @@ def _pack_head(head: int, tolerance: bytes, count: int) -> bytes:
     0: "they follow") and the tolerance and the count varint."""
     fields = (head & 1, head >> 1 & 3, head >> 3 & 7, head >> 6 & 1, head >> 7 & 1, head >> 8 & 1)
     value = head >> 9 & 15
-    for field, radix in zip(reversed(fields), (2, 2, 2, 5, 3, 2), strict=True):
-        value = value * radix + field
+    for part, radix in zip(reversed(fields), (2, 2, 2, 5, 3, 2), strict=True):
+        value = value * radix + part
     if len(tolerance) == 1 and count < _PACKED_COUNTS:
         value += _HEADS * (tolerance[0] + 128 * (count + 1))
         return value.to_bytes(3, "little")
