@@ -10,7 +10,6 @@ import binascii
 import itertools
 import struct
 import time
-import zlib
 
 import numpy as np
 import pytest
@@ -23,6 +22,24 @@ from wavecore import curvecoder, curvesets
 #: the versions of a plane set of the vertex form (5: version 4 with learnt priors; 6: 5 with
 #: translated copies of earlier curves)
 _PLANE = (curvesets.PLANE_VERSION, curvesets.PRIOR_VERSION, curvesets.COPY_VERSION)
+
+
+def _start(bundle: bytes) -> int:
+    """The length of a set's preamble: 3 for version 6 (``89 57 86``), else 5 (magic, version)."""
+    return 3 if bundle[:2] == b"\x89W" and bundle[2] >= 0x80 else 5
+
+
+def _version(bundle: bytes) -> int:
+    """A set's version, read from its preamble (docs/curves.md)."""
+    return bundle[2] & 0x7F if _start(bundle) == 3 else bundle[4]
+
+
+def _head(bundle: bytes) -> int:
+    """A plane set's head (version 4's bit layout; version 6 packs it with the tolerance and
+    the count in the 3 bytes after its preamble)."""
+    if _start(bundle) == 3:
+        return curvesets._unpack_head(bundle[3:6])[0]
+    return int.from_bytes(bundle[5:7], "little")
 
 
 def _to_polyline(source: np.ndarray, target: np.ndarray, closed: bool) -> float:
@@ -68,7 +85,7 @@ def test_vertex_form_keeps_the_bound(tolerance: float, d: int) -> None:
     closed = [False, True, True, False, True]
     bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
     # plane sets are written as version 4, others as version 2
-    assert bundle[4] in (_PLANE if d == 2 else (curvesets.VERTEX_VERSION,))
+    assert _version(bundle) in (_PLANE if d == 2 else (curvesets.VERTEX_VERSION,))
     out = wavecore.decode_curves(bundle)
     assert out.closed == closed and out.tolerance == tolerance
     for original, back, flag in zip(curves, out.curves, closed, strict=True):
@@ -123,10 +140,10 @@ def test_auto_keeps_the_smaller_form() -> None:
 def test_vertex_falls_back_to_the_wavelet_form_where_it_cannot() -> None:
     mixed = [_walk(50, 1, 2), _walk(50, 2, 3)]
     bundle = wavecore.encode_curves(mixed, closed=False, tolerance=0.01, method="vertex")
-    assert bundle[4] == curvesets.VERSION
+    assert _version(bundle) == curvesets.VERSION
     huge = [np.array([[1e150, 0.0], [1e150, 1.0], [-1e150, 2.0]])]
     bundle = wavecore.encode_curves(huge, closed=False, tolerance=1e-3, method="vertex")
-    assert bundle[4] == curvesets.VERSION
+    assert _version(bundle) == curvesets.VERSION
     assert _both_ways(huge[0], wavecore.decode(bundle)[0], False) <= 1e-3
 
 
@@ -184,19 +201,22 @@ def test_crafted_vertex_bundles_give_curves_or_bundle_error() -> None:
         tolerance=0.01,
         method="vertex",
     )
-    assert bundle[4] in _PLANE
-    assert bundle[5] & 0x40  # the ring's arcs are bulged segments
+    assert _version(bundle) in _PLANE
+    assert _head(bundle) & 0x40  # the ring's arcs are bulged segments
     rng = np.random.default_rng(9)
     for trial in range(450):
-        body = bytearray(bundle[:-4])
-        if trial % 5 == 0:  # the same bytes read as another vertex version
-            body[4] = (curvesets.VERTEX_VERSION, curvesets.BULGED_VERSION)[trial % 2]
+        body = bytearray(bundle[: -curvesets._check_size(bundle)])
+        start, version = _start(bundle), _version(bundle)
+        if trial % 5 == 0:  # the same bytes read as another vertex version (the 4-byte magic)
+            version = (curvesets.VERTEX_VERSION, curvesets.BULGED_VERSION)[trial % 2]
+            body[:start] = curvesets.MAGIC + bytes([version])
+            start = 5
         if trial % 3 == 0:  # cut or extend the stream
-            body = body[: int(rng.integers(5, len(body)))] + bytes(int(rng.integers(0, 9)))
+            body = body[: int(rng.integers(start, len(body)))] + bytes(int(rng.integers(0, 9)))
         for _ in range(int(rng.integers(1, 4))):
-            at = int(rng.integers(5, len(body)))
+            at = int(rng.integers(start, len(body)))
             body[at] = int(rng.integers(0, 256))
-        crafted = bytes(body) + struct.pack("<I", zlib.crc32(bytes(body)))
+        crafted = curvesets._with_check(body, version)  # the check its version ends in
         try:
             out = wavecore.decode(crafted)
         except wavecore.BundleError:
@@ -365,7 +385,7 @@ def test_bulged_segments_keep_the_bound_in_fewer_bytes(tolerance: float, dtype: 
     curves[-1] = curves[-1].astype(dtype)
     closed = [True, True, True, True, False]
     bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
-    assert bundle[4] in _PLANE and bundle[5] & 0x40  # bulged segments
+    assert _version(bundle) in _PLANE and _head(bundle) & 0x40  # bulged segments
     out = wavecore.decode_curves(bundle)
     assert out.closed == closed
     for original, back, flag in zip(curves, out.curves, closed, strict=True):
@@ -386,7 +406,7 @@ def _plain_vertex_size(curves, closed, tolerance) -> int:
         bundle = wavecore.encode_curves(curves, closed=closed, tolerance=tolerance, method="vertex")
     finally:
         curvesets._bulged_stream = original
-    assert bundle[4] in _PLANE and not bundle[5] & 0x40
+    assert _version(bundle) in _PLANE and not _head(bundle) & 0x40
     return len(bundle)
 
 
@@ -495,7 +515,7 @@ def test_glyph_like_set_written_as_version_5_keeps_the_bound() -> None:
         np.stack([3 * np.cos(t) + k * 7, 4 * np.sin(t) + np.sin(3 * t)], axis=1) for k in range(6)
     ]
     bundle = wavecore.encode_curves(curves, tolerance=0.05, method="vertex")
-    assert bundle[4] in _PLANE
+    assert _version(bundle) in _PLANE
     for original, decoded in zip(curves, wavecore.decode(bundle), strict=True):
         assert _both_ways(original, decoded, True) <= 0.05
 
@@ -537,7 +557,7 @@ def test_translated_curves_are_copies_and_keep_the_bound(tolerance: float, offse
     shape = np.stack([3 * np.cos(t), 4 * np.sin(t) + np.sin(3 * t)], axis=1)
     curves = [shape + [k * offset, 0.37 * k] for k in range(5)] + [_ring(80, 2.0) + 20]
     bundle = wavecore.encode_curves(curves, tolerance=tolerance, method="vertex")
-    assert bundle[4] == curvesets.COPY_VERSION
+    assert _version(bundle) == curvesets.COPY_VERSION
     for original, decoded in zip(curves, wavecore.decode(bundle), strict=True):
         assert _both_ways(original, decoded, True) <= tolerance
     alone = wavecore.encode_curves([curves[0], curves[-1]], tolerance=tolerance, method="vertex")
@@ -580,7 +600,7 @@ def test_version_6_short_check_and_tolerance(tolerance: float) -> None:
     shape = np.stack([3 * np.cos(t), 4 * np.sin(t) + np.sin(3 * t)], axis=1) * tolerance * 20
     curves = [shape + [k * 7.123456 * tolerance * 20, 0] for k in range(3)]
     bundle = wavecore.encode_curves(curves, tolerance=tolerance, method="vertex")
-    assert bundle[4] == curvesets.COPY_VERSION
+    assert _version(bundle) == curvesets.COPY_VERSION
     assert len(bundle) <= curvesets.SHORT_CHECK
     body = bundle[:-2]
     assert struct.unpack("<H", bundle[-2:])[0] == binascii.crc_hqx(body, 0)
@@ -603,7 +623,7 @@ def test_version_6_crafted_bundles_give_curves_or_bundle_error() -> None:
     bundle = wavecore.encode_curves(
         [shape, shape + [3.3, 0.1], _walk(30, 2)], tolerance=0.01, method="vertex"
     )
-    assert bundle[4] == curvesets.COPY_VERSION and len(bundle) <= curvesets.SHORT_CHECK
+    assert _version(bundle) == curvesets.COPY_VERSION and len(bundle) <= curvesets.SHORT_CHECK
     rng = np.random.default_rng(6)
     for _ in range(300):
         body = bytearray(bundle[:-2])

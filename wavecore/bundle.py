@@ -932,6 +932,14 @@ def read_bundle(data: Any) -> Bundle:
         msg = f"a bundle must be bytes, not {type(data).__name__}"
         raise BundleError(msg) from exc
     start = bytes(reader.view[:3])
+    if len(start) == 3 and start[:2] == COMPACT_MAGIC and start[2] >= 0x80:
+        # Curve sets of version 6 start with these two bytes and 0x80 | their version: not a
+        # bundle of this module (no major version reaches 0x80), and said so plainly.
+        msg = (
+            f"not an image bundle: a curve set (version {start[2] & 0x7F}); decode it with "
+            "wavecore.decode or wavecore.decode_curves"
+        )
+        raise BundleError(msg)
     if len(start) == 3 and start[:2] == COMPACT_MAGIC and start[2] != MAGIC[2]:
         major, minor = reader.take(4, "the preamble")[2:]
         if major not in _SHORT_MAJORS:

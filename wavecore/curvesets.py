@@ -113,11 +113,66 @@ COPY_VERSION = 6
 #: a CRC-32, as bundle format 4.0's groups of chunks up to 1 KiB do: it still finds every
 #: damage of up to 3 bits and every burst of up to 16 in so short a message.
 SHORT_CHECK = 1024
+#: Version 6 starts with a 3-byte preamble instead of the magic and a version byte: the
+#: family's two magic bytes (as bundle formats 4.0–6.0 start) and one byte, ``0x80 | version``.
+#: A bundle's third byte is its major version (3..6) or ``V`` (``\x89WVB``), never 0x80 or
+#: more, so the two kinds never meet.
+SHORT_MAGIC = b"\x89W"
+SHORT_FLAG = 0x80
+
+
+def _preamble(data: bytes) -> tuple[int, int]:
+    """A curve set's version and the length of its preamble (5 bytes, or 3 for version 6).
+
+    ``data`` starts with :data:`MAGIC` or :data:`SHORT_MAGIC` and a byte of 0x80 or more."""
+    if data.startswith(MAGIC):
+        return data[len(MAGIC)], len(MAGIC) + 1
+    return data[len(SHORT_MAGIC)] & 0x7F, len(SHORT_MAGIC) + 1
+
+
+def _preamble_bytes(version: int) -> bytearray:
+    """The preamble a set of ``version`` starts with."""
+    if version == COPY_VERSION:
+        return bytearray(SHORT_MAGIC + bytes([SHORT_FLAG | version]))
+    return bytearray(MAGIC + bytes([version]))
+
+
+#: Version 6 packs its head, a one-byte tolerance and a count below this many into 3 bytes:
+#: the head's fields as a mixed-radix number below :data:`_HEADS` (its 13 bits hold only
+#: 2 880 values), then the tolerance byte (7 bits), then the count plus one.
+_HEADS = 2 * 3 * 5 * 2 * 2 * 2 * 12
+_PACKED_COUNTS = (1 << 24) // (_HEADS * 128) - 1
+
+
+def _pack_head(head: int, tolerance: bytes, count: int) -> bytes:
+    """Version 6's head, tolerance and count (docs/curves.md): 3 bytes when the tolerance is
+    one byte and the count is below :data:`_PACKED_COUNTS`, else 3 bytes (tolerance and count
+    0: "they follow") and the tolerance and the count varint."""
+    fields = (head & 1, head >> 1 & 3, head >> 3 & 7, head >> 6 & 1, head >> 7 & 1, head >> 8 & 1)
+    value = head >> 9 & 15
+    for part, radix in zip(reversed(fields), (2, 2, 2, 5, 3, 2), strict=True):
+        value = value * radix + part
+    if len(tolerance) == 1 and count < _PACKED_COUNTS:
+        value += _HEADS * (tolerance[0] + 128 * (count + 1))
+        return value.to_bytes(3, "little")
+    return value.to_bytes(3, "little") + tolerance + encode_varint(count)
+
+
+def _unpack_head(packed: bytes) -> tuple[int, int, int]:
+    """The head (version 5's bit layout), the tolerance byte and the count plus one (0: the
+    tolerance and the count follow) of :func:`_pack_head`'s first 3 bytes."""
+    value = int.from_bytes(packed, "little")
+    value, tolerance_and_count = value % _HEADS, value // _HEADS
+    head = 0
+    for shift, radix in zip((0, 1, 3, 6, 7, 8), (2, 3, 5, 2, 2, 2), strict=True):
+        head |= value % radix << shift
+        value //= radix
+    return head | value << 9, tolerance_and_count % 128, tolerance_and_count // 128
 
 
 def _check_size(data: bytes) -> int:
     """The bytes of the check that ends ``data`` (a whole curve-set bundle)."""
-    short = len(data) <= SHORT_CHECK and data[len(MAGIC)] == COPY_VERSION
+    short = len(data) <= SHORT_CHECK and _preamble(data)[0] == COPY_VERSION
     return 2 if short else 4
 
 
@@ -1307,16 +1362,18 @@ def _encode_vertex(
             limit = VERTEX_PER_BYTE * (len(stream) + 16)
             if len(arrays) > limit or int(counts_written.sum()) * d > limit:
                 return best
-            out = bytearray(MAGIC)
-            out.append(plane_version)
-            out += struct.pack("<H", head)
+            out = _preamble_bytes(plane_version)
+            if plane_version == COPY_VERSION:
+                tail = _pack_head(head, _compact_tolerance(tolerance_bytes), len(arrays))
+                out += tail[:3]
+            else:
+                out += struct.pack("<H", head)
             if dtype.name != "float64":
                 out.append(DTYPES.index(dtype.name))
             if plane_version == COPY_VERSION:
-                out += _compact_tolerance(tolerance_bytes)
+                out += tail[3:]
             else:
-                out += tolerance_bytes
-            out += encode_varint(len(arrays))
+                out += tolerance_bytes + encode_varint(len(arrays))
             if meta_bytes is not None:
                 out += encode_varint(len(meta_bytes)) + meta_bytes
             out += stream
@@ -1503,11 +1560,15 @@ def _copied_stream(
 def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
     reader = _Reader(data[: -_check_size(data)])
-    reader.take(4, "magic")
-    version = reader.take(1, "version")[0]
+    version, start = _preamble(data)
+    reader.take(start, "preamble")
     from_last = False
+    packed_tolerance = packed_count = 0
     if version in (PLANE_VERSION, PRIOR_VERSION, COPY_VERSION):
-        (head,) = struct.unpack("<H", reader.take(2, "head"))
+        if version == COPY_VERSION:
+            head, packed_tolerance, packed_count = _unpack_head(reader.take(3, "head"))
+        else:
+            (head,) = struct.unpack("<H", reader.take(2, "head"))
         closed_mode = (head >> 1) & 3
         order = (head >> 3) & 7
         bulged = bool(head >> 6 & 1)
@@ -1537,14 +1598,23 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         msg = f"curve set names dtype {dtype_index}, unknown"
         raise BundleError(msg)
     dtype = np.dtype(DTYPES[dtype_index])
-    tolerance = _read_tolerance(reader, version == COPY_VERSION)
+    if packed_count:  # version 6: a one-byte tolerance and the count in the head
+        if packed_tolerance < 2:
+            msg = f"curve set tolerance byte {packed_tolerance} names a longer form"
+            raise BundleError(msg)
+        tolerance = _read_tolerance(_Reader(bytes([packed_tolerance])), True)
+    else:
+        if packed_tolerance:
+            msg = f"curve set head names tolerance byte {packed_tolerance} without a count"
+            raise BundleError(msg)
+        tolerance = _read_tolerance(reader, version == COPY_VERSION)
     if version not in (PLANE_VERSION, PRIOR_VERSION, COPY_VERSION):
         step_index = reader.take(1, "step")[0]
     if step_index >= len(VERTEX_STEPS):
         msg = f"curve set lattice step {step_index} is unknown"
         raise BundleError(msg)
     step = tolerance * VERTEX_STEPS[step_index]
-    count = reader.varint("count", MAX_POINTS)
+    count = packed_count - 1 if packed_count else reader.varint("count", MAX_POINTS)
     metadata = None
     if metadata_given:
         size = reader.varint("metadata length", len(data))
@@ -1649,7 +1719,12 @@ def coded_vertices(bundle: Any) -> dict[str, Any]:
 
 def is_curve_set(data: Any) -> bool:
     """Whether ``data`` starts like a curve-set bundle (made by :func:`encode_curves`)."""
-    return isinstance(data, bytes | bytearray | memoryview) and bytes(data[:4]) == MAGIC
+    if not isinstance(data, bytes | bytearray | memoryview):
+        return False
+    start = bytes(data[:4])
+    return start == MAGIC or (
+        start[:2] == SHORT_MAGIC and len(start) > 2 and start[2] >= SHORT_FLAG
+    )
 
 
 @dataclass
@@ -1668,11 +1743,25 @@ def _checked(data: Any) -> bytes:
         msg = f"a bundle must be bytes, not {type(data).__name__}"
         raise BundleError(msg)
     data = bytes(data)
-    if not data.startswith(MAGIC):
-        msg = "not a curve-set bundle (the first bytes are not b'\\x89WVC')"
+    if not is_curve_set(data):
+        msg = "not a curve-set bundle (the first bytes are not b'\\x89WVC' nor b'\\x89W\\x86')"
         raise BundleError(msg)
-    if len(data) < len(MAGIC) + 5:
+    if len(data) < 8:  # version 6's preamble, head and CRC-16
         msg = f"curve set truncated: {len(data)} bytes"
+        raise BundleError(msg)
+    version, start = _preamble(data)
+    if not VERSION <= version <= COPY_VERSION:
+        msg = (
+            f"curve set version {version} is not supported (this reader reads {VERSION}, "
+            f"{VERTEX_VERSION}, {BULGED_VERSION}, {PLANE_VERSION}, {PRIOR_VERSION} and "
+            f"{COPY_VERSION}); use a wavecore release that knows this version"
+        )
+        raise BundleError(msg)
+    if (start == len(SHORT_MAGIC) + 1) != (version == COPY_VERSION):
+        # Version 6 has only the short preamble, and versions 1-5 only the magic: a set that
+        # mixes them is damaged (or crafted), not a version to guess at.
+        form = "the 3-byte preamble" if version == COPY_VERSION else "the 4-byte magic"
+        msg = f"curve set version {version} is damaged: it is written with {form}"
         raise BundleError(msg)
     if _check_size(data) == 2:
         (crc,) = struct.unpack("<H", data[-2:])
@@ -1688,7 +1777,7 @@ def _checked(data: Any) -> bytes:
 
 
 def _is_vertex_form(data: bytes) -> bool:
-    return data[len(MAGIC)] in (
+    return _preamble(data)[0] in (
         VERTEX_VERSION,
         BULGED_VERSION,
         PLANE_VERSION,
