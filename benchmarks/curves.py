@@ -334,10 +334,9 @@ TRAIN_FONTS = ("DejaVu Sans Mono", "DejaVu Serif Display", "cmss10", "cmtt10", "
 TRAIN_TEXT = "Quick zebras jump over 13 lazy fox dogs, ship 4780 bytes! (Hm: 5 & 9?) gwyQ"
 
 
-def train_priors() -> str:
-    """The final models of version 4's streams on the training glyphs (every tolerance of
-    the sweep and between), averaged into :data:`wavecore.curvecoder`'s prior table."""
-    from wavecore import curvecoder
+def training_bundles():
+    """The training fonts' glyph sets (TRAIN_TEXT, never the benchmark's TEXT) coded in the
+    vertex form at every tolerance of the sweep and between: ``(bundle, coded_vertices)``."""
     from wavecore.curvesets import coded_vertices
 
     global TEXT
@@ -346,27 +345,35 @@ def train_priors() -> str:
         sets = [glyph_contours(family) for family in TRAIN_FONTS]
     finally:
         TEXT = kept_text
-    states = []
     for contours in sets:
         for relative in (0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1):
             bundle = wavecore.encode_curves(
                 contours, tolerance=relative * GLYPH_SIZE, method="vertex"
             )
-            info = coded_vertices(bundle)
-            lattice, counts, closed, repeated, bulges = info["coded"]
-            models = curvecoder.initial_models(False)
-            curvecoder.encode_set(
-                lattice,
-                counts,
-                closed,
-                repeated,
-                info["closed_mode"],
-                info["order"],
-                bulges if info["bulged"] else None,
-                info["from_last"],
-                models=models,
-            )
-            states.append(models)
+            yield bundle, coded_vertices(bundle)
+
+
+def train_priors() -> str:
+    """The final models of version 4's streams on the training glyphs (every tolerance of
+    the sweep and between), averaged into :data:`wavecore.curvecoder`'s prior table."""
+    from wavecore import curvecoder
+
+    states = []
+    for _, info in training_bundles():
+        lattice, counts, closed, repeated, bulges = info["coded"]
+        models = curvecoder.initial_models(False)
+        curvecoder.encode_set(
+            lattice,
+            counts,
+            closed,
+            repeated,
+            info["closed_mode"],
+            info["order"],
+            bulges if info["bulged"] else None,
+            info["from_last"],
+            models=models,
+        )
+        states.append(models)
     return curvecoder.trained_table(states)
 
 
@@ -375,55 +382,43 @@ def train_copy_priors() -> str:
     (the copies as the encoder chooses them), averaged as :func:`train_priors` does."""
     from wavecore import curvecoder
     from wavecore.curvesets import _check_size as check_size
-    from wavecore.curvesets import coded_vertices
 
-    global TEXT
-    kept_text, TEXT = TEXT, TRAIN_TEXT
-    try:
-        sets = [glyph_contours(family) for family in TRAIN_FONTS]
-    finally:
-        TEXT = kept_text
     states = []
-    for contours in sets:
-        for relative in (0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1):
-            bundle = wavecore.encode_curves(
-                contours, tolerance=relative * GLYPH_SIZE, method="vertex"
-            )
-            info = coded_vertices(bundle)
-            if info["version"] != 6:
-                continue
-            lattice, counts, closed, repeated, bulges = info["coded"]
-            copies = np.zeros((len(counts), 5), dtype=np.int64)
-            curvecoder.decode_bulged_set(  # the copies' sources and fractions
-                bytes(bundle[: -check_size(bundle)][-info["stream"] :]),
-                len(counts),
-                2,
-                info["closed_mode"],
-                info["closed_mode"] == 1,
-                len(lattice),
-                info["order"],
-                info["bulged"],
-                info["from_last"],
-                True,
-                copies,
-            )
-            models = curvecoder.initial_models(True)
-            models[2 * curvecoder.COPY_BASE :: 2] = curvecoder.PROB_HALF  # learnt from one half
-            models[2 * curvecoder.COPY_BASE + 1 :: 2] = 0
-            curvecoder.encode_set(
-                lattice,
-                counts,
-                closed,
-                repeated,
-                info["closed_mode"],
-                info["order"],
-                bulges if info["bulged"] else None,
-                info["from_last"],
-                models=models,
-                sources=copies[:, 0].copy(),
-                fractions=copies[:, 1:].copy(),
-            )
-            states.append(models)
+    for bundle, info in training_bundles():
+        if info["version"] != 6:
+            continue
+        lattice, counts, closed, repeated, bulges = info["coded"]
+        copies = np.zeros((len(counts), 5), dtype=np.int64)
+        curvecoder.decode_bulged_set(  # the copies' sources and fractions
+            bytes(bundle[: -check_size(bundle)][-info["stream"] :]),
+            len(counts),
+            2,
+            info["closed_mode"],
+            info["closed_mode"] == 1,
+            len(lattice),
+            info["order"],
+            info["bulged"],
+            info["from_last"],
+            True,
+            copies,
+        )
+        models = curvecoder.initial_models(True)
+        models[2 * curvecoder.COPY_BASE :: 2] = curvecoder.PROB_HALF  # learnt from one half
+        models[2 * curvecoder.COPY_BASE + 1 :: 2] = 0
+        curvecoder.encode_set(
+            lattice,
+            counts,
+            closed,
+            repeated,
+            info["closed_mode"],
+            info["order"],
+            bulges if info["bulged"] else None,
+            info["from_last"],
+            models=models,
+            sources=copies[:, 0].copy(),
+            fractions=copies[:, 1:].copy(),
+        )
+        states.append(models)
     print(f"# {len(states)} training sets coded as version 6", file=sys.stderr)
     return curvecoder.trained_table(states, first=curvecoder.COPY_BASE, stop=curvecoder.ALL_MODELS)
 

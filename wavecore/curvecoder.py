@@ -270,11 +270,10 @@ def _bit_length(value):
     return k
 
 
-@njit(cache=True, nogil=True)
-def _magnitude(st, buf, models, kind, value, decoding):
-    """Code a magnitude ``value >= 0`` in the unary context set ``kind``; return it."""
+@njit(cache=True, nogil=True, inline="always")
+def _unary_length(st, buf, models, base, value, decoding):
+    """Code the bit length ``k`` of ``value >= 0`` in unary with models ``base + i``; return it."""
     k = 0 if decoding else _bit_length(value)
-    base = MAG_BASE + kind * _UNARY
     if decoding:
         while k < MAX_BITS and _bit(st, buf, models, base + k, 0, True):
             k += 1
@@ -283,6 +282,13 @@ def _magnitude(st, buf, models, kind, value, decoding):
             _bit(st, buf, models, base + i, 1, False)
         if k < MAX_BITS:
             _bit(st, buf, models, base + k, 0, False)
+    return k
+
+
+@njit(cache=True, nogil=True)
+def _magnitude(st, buf, models, kind, value, decoding):
+    """Code a magnitude ``value >= 0`` in the unary context set ``kind``; return it."""
+    k = _unary_length(st, buf, models, MAG_BASE + kind * _UNARY, value, decoding)
     if k <= 1:
         return k
     out = 1
@@ -301,15 +307,7 @@ def _magnitude(st, buf, models, kind, value, decoding):
 def _plain_magnitude(st, buf, models, base, value, decoding):
     """A magnitude ``value >= 0``: its bit length in unary (models ``base + k``), the bits
     below the leading one with the one model ``base + _UNARY`` (version 6's copies)."""
-    k = 0 if decoding else _bit_length(value)
-    if decoding:
-        while k < MAX_BITS and _bit(st, buf, models, base + k, 0, True):
-            k += 1
-    else:
-        for i in range(k):
-            _bit(st, buf, models, base + i, 1, False)
-        if k < MAX_BITS:
-            _bit(st, buf, models, base + k, 0, False)
+    k = _unary_length(st, buf, models, base, value, decoding)
     if k <= 1:
         return k
     out = 1
