@@ -407,20 +407,24 @@ def test_declared_size_is_bounded_before_allocation() -> None:
     assert peak < 1_000_000
 
 
+def _peak_of_failing_decode(bundle: bytes) -> int:
+    """The peak traced memory of decoding ``bundle``, which must fail cleanly."""
+    tracemalloc.start()
+    try:
+        assert decodes_or_fails_cleanly(bundle) is None
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
 def test_a_large_declared_shape_with_a_small_payload_fails_without_large_allocations() -> None:
     header, chunks = split(BUNDLES["lossy image"])
     header["shape"] = [4000, 3000]
     header["pads"] = [[0, 98], [0, 2]]
     header["fitted"] = [4098, 3002]
     bundle = assemble(json.dumps(header).encode(), chunks)
-    tracemalloc.start()
-    try:
-        assert decodes_or_fails_cleanly(bundle) is None
-        _, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
     # Never more than a few float64 arrays of the declared size (4098 × 3002 elements).
-    assert peak < 6 * 8 * 4098 * 3002
+    assert _peak_of_failing_decode(bundle) < 6 * 8 * 4098 * 3002
 
 
 def test_a_short_curve_of_many_dimensions_fails_without_large_allocations() -> None:
@@ -436,14 +440,8 @@ def test_a_short_curve_of_many_dimensions_fails_without_large_allocations() -> N
     shape = [474, 2000]
     packed = binheader.pack({**header, "shape": shape, "fitted": shape}, major=4)
     bundle = assemble_as(name, packed, split(BUNDLES[name])[1])
-    tracemalloc.start()
-    try:
-        assert decodes_or_fails_cleanly(bundle) is None
-        _, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
     # The int32 coefficients of the declared size and little else (the flags took 32-64 MB).
-    assert peak < 8 * 474 * 2000
+    assert _peak_of_failing_decode(bundle) < 8 * 474 * 2000
 
 
 def test_padding_far_beyond_the_original_is_refused() -> None:
