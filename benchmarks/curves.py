@@ -381,7 +381,7 @@ def train_copy_priors() -> str:
     """Version 6's copy models: their final states on the training glyphs coded as version 6
     (the copies as the encoder chooses them), averaged as :func:`train_priors` does."""
     from wavecore import curvecoder
-    from wavecore.curvesets import _check_size as check_size
+    from wavecore.curvesets import check_size
 
     states = []
     for bundle, info in training_bundles():

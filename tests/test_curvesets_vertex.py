@@ -205,7 +205,7 @@ def test_crafted_vertex_bundles_give_curves_or_bundle_error() -> None:
     assert _head(bundle) & 0x40  # the ring's arcs are bulged segments
     rng = np.random.default_rng(9)
     for trial in range(450):
-        body = bytearray(bundle[: -curvesets._check_size(bundle)])
+        body = bytearray(bundle[: -curvesets.check_size(bundle)])
         start, version = _start(bundle), _version(bundle)
         if trial % 5 == 0:  # the same bytes read as another vertex version (the 4-byte magic)
             version = (curvesets.VERTEX_VERSION, curvesets.BULGED_VERSION)[trial % 2]

@@ -170,8 +170,19 @@ def _unpack_head(packed: bytes) -> tuple[int, int, int]:
     return head | value << 9, tolerance_and_count % 128, tolerance_and_count // 128
 
 
-def _check_size(data: bytes) -> int:
-    """The bytes of the check that ends ``data`` (a whole curve-set bundle)."""
+def check_size(data: bytes) -> int:
+    """The size of the check that ends a whole curve-set bundle.
+
+    Parameters
+    ----------
+    data : bytes
+        A whole curve-set bundle, its preamble included.
+
+    Returns
+    -------
+    int
+        2 for a version-6 set of at most ``SHORT_CHECK`` bytes (a CRC-16), else 4 (a CRC-32).
+    """
     short = len(data) <= SHORT_CHECK and _preamble(data)[0] == COPY_VERSION
     return 2 if short else 4
 
@@ -1559,7 +1570,7 @@ def _copied_stream(
 
 def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
-    reader = _Reader(data[: -_check_size(data)])
+    reader = _Reader(data[: -check_size(data)])
     version, start = _preamble(data)
     reader.take(start, "preamble")
     from_last = False
@@ -1763,7 +1774,7 @@ def _checked(data: Any) -> bytes:
         form = "the 3-byte preamble" if version == COPY_VERSION else "the 4-byte magic"
         msg = f"curve set version {version} is damaged: it is written with {form}"
         raise BundleError(msg)
-    if _check_size(data) == 2:
+    if check_size(data) == 2:
         (crc,) = struct.unpack("<H", data[-2:])
         if binascii.crc_hqx(data[:-2], 0) != crc:
             msg = "curve set damaged: its CRC-16 does not match"
