@@ -122,3 +122,24 @@ def test_two_dimensional_levels_match_one_axis_at_a_time(
         for a, b in zip(got, want, strict=True):
             assert a.shape == b.shape
             np.testing.assert_array_equal(a, b)
+
+
+def test_long_steps_do_not_accumulate_in_the_cache() -> None:
+    # A service worker codes curves of many lengths; each long step's transpose holds ~72 B a
+    # sample, so only a few of them may stay cached (1.8 GB at 128 lengths of 200 000).
+    from wavecore import adjoint
+
+    rng = np.random.default_rng(5)
+    adjoint._transposed_long.cache_clear()
+    lengths = [
+        valid_length(adjoint._LONG_STEP + 1000 * k, 1, "open", "bspline2") for k in range(12)
+    ]
+    for n in lengths:
+        y = rng.standard_normal(n)
+        coarse, detail = synthesis_adjoint(y, "bspline2", "open", 1, axes=(0,))[0:2]
+        # Still the transpose: <S c, y> = <c, S* y> for a random c.
+        c = [rng.standard_normal(coarse.shape), rng.standard_normal(detail.shape)]
+        assert np.isclose(
+            float(np.sum(waverec(c, "bspline2", "open") * y)), _inner(c, [coarse, detail])
+        )
+    assert 1 <= adjoint._transposed_long.cache_info().currsize <= 8

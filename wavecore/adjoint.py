@@ -28,9 +28,29 @@ from .transform import fused_level_fits, normalize_axis, run_rows
 __all__ = ["synthesis_adjoint", "synthesis_step_adjoint"]
 
 
-@lru_cache(maxsize=128)
+#: Steps longer than this are cached apart, a few at a time: each holds about 72 bytes per
+#: sample, so 128 of a 200 000-point curve's lengths would keep 1.8 GB in a service worker.
+_LONG_STEP = 1 << 16
+
+
 def _transposed(bank_name: str, boundary: str, m: int) -> tuple[tuple[np.ndarray, ...], ...]:
     """``P.T`` and ``Q.T`` of one step of fine length ``m``, in compressed-row form (cached)."""
+    if m > _LONG_STEP:
+        return _transposed_long(bank_name, boundary, m)
+    return _transposed_short(bank_name, boundary, m)
+
+
+@lru_cache(maxsize=128)
+def _transposed_short(bank_name: str, boundary: str, m: int) -> tuple[tuple[np.ndarray, ...], ...]:
+    return _build_transposed(bank_name, boundary, m)
+
+
+@lru_cache(maxsize=8)  # one curve's levels: what one request reuses
+def _transposed_long(bank_name: str, boundary: str, m: int) -> tuple[tuple[np.ndarray, ...], ...]:
+    return _build_transposed(bank_name, boundary, m)
+
+
+def _build_transposed(bank_name: str, boundary: str, m: int) -> tuple[tuple[np.ndarray, ...], ...]:
     _, _, P, Q = step_sparse(bank_name, boundary, m)
     out = []
     for matrix in (P, Q):
