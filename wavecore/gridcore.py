@@ -22,11 +22,12 @@ same step; only the work around it differs.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from ._kernels import squared_and_largest_error
-from .codec.encode import bundle_from_quantized
+from .codec.encode import bundle_from_quantized, reconstructed_from_quantized
 from .codec.plan import MAX_IMAGE_LEVELS, Plan, fit
 from .codec.samples import decompose, peak_of, scaled
 from .errors import InvalidParameter
@@ -108,24 +109,45 @@ class SteppedCore:
             predicted = self.predicted_rmse(step)
         return step
 
-    def encode(self, step: float) -> tuple[bytes, np.ndarray]:
-        """The core bundle quantized at ``step`` (the data's units) and what
-        :func:`wavecore.decode` returns for it (float64, the core's shape)."""
-        plan, bounds = self.plan, list(self.plan.boundary)
+    def quantized(self, step: float) -> tuple[list[Any], dict[str, Any]]:
+        """The core's bands quantized at ``step`` (the data's units) and their parameters."""
+        plan = self.plan
         coded_step = math.ldexp(step, -self.scale)
         if not (coded_step > 0 and math.isfinite(coded_step)):
             msg = f"cannot quantize at step {step!r}"
             raise InvalidParameter(msg)
-        quantized, qparams = quantize_bands(
+        return quantize_bands(
             self.coeffs,
             coded_step,
             wavelet=plan.wavelet,
-            boundary=bounds,
+            boundary=list(plan.boundary),
             axes=plan.axes,
             rounding=DEFAULT_ROUNDING,
             refine=0,
         )
-        return bundle_from_quantized(plan, quantized, qparams, self.coded, "grid")
+
+    def reconstructed(self, step: float) -> tuple[tuple[list[Any], dict[str, Any]], np.ndarray]:
+        """The core quantized at ``step`` and what :func:`wavecore.decode` would return for its
+        bundle (float64, the core's shape), with no entropy coding: a step can be measured,
+        and rejected, before the coder (most of an encoding's time) runs on it."""
+        quantized, qparams = self.quantized(step)
+        return (quantized, qparams), reconstructed_from_quantized(self.plan, quantized, qparams)
+
+    def code(
+        self, quantized: tuple[list[Any], dict[str, Any]], output: np.ndarray
+    ) -> tuple[bytes, np.ndarray]:
+        """The core bundle of :meth:`reconstructed`'s bands and output, and what
+        :func:`wavecore.decode` returns for it: ``output`` itself, unless the header rounded a
+        quantizer parameter (then the bundle decoded)."""
+        return bundle_from_quantized(
+            self.plan, quantized[0], quantized[1], self.coded, "grid", output=output
+        )
+
+    def encode(self, step: float) -> tuple[bytes, np.ndarray]:
+        """The core bundle quantized at ``step`` (the data's units) and what
+        :func:`wavecore.decode` returns for it (float64, the core's shape)."""
+        quantized, qparams = self.quantized(step)
+        return bundle_from_quantized(self.plan, quantized, qparams, self.coded, "grid")
 
 
 def squared_and_largest(final: np.ndarray, original: np.ndarray) -> tuple[float, float]:

@@ -1063,17 +1063,27 @@ def _encode_rmse_at_steps(
         # Integer samples are rounded on decoding, which adds about 1/12 of a unit squared.
         aim = math.sqrt(max(aim * aim - 1.0 / 12.0, (0.5 * aim) ** 2))
     step = stepped.step_for(aim, rmse_target * _STEP_PER_RMSE)
-    for _ in range(_RMSE_TRIES):
-        core_bytes, decoded = stepped.encode(step)
+
+    def measured(decoded: np.ndarray) -> tuple[float, float]:
         final = _to_dtype(decoded, dtype)
-        del decoded
         if has_mask:
-            measured_rmse, largest = _measure(final, original, missing, finite_count)
-        else:
-            squares, largest = squared_and_largest(final, original)
-            measured_rmse = math.sqrt(squares / finite_count)
+            return _measure(final, original, missing, finite_count)
+        squares, largest = squared_and_largest(final, original)
+        return math.sqrt(squares / finite_count), largest
+
+    for _ in range(_RMSE_TRIES):
+        # Each try is measured on its reconstruction before any entropy coding: a step that
+        # misses costs a quantization and a synthesis, not a coding (on an integer grid the
+        # first step misses more often than not: the rounding of the decoded samples).
+        quantized, decoded = stepped.reconstructed(step)
+        measured_rmse, largest = measured(decoded)
         if measured_rmse <= rmse_target:
-            return _assemble_core(arr, layout, core_bytes, mask_bytes, measured_rmse, largest)
+            core_bytes, output = stepped.code(quantized, decoded)
+            if output is not decoded:  # the header rounded a parameter: what decodes counts
+                measured_rmse, largest = measured(output)
+            if measured_rmse <= rmse_target:
+                return _assemble_core(arr, layout, core_bytes, mask_bytes, measured_rmse, largest)
+        del quantized, decoded
         if not measured_rmse > 0 or not math.isfinite(measured_rmse):
             return None
         # Aimed a little below the target, so that the next try lands on its safe side.

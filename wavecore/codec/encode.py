@@ -22,6 +22,7 @@ from .decode import decode
 from .fixedstep import bundle_from_quantized as bundle_from_quantized
 from .fixedstep import coded_units
 from .fixedstep import encode_surface_at_step as encode_surface_at_step
+from .fixedstep import reconstructed_from_quantized as reconstructed_from_quantized
 from .plan import (
     MAX_CURVE_LEVELS,
     MAX_IMAGE_LEVELS,
