@@ -618,6 +618,15 @@ class _Core:
             rounding=rounding,
         )
 
+    def encode_to_bpp(self, core: np.ndarray, bpp: float) -> tuple[bytes, np.ndarray]:
+        """The core bundle of at most ``bpp`` bits per point (the codec's rate control) and what
+        decoding it returns (the rate control's own reconstruction where it kept one)."""
+        from .codec.encode import _encode_surface_and_output
+
+        return _encode_surface_and_output(
+            core, bpp=bpp, wavelet=self.wavelet, level=self.level, boundary=self.boundary
+        )
+
     def encode(self, core: np.ndarray, *, quality: float | None, bpp: float | None) -> bytes:
         from .codec import encode_surface  # the codec imports this module for decode
 
@@ -865,10 +874,7 @@ def encode_layout(
         overhead = _TAIL.size + _HEAD.size + 4 * arr.ndim + _CRC.size + len(mask_bytes)
         budget_bits = bpp_target * arr.size - 8 * overhead
         rows, cols = core_values.shape[:2]
-        core_bytes = core.encode(
-            core_values, quality=None, bpp=max(budget_bits, 1.0) / (rows * cols)
-        )
-        decoded = _decode_core(core_bytes, 0)
+        core_bytes, decoded = core.encode_to_bpp(core_values, max(budget_bits, 1.0) / (rows * cols))
         final = _to_dtype(decoded, dtype)
         return _assemble_core(
             arr,
