@@ -397,9 +397,12 @@ def _encode_surface_and_output(
     :func:`wavecore.decode` returns for its bundle: the rate control's own reconstruction of
     the bundle it settled on where it made one, else the bundle decoded.  For
     :mod:`wavecore.grids`, which measures that output (a decoding was a quarter of an int16
-    grid's ``bpp`` encode); not part of the public API."""
+    grid's ``bpp`` encode), and whose rate control samples at most every other code-block
+    (``half_sample``); not part of the public API."""
     outputs: list[np.ndarray | None] = []
-    bundle = _encode_surface(grid, None, boundary, level, None, None, wavelet, None, bpp, outputs)
+    bundle = _encode_surface(
+        grid, None, boundary, level, None, None, wavelet, None, bpp, outputs, half_sample=True
+    )
     output = outputs[0] if outputs else None
     if output is None or read_bundle(bundle).header.get("scale"):
         return bundle, decode(bundle)  # (a scaled plan's reconstruction is in coded units)
@@ -418,6 +421,8 @@ def _encode_surface(
     rmse: float | None,
     bpp: float | None,
     outputs: list[np.ndarray | None] | None = None,
+    *,
+    half_sample: bool = False,
 ) -> bytes:
     arr = as_array(grid, "grid")
     if arr.ndim not in (2, 3):
@@ -455,7 +460,15 @@ def _encode_surface(
         if quality <= 0:  # any coding meets so loose a target: code coarsely
             quality = 1e-3
     return encode_lossy(
-        plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None, outputs=outputs
+        plan,
+        arr,
+        fitted,
+        keep=keep,
+        quality=quality,
+        bpp=bpp,
+        tolerance=None,
+        outputs=outputs,
+        half_sample=half_sample,
     )
 
 

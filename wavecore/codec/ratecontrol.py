@@ -260,6 +260,10 @@ class _LossyEncoder:
         self.keep_output = False
         self.output: tuple[tuple[float, float, bool], np.ndarray] | None = None
         self.assembled: tuple[bytes, tuple[float, float, bool], dict[str, Any]] | None = None
+        #: The bpp sample's least stride over the blocks of its sampled levels: 1 takes every
+        #: block of levels of fewer than ``2 * _SAMPLED_BLOCKS`` blocks (a sample as dear as
+        #: the full coding); the grids ask for 2 (see ``_encode_lossy``'s ``half_sample``).
+        self.least_sample_stride = 1
 
     def keep(self, fraction: float) -> None:
         if fraction == self.kept_fraction:
@@ -736,13 +740,18 @@ def _encode_lossy(
     bpp: float | None,
     tolerance: float | None,
     outputs: list[np.ndarray | None] | None = None,
+    half_sample: bool = False,
 ) -> bytes:
     """The plan's bundle under one target.  ``outputs``, if given, receives what
     :func:`wavecore.decode` returns for it (the coded units) where the rate control made that
     reconstruction on its way (None where it did not): a caller that measures the output
-    (:mod:`wavecore.grids`) then need not decode the bundle."""
+    (:mod:`wavecore.grids`) then need not decode the bundle.  ``half_sample``: the bpp
+    search's sample takes at most every other block of its sampled levels, never all of them
+    (the grids' choice: on int16 and float grids of 0.6-1.3 M samples, 20-35 % less CPU at
+    0.5-3 bpp, RMSE within 0.3 % either way; images keep the sample they were tuned with)."""
     encoder = _LossyEncoder(plan, original, transformed)
     encoder.keep_output = outputs is not None
+    encoder.least_sample_stride = 2 if half_sample else 1
     low, high = plan.peak * 2.0**-20, plan.peak * 4.0
     if keep is not None:
         encoder.keep(keep)
@@ -1226,7 +1235,9 @@ def _sampled_ratio(
     _, regions = block_lengths(shapes, True, DEFAULT_BLOCK, np.zeros(0, dtype=np.int64))
     # Pictures of few blocks sample their levels of several blocks, every other block.
     whole_level, least_stride = (
-        (_WHOLE_LEVEL_BLOCKS, 1) if len(regions) >= _SAMPLING_MIN_BLOCKS else (1, 2)
+        (_WHOLE_LEVEL_BLOCKS, encoder.least_sample_stride)
+        if len(regions) >= _SAMPLING_MIN_BLOCKS
+        else (1, 2)
     )
     model = _Search(
         functools.partial(_times, encoder.size_estimate, ratio),
