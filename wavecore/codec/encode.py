@@ -6,7 +6,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -60,13 +60,17 @@ DEFAULT_RELATIVE_TOLERANCE = 1e-3
 EFFORTS = ("default", "max")
 
 
-def _refuses_as_parameter(encoder: Callable[..., bytes]) -> Callable[..., bytes]:
+#: What an encoder returns: a bundle, or a bundle and its output (the grids' surface coding).
+_Encoded = TypeVar("_Encoded")
+
+
+def _refuses_as_parameter(encoder: Callable[..., _Encoded]) -> Callable[..., _Encoded]:
     """An encoder's ``BundleError`` (say, a header past the format's limits) is its input's
     fault: raise it as ``InvalidParameter``, so that callers (the service) never mistake an
     encode for a bad bundle."""
 
     @functools.wraps(encoder)
-    def checked(*args: Any, **kwargs: Any) -> bytes:
+    def checked(*args: Any, **kwargs: Any) -> _Encoded:
         try:
             return encoder(*args, **kwargs)
         except BundleError as exc:
