@@ -1205,8 +1205,10 @@ def _encode_rmse_at_steps(
             if measured_rmse >= _RMSE_FAR_UNDER * rmse_target:
                 break
             # Far under the target (an integer grid whose errors are mostly rounded away, at
-            # RMSEs below a unit): a coarser step, short of the finest one that missed.
-            step *= rmse_target / measured_rmse
+            # RMSEs below a unit): a coarser step, short of the finest one that missed.  The
+            # rounded RMSE grows faster than the step there (nearly as its square on the
+            # benchmark's elevation model): half the ratio in logarithms.
+            step *= math.sqrt(rmse_target / measured_rmse)
             if missed is not None:
                 step = min(step, math.sqrt(best[2] * missed))
         else:
