@@ -23,8 +23,14 @@ that adds what gridded data needs beyond a picture:
   nearly uniform in ``[-t, t]``), checked on what the decoder returns; where that comes to
   under 4 bits a sample the wavelet core codes it as well and the smaller is kept (the
   transform's coding gain wins at low rates).  A ``bpp`` budget of 4 or more is searched on
-  ``t`` the same way; lower budgets, integer grids and named wavelets use the wavelet core
-  (its step for ``rmse`` found from the coefficients, :mod:`wavecore.gridcore`).
+  ``t`` the same way; lower budgets and named wavelets use the wavelet core (its step for
+  ``rmse`` found from the coefficients and checked on each try's synthesis before the one
+  coding, :mod:`wavecore.gridcore`; for ``bpp`` the codec's rate control, whose own
+  reconstruction is measured).  An integer grid's coder is chosen from the target before
+  anything is coded (``_EXACT_BELOW_RMSE`` and ``_RUNG_TOP`` give the measurements): ``rmse`` of
+  0.4 or less, the interpolation coder exact; from ``sqrt(2/3)`` (its RMSE at a bound of one
+  unit) to 1.06 times that, the interpolation coder at that bound; otherwise the wavelet core.
+  Under ``bpp`` it is coded exactly where a centred crop predicts that fits the budget.
 * **Volumes.**  The interpolation coder predicts a volume ``(D, H, W)`` along all three axes
   (3-7 % fewer bytes than its slices coded apart, on the benchmark's volume).  The wavelet
   core (a named wavelet, low ``bpp``) codes it as ``D`` slices under one 2-D
@@ -817,7 +823,7 @@ def encode_layout(
     if dtype.kind in "iu" and bound is not None and bound < 1.0:
         lossless = True  # no error below one unit is possible but none
     # An integer grid under rmse (or psnr), no wavelet named: the coder is chosen from the
-    # target before anything is coded (see _encode_integer_rmse).
+    # target before anything is coded (see _EXACT_BELOW_RMSE and _RUNG_TOP).
     integer_rmse = (
         wavelet is None
         and dtype.kind in "iu"
