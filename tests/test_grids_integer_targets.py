@@ -197,3 +197,19 @@ def test_integer_rmse_always_met(
     assert out.dtype == data.dtype
     assert rmse(out, data) <= target
     assert math.isclose(wavecore.inspect(bundle)["rmse"], rmse(out, data), abs_tol=1e-9)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int8, np.int16, np.uint16, np.int32, np.uint32])
+def test_rounded_measure_is_the_cast_measured(dtype: type) -> None:
+    """The RMSE search's fused pass (round, clip, compare) gives what the cast then the plain
+    pass give, clipping at the dtype's ends included."""
+    from wavecore.gridcore import squared_and_largest, squared_and_largest_rounded
+
+    info = np.iinfo(dtype)
+    rng = np.random.default_rng(14)
+    original = rng.integers(int(info.min), int(info.max), size=(37, 41), endpoint=True)
+    original = original.astype(np.float64)
+    decoded = original + rng.normal(0.0, 3.0, original.shape)
+    decoded.flat[:5] = [info.min - 7.3, info.max + 9.9, 0.5, -0.5, 2.5]  # clips, ties to even
+    expected = squared_and_largest(grids._to_dtype(decoded, np.dtype(dtype)), original)
+    assert squared_and_largest_rounded(decoded, original, np.dtype(dtype)) == expected

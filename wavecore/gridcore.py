@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from ._kernels import squared_and_largest_error
+from ._kernels import squared_and_largest_error, squared_and_largest_rounded_error
 from .codec.encode import bundle_from_quantized, reconstructed_from_quantized
 from .codec.plan import MAX_IMAGE_LEVELS, Plan, fit
 from .codec.samples import decompose, peak_of, scaled
@@ -34,7 +34,7 @@ from .errors import InvalidParameter
 from .filters import get_wavelet
 from .quantize import DEFAULT_ROUNDING, OpenLoopDistortion, quantize_bands
 
-__all__ = ["SteppedCore", "squared_and_largest"]
+__all__ = ["SteppedCore", "squared_and_largest", "squared_and_largest_rounded"]
 
 #: The open-loop search stops when its prediction is within this fraction of its aim.
 _PREDICTION_TOLERANCE = 2e-3
@@ -155,5 +155,21 @@ def squared_and_largest(final: np.ndarray, original: np.ndarray) -> tuple[float,
     against ``original`` (float64, the same shape), in one compiled pass."""
     total, largest = squared_and_largest_error(
         np.ascontiguousarray(final).reshape(-1), np.ascontiguousarray(original).reshape(-1)
+    )
+    return float(total), float(largest)
+
+
+def squared_and_largest_rounded(
+    decoded: np.ndarray, original: np.ndarray, dtype: np.dtype[Any]
+) -> tuple[float, float]:
+    """:func:`squared_and_largest` of ``decoded`` (float64) as an integer ``dtype`` of at most
+    32 bits returns it (rounded, clipped to the dtype's range), with no array of that dtype
+    made: the same figures, in one compiled pass."""
+    info = np.iinfo(dtype)
+    total, largest = squared_and_largest_rounded_error(
+        np.ascontiguousarray(decoded).reshape(-1),
+        np.ascontiguousarray(original).reshape(-1),
+        float(info.min),
+        float(info.max),
     )
     return float(total), float(largest)

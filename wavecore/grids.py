@@ -1174,7 +1174,8 @@ def _encode_rmse_at_steps(
     tries miss it.  (The rate control's PSNR search, with its closed-loop refinement, cost 8x
     more on the benchmark's 1024² field for an RMSE within a per cent or two at the same
     bytes.)"""
-    from .gridcore import SteppedCore, squared_and_largest  # the codec imports this module
+    # (The codec imports this module: these are imported when used.)
+    from .gridcore import SteppedCore, squared_and_largest, squared_and_largest_rounded
 
     dtype = arr.dtype
     has_mask = bool(missing.any())
@@ -1187,10 +1188,12 @@ def _encode_rmse_at_steps(
     step = stepped.step_for(aim, rmse_target * _STEP_PER_RMSE)
 
     def measured(decoded: np.ndarray) -> tuple[float, float]:
-        final = _to_dtype(decoded, dtype)
         if has_mask:
-            return _measure(final, original, missing, finite_count)
-        squares, largest = squared_and_largest(final, original)
+            return _measure(_to_dtype(decoded, dtype), original, missing, finite_count)
+        if dtype.kind in "iu" and dtype.itemsize <= 4:  # rounded in the measuring pass
+            squares, largest = squared_and_largest_rounded(decoded, original, dtype)
+        else:
+            squares, largest = squared_and_largest(_to_dtype(decoded, dtype), original)
         return math.sqrt(squares / finite_count), largest
 
     # The kept try: the largest RMSE that met the target, with its step, bands and output.
