@@ -1168,12 +1168,13 @@ def _encode_rmse_at_steps(
     mask_bytes: bytes,
     rmse_target: float,
 ) -> bytes | None:
-    """An RMSE target met by a single quantization at the step that the coefficients predict
-    (:class:`wavecore.gridcore.SteppedCore`: decomposed once, no synthesis but the one that
-    verifies), stepped down and coded again if the decoded grid misses it; ``None`` if these
-    tries miss it.  (The rate control's PSNR search, with its closed-loop refinement, cost 8x
-    more on the benchmark's 1024² field for an RMSE within a per cent or two at the same
-    bytes.)"""
+    """An RMSE target met by quantizing at the step that the coefficients predict
+    (:class:`wavecore.gridcore.SteppedCore`: decomposed once, no synthesis but the ones that
+    verify): each try is synthesized and measured in the grid's dtype before any entropy
+    coding, stepped down if it misses the target (or up, if it lands ``_RMSE_FAR_UNDER`` or
+    further below it), and only the kept try is coded; ``None`` if no try meets it.  (The rate
+    control's PSNR search, with its closed-loop refinement, cost 8x more on the benchmark's
+    1024² field for an RMSE within a per cent or two at the same bytes.)"""
     # (The codec imports this module: these are imported when used.)
     from .gridcore import SteppedCore, squared_and_largest, squared_and_largest_rounded
 
