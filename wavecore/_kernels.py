@@ -41,6 +41,9 @@ from ._metrickernels import (
 from ._metrickernels import (
     squared_and_largest_integer_error as squared_and_largest_integer_error,
 )
+from ._metrickernels import (
+    squared_and_largest_rounded_error as squared_and_largest_rounded_error,
+)
 from ._quantkernels import (
     count_ones_and_more as count_ones_and_more,
 )

@@ -23,6 +23,28 @@ def squared_and_largest_error(decoded, original):
 
 
 @njit(nogil=True, cache=True)
+def squared_and_largest_rounded_error(decoded, original, low, high):
+    """:func:`squared_and_largest_error` of float samples rounded to integers and clipped to
+    ``[low, high]`` (an integer dtype's range) against ``original``: what the rounded samples
+    would measure, in one pass and with no array of them (the grids' RMSE search measures
+    every try so)."""
+    total = 0.0
+    largest = 0.0
+    for k in range(decoded.size):
+        v = np.rint(decoded[k])
+        if v < low:
+            v = low
+        elif v > high:
+            v = high
+        d = v - np.float64(original[k])
+        total += d * d
+        d = abs(d)
+        if d > largest or d != d:
+            largest = d
+    return total, largest
+
+
+@njit(nogil=True, cache=True)
 def squared_and_largest_integer_error(decoded, original):
     """:func:`squared_and_largest_error` of integer samples whose squared differences add up
     below ``2**53``, in integers: the same values (every float partial sum of integers that

@@ -6,7 +6,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -22,6 +22,7 @@ from .decode import decode
 from .fixedstep import bundle_from_quantized as bundle_from_quantized
 from .fixedstep import coded_units
 from .fixedstep import encode_surface_at_step as encode_surface_at_step
+from .fixedstep import reconstructed_from_quantized as reconstructed_from_quantized
 from .plan import (
     MAX_CURVE_LEVELS,
     MAX_IMAGE_LEVELS,
@@ -59,13 +60,17 @@ DEFAULT_RELATIVE_TOLERANCE = 1e-3
 EFFORTS = ("default", "max")
 
 
-def _refuses_as_parameter(encoder: Callable[..., bytes]) -> Callable[..., bytes]:
+#: What an encoder returns: a bundle, or a bundle and its output (the grids' surface coding).
+_Encoded = TypeVar("_Encoded")
+
+
+def _refuses_as_parameter(encoder: Callable[..., _Encoded]) -> Callable[..., _Encoded]:
     """An encoder's ``BundleError`` (say, a header past the format's limits) is its input's
     fault: raise it as ``InvalidParameter``, so that callers (the service) never mistake an
     encode for a bad bundle."""
 
     @functools.wraps(encoder)
-    def checked(*args: Any, **kwargs: Any) -> bytes:
+    def checked(*args: Any, **kwargs: Any) -> _Encoded:
         try:
             return encoder(*args, **kwargs)
         except BundleError as exc:
@@ -385,6 +390,44 @@ def encode_surface(
     if max_error is not None:  # the grid container's outlier pass keeps the bound
         return _bounded_surface(grid, closed, boundary, level, wavelet, max_error)
     quality = psnr if psnr is not None else quality
+    return _encode_surface(grid, closed, boundary, level, keep, quality, wavelet, rmse, bpp)
+
+
+@_refuses_as_parameter
+def _encode_surface_and_output(
+    grid: Any, *, bpp: float, wavelet: str, level: int | None, boundary: tuple[str, str]
+) -> tuple[bytes, np.ndarray]:
+    """:func:`encode_surface` of a float64 height field to ``bpp``, and what
+    :func:`wavecore.decode` returns for its bundle: the rate control's own reconstruction of
+    the bundle it settled on where it made one, else the bundle decoded.  For
+    :mod:`wavecore.grids`, which measures that output (a decoding was a quarter of an int16
+    grid's ``bpp`` encode), and whose rate control samples at most every other code-block
+    (``half_sample``); not part of the public API."""
+    outputs: list[np.ndarray | None] = []
+    bundle = _encode_surface(
+        grid, None, boundary, level, None, None, wavelet, None, bpp, outputs, half_sample=True
+    )
+    output = outputs[0] if outputs else None
+    if output is None or read_bundle(bundle).header.get("scale"):
+        return bundle, decode(bundle)  # (a scaled plan's reconstruction is in coded units)
+    return bundle, output
+
+
+# One home for what both surface encoders share: the plan, then the rate control.
+def _encode_surface(
+    grid: Any,
+    closed: tuple[bool, bool] | None,
+    boundary: str | tuple[str, str] | None,
+    level: int | None,
+    keep: float | None,
+    quality: float | None,
+    wavelet: str,
+    rmse: float | None,
+    bpp: float | None,
+    outputs: list[np.ndarray | None] | None = None,
+    *,
+    half_sample: bool = False,
+) -> bytes:
     arr = as_array(grid, "grid")
     if arr.ndim not in (2, 3):
         msg = f"grid must be (U, V) or (U, V, d), not shape {arr.shape}"
@@ -420,7 +463,17 @@ def encode_surface(
         quality = 20.0 * math.log10(plan.peak / coded_units(target, scale)) + 1e-6
         if quality <= 0:  # any coding meets so loose a target: code coarsely
             quality = 1e-3
-    return encode_lossy(plan, arr, fitted, keep=keep, quality=quality, bpp=bpp, tolerance=None)
+    return encode_lossy(
+        plan,
+        arr,
+        fitted,
+        keep=keep,
+        quality=quality,
+        bpp=bpp,
+        tolerance=None,
+        outputs=outputs,
+        half_sample=half_sample,
+    )
 
 
 def _bounded_surface(

@@ -90,22 +90,38 @@ def encode_surface_at_step(
     return bundle_from_quantized(plan, quantized, qparams, arr, "input")
 
 
-def bundle_from_quantized(
-    plan: Plan, quantized: list[Any], qparams: dict[str, Any], coded: np.ndarray, what: str
-) -> tuple[bytes, np.ndarray]:
-    """Code a surface plan's quantized bands into its bundle, measured on what the decoder
-    returns: the bundle and that output.  ``coded`` is the (scaled) samples the plan was made
-    from; ``what`` names them in the error a bundle that cannot be stored raises."""
-    bounds = list(plan.boundary)
-    chunks, cparams = encode_levels(quantized, coder=DEFAULT_CODER)
+def reconstructed_from_quantized(
+    plan: Plan, quantized: list[Any], qparams: dict[str, Any]
+) -> np.ndarray:
+    """What the decoder returns for a surface plan's quantized bands (the plan's units, before
+    any unscaling), with no entropy coding: a caller that may reject the step (the grids' RMSE
+    search) measures this first and codes only the step it keeps."""
     dequantized = dequantize_bands(
-        quantized, qparams, wavelet=plan.wavelet, boundary=bounds, axes=plan.axes
+        quantized, qparams, wavelet=plan.wavelet, boundary=list(plan.boundary), axes=plan.axes
     )
-    del quantized
     samples = reconstruct(plan, dequantized)
     del dequantized
     output = finish(plan, samples, 0)
     del samples
+    return output
+
+
+def bundle_from_quantized(
+    plan: Plan,
+    quantized: list[Any],
+    qparams: dict[str, Any],
+    coded: np.ndarray,
+    what: str,
+    output: np.ndarray | None = None,
+) -> tuple[bytes, np.ndarray]:
+    """Code a surface plan's quantized bands into its bundle, measured on what the decoder
+    returns: the bundle and that output.  ``coded`` is the (scaled) samples the plan was made
+    from; ``what`` names them in the error a bundle that cannot be stored raises.  ``output``,
+    if given, is :func:`reconstructed_from_quantized` of the same bands (not made again)."""
+    chunks, cparams = encode_levels(quantized, coder=DEFAULT_CODER)
+    if output is None:
+        output = reconstructed_from_quantized(plan, quantized, qparams)
+    del quantized
     scale = plan.scale
     decoded = np.ldexp(output, -scale) if scale else output
     psnr, largest = measure_errors(plan, coded, decoded)
