@@ -6,7 +6,7 @@ real uvicorn process on 127.0.0.1 (``live_server`` in ``tests/conftest.py``).
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterator
 from typing import Any
 
 import httpx
@@ -21,6 +21,17 @@ from service.settings import Settings
 @pytest.fixture
 def anyio_backend() -> str:
     return "asyncio"
+
+
+@pytest.fixture(autouse=True)
+def _pillow_pixel_limit() -> Iterator[None]:
+    """Put back Pillow's process-wide bomb limit, which every in-process app sets from its
+    settings: a small ``max_pixels`` here would refuse other tests' pictures afterwards."""
+    from PIL import Image
+
+    saved = Image.MAX_IMAGE_PIXELS
+    yield
+    Image.MAX_IMAGE_PIXELS = saved
 
 
 def asgi_client(**settings: Any) -> httpx.AsyncClient:
