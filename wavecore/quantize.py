@@ -176,7 +176,10 @@ def _rounding_margin(value: float) -> float:
         unit = Decimal(10) ** (exact.adjusted() - 3)
         scaled = exact / unit  # in [1000, 10000)
         fraction = scaled - scaled.to_integral_value(rounding=ROUND_FLOOR)
-        return float(abs(fraction - Decimal("0.5")) * unit / exact)
+        distance = abs(fraction - Decimal("0.5"))
+        # Just above a power of ten the decade below is ten times finer: 999.95 rounds up.
+        distance = min(distance, scaled - Decimal("999.95"))
+        return float(distance * unit / exact)
 
 
 def _check_step(step: Any) -> float:
