@@ -124,6 +124,8 @@ def test_derived_weights_match_two_axis_golden_bundles_too() -> None:
     for name, entry in MANIFEST.items():
         if entry["kind"] == "curve" or entry["quantizer"] != "deadzone":
             continue
+        if entry["arguments"].get("nudge_weight"):  # a 3.1 bundle with a weight not the plan's
+            continue
         header = read_bundle((GOLDEN / f"{name}.wvb").read_bytes()).header
         assert derived_weights(header) == header["qparams"]["weights"], name
         checked += 1

@@ -232,3 +232,17 @@ def test_band_weight_margins_bound_what_rounding_can_move() -> None:
         )
         moved = {f"{value * (1 + 1.01 * margin):.4g}", f"{value * (1 - 1.01 * margin):.4g}"}
         assert margin < 1e-15 or moved != {digits}
+
+
+def test_the_check_finds_every_change_of_one_weight_in_its_last_digit() -> None:
+    weights = read_bundle(
+        wavecore.encode_image(data.astronaut()[:300, :300], quality=40, level=7)
+    ).header["qparams"]["weights"]
+    check = binheader.weights_check(weights)
+    for level, entry in enumerate(weights):
+        for band, weight in enumerate(entry):
+            unit = 10 ** (np.floor(np.log10(weight)) - 3)
+            for step in (*range(-9, 0), *range(1, 10)):
+                changed = [list(e) for e in weights]
+                changed[level][band] = float(f"{weight + step * unit:.4g}")
+                assert binheader.weights_check(changed) != check, (level, band, step)

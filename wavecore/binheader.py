@@ -1,5 +1,5 @@
-"""The binary header of bundle formats 2.0, 3.0 and 4.0: the codec's header dict in a few dozen
-bytes.
+"""The binary header of bundle formats 2.0, 3.0, 3.1 and 4.0 on: the codec's header dict in a
+few dozen bytes.
 
 :func:`pack` maps the header dict that the codec builds (``_Plan.header()`` plus the quantizer,
 coder and error keys) to bytes, and :func:`unpack` maps the bytes back to an equal dict, so the
@@ -22,6 +22,10 @@ specifies the bytes; in short, in this order:
 * an optional *extension*: a raw-DEFLATE JSON object holding whatever the compact fields cannot
   say (unknown keys, parameters of another shape, wavelet names not in the table).  So every
   header that :func:`wavecore.bundle.check_header` accepts packs, and unpacks to an equal dict.
+
+Format 3.1 (:func:`pack` with ``pinned``, :func:`unpack_pinned`) adds a quantizer code, 3: the
+``deadzone`` quantizer whose weights the plan gives; only the *pinned* ones are stored (each
+with its band's index), then a CRC-8 of them all (:func:`weights_check`).
 
 Format 4.0 (:func:`pack` with ``major=4``, :func:`unpack_from`) has the same fields, with
 no length before them, and gives three flag bits new meanings: the weights are derived from
@@ -229,8 +233,9 @@ def _weight_code(weight: Any) -> int | None:
     return code if 0 <= code < WEIGHT_CODE_LIMIT else None
 
 
-def _pack_weights(weights: Any, levels: int, two_d: bool) -> bytes | None:
-    """The weights in the standard layout ``[[cA], [bands of level L], …]``, or None."""
+def _pack_weights(weights: Any, levels: int, two_d: bool) -> tuple[bytes, list[int]] | None:
+    """The weights in the standard layout ``[[cA], [bands of level L], …]``, and every band's
+    code (coarse first, ``cV`` included), or None."""
     bands = 3 if two_d else 1
     if not isinstance(weights, list) or len(weights) != levels + 1:
         return None
@@ -254,7 +259,7 @@ def _pack_weights(weights: Any, levels: int, two_d: bool) -> bytes | None:
             if two_d and band == 1 and same_hv >> (index - 1) & 1:
                 continue
             out += _U16.pack(code)
-    return bytes(out)
+    return bytes(out), [code for entry in codes for code in entry]
 
 
 def _flat_codes(weights: Any) -> list[int] | None:
@@ -285,10 +290,13 @@ def weights_check(weights: Any) -> int | None:
     213
     """
     codes = _flat_codes(weights)
-    if codes is None:
-        return None
+    return None if codes is None else _codes_check(codes)
+
+
+def _codes_check(codes: list[int]) -> int:
+    """The CRC-8 of :func:`weights_check`, of the codes themselves."""
     crc = 0
-    for byte in b"".join(_U16.pack(code) for code in codes):
+    for byte in struct.pack(f"<{len(codes)}H", *codes):
         crc ^= byte
         for _ in range(8):
             crc = (crc << 1 ^ 0x07) & 0xFF if crc & 0x80 else crc << 1
@@ -319,20 +327,16 @@ class PinnedWeights:
         return out
 
 
-def _pack_pins(weights: Any, pinned: Mapping[int, float]) -> bytes | None:
-    """3.1's weights field: how many weights are pinned, each one's index (a varint) and code
-    (uint16), then the check byte; None when a weight has no code or a pin is not the
+def _pack_pins(codes: list[int], pinned: Mapping[int, float]) -> bytes | None:
+    """3.1's weights field from every band's weight code: how many weights are pinned, each
+    one's index (a varint) and code (uint16), then the check byte; None when a pin is not the
     header's weight."""
-    codes = _flat_codes(weights)
-    check = weights_check(weights)
-    if codes is None or check is None:
-        return None
     out = bytearray(encode_varint(len(pinned)))
     for index in sorted(pinned):
         if not 0 <= index < len(codes) or _weight_code(pinned[index]) != codes[index]:
             return None
         out += encode_varint(index) + _U16.pack(codes[index])
-    return bytes(out) + bytes([check])
+    return bytes(out) + bytes([_codes_check(codes)])
 
 
 def _is_float32(value: float) -> bool:
@@ -366,14 +370,15 @@ def _compact_qparams(
     levels, boundary = header.get("levels"), header.get("boundary")
     if not isinstance(levels, int) or not isinstance(boundary, list):
         return None
-    weights = _pack_weights(qparams["weights"], levels, len(boundary) == 2)
-    if weights is None:
+    packed_weights = _pack_weights(qparams["weights"], levels, len(boundary) == 2)
+    if packed_weights is None:
         return None
+    weights, codes = packed_weights
     if major >= 4 and derived_weights:
         weights = b""
     pins = None
     if major == 3 and pinned is not None:
-        pins = _pack_pins(qparams["weights"], pinned)
+        pins = _pack_pins(codes, pinned)
         if pins is not None and len(pins) < len(weights):
             weights = pins
         else:

@@ -1,8 +1,8 @@
 """The coefficient bundle: a versioned binary container, coarse to fine.
 
-This docstring summarises format versions 5.0 (written for curves) and 3.0 (written for images
-and surfaces), and 4.0, 2.0 and 1.x, which are still read; ``docs/bundle-format.md`` is the
-specification.  Like NumPy's ``.npy`` format, a bundle is a
+This docstring summarises format versions 6.0 and 5.0 (written for curves) and 3.1 (written
+for images and surfaces), and 4.0, 3.0, 2.0 and 1.x, which are still read;
+``docs/bundle-format.md`` is the specification.  Like NumPy's ``.npy`` format, a bundle is a
 fixed preamble, a bounded self-describing header, then the payload.  All integers are
 little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
 
@@ -33,8 +33,12 @@ chunk's length, a varint; a CRC-16/XMODEM of each *group* of chunks (:func:`chun
 consecutive chunks packed while a group holds at most :data:`GROUP_BYTES`); the CRC-16 of every
 byte before it; the chunks, as in 3.0.
 
-Layout (3.0; 2.0 where it says so)
-----------------------------------
+Layout (3.1 and 3.0; 2.0 where it says so)
+------------------------------------------
+3.1 is 3.0's layout; its header may name the quantizer by code 3, whose weights are derived
+from the plan but for the *pinned* ones it stores (:func:`pinned_weights`), with a one-byte
+check of them all (:func:`wavecore.binheader.weights_check`), verified after the CRC-32.
+
 ==========  ===========  ========================================================================
 offset      size         field
 ==========  ===========  ========================================================================
@@ -42,7 +46,7 @@ offset      size         field
                          mangling, stops ``type`` on DOS)
 8           1            major version (``3``; ``2`` for 2.0); a reader refuses a major version it
                          does not know
-9           1            minor version (``0``)
+9           1            minor version (``1``; ``0`` for 3.0 and 2.0)
 10          v            header length ``H``, a varint, at most ``MAX_HEADER_SIZE``
 …           H            the binary header of :mod:`wavecore.binheader` (the same dict as 1.x)
 …           v · N        each chunk's byte length, a varint; ``N = levels + 1``
@@ -419,11 +423,12 @@ class _Reader:
 
 def written_version(header: dict[str, Any]) -> tuple[int, int]:
     """The version :func:`write_bundle` writes by default: 6.0 for curves (5.0 when 6.0's block
-    checks would pass :data:`CURVE_OVERHEAD_LIMIT`), 3.0 for the rest.
+    checks would pass :data:`CURVE_OVERHEAD_LIMIT`), 3.1 for the rest (labelled 3.0 when the
+    header has no weights the plan derives, as a lossless picture's: it is 3.0's).
 
-    Images and surfaces stay in 3.0: their headers are 45 to 93 bytes already, and the
-    compact layouts' grouped chunk checks and shorter head check would weaken their damage
-    handling for a few bytes (see ``docs/bundle-format.md``).
+    Images and surfaces stay in 3.x's layout: the compact layouts' grouped chunk checks and
+    shorter head check would weaken their damage handling for a few bytes; 3.1's header
+    derives their weights instead (see ``docs/bundle-format.md``).
     """
     return CURVE_VERSION if header.get("kind") == "curve" else FORMAT_VERSION
 
@@ -437,8 +442,10 @@ def write_bundle(
     """Serialise a header and its chunks (coarse to fine) into bundle bytes.
 
     The header is validated exactly as a reader would, so a writer can never produce a bundle
-    that its own reader refuses.  ``version`` is None (:func:`written_version`: 4.0 for
-    curves, 3.0 for images and surfaces), ``(4, 0)`` (the compact layout), ``(3, 0)`` (the
+    that its own reader refuses.  ``version`` is None (:func:`written_version`: 6.0 or 5.0 for
+    curves, 3.1 for images and surfaces), ``(6, 0)``, ``(5, 0)`` or ``(4, 0)`` (the compact
+    layouts), ``(3, 1)`` (3.0 whose header derives the weights from the plan; labelled 3.0
+    when it has none to derive), ``(3, 0)`` (the
     binary header, a CRC-16 per chunk and per code-block), ``(2, 0)`` (no block checks, chunk
     0 under the header's CRC-32), or ``(1, 1)`` for the JSON header that wavecore releases
     before 2.0 read (labelled 1.2 when the header has ``scale``).  ``chunks`` are always as
@@ -482,6 +489,10 @@ def write_bundle(
     if len(packed) > MAX_HEADER_SIZE:
         msg = f"header is {len(packed)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
         raise BundleError(msg)
+    if version == FORMAT_VERSION and packed[3] & 3 != binheader.DERIVED_DEADZONE:
+        # Labelled with the oldest minor version that reads it right, as 1.x did: a header
+        # without derived weights (a lossless picture) is 3.0's.
+        version = (3, 0)
     if version >= (3, 0):
         chunks = _with_block_checks(header, chunks)
     parts = [MAGIC, bytes(version), _varint(len(packed)), packed]

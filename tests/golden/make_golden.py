@@ -169,13 +169,12 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
         ),
         # Format 3.1 (3.0's layout; the header's quantizer code 3 derives the weights from the
         # plan, storing only pinned ones and a check byte): a grey picture whose finest bands
-        # span several blocks, colour at a set rate, a surface, a lossless picture (no
-        # weights: labelled 3.1, laid out as 3.0), and a picture one of whose weights is not
-        # the plan's (its approximation's, one up in the last digit), so that it is pinned.
+        # span several blocks, colour at a set rate, a surface, and a picture one of whose
+        # weights is not the plan's (its approximation's, one up in the last digit), so that
+        # it is pinned.  (A lossless picture has no weights: it is written as 3.0.)
         "v3_1_image_grey_u8_blocks": ("image", blocks_picture, {"quality": 38.0}),
         "v3_1_image_rgb_u8_bpp": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 6.0}),
         "v3_1_surface_closed_open": ("surface", surface, {"closed": (True, False)}),
-        "v3_1_image_grey_u8_lossless": ("image", grey.astype(np.uint8), {"lossless": True}),
         "v3_1_image_grey_u8_pinned": (
             "image",
             grey.astype(np.uint8),
