@@ -359,6 +359,8 @@ def fuzz_case(data: st.DataObject) -> None:
                 mutate_header(header, data),
                 major=4 if compact else 3,
                 derived_weights=compact and data.draw(st.booleans()),
+                # 3.1: the weights left to the plan (quantizer code 3), whatever it gives.
+                pinned=None if compact or not data.draw(st.booleans()) else {},
             )
         except BundleError:  # a value the binary header cannot hold
             return
