@@ -1,17 +1,20 @@
-"""Header sizes of typical bundles in formats 6.0 and 5.0 (curves), 4.0 (compact), 3.0 (binary
-header) and 1.1 (JSON), and the largest curve header over a sweep of curves.
+"""Header sizes of typical bundles in formats 6.0 and 5.0 (curves), 4.0 (compact), 3.1 (the
+weights derived), 3.0 (binary header) and 1.1 (JSON), and the largest curve header over a sweep
+of curves.
 
     .venv/bin/python benchmarks/header_sizes.py
 
 Each bundle is encoded once; the same header and chunks are then written in each format
 (``write_bundle(..., version=(1, 1))`` is the writer of releases before 2.0), so the payload is
 identical and only the overhead differs.  ``header`` is everything but the chunks as the
-coder wrote them (preamble, header, chunk lengths, checks; in 3.0, 4.0 and 6.0 also the block
+coder wrote them (preamble, header, chunk lengths, checks; in 3.x, 4.0 and 6.0 also the block
 checks and band counts ``write_bundle`` adds inside chunks of several code-blocks).  The
-codec writes 6.0 for curves and 3.0 for images and surfaces; the column of the version it
+codec writes 6.0 for curves and 3.1 for images and surfaces; the column of the version it
 writes is the one in bold.  Prints Markdown tables (docs/bundle-format.md quotes them).
 
-``--images`` prints the images' heads alone.  ``--sweep`` (both also run by default) encodes
+``--images`` prints the images' heads alone, at the default levels and at explicit deeper
+ones (up to the deepest the codec accepts: 8 for 512², 10 for 2048²), with 3.0's head of the
+same header and chunks beside.  ``--sweep`` (both also run by default) encodes
 curves of 2, 3, 8, 1000 and 50 000 points, 2-D and 3-D, open and closed, smooth and noisy,
 at the default level and at every explicit level the plan allows, and prints the largest
 header for each length and overall, next to the coder's own tables of block lengths (which
@@ -196,18 +199,20 @@ def sweep(lengths: tuple[int, ...] = (2, 3, 8, 1000, 50_000)) -> int:
 
 
 def image_headers() -> int:
-    """Images as the codec writes them (3.0): the head (``inspect``'s ``header_bytes``:
-    preamble, header, chunk lengths, CRCs) and, apart, the block checks and band counts that
-    3.0 adds inside chunks of several code-blocks (2 bytes a block and a few more a chunk:
-    they grow with the picture, the price of a damaged block losing only itself); returns the
-    largest head."""
+    """Images as the codec writes them (3.1): the head (``inspect``'s ``header_bytes``:
+    preamble, header, chunk lengths, CRCs), the head of the same header and chunks in 3.0,
+    and, apart, the block checks and band counts that 3.x adds inside chunks of several
+    code-blocks (2 bytes a block and a few more a chunk: they grow with the picture, the price
+    of a damaged block losing only itself); returns the largest head."""
     from skimage import data
 
     print()
-    print("| image | head (header_bytes) | block checks and band counts |")
-    print("|---|---:|---:|")
+    print("| image | levels | head 3.1 (header_bytes) | head 3.0 | block checks and band counts |")
+    print("|---|---:|---:|---:|---:|")
     largest = 0
     rng = np.random.default_rng(1)
+    # 2048² RGB: the astronaut enlarged (each pixel 4 × 4), the largest picture here.
+    large = np.kron(data.astronaut(), np.ones((4, 4, 1), np.uint8))
     pictures = {
         "camera 512² grey, default": (data.camera(), {}),
         "astronaut 512² RGB, default": (data.astronaut(), {}),
@@ -222,32 +227,49 @@ def image_headers() -> int:
             rng.integers(0, 65536, (300, 300, 4)).astype(np.uint16),
             {"lossless": True},
         ),
+        "2048² RGB (astronaut × 4), 1 bpp, 9 levels": (large, {"bpp": 1.0, "level": 9}),
+        "2048² RGB (astronaut × 4), 1 bpp, 10 levels": (large, {"bpp": 1.0, "level": 10}),
+        # Odd shapes padded to the deepest level they allow, 4 channels of 16 bits and
+        # float32 colour: every band has its own weight (cV is not cH), chunks of kilobytes.
+        "RGBA 16-bit 301 × 517, quality 40, 7 levels": (
+            rng.integers(0, 65536, (301, 517, 4)).astype(np.uint16),
+            {"quality": 40.0, "level": 7},
+        ),
+        "float32 RGB 777 × 1001 noise, cdf97, 2 bpp, 8 levels": (
+            rng.random((777, 1001, 3)).astype(np.float32),
+            {"wavelet": "cdf97", "bpp": 2.0, "level": 8},
+        ),
     }
     deepest = 0
     for name, (picture, options) in pictures.items():
         bundle = wavecore.encode_image(picture, **options)
-        head = wavecore.inspect(bundle)["header_bytes"]
+        info = wavecore.inspect(bundle)
+        head = info["header_bytes"]
+        parsed = read_bundle(bundle)
+        older = write_bundle(parsed.header, coder_chunks(bundle), version=(3, 0))
         inside = len(bundle) - head - sum(len(c) for c in coder_chunks(bundle))
-        # Each level adds its weights, a chunk length and a CRC-16: the target is for the
-        # default levels, and the explicitly deeper pictures show what a level costs.
+        old_head = len(older) - sum(len(c) for c in parsed.chunks)
+        # Each level adds a chunk length and a CRC-16 (in 3.0 also its weights): the
+        # explicitly deeper pictures show what a level costs.
         if "level" in options:
             deepest = max(deepest, head)
         else:
             largest = max(largest, head)
-        print(f"| {name} | {head} B | {inside} B |")
+        print(f"| {name} | {info['levels']} | {head} B | {old_head} B | {inside} B |")
     print(f"\nlargest image head at the default levels: {largest} B (target: at most 96)")
-    print(f"largest image head at explicit deeper levels: {deepest} B")
-    return largest
+    print(f"largest image head at explicit deeper levels: {deepest} B (target: at most 96)")
+    return max(largest, deepest)
 
 
 def main() -> None:
     print(f"load average {os.getloadavg()[0]:.2f}")
-    versions = ((1, 1), (3, 0), (4, 0), (5, 0), (6, 0))
+    versions = ((1, 1), (3, 0), (3, 1), (4, 0), (5, 0), (6, 0))
     print(
-        "| bundle | levels | payload | header 1.1 | header 3.0 | header 4.0 | header 5.0 "
-        "| header 6.0 | bundle 1.1 | bundle 3.0 | bundle 4.0 | bundle 5.0 | bundle 6.0 |"
+        "| bundle | levels | payload | header 1.1 | header 3.0 | header 3.1 | header 4.0 "
+        "| header 5.0 | header 6.0 | bundle 1.1 | bundle 3.0 | bundle 3.1 | bundle 4.0 "
+        "| bundle 5.0 | bundle 6.0 |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name, bundle in cases().items():
         parsed = read_bundle(bundle)
         chunks = coder_chunks(bundle)

@@ -1,5 +1,5 @@
 """The worked examples of docs/bundle-format.md are what the code gives: "Inspecting a bundle"
-(an image, format 3.0) and the 5.0 curve taken apart byte by byte.
+(an image, format 3.1) and the 6.0 curve taken apart byte by byte.
 
 The examples' text is generated here from the code's own output and compared with the file:
 when the format or the coder changes, this test fails and

@@ -259,7 +259,8 @@ UNKNOWN_CODES = [
     ("lossy image", 2, 0x18, 0x18, "'boundary'.*unknown code 3"),
     ("lossy image", 2, 0x60, 0x60, "'boundary'.*unknown code 3"),
     ("closed curve", 2, 0x60, 0x20, "'boundary'.*a second boundary code"),
-    ("lossy image", 3, 0x03, 0x03, "'quantizer'.*unknown code 3"),
+    # Code 3 (3.1: the weights derived) holds its parameters in the compact form only.
+    ("lossy image", 3, 0x13, 0x03, "'flags'.*quantizer code 3 without"),
     ("lossy image", 3, 0x0C, 0x0C, "'coder'.*unknown code 3"),
     ("lossless rgb", 3, 0x80, 0x80, "'flags'.*default-rounding"),
     ("lossy image", 3, 0x03, 0x02, "'flags'.*compact parameters"),

@@ -51,7 +51,7 @@ def test_surfaces_of_any_finite_magnitude_meet_their_quality(magnitude: float) -
     assert out.dtype == np.float64 and np.all(np.isfinite(out))
     assert _psnr(out, grid) >= 40 - 1e-9
     info = inspect(bundle)
-    assert info["scale"] != 0 and info["version"] == "3.0"  # 1.2 in the JSON header of 1.x
+    assert info["scale"] != 0 and info["version"] == "3.1"  # 1.2 in the JSON header of 1.x
     assert info["max_error"] >= np.max(np.abs(out - grid)) * (1 - 1e-12)
 
 
@@ -80,7 +80,7 @@ def test_curves_of_any_finite_magnitude_meet_their_tolerance(magnitude: float) -
 def test_ordinary_data_is_not_scaled() -> None:
     grid = _field(1e6, (12, 12))
     header = read_bundle(wavecore.encode_surface(grid)).header
-    assert "scale" not in header and inspect(wavecore.encode_surface(grid))["version"] == "3.0"
+    assert "scale" not in header and inspect(wavecore.encode_surface(grid))["version"] == "3.1"
 
 
 def test_a_scaled_bundle_with_keep_and_coarse_levels_decodes() -> None:

@@ -1,5 +1,5 @@
-"""The binary header of bundle formats 2.0, 3.0 and 4.0: the codec's header dict in a few dozen
-bytes.
+"""The binary header of bundle formats 2.0, 3.0, 3.1 and 4.0 on: the codec's header dict in a
+few dozen bytes.
 
 :func:`pack` maps the header dict that the codec builds (``_Plan.header()`` plus the quantizer,
 coder and error keys) to bytes, and :func:`unpack` maps the bytes back to an equal dict, so the
@@ -23,6 +23,10 @@ specifies the bytes; in short, in this order:
   say (unknown keys, parameters of another shape, wavelet names not in the table).  So every
   header that :func:`wavecore.bundle.check_header` accepts packs, and unpacks to an equal dict.
 
+Format 3.1 (:func:`pack` with ``pinned``, :func:`unpack_pinned`) adds a quantizer code, 3: the
+``deadzone`` quantizer whose weights the plan gives; only the *pinned* ones are stored (each
+with its band's index), then a CRC-8 of them all (:func:`weights_check`).
+
 Format 4.0 (:func:`pack` with ``major=4``, :func:`unpack_from`) has the same fields, with
 no length before them, and gives three flag bits new meanings: the weights are derived from
 the plan (then not stored; ``fitted`` is always derived, or in the extension), the step is a
@@ -40,6 +44,8 @@ import json
 import math
 import struct
 import zlib
+from collections.abc import Mapping
+from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 from typing import Any
 
@@ -48,7 +54,7 @@ import numpy as np
 from .errors import BundleError
 from .varints import encode_varint, unzigzag, zigzag
 
-__all__ = ["MAX_VARINT_BYTES", "pack", "unpack"]
+__all__ = ["MAX_VARINT_BYTES", "PinnedWeights", "pack", "unpack", "unpack_pinned", "weights_check"]
 
 # The format's code tables.  A code is an index into its table: never reorder them, only append
 # (a new value is a new minor version; an older reader refuses the unknown code by name).
@@ -75,6 +81,10 @@ BOUNDARY_CODES = ("open", "closed", "symmetric")
 LIFTING_CODES = ("legall53", "haar", "bspline2", "511c")
 #: Code 2 means "the name is in the extension".
 QUANTIZER_CODES = ("none", "deadzone")
+#: Quantizer code 3 (format 3.1): ``deadzone`` whose weights the plan gives, but for a few
+#: *pinned* ones stored with their index, and a one-byte check of them all.  A 3.0 reader
+#: refuses it by name ("binary header field 'quantizer' … unknown code 3").
+DERIVED_DEADZONE = 3
 CODER_CODES = ("context", "zlib")
 IN_EXTENSION = 2
 
@@ -223,8 +233,9 @@ def _weight_code(weight: Any) -> int | None:
     return code if 0 <= code < WEIGHT_CODE_LIMIT else None
 
 
-def _pack_weights(weights: Any, levels: int, two_d: bool) -> bytes | None:
-    """The weights in the standard layout ``[[cA], [bands of level L], …]``, or None."""
+def _pack_weights(weights: Any, levels: int, two_d: bool) -> tuple[bytes, list[int]] | None:
+    """The weights in the standard layout ``[[cA], [bands of level L], …]``, and every band's
+    code (coarse first, ``cV`` included), or None."""
     bands = 3 if two_d else 1
     if not isinstance(weights, list) or len(weights) != levels + 1:
         return None
@@ -248,7 +259,84 @@ def _pack_weights(weights: Any, levels: int, two_d: bool) -> bytes | None:
             if two_d and band == 1 and same_hv >> (index - 1) & 1:
                 continue
             out += _U16.pack(code)
-    return bytes(out)
+    return bytes(out), [code for entry in codes for code in entry]
+
+
+def _flat_codes(weights: Any) -> list[int] | None:
+    """The weight codes of every band, coarse first (``cV`` included), or None."""
+    if not isinstance(weights, list):
+        return None
+    codes = []
+    for entry in weights:
+        if not isinstance(entry, list):
+            return None
+        for weight in entry:
+            code = _weight_code(weight)
+            if code is None:
+                return None
+            codes.append(code)
+    return codes
+
+
+def weights_check(weights: Any) -> int | None:
+    """Format 3.1's check of a header's weights: the CRC-8 (polynomial ``0x07``, initial value
+    0) of every band's 16-bit weight code, little-endian, coarse first and ``cV`` included; None
+    when a weight has no code.
+
+    A CRC-8 finds every change of up to 8 consecutive bits, so every change of one weight by
+    one in its last digit but those that carry through more than 8 bits of its code.
+
+    >>> weights_check([[0.9535], [1.0]])
+    213
+    """
+    codes = _flat_codes(weights)
+    return None if codes is None else _codes_check(codes)
+
+
+def _codes_check(codes: list[int]) -> int:
+    """The CRC-8 of :func:`weights_check`, of the codes themselves."""
+    crc = 0
+    for byte in struct.pack(f"<{len(codes)}H", *codes):
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc << 1 ^ 0x07) & 0xFF if crc & 0x80 else crc << 1
+    return crc
+
+
+@dataclass(frozen=True)
+class PinnedWeights:
+    """What a 3.1 header (quantizer code 3) says about its weights: the *pinned* ones, by
+    their index among every band coarse first (``cV`` included), and the check of them all
+    (:func:`weights_check`); the rest are the plan's (:func:`wavecore.bundle.derived_weights`)."""
+
+    pins: dict[int, float]
+    check: int
+
+    def apply(self, derived: list[list[float]]) -> list[list[float]]:
+        """The derived weights with the pinned ones put in."""
+        out, index = [], 0
+        for entry in derived:
+            row = []
+            for weight in entry:
+                row.append(self.pins.get(index, weight))
+                index += 1
+            out.append(row)
+        if self.pins and max(self.pins) >= index:
+            msg = f"qparams.weights: pinned weight {max(self.pins)} is past the {index} bands"
+            raise BundleError(msg)
+        return out
+
+
+def _pack_pins(codes: list[int], pinned: Mapping[int, float]) -> bytes | None:
+    """3.1's weights field from every band's weight code: how many weights are pinned, each
+    one's index (a varint) and code (uint16), then the check byte; None when a pin is not the
+    header's weight."""
+    out = bytearray(encode_varint(len(pinned)))
+    for index in sorted(pinned):
+        if not 0 <= index < len(codes) or _weight_code(pinned[index]) != codes[index]:
+            return None
+        out += encode_varint(index) + _U16.pack(codes[index])
+    return bytes(out) + bytes([_codes_check(codes)])
 
 
 def _is_float32(value: float) -> bool:
@@ -257,17 +345,21 @@ def _is_float32(value: float) -> bool:
 
 
 def _compact_qparams(
-    header: dict[str, Any], major: int = 3, derived_weights: bool = False
-) -> tuple[bytes, bool, bool] | None:
-    """(bytes, rounding is the default, step is a float32) of the quantizer's parameters, or
-    None.  In 4.0 the step takes 4 bytes when it is a float32, and ``derived_weights`` (the
-    weights are those the plan gives, :func:`wavecore.bundle.derived_weights`) leaves them
-    out."""
+    header: dict[str, Any],
+    major: int = 3,
+    derived_weights: bool = False,
+    pinned: Mapping[int, float] | None = None,
+) -> tuple[bytes, bool, bool, bool] | None:
+    """(bytes, rounding is the default, step is a float32, weights are pinned) of the
+    quantizer's parameters, or None.  In 4.0 the step takes 4 bytes when it is a float32, and
+    ``derived_weights`` (the weights are those the plan gives,
+    :func:`wavecore.bundle.derived_weights`) leaves them out.  In 3.1 ``pinned`` (the weights
+    the plan does not give for sure) stores those alone, when that is shorter."""
     quantizer, qparams = header.get("quantizer"), header.get("qparams")
     if not isinstance(qparams, dict):
         return None
     if quantizer == "none":
-        return (b"", False, False) if qparams == {} else None
+        return (b"", False, False, False) if qparams == {} else None
     if quantizer != "deadzone" or set(qparams) != {"name", "step", "weights", "rounding"}:
         return None
     step, rounding = qparams["step"], qparams["rounding"]
@@ -278,16 +370,24 @@ def _compact_qparams(
     levels, boundary = header.get("levels"), header.get("boundary")
     if not isinstance(levels, int) or not isinstance(boundary, list):
         return None
-    weights = _pack_weights(qparams["weights"], levels, len(boundary) == 2)
-    if weights is None:
+    packed_weights = _pack_weights(qparams["weights"], levels, len(boundary) == 2)
+    if packed_weights is None:
         return None
+    weights, codes = packed_weights
     if major >= 4 and derived_weights:
         weights = b""
+    pins = None
+    if major == 3 and pinned is not None:
+        pins = _pack_pins(codes, pinned)
+        if pins is not None and len(pins) < len(weights):
+            weights = pins
+        else:
+            pins = None
     is_default = isinstance(rounding, float) and _same_float(rounding, DEFAULT_ROUNDING)
     middle = b"" if is_default else _number(rounding, "qparams.rounding", major=major)
     single = major >= 4 and _is_float32(step)
     packed_step = _F32.pack(step) if single else _F64.pack(step)
-    return packed_step + middle + weights, is_default, single
+    return packed_step + middle + weights, is_default, single, pins is not None
 
 
 def _compact_cparams(header: dict[str, Any]) -> bytes | None:
@@ -360,14 +460,23 @@ def _derived_fitted(shape: list[int], pads: list[list[int]]) -> list[int]:
     return fitted
 
 
-def pack(header: dict[str, Any], *, major: int = 3, derived_weights: bool = False) -> bytes:
+def pack(
+    header: dict[str, Any],
+    *,
+    major: int = 3,
+    derived_weights: bool = False,
+    pinned: Mapping[int, float] | None = None,
+) -> bytes:
     """The binary form of a header dict (one that :func:`bundle.check_header` accepts).
 
     ``major`` is the bundle format's major version: 2 and 3 share one form; 4 (see
     ``docs/bundle-format.md``, *The binary header in 4.0*) always derives ``fitted`` (else it
     goes to the extension), leaves the weights out when ``derived_weights`` says they are the
     plan's, stores a float32 step in 4 bytes and the default coder parameters in none, and
-    has the binary number form.
+    has the binary number form.  ``pinned`` (major 3 only: format 3.1) says that the weights
+    are the plan's but for these (an index among every band, coarse first and ``cV``
+    included, to the header's weight): the quantizer is then written as code 3, with the
+    pinned weights and a check byte in place of the weights (when that is shorter).
 
     Raises
     ------
@@ -468,8 +577,12 @@ def pack(header: dict[str, Any], *, major: int = 3, derived_weights: bool = Fals
     if quantizer_code == IN_EXTENSION:
         extension["quantizer"] = quantizer
     qparams = (
-        _compact_qparams(header, major, derived_weights) if quantizer_code != IN_EXTENSION else None
+        _compact_qparams(header, major, derived_weights, pinned)
+        if quantizer_code != IN_EXTENSION
+        else None
     )
+    if qparams is not None and qparams[3]:
+        quantizer_code = DERIVED_DEADZONE
     if qparams is None:
         extension["qparams"] = header["qparams"]
         if major >= 4 and quantizer_code != IN_EXTENSION:  # 4.0: both in the extension
@@ -663,10 +776,31 @@ def _unpack_weights(reader: _Reader, levels: int, two_d: bool) -> list[list[floa
             (code,) = _U16.unpack(reader.take(2, "qparams.weights"))
             if code >= WEIGHT_CODE_LIMIT:
                 raise reader.fail("qparams.weights", f"weight code {code} is not a weight")
-            exponent, mantissa = divmod(code, 9000)
-            entry.append(float(f"{mantissa + 1000}e{exponent + WEIGHT_EXPONENT_MIN}"))
+            entry.append(_weight_of(code))
         weights.append(entry)
     return weights
+
+
+def _weight_of(code: int) -> float:
+    exponent, mantissa = divmod(code, 9000)
+    return float(f"{mantissa + 1000}e{exponent + WEIGHT_EXPONENT_MIN}")
+
+
+def _unpack_pins(reader: _Reader, levels: int, two_d: bool) -> PinnedWeights:
+    """3.1's weights field: the pinned weights (indices strictly increasing, below the number
+    of bands) and the check byte."""
+    bands = 1 + levels * (3 if two_d else 1)
+    count = reader.varint("qparams.weights", bands)
+    pins: dict[int, float] = {}
+    for _ in range(count):
+        index = reader.varint("qparams.weights", bands - 1)
+        if pins and index <= max(pins):
+            raise reader.fail("qparams.weights", "pinned weights out of order")
+        (code,) = _U16.unpack(reader.take(2, "qparams.weights"))
+        if code >= WEIGHT_CODE_LIMIT:
+            raise reader.fail("qparams.weights", f"weight code {code} is not a weight")
+        pins[index] = _weight_of(code)
+    return PinnedWeights(pins, reader.byte("qparams.weights"))
 
 
 def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
@@ -679,10 +813,27 @@ def unpack(data: bytes | bytearray | memoryview) -> dict[str, Any]:
         varint too long or too large, a non-finite number, bytes left over.  What the fields
         say together is checked by :func:`bundle.check_header` and the codec.
     """
-    reader = _Reader(data)
-    header, _ = _read_fields(reader, 3)
-    reader.end()
+    header, pinned = unpack_pinned(data)
+    if pinned is not None:
+        msg = (
+            "binary header field 'qparams.weights': derived from the plan (quantizer code 3, "
+            "format 3.1); read the bundle with wavecore.bundle.read_bundle"
+        )
+        raise BundleError(msg)
     return header
+
+
+def unpack_pinned(
+    data: bytes | bytearray | memoryview,
+) -> tuple[dict[str, Any], PinnedWeights | None]:
+    """As :func:`unpack`, for a header of format 3.1 too: the header dict and, when its
+    quantizer is code 3 (the weights derived from the plan), its :class:`PinnedWeights`;
+    ``qparams`` then holds no ``weights`` (:func:`wavecore.bundle.read_bundle` derives them
+    once the header's CRC has matched)."""
+    reader = _Reader(data)
+    header, _, pinned = _read_fields(reader, 3)
+    reader.end()
+    return header, pinned
 
 
 def unpack_from(
@@ -696,12 +847,13 @@ def unpack_from(
     field for anything malformed, as :func:`unpack` does.
     """
     reader = _Reader(memoryview(data)[offset : offset + _MAX_EXTENSION])
-    header, derived = _read_fields(reader, major)
+    header, derived, _ = _read_fields(reader, major)
     return header, offset + reader.offset, derived
 
 
-def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool]:
-    """The fields of a binary header, in order (``major`` 2, 3 or 4)."""
+def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool, PinnedWeights | None]:
+    """The fields of a binary header, in order (``major`` 2, 3 or 4): the header, whether its
+    weights are derived (4.0 on), and 3.1's pinned weights (quantizer code 3)."""
     flags = [reader.byte("flags") for _ in range(4)]
     kind = reader.code(flags[0] & 3, KIND_CODES, "kind")
     colour_code = flags[0] >> 2 & 3
@@ -727,7 +879,14 @@ def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool]:
         raise reader.fail("boundary", "a second boundary code for one axis")
     has_scale = bool(flags[2] >> 7)
     quantizer_code, coder_code = flags[3] & 3, flags[3] >> 2 & 3
-    if quantizer_code > IN_EXTENSION:
+    # 3.1's code 3 is a deadzone quantizer whose weights the plan gives (2.0's and 3.0's
+    # header form; 4.0 on have their own flag for it).
+    derived_deadzone = quantizer_code == DERIVED_DEADZONE and major <= 3
+    if derived_deadzone:
+        if not flags[3] >> 4 & 1:
+            raise reader.fail("flags", "quantizer code 3 without its compact parameters")
+        quantizer_code = 1
+    elif quantizer_code > IN_EXTENSION:
         raise reader.fail("quantizer", f"unknown code {quantizer_code}")
     if coder_code > IN_EXTENSION:
         raise reader.fail("coder", f"unknown code {coder_code}")
@@ -750,6 +909,7 @@ def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool]:
     if default_rounding and not (q_compact and quantizer_code == 1):
         raise reader.fail("flags", "the default-rounding flag without a deadzone quantizer")
 
+    pinned: PinnedWeights | None = None
     levels = reader.varint("levels", 255)
     shape = [reader.varint("shape", _MAX_SIZE) for _ in range(rank)]
     fitted = None
@@ -804,7 +964,9 @@ def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool]:
             DEFAULT_ROUNDING if default_rounding else reader.number("qparams.rounding", major)
         )
         qparams: dict[str, Any] = {"name": "deadzone", "step": float(step)}
-        if not weights_derived:  # else the bundle reader derives them from the plan
+        if derived_deadzone:  # the bundle reader derives them, once the CRC has matched
+            pinned = _unpack_pins(reader, levels, axes == 2)
+        elif not weights_derived:  # else the bundle reader derives them from the plan
             qparams["weights"] = _unpack_weights(reader, levels, axes == 2)
         qparams["rounding"] = rounding
         header["qparams"] = qparams
@@ -837,7 +999,7 @@ def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool]:
         _merge_extension(reader, header)
         if derived_fitted is not None:  # 4.0: ``fitted`` is derived unless the extension says
             header.setdefault("fitted", derived_fitted)
-    return header, weights_derived
+    return header, weights_derived, pinned
 
 
 def _merge_extension(reader: _Reader, header: dict[str, Any]) -> None:

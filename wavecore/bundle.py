@@ -1,8 +1,8 @@
 """The coefficient bundle: a versioned binary container, coarse to fine.
 
-This docstring summarises format versions 5.0 (written for curves) and 3.0 (written for images
-and surfaces), and 4.0, 2.0 and 1.x, which are still read; ``docs/bundle-format.md`` is the
-specification.  Like NumPy's ``.npy`` format, a bundle is a
+This docstring summarises format versions 6.0 and 5.0 (written for curves) and 3.1 (written
+for images and surfaces), and 4.0, 3.0, 2.0 and 1.x, which are still read;
+``docs/bundle-format.md`` is the specification.  Like NumPy's ``.npy`` format, a bundle is a
 fixed preamble, a bounded self-describing header, then the payload.  All integers are
 little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
 
@@ -33,8 +33,12 @@ chunk's length, a varint; a CRC-16/XMODEM of each *group* of chunks (:func:`chun
 consecutive chunks packed while a group holds at most :data:`GROUP_BYTES`); the CRC-16 of every
 byte before it; the chunks, as in 3.0.
 
-Layout (3.0; 2.0 where it says so)
-----------------------------------
+Layout (3.1 and 3.0; 2.0 where it says so)
+------------------------------------------
+3.1 is 3.0's layout; its header may name the quantizer by code 3, whose weights are derived
+from the plan but for the *pinned* ones it stores (:func:`pinned_weights`), with a one-byte
+check of them all (:func:`wavecore.binheader.weights_check`), verified after the CRC-32.
+
 ==========  ===========  ========================================================================
 offset      size         field
 ==========  ===========  ========================================================================
@@ -42,7 +46,7 @@ offset      size         field
                          mangling, stops ``type`` on DOS)
 8           1            major version (``3``; ``2`` for 2.0); a reader refuses a major version it
                          does not know
-9           1            minor version (``0``)
+9           1            minor version (``1``; ``0`` for 3.0 and 2.0)
 10          v            header length ``H``, a varint, at most ``MAX_HEADER_SIZE``
 …           H            the binary header of :mod:`wavecore.binheader` (the same dict as 1.x)
 …           v · N        each chunk's byte length, a varint; ``N = levels + 1``
@@ -168,12 +172,14 @@ __all__ = [
     "MAX_CHUNKS",
     "MAX_ELEMENTS",
     "MAX_HEADER_SIZE",
+    "PIN_MARGIN",
     "Bundle",
     "chunk_groups",
     "curve_groups",
     "deflate_header",
     "derived_weights",
     "inflate_header",
+    "pinned_weights",
     "read_bundle",
     "with_header",
     "write_bundle",
@@ -187,8 +193,19 @@ MAGIC = b"\x89WVB\r\n\x1a\n"
 #: float16, int8–int64 and uint32, and 1.2 the optional ``scale`` key.  3.0 (again a new major
 #: version: chunk 0 is no longer under the CRC-32, and block-coded chunks carry block checks)
 #: keeps the binary header and adds a CRC-16 per chunk and per code-block.
+#: 3.1 (written for images and surfaces since 2026-11-28) is 3.0's layout whose header may name
+#: the quantizer by code 3: the weights are the plan's (:func:`derived_weights`), stored only
+#: where they might not be (:func:`pinned_weights`), with a one-byte check of them all.  A 3.0
+#: reader refuses such a header by naming the field 'quantizer'; 3.0 is still written on
+#: request (``write_bundle(..., version=(3, 0))``).
 #: The version written for images and surfaces (:func:`written_version`).
-FORMAT_VERSION = (3, 0)
+FORMAT_VERSION = (3, 1)
+#: 3.1 stores a weight the plan gives when its unrounded value lies closer than this, relative
+#: to it, to a point where its four significant digits change
+#: (:func:`wavecore.quantize.band_weight_margins`): floating-point sums of a few thousand
+#: terms on another machine (another SIMD width or summation order) differ by some 1e-13
+#: relative, so the other weights round to the same digits everywhere.
+PIN_MARGIN = 1e-9
 #: 4.0, the compact layout (a new major version: a 4-byte preamble, no header length, derived
 #: weights, chunks checked in groups and the head by a CRC-16; see ``docs/bundle-format.md``),
 #: is written for curves, and is the newest version this module reads.
@@ -406,11 +423,12 @@ class _Reader:
 
 def written_version(header: dict[str, Any]) -> tuple[int, int]:
     """The version :func:`write_bundle` writes by default: 6.0 for curves (5.0 when 6.0's block
-    checks would pass :data:`CURVE_OVERHEAD_LIMIT`), 3.0 for the rest.
+    checks would pass :data:`CURVE_OVERHEAD_LIMIT`), 3.1 for the rest (labelled 3.0 when the
+    header has no weights the plan derives, as a lossless picture's: it is 3.0's).
 
-    Images and surfaces stay in 3.0: their headers are 45 to 93 bytes already, and the
-    compact layouts' grouped chunk checks and shorter head check would weaken their damage
-    handling for a few bytes (see ``docs/bundle-format.md``).
+    Images and surfaces stay in 3.x's layout: the compact layouts' grouped chunk checks and
+    shorter head check would weaken their damage handling for a few bytes; 3.1's header
+    derives their weights instead (see ``docs/bundle-format.md``).
     """
     return CURVE_VERSION if header.get("kind") == "curve" else FORMAT_VERSION
 
@@ -424,8 +442,10 @@ def write_bundle(
     """Serialise a header and its chunks (coarse to fine) into bundle bytes.
 
     The header is validated exactly as a reader would, so a writer can never produce a bundle
-    that its own reader refuses.  ``version`` is None (:func:`written_version`: 4.0 for
-    curves, 3.0 for images and surfaces), ``(4, 0)`` (the compact layout), ``(3, 0)`` (the
+    that its own reader refuses.  ``version`` is None (:func:`written_version`: 6.0 or 5.0 for
+    curves, 3.1 for images and surfaces), ``(6, 0)``, ``(5, 0)`` or ``(4, 0)`` (the compact
+    layouts), ``(3, 1)`` (3.0 whose header derives the weights from the plan; labelled 3.0
+    when it has none to derive), ``(3, 0)`` (the
     binary header, a CRC-16 per chunk and per code-block), ``(2, 0)`` (no block checks, chunk
     0 under the header's CRC-32), or ``(1, 1)`` for the JSON header that wavecore releases
     before 2.0 read (labelled 1.2 when the header has ``scale``).  ``chunks`` are always as
@@ -458,16 +478,21 @@ def write_bundle(
         return _write_json(header, chunks)
     if version in (COMPACT_VERSION, CURVE_VERSION_5, CURVE_VERSION):
         return _write_compact(header, chunks, version)
-    if version not in ((2, 0), FORMAT_VERSION):
+    if version not in ((2, 0), (3, 0), FORMAT_VERSION):
         msg = (
             f"cannot write bundle format version {version}; use {CURVE_VERSION}, "
-            f"{CURVE_VERSION_5}, {COMPACT_VERSION}, {FORMAT_VERSION}, (2, 0) or (1, 1)"
+            f"{CURVE_VERSION_5}, {COMPACT_VERSION}, {FORMAT_VERSION}, (3, 0), (2, 0) or (1, 1)"
         )
         raise BundleError(msg)
-    packed = binheader.pack(header)
+    pinned = pinned_weights(header) if version == FORMAT_VERSION else None
+    packed = binheader.pack(header, pinned=pinned)
     if len(packed) > MAX_HEADER_SIZE:
         msg = f"header is {len(packed)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
         raise BundleError(msg)
+    if version == FORMAT_VERSION and packed[3] & 3 != binheader.DERIVED_DEADZONE:
+        # Labelled with the oldest minor version that reads it right, as 1.x did: a header
+        # without derived weights (a lossless picture) is 3.0's.
+        version = (3, 0)
     if version >= (3, 0):
         chunks = _with_block_checks(header, chunks)
     parts = [MAGIC, bytes(version), _varint(len(packed)), packed]
@@ -794,23 +819,110 @@ def derived_weights(header: dict[str, Any]) -> list[list[float]]:
     BundleError
         If the header does not describe a consistent plan.
     """
+    plan = _plan_shapes(header)
+    try:
+        weights = _plan_weights(*plan)
+    except Exception as exc:  # a crafted header that passed every check
+        msg = f"the header's weights cannot be derived: {type(exc).__name__}: {exc}"
+        raise BundleError(msg[:300]) from exc
+    return [list(entry) for entry in weights]
+
+
+def _plan_shapes(
+    header: dict[str, Any],
+) -> tuple[str, tuple[str, ...], tuple[tuple[tuple[int, ...], ...], ...]]:
+    """The wavelet, boundaries and band shapes of a header's plan (what its weights depend
+    on)."""
     # The plan imports this module (through the codec); hence here.
     from .codec.plan import plan_from_header
 
     plan = plan_from_header(header)
     try:
         layout = plan.band_shapes()
-        shapes = tuple(
-            (tuple(entry),) if index == 0 or len(plan.axes) == 1 else tuple(map(tuple, entry))
-            for index, entry in enumerate(layout)
-        )
-        weights = _plan_weights(plan.wavelet, tuple(plan.boundary), shapes)
     except BundleError:
         raise
     except Exception as exc:  # a crafted header that passed every check
         msg = f"the header's weights cannot be derived: {type(exc).__name__}: {exc}"
         raise BundleError(msg[:300]) from exc
-    return [list(entry) for entry in weights]
+    shapes = tuple(
+        (tuple(entry),) if index == 0 or len(plan.axes) == 1 else tuple(map(tuple, entry))
+        for index, entry in enumerate(layout)
+    )
+    return plan.wavelet, tuple(plan.boundary), shapes
+
+
+def pinned_weights(header: dict[str, Any]) -> dict[int, float] | None:
+    """The weights a 3.1 header stores although its plan gives them: by their index among
+    every band (coarse first, ``cV`` included), those that differ from
+    :func:`derived_weights` and those whose unrounded value lies within :data:`PIN_MARGIN` of
+    a change of digit; None when the plan does not give the header's weights (a quantizer
+    without derivable weights, or another layout).
+
+    The codec's weights are the plan's, and a weight that close to a change of digit is rare
+    (about 2·10⁻⁵ of them), so nearly every header pins none.
+    """
+    weights = header["qparams"].get("weights")
+    # The codec's stage registry says which quantizers' weights the plan derives; imported
+    # here because the codec package imports this module.
+    from .codec.stages import quantizer_of
+
+    try:
+        if weights is None or not quantizer_of(header).derivable_weights:
+            return None
+        derived = derived_weights(header)
+        margins = _margins(header)
+    except BundleError:
+        return None
+    if not isinstance(weights, list) or [len(e) for e in weights] != [len(e) for e in derived]:
+        return None
+    pins: dict[int, float] = {}
+    index = 0
+    for stored, plan, margin in zip(weights, derived, margins, strict=True):
+        for weight, expected, room in zip(stored, plan, margin, strict=True):
+            if weight != expected or room < PIN_MARGIN:
+                pins[index] = weight
+            index += 1
+    return pins
+
+
+def _margins(header: dict[str, Any]) -> tuple[tuple[float, ...], ...]:
+    """The rounding margins of the plan's weights (:func:`_plan_margins`)."""
+    plan = _plan_shapes(header)
+    try:
+        return _plan_margins(*plan)
+    except Exception as exc:  # a crafted header that passed every check
+        msg = f"the header's weights cannot be derived: {type(exc).__name__}: {exc}"
+        raise BundleError(msg[:300]) from exc
+
+
+@functools.lru_cache(maxsize=64)
+def _plan_margins(
+    wavelet: str, boundary: tuple[str, ...], shapes: tuple[tuple[tuple[int, ...], ...], ...]
+) -> tuple[tuple[float, ...], ...]:
+    """``band_weight_margins`` of a layout's band shapes (cached as :func:`_plan_weights`)."""
+    from .quantize import band_weight_margins
+
+    coeffs, axes = _stand_ins(boundary, shapes)
+    margins = band_weight_margins(coeffs, wavelet=wavelet, boundary=list(boundary), axes=axes)
+    return tuple(tuple(entry) for entry in margins)
+
+
+def _stand_ins(
+    boundary: tuple[str, ...], shapes: tuple[tuple[tuple[int, ...], ...], ...]
+) -> tuple[list[Any], tuple[int, ...]]:
+    """Zero-memory stand-in bands of a layout's shapes (the norms need the shapes only)."""
+    import numpy as np
+
+    stand_in = np.zeros(())
+
+    def band(shape: tuple[int, ...]) -> Any:
+        return np.broadcast_to(stand_in, shape)
+
+    one_axis = len(boundary) == 1
+    coeffs: list[Any] = [band(shapes[0][0])] + [
+        band(entry[0]) if one_axis else tuple(band(s) for s in entry) for entry in shapes[1:]
+    ]
+    return coeffs, (0,) if one_axis else (0, 1)
 
 
 @functools.lru_cache(maxsize=64)
@@ -819,20 +931,9 @@ def _plan_weights(
 ) -> tuple[tuple[float, ...], ...]:
     """``band_weights`` of a layout's band shapes (cached: an encoder reads back what it wrote,
     and ``inspect`` and ``decode`` read the same bundles)."""
-    import numpy as np
-
     from .quantize import band_weights
 
-    stand_in = np.zeros(())
-
-    def band(shape: tuple[int, ...]) -> Any:
-        return np.broadcast_to(stand_in, shape)  # shapes only: no memory
-
-    one_axis = len(boundary) == 1
-    coeffs: list[Any] = [band(shapes[0][0])] + [
-        band(entry[0]) if one_axis else tuple(band(s) for s in entry) for entry in shapes[1:]
-    ]
-    axes = (0,) if one_axis else (0, 1)
+    coeffs, axes = _stand_ins(boundary, shapes)
     weights = band_weights(coeffs, wavelet=wavelet, boundary=list(boundary), axes=axes)
     return tuple(tuple(entry) for entry in weights)
 
@@ -980,7 +1081,7 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
     checks.
     """
     header_size = reader.varint("the header length", MAX_HEADER_SIZE)
-    header = binheader.unpack(reader.take(header_size, "the header"))
+    header, pinned = binheader.unpack_pinned(reader.take(header_size, "the header"))
     check_header(header)
     count = header["levels"] + 1
     lengths = [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
@@ -994,6 +1095,8 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
         if zlib.crc32(reader.view[:head_end]) != crc:
             msg = "the header or chunk table is corrupt: the header CRC-32 does not match"
             raise BundleError(msg)
+        if pinned is not None:  # only once the header is known to be intact
+            _add_pinned_weights(header, pinned)
         chunks = _take_chunks(reader, lengths)
         return Bundle((major, minor), header, chunks, tuple(crcs), "crc16", block_checks=True)
     remaining = len(reader.view) - reader.offset
@@ -1007,6 +1110,8 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
     if zlib.crc32(first, zlib.crc32(reader.view[:head_end])) != crc:
         msg = "the header, chunk table or chunk 0 is corrupt: the header CRC-32 does not match"
         raise BundleError(msg)
+    if pinned is not None:  # a 2.x header with 3.1's quantizer code: read as it says
+        _add_pinned_weights(header, pinned)
     crcs[0] = crc16(first)
     chunks = _take_chunks(reader, lengths)
     return Bundle((major, minor), header, chunks, tuple(crcs), "crc16")
@@ -1056,6 +1161,27 @@ def _grouped(
         if any(chunk is None for chunk in chunks[first : last + 1]):
             chunks[first : last + 1] = [None] * (last + 1 - first)
     return tuple(chunks), tuple(groups)
+
+
+def _add_pinned_weights(header: dict[str, Any], pinned: binheader.PinnedWeights) -> None:
+    """3.1: the plan's weights with the pinned ones put in, checked against the header's
+    check byte (a reader that derives other weights than the writer did is refused)."""
+    weights = pinned.apply(derived_weights(header))
+    check = binheader.weights_check(weights)
+    if check != pinned.check:
+        msg = (
+            "the quantizer's weights that this reader derives from the plan are not the "
+            f"writer's: their check is {check}, the header says {pinned.check} (a wavecore "
+            "whose band norms differ from those that wrote the bundle)"
+        )
+        raise BundleError(msg)
+    qparams = header["qparams"]
+    header["qparams"] = {
+        "name": qparams["name"],
+        "step": qparams["step"],
+        "weights": weights,
+        "rounding": qparams["rounding"],
+    }
 
 
 def _add_derived_weights(header: dict[str, Any]) -> None:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
+from decimal import ROUND_FLOOR, Decimal, localcontext
 from typing import Any
 
 import numpy as np
@@ -43,6 +44,7 @@ from .transform import run_calls, run_rows, run_slices
 __all__ = [
     "ClosedLoopFit",
     "OpenLoopDistortion",
+    "band_weight_margins",
     "dequantize_bands",
     "quantize_bands",
     "reconstruction_offset",
@@ -128,7 +130,56 @@ def band_weights(
     from the coarse end, ``[[cA], [level L bands], ...]``.
     """
     norms = _band_norms(as_levels(coeffs), wavelet, boundary, tuple(int(a) for a in axes))
-    return [[float(f"{1.0 / max(norm, 1e-12):.4g}") for norm in level] for level in norms]
+    return [[float(f"{_unrounded_weight(norm):.4g}") for norm in level] for level in norms]
+
+
+def _unrounded_weight(norm: float) -> float:
+    return 1.0 / max(norm, 1e-12)
+
+
+def band_weight_margins(
+    coeffs: Sequence[Any],
+    *,
+    wavelet: str,
+    boundary: str | Sequence[str],
+    axes: Sequence[int] = (0, 1),
+) -> list[list[float]]:
+    """How far each band's weight is from flipping a digit: the distance of its unrounded
+    value from the nearest rounding boundary of :func:`band_weights`' four significant digits,
+    relative to the value, laid out as ``band_weights``' result.
+
+    The norms are sums computed in floating point, so another machine (another SIMD width,
+    another summation order) may get them a few ulps apart.  A weight whose margin is far
+    larger than that rounds to the same four digits everywhere; a bundle that derives the
+    weights from the plan instead of storing them stores those whose margin is small
+    (``docs/bundle-format.md``, *The binary header in 3.1*).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wavecore import wavedec2
+    >>> coeffs = wavedec2(np.zeros((34, 34)), level=2)
+    >>> margins = band_weight_margins(coeffs, wavelet="bspline2", boundary="open")
+    >>> [len(level) for level in margins], all(0 <= m < 1e-3 for lv in margins for m in lv)
+    ([1, 3, 3], True)
+    """
+    norms = _band_norms(as_levels(coeffs), wavelet, boundary, tuple(int(a) for a in axes))
+    return [[_rounding_margin(_unrounded_weight(norm)) for norm in level] for level in norms]
+
+
+def _rounding_margin(value: float) -> float:
+    """Relative distance of a positive ``value`` from the nearest point where its four
+    significant digits change (``d.ddd5 · 10**e``), in exact decimal arithmetic."""
+    exact = Decimal(value)  # the binary value, exactly
+    with localcontext() as context:
+        context.prec = 80
+        unit = Decimal(10) ** (exact.adjusted() - 3)
+        scaled = exact / unit  # in [1000, 10000)
+        fraction = scaled - scaled.to_integral_value(rounding=ROUND_FLOOR)
+        distance = abs(fraction - Decimal("0.5"))
+        # Just above a power of ten the decade below is ten times finer: 999.95 rounds up.
+        distance = min(distance, scaled - Decimal("999.95"))
+        return float(distance * unit / exact)
 
 
 def _check_step(step: Any) -> float:

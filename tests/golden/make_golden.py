@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -166,6 +167,19 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             (np.sin(40 * np.linspace(0, 1, 33_000)) * np.linspace(0, 1, 33_000)).astype(np.float32),
             {"level": 1, "tolerance": 1e-3},
         ),
+        # Format 3.1 (3.0's layout; the header's quantizer code 3 derives the weights from the
+        # plan, storing only pinned ones and a check byte): a grey picture whose finest bands
+        # span several blocks, colour at a set rate, a surface, and a picture one of whose
+        # weights is not the plan's (its approximation's, one up in the last digit), so that
+        # it is pinned.  (A lossless picture has no weights: it is written as 3.0.)
+        "v3_1_image_grey_u8_blocks": ("image", blocks_picture, {"quality": 38.0}),
+        "v3_1_image_rgb_u8_bpp": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 6.0}),
+        "v3_1_surface_closed_open": ("surface", surface, {"closed": (True, False)}),
+        "v3_1_image_grey_u8_pinned": (
+            "image",
+            grey.astype(np.uint8),
+            {"quality": 40.0, "nudge_weight": True},
+        ),
         # Format 1.2 (the JSON header with ``scale``), written by the 1.x writer that
         # ``write_bundle(..., version=(1, 1))`` keeps: no earlier golden bundle had it.
         "surface_scaled_v1_2": (
@@ -188,8 +202,15 @@ def main() -> None:
     for name, (kind, data, kwargs) in inputs().items():
         if name in manifest and name not in replace:
             continue
-        options = {k: v for k, v in kwargs.items() if k != "format_version"}
+        options = {k: v for k, v in kwargs.items() if k not in ("format_version", "nudge_weight")}
         bundle = encoders[kind](data, **options)
+        if kwargs.get("nudge_weight"):  # a weight the plan does not give: 3.1 pins it
+            parsed = read_bundle(bundle)
+            weights = parsed.header["qparams"]["weights"]
+            weight = weights[0][0]
+            weights[0][0] = float(f"{weight + 10 ** (math.floor(math.log10(weight)) - 3):.4g}")
+            chunks = [parsed.chunk(i) for i in range(len(parsed.chunks))]
+            bundle = write_bundle(parsed.header, chunks)
         if "format_version" in kwargs:  # the same bundle in an older format
             parsed = read_bundle(bundle)
             chunks = [parsed.chunk(i) for i in range(len(parsed.chunks))]
