@@ -496,7 +496,12 @@ def write_bundle(
     if version >= (3, 0):
         chunks = _with_block_checks(header, chunks)
     parts = [MAGIC, bytes(version), _varint(len(packed)), packed]
-    parts += [_varint(len(chunk)) for chunk in chunks]
+    if version == FORMAT_VERSION and self_delimiting_blocks(header) is not None:
+        # 3.1: chunks that delimit themselves (a table of block lengths first) have no
+        # lengths in the head, which is then bounded whatever the chunks' sizes.
+        _check_delimited(header, chunks)
+    else:
+        parts += [_varint(len(chunk)) for chunk in chunks]
     checked = chunks if version >= (3, 0) else chunks[1:]
     parts += [_U16.pack(_crc16(chunk)) for chunk in checked]
     head = b"".join(parts)
@@ -715,14 +720,7 @@ def _checked_curve_bytes(packed: bytes, header: dict[str, Any], chunks: Sequence
     if self_delimiting_blocks(header) is None:
         parts += [_varint(len(chunk)) for chunk in chunks]
     else:
-        for index, chunk in enumerate(chunks):
-            length = _checked_length(memoryview(chunk), blocks[index], bands[index])
-            if length != len(chunk):
-                msg = (
-                    f"chunk {index} is not as the block coder writes it: its table of "
-                    f"{blocks[index]} block length(s) does not add up to its {len(chunk)} bytes"
-                )
-                raise BundleError(msg)
+        _check_delimited(header, chunks)
     for first, last in checked_groups(blocks):
         crc = 0
         for chunk in chunks[first : last + 1]:
@@ -730,6 +728,22 @@ def _checked_curve_bytes(packed: bytes, header: dict[str, Any], chunks: Sequence
         parts.append(_U16.pack(crc))
     head = b"".join(parts)
     return b"".join([head, _U16.pack(binascii.crc_hqx(head, 0)), *map(bytes, chunks)])
+
+
+def _check_delimited(header: dict[str, Any], chunks: Sequence[bytes]) -> None:
+    """Refuse chunks in their stored form (3.1, 6.0) whose own tables do not give their
+    lengths, so that a writer never writes a bundle its reader would cut elsewhere."""
+    layout = block_layout(header)
+    count = len(chunks)
+    blocks, bands = layout if layout is not None else ([1] * count, [0] * count)
+    for index, chunk in enumerate(chunks):
+        length = _checked_length(memoryview(chunk), blocks[index], bands[index])
+        if length != len(chunk):
+            msg = (
+                f"chunk {index} is not as the block coder writes it: its table of "
+                f"{blocks[index]} block length(s) does not add up to its {len(chunk)} bytes"
+            )
+            raise BundleError(msg)
 
 
 def _checked_length(view: memoryview, blocks: int, bands: int) -> int | None:
@@ -1084,7 +1098,14 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
     header, pinned = binheader.unpack_pinned(reader.take(header_size, "the header"))
     check_header(header)
     count = header["levels"] + 1
-    lengths = [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
+    # 3.1 on: chunks that delimit themselves have no lengths in the head (found below, once
+    # the head is known to be intact).
+    delimited = (major, minor) >= FORMAT_VERSION and self_delimiting_blocks(header) is not None
+    lengths = (
+        []
+        if delimited
+        else [reader.varint(f"the length of chunk {i}", 2**40) for i in range(count)]
+    )
     first_crc = 0 if major >= 3 else 1  # 2.x: chunk 0 is checked by the CRC-32
     crcs = [0] * first_crc + [
         reader.unpack(_U16, f"the CRC-16 of chunk {i}")[0] for i in range(first_crc, count)
@@ -1097,6 +1118,10 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
             raise BundleError(msg)
         if pinned is not None:  # only once the header is known to be intact
             _add_pinned_weights(header, pinned)
+        if delimited:
+            layout = block_layout(header)
+            blocks, bands = layout if layout is not None else ([1] * count, [0] * count)
+            lengths = _delimited_lengths(reader, blocks, bands)
         chunks = _take_chunks(reader, lengths)
         return Bundle((major, minor), header, chunks, tuple(crcs), "crc16", block_checks=True)
     remaining = len(reader.view) - reader.offset
