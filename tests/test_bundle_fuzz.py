@@ -122,13 +122,22 @@ def assemble2(packed: bytes, chunks: list[bytes], version: tuple[int, int] = (3,
     """A format 3.x or 2.0 bundle with correct CRCs around whatever binary header bytes it is
     given (3.x: a CRC-16 per chunk, the CRC-32 over the head; 2.0: chunk 0 under the CRC-32)."""
     head = MAGIC + bytes(version) + _varint(len(packed)) + packed
-    head += b"".join(_varint(len(c)) for c in chunks)
+    if version < (3, 1) or not _delimits_in_3_1(packed):  # 3.1: such chunks have no lengths
+        head += b"".join(_varint(len(c)) for c in chunks)
     checked = chunks if version >= (3, 0) else chunks[1:]
     head += b"".join(struct.pack("<H", binascii.crc_hqx(c, 0)) for c in checked)
     if version >= (3, 0):
         return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
     crc = zlib.crc32(chunks[0] if chunks else b"", zlib.crc32(head))
     return head + struct.pack("<I", crc) + b"".join(chunks)
+
+
+def _delimits_in_3_1(packed: bytes) -> bool:
+    """Whether a 3.1 reader finds the chunks of this header without their lengths."""
+    try:
+        return self_delimiting_blocks(binheader.unpack_pinned(packed)[0]) is not None
+    except Exception:  # a crafted header: the reader refuses it before the lengths matter
+        return False
 
 
 def assemble4(packed: bytes, chunks: list[bytes], minor: int = 0) -> bytes:

@@ -57,19 +57,11 @@ def _packed(data_: bytes) -> bytes:
 
 
 def _assemble(packed: bytes, chunks: list[bytes]) -> bytes:
-    """A 3.1 bundle with correct CRCs around whatever header bytes it is given."""
+    """A 3.1 bundle with correct CRCs around whatever header bytes it is given (the block
+    coder's chunks delimit themselves: no lengths)."""
     head = MAGIC + bytes(FORMAT_VERSION) + bytes([len(packed)]) + packed
-    head += b"".join(bytes([len(c)]) if len(c) < 128 else _varint(len(c)) for c in chunks)
     head += b"".join(struct.pack("<H", binascii.crc_hqx(c, 0)) for c in chunks)
     return head + struct.pack("<I", zlib.crc32(head)) + b"".join(chunks)
-
-
-def _varint(value: int) -> bytes:
-    out = bytearray()
-    while value >= 0x80:
-        out.append(value & 0x7F | 0x80)
-        value >>= 7
-    return bytes(out + bytes([value]))
 
 
 def _weights_field(packed: bytes, header: dict[str, Any]) -> int:

@@ -301,6 +301,9 @@ class Bundle:
     #: ``(blocks, bands)``; it is in no group, and it is intact when its prefix check and every
     #: block's CRC-16 match.  None for every other chunk (and in other versions).
     checked: tuple[tuple[int, int] | None, ...] | None = None
+    #: 3.1 with chunks that delimit themselves: the last chunk is whatever follows the others,
+    #: so a bundle cut inside it shows as that chunk's damage (said so in the error).
+    open_ended: bool = False
     _verified: dict[int, bool] = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -329,8 +332,11 @@ class Bundle:
             if self.groups is not None and self.groups[index][0] != self.groups[index][1]:
                 first, last = self.groups[index]
                 what = f"the {name} of its group (chunks {first} to {last})"
+            cut = ""
+            if self.open_ended and index == len(self.chunks) - 1:
+                cut = ", or the bundle is truncated (this last chunk runs to the end of the bundle)"
             msg = (
-                f"chunk {index} is corrupt: {what} does not match the chunk table (decode "
+                f"chunk {index} is corrupt: {what} does not match the chunk table{cut} (decode "
                 "with damaged='zero' to get the rest with its damaged blocks zeroed)"
             )
             raise BundleError(msg)
@@ -746,6 +752,34 @@ def _check_delimited(header: dict[str, Any], chunks: Sequence[bytes]) -> None:
             raise BundleError(msg)
 
 
+def _cut_short(view: memoryview, blocks: int, bands: int) -> bool:
+    """Whether the last chunk of a 3.1 bundle, ``view`` (the rest of the bundle), is cut
+    short: its table (intact, by its prefix check when it has several blocks) asks for more
+    bytes than remain, or the bundle ends inside the table.  A damaged table is not a cut;
+    the chunk's checks then find the damage."""
+    length = _checked_length(view, blocks, bands)
+    if length is not None:
+        return False
+    if blocks <= 1:
+        return True  # one block: its length is the only table
+    try:
+        read, _ = block_table(view, blocks)
+    except BundleError:
+        return True  # the table itself is cut short (or unreadable)
+    position = read + CHECK_BYTES * blocks
+    for _ in range(2 * bands):  # the band counts, two varints a band
+        for count in range(binheader.MAX_VARINT_BYTES + 1):
+            if position >= len(view) or count == binheader.MAX_VARINT_BYTES:
+                return position >= len(view)
+            position += 1
+            if not view[position - 1] & 0x80:
+                break
+    if position + CHECK_BYTES > len(view):
+        return True
+    stored = int.from_bytes(view[position : position + CHECK_BYTES], "little")
+    return binascii.crc_hqx(view[:position], 0) == stored
+
+
 def _checked_length(view: memoryview, blocks: int, bands: int) -> int | None:
     """The stored length of a self-delimiting chunk at the start of ``view`` (6.0): its
     table, and for a chunk of several blocks its block checks, band counts and prefix check,
@@ -1121,9 +1155,24 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
         if delimited:
             layout = block_layout(header)
             blocks, bands = layout if layout is not None else ([1] * count, [0] * count)
-            lengths = _delimited_lengths(reader, blocks, bands)
+            lengths = _delimited_lengths(reader, blocks[:-1], bands[:-1])
+            # The finest chunk (the largest, with the longest table) runs to the end: a
+            # damaged table there loses only that chunk, and a cut there only its end.
+            start = reader.offset + sum(lengths)
+            rest = len(reader.view) - start
+            if rest < 0 or _cut_short(reader.view[start:], blocks[-1], bands[-1]):
+                rest = len(reader.view) + 1  # missing: the bundle was cut inside it
+            lengths.append(rest)
         chunks = _take_chunks(reader, lengths)
-        return Bundle((major, minor), header, chunks, tuple(crcs), "crc16", block_checks=True)
+        return Bundle(
+            (major, minor),
+            header,
+            chunks,
+            tuple(crcs),
+            "crc16",
+            block_checks=True,
+            open_ended=delimited,
+        )
     remaining = len(reader.view) - reader.offset
     if lengths[0] > remaining:
         msg = (
