@@ -27,6 +27,7 @@ header is everything but the coded stream (magic, fields, CRC), in both forms.
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 
@@ -261,6 +262,73 @@ def image_headers() -> int:
     return max(largest, deepest)
 
 
+def worst_case_heads() -> int:
+    """The largest 3.1 image head the codec can write, from its fields' largest values (no
+    encoding needed: since 3.1's head holds no chunk lengths, it depends only on the header
+    and the number of levels).  Checks first that the head is exactly that on a real bundle.
+    Returns the largest head."""
+    import struct
+
+    from wavecore import binheader
+    from wavecore.bundle import MAGIC, pinned_weights
+
+    def head_of(header: dict, pinned: dict | None) -> int:
+        packed = binheader.pack(header, pinned=pinned)
+        assert len(packed) < 128  # its length is one varint byte
+        return len(MAGIC) + 2 + 1 + len(packed) + 2 * (header["levels"] + 1) + 4
+
+    from skimage import data
+
+    bundle = wavecore.encode_image(data.astronaut(), bpp=1.0, level=8)
+    header = read_bundle(bundle).header
+    assert head_of(header, pinned_weights(header)) == wavecore.inspect(bundle)["header_bytes"]
+    print()
+    print("| worst case (3.1, synthetic header) | levels | header | head |")
+    print("|---|---:|---:|---:|")
+    largest = 0
+    # The deepest image a bundle may declare: Haar's open boundary fits 8192 = 2**13 · 1, so
+    # 4064 × 16384 (fitted 8192 × 16384 = MAX_ELEMENTS; a length may at most double, + 64)
+    # takes 13 levels; shape and pads at their longest varints; float64 data whose peak, step and max_error have no short form
+    # (9 bytes each); a psnr of 9 000 dB (4 bytes; no float64 picture reaches 9 400 dB);
+    # every weight pinned but one (the writer's worst: more pins and it stores code 1).
+    worst = dict(header)
+    worst.update(
+        shape=[4064, 16384],  # 2 + 3 varint bytes, the first padded by 4128 (2 more)
+        fitted=[8192, 16384],
+        colour="none",
+        pads=[[0, 4128], [0, 0]],
+        dtype="float64",
+        wavelet="haar",
+        levels=13,
+        peak=struct.unpack("<d", struct.pack("<d", math.pi * 1e10))[0],
+        psnr=9000.1234,
+        max_error=1e-300,  # below float32's normal range: stored as a float64
+    )
+    worst["qparams"] = dict(header["qparams"], step=math.pi / 7)
+    # In colour (a byte more for the channels) 13 levels no longer fit: 12.
+    colour = dict(worst, shape=[4094, 8190, 3], fitted=[4096, 8192, 3], levels=12)
+    colour["pads"] = [[0, 2], [0, 2]]
+    colour["colour"] = "ycbcr"
+    cases_ = {
+        "grey 4064 × 16384, 13 levels, no pin": (worst, 0),
+        "grey 4064 × 16384, 13 levels, one pin": (worst, 1),
+        "RGB 4094 × 8190, 12 levels, one pin": (colour, 1),
+    }
+    for name, (base, pins) in cases_.items():
+        candidate = dict(base)
+        from wavecore.bundle import derived_weights
+
+        weights = derived_weights(candidate)
+        candidate["qparams"] = dict(candidate["qparams"], weights=weights)
+        pinned = {index: weights[0][0] for index in range(pins)}
+        packed = binheader.pack(candidate, pinned=pinned)
+        head = head_of(candidate, pinned)
+        largest = max(largest, head)
+        print(f"| {name} | {candidate['levels']} | {len(packed)} B | {head} B |")
+    print(f"\nlargest 3.1 image head possible: {largest} B (target: at most 96)")
+    return largest
+
+
 def main() -> None:
     print(f"load average {os.getloadavg()[0]:.2f}")
     versions = ((1, 1), (3, 0), (3, 1), (4, 0), (5, 0), (6, 0))
@@ -291,6 +359,7 @@ def main() -> None:
     curve_sets()
     curve_headers()
     image_headers()
+    worst_case_heads()
     sweep()
     print(f"load average {os.getloadavg()[0]:.2f}")
 
@@ -300,5 +369,6 @@ if __name__ == "__main__":
         sweep()
     elif "--images" in sys.argv:
         image_headers()
+        worst_case_heads()
     else:
         main()
