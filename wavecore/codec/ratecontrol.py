@@ -183,10 +183,15 @@ _WHOLE_LEVEL_BLOCKS = 4
 _TRIM_ROUNDS = 6
 #: Where in the window the trim aims, from the budget down (bytes left unused cost PSNR).
 _TRIM_AIM = 0.3
-#: How much longer a header with the two placeholders is than the real one: each number of
-#: format 2.0's header takes 1 to 10 bytes (wavecore/binheader.py), so at most 2 × 9.
-_PLACEHOLDER_EXCESS = 18
+#: How much longer a header with the two placeholders is than the real one: the psnr takes
+#: 1 to 4 bytes (None, or at most 4 decimals below 9 500 dB: wavecore/binheader.py), the
+#: max_error 1 to 9, so at most 3 + 8.
+_PLACEHOLDER_EXCESS = 11
 _LONGEST_FLOAT = 1.2345678901234567e-300  # 23 characters, the longest repr of a positive float
+#: The psnr placeholder: 4 bytes in the binary header, as many as any PSNR the codec measures
+#: (rounded down to 4 decimals; no float64 picture passes 9 405 dB: 20 log10 of the largest
+#: peak over the smallest nonzero squared error), so the bound is tight by the psnr's bytes.
+_PSNR_PLACEHOLDER = 9999.9999
 
 
 class CodingCounts:
@@ -489,10 +494,10 @@ class _LossyEncoder:
     def size_bound(self, step: float, closed: bool = True) -> float:
         """An upper bound on ``len(self.bundle(step, closed))`` that skips measuring the errors.
 
-        The placeholders are floats with the longest JSON form, so the real header can only
-        be shorter (by at most a few dozen bytes).
+        The placeholders take at least as many bytes as any real psnr and max_error, so the
+        real header can only be shorter (by at most :data:`_PLACEHOLDER_EXCESS` bytes).
         """
-        return float(len(self._assemble(step, (_LONGEST_FLOAT, _LONGEST_FLOAT), closed)))
+        return float(len(self._assemble(step, (_PSNR_PLACEHOLDER, _LONGEST_FLOAT), closed)))
 
     def size_estimate(self, step: float) -> float:
         """A cheap stand-in for :meth:`size_bound`: first-order entropy of every band, in bytes.
