@@ -286,11 +286,11 @@ def worst_case_heads() -> int:
     print("| worst case (3.1, synthetic header) | levels | header | head |")
     print("|---|---:|---:|---:|")
     largest = 0
-    # The deepest image a bundle may declare: Haar's open boundary fits 8192 = 2**13 · 1, so
-    # 4064 × 16384 (fitted 8192 × 16384 = MAX_ELEMENTS; a length may at most double, + 64)
-    # takes 13 levels; shape and pads at their longest varints; float64 data whose peak, step and max_error have no short form
-    # (9 bytes each); a psnr of 9 000 dB (4 bytes; no float64 picture reaches 9 400 dB);
-    # every weight pinned but one (the writer's worst: more pins and it stores code 1).
+    # The deepest image a bundle may declare: Haar's open boundary fits any multiple of 2**L,
+    # so 4064 × 16384 (fitted 8192 × 16384 = MAX_ELEMENTS; a length may at most double, + 64)
+    # takes 13 levels; shape and pads at their longest varints; float64 data whose peak,
+    # step and max_error have no short form (9, 8 and 9 bytes); a psnr of 4 bytes (no
+    # float64 picture passes 9 405 dB); no pin, then one (3 bytes).
     worst = dict(header)
     worst.update(
         shape=[4064, 16384],  # 2 + 3 varint bytes, the first padded by 4128 (2 more)
@@ -301,7 +301,7 @@ def worst_case_heads() -> int:
         wavelet="haar",
         levels=13,
         peak=struct.unpack("<d", struct.pack("<d", math.pi * 1e10))[0],
-        psnr=9000.1234,
+        psnr=9404.9999,
         max_error=1e-300,  # below float32's normal range: stored as a float64
     )
     worst["qparams"] = dict(header["qparams"], step=math.pi / 7)

@@ -4,7 +4,9 @@ The header names the quantizer by code 3 and stores, in place of the weights, on
 *pinned* ones (those the plan may not give bit for bit: a weight that differs from it, or one
 whose unrounded value lies within ``PIN_MARGIN`` of a change of its four digits) and a CRC-8
 of them all; a reader derives the rest once the head's CRC-32 has matched and refuses the
-bundle when the check differs.  The chunks are those of 3.0, byte for byte.
+bundle when the check differs.  The chunks are those of 3.0, byte for byte; the block
+coder's chunks delimit themselves, so the head stores no chunk lengths (the last chunk runs to
+the end of the bundle), and an image's head is at most 96 bytes.
 """
 
 from __future__ import annotations
@@ -238,3 +240,68 @@ def test_the_check_finds_every_change_of_one_weight_in_its_last_digit() -> None:
                 changed = [list(e) for e in weights]
                 changed[level][band] = float(f"{weight + step * unit:.4g}")
                 assert binheader.weights_check(changed) != check, (level, band, step)
+
+
+def _head(header: dict[str, Any], pinned: dict[int, float] | None) -> int:
+    """A 3.1 head from its header alone: preamble, header length, header, CRC-16s, CRC-32."""
+    packed = binheader.pack(header, pinned=pinned)
+    assert len(packed) < 128
+    return len(MAGIC) + 2 + 1 + len(packed) + 2 * (header["levels"] + 1) + 4
+
+
+@pytest.mark.parametrize(
+    "options", [{}, {"bpp": 4.0, "level": 6}, {"quality": 55.0}, {"wavelet": "haar", "level": 7}]
+)
+def test_the_head_is_the_header_and_two_bytes_a_level(options: dict[str, Any]) -> None:
+    """Nothing in a 3.1 image's head depends on the chunks' sizes."""
+    picture = np.kron(_picture(), np.ones((2, 2, 1), np.uint8))
+    data_ = wavecore.encode_image(picture, **options)
+    parsed = read_bundle(data_)
+    assert parsed.version == FORMAT_VERSION
+    head = _head(parsed.header, pinned_weights(parsed.header))
+    assert inspect(data_)["header_bytes"] == head
+    assert len(data_) - head == sum(len(c or b"") for c in parsed.chunks)
+
+
+def test_the_largest_head_is_at_most_96_bytes() -> None:
+    """docs/bundle-format.md's bound: the deepest image (13 levels of Haar, 2**27 fitted
+    samples) with float64 data whose numbers all take their longest forms, and one pin."""
+    header = dict(read_bundle(BUNDLE).header)
+    header.update(
+        shape=[4064, 16384],
+        fitted=[8192, 16384],
+        pads=[[0, 4128], [0, 0]],
+        colour="none",
+        dtype="float64",
+        wavelet="haar",
+        levels=13,
+        peak=float(np.pi * 1e10),
+        psnr=9404.9999,
+        max_error=1e-300,
+    )
+    weights = bundle.derived_weights(header)
+    header["qparams"] = dict(header["qparams"], step=float(np.pi / 7), weights=weights)
+    assert _head(header, {}) <= 93
+    assert _head(header, {0: weights[0][0]}) <= 96
+    # One level more does not fit the element limit.
+    with pytest.raises(BundleError):
+        bundle.check_header(dict(header, levels=14, fitted=[16384, 16384]))
+
+
+def test_a_bundle_cut_inside_its_last_chunk_is_truncated() -> None:
+    big = wavecore.encode_image(np.kron(_picture(), np.ones((4, 4, 1), np.uint8)), bpp=2.0)
+    parsed = read_bundle(big)
+    last = len(parsed.chunks) - 1
+    cut = big[: len(big) - len(parsed.chunks[last]) // 2]
+    assert read_bundle(cut).chunks[last] is None  # its intact table asks for more
+    with pytest.raises(BundleError, match="truncated"):
+        decode(cut)
+    assert decode(cut, damaged="zero").shape == decode(big).shape
+    assert decode(cut, level=1).shape == decode(big, level=1).shape
+
+
+def test_bytes_after_the_last_chunk_are_its_damage() -> None:
+    longer = BUNDLE + b"\x00"
+    with pytest.raises(BundleError, match=r"corrupt.*or the bundle is truncated"):
+        decode(longer)
+    assert decode(longer, damaged="zero").shape == decode(BUNDLE).shape

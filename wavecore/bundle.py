@@ -37,7 +37,11 @@ Layout (3.1 and 3.0; 2.0 where it says so)
 ------------------------------------------
 3.1 is 3.0's layout; its header may name the quantizer by code 3, whose weights are derived
 from the plan but for the *pinned* ones it stores (:func:`pinned_weights`), with a one-byte
-check of them all (:func:`wavecore.binheader.weights_check`), verified after the CRC-32.
+check of them all (:func:`wavecore.binheader.weights_check`), verified after the CRC-32.  When
+the chunks delimit themselves (:func:`self_delimiting_blocks`: the block coder's), 3.1 stores
+no chunk lengths: a reader finds each chunk but the last from its table of block lengths (as
+6.0 does), and the last is the rest of the bundle.  The head is then the header and 2 bytes a
+level besides 15 of framing: at most 96 bytes for any image (``docs/bundle-format.md``).
 
 ==========  ===========  ========================================================================
 offset      size         field
@@ -49,7 +53,8 @@ offset      size         field
 9           1            minor version (``1``; ``0`` for 3.0 and 2.0)
 10          v            header length ``H``, a varint, at most ``MAX_HEADER_SIZE``
 …           H            the binary header of :mod:`wavecore.binheader` (the same dict as 1.x)
-…           v · N        each chunk's byte length, a varint; ``N = levels + 1``
+…           v · N        each chunk's byte length, a varint; ``N = levels + 1`` (3.1 whose
+                         chunks delimit themselves: absent)
 …           2 · N        CRC-16/XMODEM (``binascii.crc_hqx(chunk, 0)``) of every chunk (2.0:
                          of chunks 1 … N - 1 only)
 …           4            CRC-32 of every byte before it (2.0: *and then chunk 0*)
@@ -195,7 +200,8 @@ MAGIC = b"\x89WVB\r\n\x1a\n"
 #: keeps the binary header and adds a CRC-16 per chunk and per code-block.
 #: 3.1 (written for images and surfaces since 2026-11-28) is 3.0's layout whose header may name
 #: the quantizer by code 3: the weights are the plan's (:func:`derived_weights`), stored only
-#: where they might not be (:func:`pinned_weights`), with a one-byte check of them all.  A 3.0
+#: where they might not be (:func:`pinned_weights`), with a one-byte check of them all; chunks
+#: that delimit themselves have no lengths in the head (the last runs to the end).  A 3.0
 #: reader refuses such a header by naming the field 'quantizer'; 3.0 is still written on
 #: request (``write_bundle(..., version=(3, 0))``).
 #: The version written for images and surfaces (:func:`written_version`).
@@ -721,7 +727,7 @@ def _checked_curve_bytes(packed: bytes, header: dict[str, Any], chunks: Sequence
     several blocks with their block checks, as :func:`_with_block_checks` makes them)."""
     layout = block_layout(header)
     count = len(chunks)
-    blocks, bands = layout if layout is not None else ([1] * count, [0] * count)
+    blocks = layout[0] if layout is not None else [1] * count
     parts = [COMPACT_MAGIC, bytes(CURVE_VERSION), packed]
     if self_delimiting_blocks(header) is None:
         parts += [_varint(len(chunk)) for chunk in chunks]
