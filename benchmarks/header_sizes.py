@@ -12,11 +12,13 @@ checks and band counts ``write_bundle`` adds inside chunks of several code-block
 codec writes 6.0 for curves and 3.1 for images and surfaces; the column of the version it
 writes is the one in bold.  Prints Markdown tables (docs/bundle-format.md quotes them).
 
-``--images`` prints the images' heads alone, at the default levels and at explicit deeper
-ones (up to the deepest the codec accepts: 8 for 512², 10 for 2048²), with 3.0's head of the
-same header and chunks beside.  ``--sweep`` (both also run by default) encodes
-curves of 2, 3, 8, 1000 and 50 000 points, 2-D and 3-D, open and closed, smooth and noisy,
-at the default level and at every explicit level the plan allows, and prints the largest
+``--images`` prints the images' heads alone, at the default levels and at explicit deeper ones
+(up to the deepest the codec accepts: 8 for 512², 10 for 2048²), with 3.0's head of the same
+header and chunks beside, then the *worst-case* rows: the largest 3.1 head any image can have,
+from a header whose fields take their longest forms at the deepest level a bundle may declare
+(3.1 stores no chunk lengths, so no encoding is needed). ``--sweep`` (both also run by default)
+encodes curves of 2, 3, 8, 1000 and 50 000 points, 2-D and 3-D, open and closed, smooth and
+noisy, at the default level and at every explicit level the plan allows, and prints the largest
 header for each length and overall, next to the coder's own tables of block lengths (which
 delimit the chunks in 5.0, and are counted as the coder's).
 
