@@ -133,11 +133,9 @@ def assemble2(packed: bytes, chunks: list[bytes], version: tuple[int, int] = (3,
 
 
 def _delimits_in_3_1(packed: bytes) -> bool:
-    """Whether a 3.1 reader finds the chunks of this header without their lengths."""
-    try:
-        return self_delimiting_blocks(binheader.unpack_pinned(packed)[0]) is not None
-    except Exception:  # a crafted header: the reader refuses it before the lengths matter
-        return False
+    """Whether a 3.1 reader finds the chunks of this header without their lengths: its coder
+    code is 3."""
+    return len(packed) > 3 and packed[3] >> 2 & 3 == binheader.DELIMITED_CONTEXT
 
 
 def assemble4(packed: bytes, chunks: list[bytes], minor: int = 0) -> bytes:

@@ -261,7 +261,8 @@ UNKNOWN_CODES = [
     ("closed curve", 2, 0x60, 0x20, "'boundary'.*a second boundary code"),
     # Code 3 (3.1: the weights derived) holds its parameters in the compact form only.
     ("lossy image", 3, 0x13, 0x03, "'flags'.*quantizer code 3 without"),
-    ("lossy image", 3, 0x0C, 0x0C, "'coder'.*unknown code 3"),
+    # Coder code 3 (3.1: the context coder, chunks without lengths): compact parameters only.
+    ("lossy image", 3, 0x2C, 0x0C, "'flags'.*coder code 3 without"),
     ("lossless rgb", 3, 0x80, 0x80, "'flags'.*default-rounding"),
     ("lossy image", 3, 0x03, 0x02, "'flags'.*compact parameters"),
 ]

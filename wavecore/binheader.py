@@ -25,7 +25,9 @@ specifies the bytes; in short, in this order:
 
 Format 3.1 (:func:`pack` with ``pinned``, :func:`unpack_pinned`) adds a quantizer code, 3: the
 ``deadzone`` quantizer whose weights the plan gives; only the *pinned* ones are stored (each
-with its band's index), then a CRC-8 of them all (:func:`weights_check`).
+with its band's index), then a CRC-8 of them all (:func:`weights_check`); and a coder code, 3:
+the ``context`` coder whose chunks delimit themselves (the bundle then stores no chunk
+lengths), which every 3.1 header has.
 
 Format 4.0 (:func:`pack` with ``major=4``, :func:`unpack_from`) has the same fields, with
 no length before them, and gives three flag bits new meanings: the weights are derived from
@@ -87,6 +89,11 @@ QUANTIZER_CODES = ("none", "deadzone")
 DERIVED_DEADZONE = 3
 CODER_CODES = ("context", "zlib")
 IN_EXTENSION = 2
+#: Coder code 3 (format 3.1): the ``context`` coder (its parameters compact) whose chunks
+#: delimit themselves, so the bundle stores no chunk lengths.  Every 3.1 bundle has it, so a
+#: 3.0 reader refuses each one by name ("binary header field 'coder' … unknown code 3")
+#: before it reads the chunk table it would misread.
+DELIMITED_CONTEXT = 3
 
 #: The rounding the codec uses today; a flag stands for it.
 DEFAULT_ROUNDING = 0.27
@@ -466,6 +473,7 @@ def pack(
     major: int = 3,
     derived_weights: bool = False,
     pinned: Mapping[int, float] | None = None,
+    delimited: bool = False,
 ) -> bytes:
     """The binary form of a header dict (one that :func:`bundle.check_header` accepts).
 
@@ -477,6 +485,8 @@ def pack(
     are the plan's but for these (an index among every band, coarse first and ``cV``
     included, to the header's weight): the quantizer is then written as code 3, with the
     pinned weights and a check byte in place of the weights (when that is shorter).
+    ``delimited`` (major 3 only: format 3.1) writes the ``context`` coder, with compact
+    parameters, as code 3: the bundle stores no chunk lengths.
 
     Raises
     ------
@@ -598,6 +608,8 @@ def pack(
         if major >= 4 and coder_code != IN_EXTENSION:
             coder_code = IN_EXTENSION
             extension["coder"] = coder
+    if delimited and major <= 3 and coder_code == 0 and cparams is not None:
+        coder_code = DELIMITED_CONTEXT
     default_cparams = (
         major >= 4 and cparams is not None and header["cparams"] == default_cparams_for(boundary)
     )
@@ -888,7 +900,11 @@ def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool, Pin
         quantizer_code = 1
     elif quantizer_code > IN_EXTENSION:
         raise reader.fail("quantizer", f"unknown code {quantizer_code}")
-    if coder_code > IN_EXTENSION:
+    if coder_code == DELIMITED_CONTEXT and major <= 3:  # 3.1: the context coder, delimited
+        if not flags[3] >> 5 & 1:
+            raise reader.fail("flags", "coder code 3 without its compact parameters")
+        coder_code = 0
+    elif coder_code > IN_EXTENSION:
         raise reader.fail("coder", f"unknown code {coder_code}")
     q_compact, c_compact = bool(flags[3] >> 4 & 1), bool(flags[3] >> 5 & 1)
     single_step = default_cparams = False

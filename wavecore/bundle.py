@@ -497,18 +497,19 @@ def write_bundle(
         )
         raise BundleError(msg)
     pinned = pinned_weights(header) if version == FORMAT_VERSION else None
-    packed = binheader.pack(header, pinned=pinned)
+    delimited = version == FORMAT_VERSION and _delimits_itself(header)
+    packed = binheader.pack(header, pinned=pinned, delimited=delimited)
     if len(packed) > MAX_HEADER_SIZE:
         msg = f"header is {len(packed)} bytes, more than MAX_HEADER_SIZE = {MAX_HEADER_SIZE}"
         raise BundleError(msg)
-    if version == FORMAT_VERSION and packed[3] & 3 != binheader.DERIVED_DEADZONE:
+    if version == FORMAT_VERSION and not delimited and packed[3] & 3 != binheader.DERIVED_DEADZONE:
         # Labelled with the oldest minor version that reads it right, as 1.x did: a header
-        # without derived weights (a lossless picture) is 3.0's.
+        # without derived weights whose chunk lengths are stored is 3.0's.
         version = (3, 0)
     if version >= (3, 0):
         chunks = _with_block_checks(header, chunks)
     parts = [MAGIC, bytes(version), _varint(len(packed)), packed]
-    if version == FORMAT_VERSION and self_delimiting_blocks(header) is not None:
+    if delimited:
         # 3.1: chunks that delimit themselves (a table of block lengths first) have no
         # lengths in the head, which is then bounded whatever the chunks' sizes.
         _check_delimited(header, chunks)
@@ -740,6 +741,17 @@ def _checked_curve_bytes(packed: bytes, header: dict[str, Any], chunks: Sequence
         parts.append(_U16.pack(crc))
     head = b"".join(parts)
     return b"".join([head, _U16.pack(binascii.crc_hqx(head, 0)), *map(bytes, chunks)])
+
+
+def _delimits_itself(header: dict[str, Any]) -> bool:
+    """Whether 3.1 stores no chunk lengths for this header: the ``context`` coder in blocks
+    (versions 4 and 5, lossy and lossless), whose chunks start with their blocks' lengths."""
+    cparams = header["cparams"]
+    return (
+        header["coder"] == "context"
+        and cparams.get("version") in (4, 5)
+        and block_layout(header) is not None
+    )
 
 
 def _check_delimited(header: dict[str, Any], chunks: Sequence[bytes]) -> None:
@@ -1135,12 +1147,19 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
     checks.
     """
     header_size = reader.varint("the header length", MAX_HEADER_SIZE)
-    header, pinned = binheader.unpack_pinned(reader.take(header_size, "the header"))
+    packed = reader.take(header_size, "the header")
+    header, pinned = binheader.unpack_pinned(packed)
     check_header(header)
     count = header["levels"] + 1
-    # 3.1 on: chunks that delimit themselves have no lengths in the head (found below, once
-    # the head is known to be intact).
-    delimited = (major, minor) >= FORMAT_VERSION and self_delimiting_blocks(header) is not None
+    # 3.1 (coder code 3): the chunks delimit themselves, and the head has no lengths (they
+    # are found below, once the head is known to be intact).
+    delimited = major == 3 and packed[3] >> 2 & 3 == binheader.DELIMITED_CONTEXT
+    if delimited and not _delimits_itself(header):
+        msg = (
+            "binary header field 'coder': code 3 (chunks that delimit themselves) needs the "
+            f"context coder in blocks (version 4 or 5), not {header['cparams']!r}"
+        )
+        raise BundleError(msg)
     lengths = (
         []
         if delimited

@@ -167,15 +167,18 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             (np.sin(40 * np.linspace(0, 1, 33_000)) * np.linspace(0, 1, 33_000)).astype(np.float32),
             {"level": 1, "tolerance": 1e-3},
         ),
-        # Format 3.1 (3.0's layout without chunk lengths, the chunks delimiting themselves; the
-        # header's quantizer code 3 derives the weights from the plan, storing only pinned ones
-        # and a check byte; rewritten on 2026-11-28 before 3.1's release, when the lengths
-        # went): a grey picture whose finest bands
+        # Format 3.1 (3.0's layout without chunk lengths, the chunks delimiting themselves, said
+        # by coder code 3; the header's quantizer code 3 derives the weights from the plan,
+        # storing only pinned ones and a check byte; rewritten on 2026-11-28 before 3.1's
+        # release, when the lengths went), and a lossless picture (coder code 3 alone):
+        # a grey picture whose finest bands
         # span several blocks, colour at a set rate, a surface, and a picture one of whose
         # weights is not the plan's (its approximation's, one up in the last digit), so that
-        # it is pinned.  (A lossless picture has no weights: it is written as 3.0.)
+        # it is pinned.
+        "v3_1_image_rgba_u16_lossless": ("image", rgba16, {"lossless": True}),
         "v3_1_image_grey_u8_blocks": ("image", blocks_picture, {"quality": 38.0}),
-        "v3_1_image_rgb_u8_bpp": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 6.0}),
+        # (At 6 bpp this picture now fits losslessly: 4 keeps it lossy.)
+        "v3_1_image_rgb_u8_bpp": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 4.0}),
         "v3_1_surface_closed_open": ("surface", surface, {"closed": (True, False)}),
         "v3_1_image_grey_u8_pinned": (
             "image",
