@@ -275,7 +275,7 @@ def worst_case_heads() -> int:
     from wavecore.bundle import MAGIC, pinned_weights
 
     def head_of(header: dict, pinned: dict | None) -> int:
-        packed = binheader.pack(header, pinned=pinned)
+        packed = binheader.pack(header, pinned=pinned, delimited=True)
         assert len(packed) < 128  # its length is one varint byte
         return len(MAGIC) + 2 + 1 + len(packed) + 2 * (header["levels"] + 1) + 4
 
@@ -327,6 +327,20 @@ def worst_case_heads() -> int:
         head = head_of(candidate, pinned)
         largest = max(largest, head)
         print(f"| {name} | {candidate['levels']} | {len(packed)} B | {head} B |")
+    # Lossless (coder code 3, no weights): 16-bit grey at 13 levels, every lifting code stored.
+    lossless = read_bundle(wavecore.encode_image(data.camera(), lossless=True, level=2)).header
+    lossless.update(
+        shape=[8192, 16384],
+        fitted=[8192, 16384],
+        dtype="uint16",
+        levels=13,
+        lifting=["legall53"] * 13,
+        peak=65535.0,
+    )
+    head = head_of(lossless, None)
+    largest = max(largest, head)
+    packed = binheader.pack(lossless, delimited=True)
+    print(f"| lossless 16-bit grey 8192 × 16384, 13 levels | 13 | {len(packed)} B | {head} B |")
     print(f"\nlargest 3.1 image head possible: {largest} B (target: at most 96)")
     return largest
 

@@ -244,7 +244,7 @@ def test_the_check_finds_every_change_of_one_weight_in_its_last_digit() -> None:
 
 def _head(header: dict[str, Any], pinned: dict[int, float] | None) -> int:
     """A 3.1 head from its header alone: preamble, header length, header, CRC-16s, CRC-32."""
-    packed = binheader.pack(header, pinned=pinned)
+    packed = binheader.pack(header, pinned=pinned, delimited=True)
     assert len(packed) < 128
     return len(MAGIC) + 2 + 1 + len(packed) + 2 * (header["levels"] + 1) + 4
 
@@ -305,3 +305,20 @@ def test_bytes_after_the_last_chunk_are_its_damage() -> None:
     with pytest.raises(BundleError, match=r"corrupt.*or the bundle is truncated"):
         decode(longer)
     assert decode(longer, damaged="zero").shape == decode(BUNDLE).shape
+
+
+def test_the_largest_lossless_head_is_at_most_66_bytes() -> None:
+    """docs/bundle-format.md: a lossless 16-bit picture at 13 levels (coder code 3, no lengths)."""
+    header = read_bundle(wavecore.encode_image(_picture(), lossless=True, level=2)).header
+    assert read_bundle(wavecore.encode_image(_picture(), lossless=True)).version == (3, 1)
+    header.update(
+        shape=[8192, 16384],
+        fitted=[8192, 16384],
+        colour="none",
+        dtype="uint16",
+        levels=13,
+        lifting=["511c"] * 13,
+        peak=65535.0,
+    )
+    bundle.check_header(header)  # a header a bundle may carry (2**27 samples)
+    assert _head(header, None) <= 66
