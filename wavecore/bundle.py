@@ -436,7 +436,8 @@ class _Reader:
 def written_version(header: dict[str, Any]) -> tuple[int, int]:
     """The version :func:`write_bundle` writes by default: 6.0 for curves (5.0 when 6.0's block
     checks would pass :data:`CURVE_OVERHEAD_LIMIT`), 3.1 for the rest (labelled 3.0 when the
-    header has no weights the plan derives, as a lossless picture's: it is 3.0's).
+    header has no weights the plan derives and a coder whose chunks do not delimit themselves:
+    it is 3.0's).
 
     Images and surfaces stay in 3.x's layout: the compact layouts' grouped chunk checks and
     shorter head check would weaken their damage handling for a few bytes; 3.1's header
@@ -456,8 +457,9 @@ def write_bundle(
     The header is validated exactly as a reader would, so a writer can never produce a bundle
     that its own reader refuses.  ``version`` is None (:func:`written_version`: 6.0 or 5.0 for
     curves, 3.1 for images and surfaces), ``(6, 0)``, ``(5, 0)`` or ``(4, 0)`` (the compact
-    layouts), ``(3, 1)`` (3.0 whose header derives the weights from the plan; labelled 3.0
-    when it has none to derive), ``(3, 0)`` (the
+    layouts), ``(3, 1)`` (3.0 whose header derives the weights from the plan and whose head
+    has no chunk lengths when the block coder's chunks delimit themselves; labelled 3.0 when
+    neither applies), ``(3, 0)`` (the
     binary header, a CRC-16 per chunk and per code-block), ``(2, 0)`` (no block checks, chunk
     0 under the header's CRC-32), or ``(1, 1)`` for the JSON header that wavecore releases
     before 2.0 read (labelled 1.2 when the header has ``scale``).  ``chunks`` are always as
