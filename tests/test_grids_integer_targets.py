@@ -13,9 +13,11 @@ from hypothesis import strategies as st
 
 import wavecore
 from wavecore import grids
+from wavecore.blockcoder import block_lengths
 from wavecore.codec import fixedstep, ratecontrol
 from wavecore.codec.encode import _encode_surface_and_output
 from wavecore.gridcore import SteppedCore
+from wavecore.layout import as_levels
 
 
 def terrain(shape: tuple[int, ...], seed: int = 0, exponent: float = 2.2) -> np.ndarray:
@@ -157,7 +159,7 @@ def test_a_bpp_grid_is_not_decoded_to_be_measured(monkeypatch: pytest.MonkeyPatc
 
 def test_grid_bpp_samples_fewer_blocks_than_the_picture_holds() -> None:
     """A grid of 20-39 blocks in its sampled levels sampled all of them (a second full coding);
-    the grids' rate control takes every other one."""
+    the grids' rate control takes a third of them."""
     data = terrain((900, 1100), seed=12)
     ratecontrol.coding_counts.reset()
     wavecore.encode_grid(data.astype(np.int16), bpp=2.0)
@@ -165,6 +167,24 @@ def test_grid_bpp_samples_fewer_blocks_than_the_picture_holds() -> None:
     ratecontrol.coding_counts.reset()
     wavecore.encode_surface(data, bpp=2.0, wavelet="cdf97")  # images' and surfaces' sample
     assert 0 < sampled < ratecontrol.coding_counts.sampled_blocks
+
+
+def test_grid_bpp_sample_takes_a_third_of_each_level() -> None:
+    """The grids' sample codes single-block levels whole and every third block of the others
+    (levels of up to four blocks were coded whole, and every other block of the rest: most of
+    a coding's bytes); the bundle still lands in the budget's window after one full coding."""
+    data = terrain((1000, 1200), seed=13).astype(np.int16)
+    ratecontrol.coding_counts.reset()
+    bundle = wavecore.encode_grid(data, bpp=2.0)
+    counts = ratecontrol.coding_counts
+    coeffs = SteppedCore(data.astype(np.float64), "cdf97", None, ("open", "open")).coeffs
+    _, regions = block_lengths(as_levels(coeffs), True, 128, np.zeros(0, dtype=np.int64))
+    per_level = np.bincount(regions[:, 0])
+    most = sum(1 if n == 1 else -(-n // 3) for n in per_level)
+    assert 0 < counts.sampled_blocks <= most < len(regions)
+    assert counts.full_codings == 1
+    budget = math.floor(2.0 * data.size / 8)
+    assert 0.975 * budget <= len(bundle) <= budget
 
 
 def test_bpp_that_affords_the_exact_code_gets_it() -> None:
