@@ -171,13 +171,19 @@ def test_the_rate_controls_output_is_the_decoded_core(bpp: float, wavelet: str) 
     assert 8 * len(bundle) <= bpp * data.size
 
 
-def test_a_bpp_grid_is_not_decoded_to_be_measured(monkeypatch: pytest.MonkeyPatch) -> None:
-    data = integer_terrain(np.int16, (300, 330), seed=11)
+@pytest.mark.parametrize("dtype", [np.int16, np.uint8, np.int32])
+def test_a_bpp_grid_is_not_decoded_to_be_measured(
+    monkeypatch: pytest.MonkeyPatch, dtype: type
+) -> None:
+    """The rate control's own reconstruction is measured, rounded and clipped as the cast
+    does, in one compiled pass: no decoding, and no array of the grid's dtype made."""
+    data = integer_terrain(dtype, (300, 330), seed=11)
 
     def refused(*args: object, **kwargs: object) -> None:
-        raise AssertionError("the core was decoded")
+        raise AssertionError("the core was decoded, or cast to be measured")
 
     monkeypatch.setattr(grids, "_decode_core", refused)
+    monkeypatch.setattr(grids, "_to_dtype", refused)
     bundle = wavecore.encode_grid(data, bpp=2.0)
     monkeypatch.undo()  # decoded below, to check what the encoder measured
     assert 8 * len(bundle) <= 2.0 * data.size
