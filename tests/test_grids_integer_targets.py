@@ -223,6 +223,21 @@ def test_grid_bpp_sample_takes_a_third_of_each_level() -> None:
     assert 0.975 * budget <= len(bundle) <= budget
 
 
+@pytest.mark.parametrize("bpp", [1.0, 2.0, 3.0])
+def test_grid_bpp_prediction_aims_at_the_budget_itself(bpp: float) -> None:
+    """The grids' sampled prediction is solved for the budget itself (the pictures' looser
+    window left codings anywhere from 98.5 % of it, and trimmed those aimed 1 % over it): one
+    full coding, no block coded again, and at least 99 % of the budget used."""
+    data = terrain((1000, 1200), seed=13).astype(np.int16)
+    ratecontrol.coding_counts.reset()
+    bundle = wavecore.encode_grid(data, bpp=bpp)
+    assert wavecore.inspect(bundle)["wavelet"] == "cdf97"
+    assert ratecontrol.coding_counts.full_codings == 1
+    assert ratecontrol.coding_counts.blocks_recoded == 0
+    budget = math.floor(bpp * data.size / 8)
+    assert 0.99 * budget <= len(bundle) <= budget
+
+
 def test_bpp_that_affords_the_exact_code_gets_it() -> None:
     data = integer_terrain(np.int16, (300, 330), seed=13)
     exact = grids._predictive_bundle(
