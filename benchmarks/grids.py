@@ -1,6 +1,6 @@
 """Grids against the error-bounded peers: height fields and a volume, in one run.
 
-    python benchmarks/grids.py [--quick] [--write-docs]
+    python benchmarks/grids.py [--quick] [--write-docs] [--integer-speed]
 
 Data:
 
@@ -491,7 +491,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="smaller synthesized data")
     parser.add_argument("--write-docs", action="store_true", help="update docs/benchmarks.md")
+    parser.add_argument(
+        "--integer-speed",
+        action="store_true",
+        help="only the integer grid's encode speed per target (nothing written)",
+    )
     args = parser.parse_args()
+    if args.integer_speed:
+        print(f"load average {' '.join(loadavg())}")
+        print("\n".join(integer_speed_lines(dem())))
+        print(f"load average {' '.join(loadavg())}")
+        return
     side = 512 if args.quick else 1024
     elevation = dem()
     field = spectral_field((side, side), 2.2, 1)

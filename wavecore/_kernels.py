@@ -17,6 +17,9 @@ from ._colourkernels import (
 from ._colourkernels import (
     colour_to_integers as colour_to_integers,
 )
+from ._colourkernels import (
+    finite_floats as finite_floats,
+)
 from ._liftingkernels import (
     lift_steps as lift_steps,
 )

@@ -11,7 +11,8 @@ field); what this module saves is everything else that a quantize-and-measure lo
   and no synthesis), within 0.1 % of the decoded RMSE on the benchmark's synthesized fields
   (1-6 % low on the real elevation model); each try is synthesized and measured in the grid's
   dtype **before** it is entropy coded (a miss, from the cast to an integer dtype or a grid the
-  prediction does not fit, steps and synthesizes again), so the core is coded **once**;
+  prediction does not fit, steps to where the prediction corrected by the miss meets the
+  target, and synthesizes again), so the core is coded **once**;
 * the check of the decoded grid against the original is one compiled pass where no cell is
   missing.
 
@@ -75,9 +76,13 @@ class SteppedCore:
         self.coeffs = decompose(self.plan, fitted)
         self._fitted_size = fitted.size
         self._distortion: OpenLoopDistortion | None = None
+        self._predicted: dict[float, float] = {}
 
     def predicted_rmse(self, step: float) -> float:
-        """The RMSE of the core (its own units) quantized at ``step``, predicted open loop."""
+        """The RMSE of the core (its own units) quantized at ``step``, predicted open loop
+        (kept per step: the search asks again for the step it tried)."""
+        if step in self._predicted:
+            return self._predicted[step]
         if self._distortion is None:
             self._distortion = OpenLoopDistortion(
                 self.coeffs,
@@ -88,7 +93,9 @@ class SteppedCore:
             )
         coded_step = math.ldexp(step, -self.scale)
         squared = self._distortion(coded_step) / self._fitted_size
-        return math.ldexp(math.sqrt(max(squared, 0.0)), self.scale)
+        predicted = math.ldexp(math.sqrt(max(squared, 0.0)), self.scale)
+        self._predicted[step] = predicted
+        return predicted
 
     def step_for(self, rmse: float, first: float) -> float:
         """The step whose predicted RMSE is ``rmse`` (secant steps on the logarithms, from

@@ -401,8 +401,8 @@ def _encode_surface_and_output(
     :func:`wavecore.decode` returns for its bundle: the rate control's own reconstruction of
     the bundle it settled on where it made one, else the bundle decoded.  For
     :mod:`wavecore.grids`, which measures that output (a decoding was a quarter of an int16
-    grid's ``bpp`` encode), and whose rate control samples at most every other code-block
-    (``half_sample``); not part of the public API."""
+    grid's ``bpp`` encode), and whose rate control samples every third code-block of each
+    level of several (``half_sample``); not part of the public API."""
     outputs: list[np.ndarray | None] = []
     bundle = _encode_surface(
         grid, None, boundary, level, None, None, wavelet, None, bpp, outputs, half_sample=True
