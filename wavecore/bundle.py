@@ -201,9 +201,10 @@ MAGIC = b"\x89WVB\r\n\x1a\n"
 #: 3.1 (written for images and surfaces since 2026-11-28) is 3.0's layout whose header may name
 #: the quantizer by code 3: the weights are the plan's (:func:`derived_weights`), stored only
 #: where they might not be (:func:`pinned_weights`), with a one-byte check of them all; chunks
-#: that delimit themselves have no lengths in the head (the last runs to the end).  A 3.0
-#: reader refuses such a header by naming the field 'quantizer'; 3.0 is still written on
-#: request (``write_bundle(..., version=(3, 0))``).
+#: that delimit themselves have no lengths in the head (the last runs to the end), which
+#: the header says by coder code 3 (:data:`wavecore.binheader.DELIMITED_CONTEXT`), lossless
+#: pictures included.  A 3.0 reader refuses such a header by naming the field 'coder' (or
+#: 'quantizer'); 3.0 is still written on request (``write_bundle(..., version=(3, 0))``).
 #: The version written for images and surfaces (:func:`written_version`).
 FORMAT_VERSION = (3, 1)
 #: 3.1 stores a weight the plan gives when its unrounded value lies closer than this, relative
@@ -1146,7 +1147,8 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
 
     Every 2.x minor version is read in 2.0's layout (a minor version may only add optional
     header keys or enumerated values); 3.x checks every chunk by its CRC-16 and carries block
-    checks.
+    checks; a 3.x header with coder code 3 (3.1) has no chunk lengths: the chunks are found
+    from their tables of block lengths, the last is the rest of the bundle.
     """
     header_size = reader.varint("the header length", MAX_HEADER_SIZE)
     packed = reader.take(header_size, "the header")
