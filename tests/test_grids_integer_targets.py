@@ -15,7 +15,7 @@ import wavecore
 from wavecore import grids
 from wavecore.blockcoder import block_lengths
 from wavecore.codec import fixedstep, ratecontrol
-from wavecore.codec.encode import _encode_surface_and_output
+from wavecore.codec.encode import encode_surface_and_output
 from wavecore.gridcore import SteppedCore
 from wavecore.layout import as_levels
 
@@ -164,7 +164,7 @@ def test_reconstructed_is_what_the_coded_core_decodes_to() -> None:
 @pytest.mark.parametrize("wavelet", ["cdf97", "bspline2"])
 def test_the_rate_controls_output_is_the_decoded_core(bpp: float, wavelet: str) -> None:
     data = terrain((150, 210), seed=10)
-    bundle, output = _encode_surface_and_output(
+    bundle, output = encode_surface_and_output(
         data, bpp=bpp, wavelet=wavelet, level=None, boundary=("open", "open")
     )
     np.testing.assert_array_equal(output, wavecore.decode(bundle))

@@ -627,9 +627,9 @@ class _Core:
     def encode_to_bpp(self, core: np.ndarray, bpp: float) -> tuple[bytes, np.ndarray]:
         """The core bundle of at most ``bpp`` bits per point (the codec's rate control) and what
         decoding it returns (the rate control's own reconstruction where it kept one)."""
-        from .codec.encode import _encode_surface_and_output
+        from .codec.encode import encode_surface_and_output
 
-        return _encode_surface_and_output(
+        return encode_surface_and_output(
             core, bpp=bpp, wavelet=self.wavelet, level=self.level, boundary=self.boundary
         )
 

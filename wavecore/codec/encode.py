@@ -394,7 +394,7 @@ def encode_surface(
 
 
 @_refuses_as_parameter
-def _encode_surface_and_output(
+def encode_surface_and_output(
     grid: Any, *, bpp: float, wavelet: str, level: int | None, boundary: tuple[str, str]
 ) -> tuple[bytes, np.ndarray]:
     """:func:`encode_surface` of a float64 height field to ``bpp``, and what
@@ -402,7 +402,7 @@ def _encode_surface_and_output(
     the bundle it settled on where it made one, else the bundle decoded.  For
     :mod:`wavecore.grids`, which measures that output (a decoding was a quarter of an int16
     grid's ``bpp`` encode), and whose rate control samples every third code-block of each
-    level of several (``half_sample``); not part of the public API."""
+    level of several (``half_sample``); the package does not export it."""
     outputs: list[np.ndarray | None] = []
     bundle = _encode_surface(
         grid, None, boundary, level, None, None, wavelet, None, bpp, outputs, half_sample=True
