@@ -37,7 +37,7 @@ from . import _blockkernels as kernels
 from . import _blocktables as tables
 from . import _kernels as sample_kernels
 from .errors import BundleError
-from .transform import run_rows
+from .transform import run_rows, run_slices
 from .varints import encode_varint
 
 __all__ = [
@@ -253,16 +253,21 @@ def encode_blocks(
     payload = np.concatenate([r[0] for r in results])
     lengths = np.concatenate([r[1] for r in results])
     ends = np.cumsum(lengths)
+    # What bundle format 3.0 stores for a region decode: the counts of the detail chunks of
+    # several blocks, all in one parallel region.
+    counted = [index > 0 and count > 1 for index, count in enumerate(per_chunk)]
+    wanted = [band for bands, c in zip(entries, counted, strict=True) if c for band in bands]
+    counts = iter(_band_counts_of(wanted))
     chunks: list[bytes] = []
     first = 0
-    for bands, count in zip(entries, per_chunk, strict=True):
+    for bands, count, has_counts in zip(entries, per_chunk, counted, strict=True):
         last = first + count
         start = int(ends[first - 1]) if first else 0
         stop = int(ends[last - 1]) if count else start
         table = kernels.write_varints(lengths[first:last])
         chunk = CodedChunk(table.tobytes() + payload[start:stop].tobytes())
-        if count > 1 and chunks:  # what bundle format 3.0 stores for a region decode
-            chunk.band_counts = [band_counts(band) for band in bands]
+        if has_counts:
+            chunk.band_counts = [next(counts) for _ in bands]
         chunks.append(chunk)
         first = last
     return chunks
@@ -293,6 +298,23 @@ def band_counts(band: np.ndarray) -> tuple[int, int]:
         flat.size,
     )
     return sum(int(p[0]) for p in parts), sum(int(p[1]) for p in parts)
+
+
+def _band_counts_of(bands: list[np.ndarray]) -> list[tuple[int, int]]:
+    """:func:`band_counts` of each of ``bands``, in one parallel region for all of them (one
+    region a band spent more on handing out its slices than on counting a small band)."""
+    flats = [np.ravel(band) for band in bands]
+    parts: list[tuple[int, tuple[int, int]]] = []
+
+    def count(item: int, lo: int, hi: int) -> None:
+        parts.append((item, sample_kernels.count_ones_and_more(flats[item][lo:hi])))
+
+    run_slices([flat.size for flat in flats], count)
+    totals = [[0, 0] for _ in flats]
+    for item, (ones, more) in parts:
+        totals[item][0] += int(ones)
+        totals[item][1] += int(more)
+    return [(ones, more) for ones, more in totals]
 
 
 class CodedBlocks:
@@ -345,9 +367,10 @@ class CodedBlocks:
         for k, index in enumerate(indices):
             start = int(ends[k - 1]) if k else 0
             self.payloads[int(index)] = payload[start : int(ends[k])].tobytes()
-        for entry, bands in enumerate(entries):
-            if self.band_counts[entry] is not None:
-                self.band_counts[entry] = [band_counts(band) for band in bands]
+        recount = [entry for entry in range(len(entries)) if self.band_counts[entry] is not None]
+        counts = iter(_band_counts_of([band for entry in recount for band in entries[entry]]))
+        for entry in recount:
+            self.band_counts[entry] = [next(counts) for _ in entries[entry]]
 
     def chunks(self) -> list[bytes]:
         """The chunks, as :func:`encode_blocks` writes them for the blocks' current values."""

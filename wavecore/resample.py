@@ -45,7 +45,7 @@ from .multilevel import (
     resolve_boundaries,
     valid_length,
 )
-from .transform import as_float_array, run_rows
+from .transform import BLOCKS_PER_THREAD, as_float_array, run_rows
 
 __all__ = [
     "GridFit",
@@ -186,7 +186,13 @@ def _padded(
         assert convert is not None
         convert(out, lo, hi)
 
-    run_rows(copy if convert is None else converted, arr.shape[0], arr.size)
+    # (The copy's pages are fresh memory: their faults make the blocks' times uneven.)
+    run_rows(
+        copy if convert is None else converted,
+        arr.shape[0],
+        arr.size,
+        per_thread=BLOCKS_PER_THREAD,
+    )
     filled = list(arr.shape)
     for axis, count, closed in extensions:
         if count:
