@@ -128,3 +128,25 @@ def test_threaded_passes_give_the_same_bits_as_one_thread(monkeypatch: pytest.Mo
     assert np.array_equal(one[2], two[2])
     assert one[3] == two[3]
     assert np.abs(one[1] - image).max() < 1e-6  # and it is the transform, not a stand-in
+
+
+def test_a_colour_pictures_predicted_error_is_the_same_on_any_thread_count(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Bands with a channel axis (a colour picture's) are summed in slices of their own: the
+    float sums must not follow the thread count, or the quality search could pick another step
+    (and write other bytes) on another machine."""
+    from wavecore import wavedec2
+    from wavecore.quantize import OpenLoopDistortion
+
+    rng = np.random.default_rng(3)
+    picture = rng.normal(128.0, 40.0, (1104, 1000, 3))  # finest bands of 828 000 values
+    predictions = {}
+    for count in ("1", "2", "3"):
+        monkeypatch.setenv("WAVECORE_THREADS", count)
+        coeffs = wavedec2(picture, "cdf97", level=3)
+        predict = OpenLoopDistortion(
+            coeffs, wavelet="cdf97", boundary="open", channel_gains=(0.6, 0.3, 0.1)
+        )
+        predictions[count] = [predict(step).hex() for step in (0.7, 4.0, 23.0)]
+    assert predictions["1"] == predictions["2"] == predictions["3"]

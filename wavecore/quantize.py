@@ -726,25 +726,35 @@ def _deadzone_error_terms(values, channels, inverse_step, rounding, largest):
 
 #: Bands smaller than this are summed on the calling thread (a thread hand-off costs more).
 _THREADED_TERMS = 1 << 17
+#: Slices of a band at least that large: a fixed count, so that the sums do not depend on the
+#: thread count, and enough for the pool to balance them on a few cores.
+_TERMS_PIECES = 8
 
 
 def _band_error_terms(
     values: np.ndarray, channels: int, band_step: float, rounding: float
 ) -> tuple[int, int, np.ndarray]:
     """``_deadzone_error_terms`` over a flat band, in slices of whole pixels over the threads
-    (so that each value's channel is its index modulo ``channels``), added up."""
-    parts: list[tuple[int, int, np.ndarray]] = []
+    (so that each value's channel is its index modulo ``channels``), added up.
 
-    def run(lo: int, hi: int) -> None:
-        chunk = values[lo * channels : hi * channels]
-        parts.append(_deadzone_error_terms(chunk, channels, 1.0 / band_step, rounding, MAX_INDEX))
+    The float sums depend on where the slices end and on the order they are added in, so
+    both follow from the band's size alone: the predicted error, and the steps that the
+    quality search picks from it, are the same on any number of threads."""
+    pixels = values.size // channels
+    pieces = 1 if values.size < _THREADED_TERMS else min(pixels, _TERMS_PIECES)
+    edges = [pixels * k // pieces for k in range(pieces + 1)]
+    parts: list[Any] = [None] * pieces
 
-    if values.size < _THREADED_TERMS:
-        run(0, values.size // channels)
+    def run(piece: int) -> None:
+        chunk = values[edges[piece] * channels : edges[piece + 1] * channels]
+        parts[piece] = _deadzone_error_terms(chunk, channels, 1.0 / band_step, rounding, MAX_INDEX)
+
+    if pieces == 1:
+        run(0)
     else:
-        run_rows(run, values.size // channels, values.size)
+        run_calls([functools.partial(run, piece) for piece in range(pieces)])
     sums = np.zeros((4, channels))
-    for part in parts:
+    for part in parts:  # in the slices' order
         sums += part[2]
     return sum(p[0] for p in parts), sum(p[1] for p in parts), sums
 
