@@ -5,7 +5,8 @@ plus a little noise, coded at 1 bpp (RGB, and its grey version), with the defaul
 with bspline2, and losslessly.  For each bundle: the median time of ``wavecore.decode(bundle)``
 and of ``wavecore.decode(bundle, region=...)`` for a 256² window in the middle and at a corner,
 their ratio, and a check that the window equals the full decode cropped.  Also the bytes that
-format 3.0's block checks add (against the same chunks written as 2.0).
+format 3.0's block checks add (the same chunks written as 3.0 and as 2.0), and the 3.1 bundle
+the codec writes (3.0's checks, no chunk lengths).
 
 Run: ``python benchmarks/region_decode.py [--repeat 5]``.  One process; the machine may be
 shared, so the load average is printed with the figures.
@@ -48,8 +49,8 @@ def median_time(run: Callable[[], Any], repeat: int) -> float:
     return statistics.median(times)
 
 
-def checks_overhead(bundle: bytes) -> int:
-    """Bytes of a 3.0 bundle beyond the same coded chunks written as 2.0."""
+def coder_chunks(bundle: bytes) -> tuple[dict[str, Any], list[bytes]]:
+    """A bundle's header and its chunks as the coder wrote them (block checks taken out)."""
     parsed = read_bundle(bundle)
     plan = plan_from_header(parsed.header)
     shapes = plan.band_shapes()
@@ -62,30 +63,44 @@ def checks_overhead(bundle: bytes) -> int:
             zip(parsed.chunks, counts, entries, strict=True)
         )
     ]
-    return len(bundle) - len(write_bundle(parsed.header, chunks, version=(2, 0)))
+    return parsed.header, chunks
+
+
+def checks_overhead(bundle: bytes) -> int:
+    """Bytes that format 3.0's block checks add: the same coded chunks written as 3.0 and 2.0
+    (3.1, as the codec writes it, keeps those checks and drops the chunk lengths)."""
+    header, chunks = coder_chunks(bundle)
+    return len(write_bundle(header, chunks, version=(3, 0))) - len(
+        write_bundle(header, chunks, version=(2, 0))
+    )
 
 
 def block_check_sizes() -> None:
-    """What format 3.0 adds to the 512² pictures of benchmarks/header_sizes.py."""
+    """What format 3.0 adds to the 512² pictures of benchmarks/header_sizes.py, and the 3.1
+    bundle the codec writes from the same chunks."""
     pictures = {
         "image 512² grey (camera)": data.camera(),
         "image 512² RGB (astronaut)": data.astronaut(),
     }
-    print("| bundle | bytes 2.0 | bytes 3.0 | added | blocks in chunks of several |")
-    print("|---|---:|---:|---:|---:|")
+    print(
+        "| bundle | bytes 2.0 | bytes 3.0 | 3.0 adds | bytes 3.1 (written) "
+        "| blocks in chunks of several |"
+    )
+    print("|---|---:|---:|---:|---:|---:|")
     for name, image in pictures.items():
         for label, options in (("default", {}), ("lossless", {"lossless": True})):
             bundle = wavecore.encode_image(image, **options)
-            extra = checks_overhead(bundle)
-            parsed = read_bundle(bundle)
-            plan = plan_from_header(parsed.header)
+            header, chunks = coder_chunks(bundle)
+            old = len(write_bundle(header, chunks, version=(2, 0)))
+            three = len(write_bundle(header, chunks, version=(3, 0)))
+            plan = plan_from_header(header)
             shapes = plan.band_shapes()
             entries = [[tuple(shapes[0])]] + [[tuple(b) for b in e] for e in shapes[1:]]
-            cparams = parsed.header["cparams"]
+            cparams = header["cparams"]
             counts = block_counts(entries, cparams["two_d"], cparams["block"])
             several = sum(n for n in counts if n > 1)
             print(
-                f"| {name}, {label} | {len(bundle) - extra} | {len(bundle)} | {extra} | {several} |"
+                f"| {name}, {label} | {old} | {three} | {three - old} | {len(bundle)} | {several} |"
             )
 
 
