@@ -1146,7 +1146,7 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
             if step is None:
                 break
             size = encoder.size_bound(step)
-            if enough <= size <= budget:
+            if _written_enough(budget, enough) <= size <= budget:
                 return encoder.bundle(step)
             factor, start = size / open_size(step), step
         encoder.keep(1.0)
@@ -1189,7 +1189,7 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         encoder,
         size_or_trimmed,
         budget,
-        enough,
+        _written_enough(budget, enough),
         0.993 * budget if encoder.refines() else bpp_aim * budget,
         low,
         high,
@@ -1207,6 +1207,14 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         )
         raise InvalidParameter(msg)
     return _last_bundle(encoder, step)
+
+
+def _written_enough(budget: int, enough: int) -> int:
+    """The least size *bound* to stop at: ``enough`` (97.5 % of the budget, or 97 % and the
+    placeholder excess for small budgets), raised so that the bundle as written, up to
+    :data:`_PLACEHOLDER_EXCESS` bytes shorter than its bound, still keeps 97.5 %.  Only the
+    stops use it; the aims stay where ``enough`` puts them."""
+    return min(budget, max(enough, math.ceil(0.975 * budget) + _PLACEHOLDER_EXCESS))
 
 
 def _last_bundle(encoder: _LossyEncoder, step: float) -> bytes:
@@ -1558,7 +1566,7 @@ def _predicted_bpp(
             return None
         step = found[0]
         size = encoder.size_bound(step)
-        if enough <= size <= budget:
+        if _written_enough(budget, enough) <= size <= budget:
             return encoder.bundle(step)
         ratio = size / encoder.size_estimate(step)
     return None
