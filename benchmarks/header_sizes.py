@@ -311,18 +311,29 @@ def worst_case_heads() -> int:
     colour = dict(worst, shape=[4094, 8190, 3], fitted=[4096, 8192, 3], levels=12)
     colour["pads"] = [[0, 2], [0, 2]]
     colour["colour"] = "ycbcr"
+    # cdf97 (and bspline2) reach 11 levels at most: 8192 × 16384 fits them.
+    deep_cdf97 = dict(worst, wavelet="cdf97", levels=11, shape=[8192, 16384])
+    deep_cdf97.update(fitted=[8192, 16384], pads=[[0, 0], [0, 0]])
     cases_ = {
-        "grey 4064 × 16384, 13 levels, no pin": (worst, 0),
-        "grey 4064 × 16384, 13 levels, one pin": (worst, 1),
-        "RGB 4094 × 8190, 12 levels, one pin": (colour, 1),
+        "Haar grey 4064 × 16384, 13 levels": (worst, 0),
+        "Haar grey 4064 × 16384, 13 levels, one pin more": (worst, 1),
+        "Haar RGB 4094 × 8190, 12 levels, one pin more": (colour, 1),
+        "cdf97 grey 8192 × 16384, 11 levels": (deep_cdf97, 0),
+        "cdf97 grey 8192 × 16384, 11 levels, one pin more": (deep_cdf97, 1),
     }
-    for name, (base, pins) in cases_.items():
-        candidate = dict(base)
-        from wavecore.bundle import derived_weights
+    from wavecore.bundle import derived_weights
 
+    for name, (base, extra) in cases_.items():
+        candidate = dict(base)
         weights = derived_weights(candidate)
         candidate["qparams"] = dict(candidate["qparams"], weights=weights)
-        pinned = {index: weights[0][0] for index in range(pins)}
+        # The plan's own pins (Haar's weights 2**-6 and 2**-7 lie within a few ulps of a change
+        # of digit: six pins from 8 levels on), and ``extra`` more as if a weight were close.
+        pinned = dict(pinned_weights(candidate) or {})
+        flat = [w for entry in weights for w in entry]
+        free = [index for index in range(len(flat)) if index not in pinned][:extra]
+        pinned.update({index: flat[index] for index in free})
+        name = f"{name} ({len(pinned)} pins)"
         packed = binheader.pack(candidate, pinned=pinned)
         head = head_of(candidate, pinned)
         largest = max(largest, head)
