@@ -7,20 +7,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_grids import terrain  # one terrain generator for the grid tests
 
 import wavecore
 from wavecore.gridcore import SteppedCore
-
-
-def terrain(shape: tuple[int, ...], seed: int = 0, exponent: float = 2.2) -> np.ndarray:
-    """A terrain-like random field (power-law spectrum), 0..1000."""
-    rng = np.random.default_rng(seed)
-    freqs = np.meshgrid(*[np.fft.fftfreq(n) for n in shape], indexing="ij")
-    radius2 = sum(f * f for f in freqs)
-    radius2.flat[0] = 1.0
-    field = np.fft.ifftn(np.fft.fftn(rng.standard_normal(shape)) * radius2 ** (-exponent / 4))
-    field = field.real
-    return 1000.0 * (field - field.min()) / (field.max() - field.min())
 
 
 def rmse(decoded: np.ndarray, original: np.ndarray) -> float:
