@@ -327,8 +327,8 @@ def worst_case_heads() -> int:
         candidate = dict(base)
         weights = derived_weights(candidate)
         candidate["qparams"] = dict(candidate["qparams"], weights=weights)
-        # The plan's own pins (Haar's weights 2**-6 and 2**-7 lie within a few ulps of a change
-        # of digit: six pins from 8 levels on), and ``extra`` more as if a weight were close.
+        # The plan's own pins (none here: Haar's weights 2**-6 and 2**-7 are exact ties, which
+        # need none), and ``extra`` more as if a weight lay that close to a change of digit.
         pinned = dict(pinned_weights(candidate) or {})
         flat = [w for entry in weights for w in entry]
         free = [index for index in range(len(flat)) if index not in pinned][:extra]

@@ -948,7 +948,11 @@ def pinned_weights(header: dict[str, Any]) -> dict[int, float] | None:
     index = 0
     for stored, plan, margin in zip(weights, derived, margins, strict=True):
         for weight, expected, room in zip(stored, plan, margin, strict=True):
-            if weight != expected or room < PIN_MARGIN:
+            # A margin of exactly 0 is an exact tie: the plan's norms reach it exactly (Haar's
+            # weights 2**-6 = 0.015625 and 2**-7 = 0.0078125: powers of two, from exact means
+            # of squares), the same on every machine, and ``f"{w:.4g}"`` rounds it to even
+            # everywhere; it needs no pin.
+            if weight != expected or 0.0 < room < PIN_MARGIN:
                 pins[index] = weight
             index += 1
     return pins

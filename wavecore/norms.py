@@ -164,6 +164,50 @@ def _squared_norms(
 
 
 @lru_cache(maxsize=256)
+def _squared_table(
+    n: int, wavelet: str, boundary: str, level: int
+) -> tuple[tuple[tuple[np.ndarray, int], tuple[np.ndarray, int]], ...]:
+    """Squared norms in compact form for levels 0 … ``level`` (see :func:`_squared_norms`)."""
+    rule = get_wavelet(wavelet).rule(boundary)
+    target = _PROXY_LENGTH
+    while True:
+        try:
+            return _squared_norms(rule, n, level, target)
+        except _NotToeplitz:
+            # A wider filter than the stand-in allows for: a longer one (at worst the full
+            # length, which needs no stand-in at all).
+            target *= 2
+
+
+def mean_squared_norms(n: int, wavelet: str, boundary: str, level: int) -> tuple[float, float]:
+    """The mean squared basis norm of level ``level``'s coarse and detail coefficients of a
+    1-D decomposition of fine length ``n``, from the squared norms themselves.
+
+    Before any square root: Haar's are powers of two, exactly, so the quantizer's weights of a
+    2-D band (the square root of the product of its two axes' means) come out exact, the same
+    on every machine, where a product of two rounded square roots missed them by an ulp.
+
+    Parameters
+    ----------
+    n : int
+        The fine length.
+    wavelet, boundary : str
+        As for :func:`basis_norms`.
+    level : int
+        The level, at least 1.
+
+    Returns
+    -------
+    tuple of float
+        The means over the coarse and the detail coefficients of that level.
+    """
+    table = _squared_table(n, wavelet, boundary, level)
+    return tuple(  # type: ignore[return-value]
+        float(np.mean(np.maximum(_expand(values, length), 0.0))) for values, length in table[level]
+    )
+
+
+@lru_cache(maxsize=256)
 def _compact_table(
     n: int, wavelet: str, boundary: str, level: int
 ) -> tuple[tuple[tuple[np.ndarray, int], tuple[np.ndarray, int]], ...]:
@@ -172,18 +216,10 @@ def _compact_table(
     Each band is at most a few hundred values and its true length: small whatever ``n`` is,
     so the cache may hold many of them.
     """
-    rule = get_wavelet(wavelet).rule(boundary)
-    target = _PROXY_LENGTH
-    while True:
-        try:
-            squared = _squared_norms(rule, n, level, target)
-            break
-        except _NotToeplitz:
-            # A wider filter than the stand-in allows for: a longer one (at worst the full
-            # length, which needs no stand-in at all).
-            target *= 2
     out = []
-    for (coarse, coarse_length), (detail, detail_length) in squared:
+    for (coarse, coarse_length), (detail, detail_length) in _squared_table(
+        n, wavelet, boundary, level
+    ):
         pair = []
         for values, length in ((coarse, coarse_length), (detail, detail_length)):
             norms = np.sqrt(np.maximum(values, 0.0))
@@ -244,6 +280,7 @@ def _norms(
 def _forget() -> None:
     global _expanded_bytes
     _compact_table.cache_clear()
+    _squared_table.cache_clear()
     with _expanded_lock:
         _expanded.clear()
         _expanded_bytes = 0

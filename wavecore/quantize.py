@@ -38,7 +38,7 @@ from .errors import InvalidLength, InvalidParameter
 from .filters import get_wavelet
 from .layout import as_levels, from_levels
 from .multilevel import waverec, waverec2
-from .norms import basis_norms
+from .norms import basis_norms, mean_squared_norms
 from .transform import run_calls, run_rows, run_slices
 
 __all__ = [
@@ -100,19 +100,25 @@ def _band_norms(
         msg = f"need one boundary per axis ({len(axes)}), not {bounds!r}"
         raise InvalidParameter(msg)
     lengths = _fine_lengths(levels, axes)
-    rms = []  # per axis and level (coarse first): (RMS coarse norm, RMS detail norm)
-    for n, b in zip(lengths, bounds, strict=True):
-        per_level = [_rms_norms(int(n), wavelet, str(b), lvl) for lvl in range(count, 0, -1)]
-        rms.append(per_level)
     if count == 0:
         return [[1.0]]
-    out: list[list[float]] = [[math.prod(axis_rms[0][0] for axis_rms in rms)]]
-    for i in range(count):
-        if len(axes) == 1:
-            out.append([rms[0][i][1]])
-        else:
-            (a0, d0), (a1, d1) = rms[0][i], rms[1][i]
-            out.append([d0 * a1, a0 * d1, d0 * d1])  # cH ("da"), cV ("ad"), cD ("dd")
+    if len(axes) == 1:
+        rms = [
+            _rms_norms(int(lengths[0]), wavelet, str(bounds[0]), lvl) for lvl in range(count, 0, -1)
+        ]
+        return [[rms[0][0]]] + [[detail] for _, detail in rms]
+    # Two axes: the square root of the product of the axes' mean squares, so that norms whose
+    # squares are exact (Haar's powers of two) come out exact, not an ulp off from a product of
+    # two rounded square roots (which put Haar's weights 2**-6 and 2**-7 a few ulps from a
+    # change of digit, and made 3.1 store six of them).
+    means = [
+        [mean_squared_norms(int(n), wavelet, str(b), lvl) for lvl in range(count, 0, -1)]
+        for n, b in zip(lengths, bounds, strict=True)
+    ]
+    out: list[list[float]] = [[math.sqrt(means[0][0][0] * means[1][0][0])]]
+    for (a0, d0), (a1, d1) in zip(means[0], means[1], strict=True):
+        # cH ("da"), cV ("ad"), cD ("dd")
+        out.append([math.sqrt(d0 * a1), math.sqrt(a0 * d1), math.sqrt(d0 * d1)])
     return out
 
 
