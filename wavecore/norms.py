@@ -179,6 +179,7 @@ def _squared_table(
             target *= 2
 
 
+@lru_cache(maxsize=512)  # the rate searches ask for the same ones at every trial step
 def mean_squared_norms(n: int, wavelet: str, boundary: str, level: int) -> tuple[float, float]:
     """The mean squared basis norm of level ``level``'s coarse and detail coefficients of a
     1-D decomposition of fine length ``n``, from the squared norms themselves.
@@ -281,6 +282,7 @@ def _forget() -> None:
     global _expanded_bytes
     _compact_table.cache_clear()
     _squared_table.cache_clear()
+    mean_squared_norms.cache_clear()
     with _expanded_lock:
         _expanded.clear()
         _expanded_bytes = 0
