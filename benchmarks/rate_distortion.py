@@ -353,46 +353,87 @@ def coder_bd_rates(names: tuple[str, ...] = GREY, wavelet: str = "bspline2") -> 
 
 
 def rdoq_bd_rates(
-    names: tuple[str, ...] = IMAGES, wavelet: str = "cdf97", method: str = "fast"
+    names: tuple[str, ...] = IMAGES,
+    wavelet: str = "cdf97",
+    method: str = "fast",
+    qualities_db: tuple[float, ...] = (30.0, 35.0, 40.0, 45.0),
 ) -> dict[str, float]:
     """BD-rate of ``encode_image(..., bpp=r)`` with RDOQ (``wavecore.rdoq``, its ``method``:
     ``"fast"``, the neighbourhood's dead zone, or ``"full"``, the greedy search) against
-    without, over the peers' exact rates (0.25–2 bpp), and the ratio of the encode times (same
-    run)."""
+    without, over the peers' exact rates (0.25–2 bpp), with what the rate control ran for it.
+
+    Per picture and side (off, on): the BD-rate; the bpp codings that missed 97.5–100 % of
+    their budget; the rate control's counts summed over the rates (``ratecontrol.coding_counts``:
+    full codings, code-blocks coded again by the trims, blocks coded in the samples); the
+    encode's CPU time (``time.process_time``, all threads, the rates interleaved off/on so that
+    a change of load hits both sides) and its ratio on/off; and, for each of ``qualities_db``,
+    the PSNR that ``encode_image(quality=q)`` reached (a miss: below ``q`` or 0.05 dB over it).
+    """
     from wavecore import rdoq
+    from wavecore.codec import ratecontrol
 
     was_enabled, was_method = rdoq.ENABLED, rdoq.METHOD
     rdoq.METHOD = method
 
+    def counts() -> tuple[int, int, int]:
+        c = ratecontrol.coding_counts
+        return c.full_codings, c.blocks_recoded, c.sampled_blocks
+
     out = {}
+    cpu_ratios = []
     for name in names:
         image = getattr(data, name)()
-        curves = {}
+        pixels = image.shape[0] * image.shape[1]
+        curves: dict[bool, tuple[list[float], list[float]]] = {False: ([], []), True: ([], [])}
+        cpu = {False: 0.0, True: 0.0}
+        tally = {False: [0, 0, 0], True: [0, 0, 0]}
+        misses: dict[bool, list[str]] = {False: [], True: []}
         for enabled in (False, True):
             rdoq.ENABLED = enabled
             wavecore.encode_image(image[:64, :64], wavelet=wavelet, bpp=1.0)  # compile first
-            start = time.perf_counter()
-            rates, qualities = [], []
-            for rate in peers.EXACT_RATES:
+        for rate in peers.EXACT_RATES:
+            budget = math.floor(rate * pixels / 8)
+            for enabled in (False, True):
+                rdoq.ENABLED = enabled
+                before = counts()
+                start = time.process_time()
                 bundle = wavecore.encode_image(image, wavelet=wavelet, bpp=rate)
-                rates.append(8 * len(bundle) / (image.shape[0] * image.shape[1]))
-                qualities.append(psnr(wavecore.decode(bundle), image))
-            curves[enabled] = (rates, qualities, time.perf_counter() - start)
+                cpu[enabled] += time.process_time() - start
+                tally[enabled] = [
+                    t + a - b for t, a, b in zip(tally[enabled], counts(), before, strict=True)
+                ]
+                if not 0.975 * budget <= len(bundle) <= budget:
+                    misses[enabled].append(f"{rate:.3f}: {100 * len(bundle) / budget:.2f} %")
+                curves[enabled][0].append(8 * len(bundle) / pixels)
+                curves[enabled][1].append(psnr(wavecore.decode(bundle), image))
+        quality_misses: dict[bool, list[str]] = {False: [], True: []}
+        for target in qualities_db:
+            for enabled in (False, True):
+                rdoq.ENABLED = enabled
+                bundle = wavecore.encode_image(image, wavelet=wavelet, quality=target)
+                got = psnr(wavecore.decode(bundle), image)
+                if not target <= got <= target + 0.05:
+                    quality_misses[enabled].append(f"{target}: {got:.3f} dB")
         rdoq.ENABLED = was_enabled
-        (r0, q0, t0), (r1, q1, t1) = curves[False], curves[True]
-        out[name] = bd_rate(r0, q0, r1, q1)
+        out[name] = bd_rate(*curves[False], *curves[True])
+        cpu_ratios.append(cpu[True] / cpu[False])
         print(
             f"{name:10s} {wavelet}: BD-rate of RDOQ ({method}) {out[name]:+.2f} %, "
-            f"encode time x{t1 / t0:.2f} ({t0:.2f} s -> {t1:.2f} s for 7 rates)",
+            f"encode CPU x{cpu[True] / cpu[False]:.2f} ({cpu[False]:.2f} s -> {cpu[True]:.2f} s "
+            f"for {len(peers.EXACT_RATES)} rates); codings/recoded/sampled off {tally[False]} "
+            f"on {tally[True]}; budget misses off {misses[False] or 'none'} "
+            f"on {misses[True] or 'none'}; quality misses off {quality_misses[False] or 'none'} "
+            f"on {quality_misses[True] or 'none'}",
             flush=True,
         )
     rdoq.METHOD = was_method
     grey = [v for n, v in out.items() if n in GREY]
     colour = [v for n, v in out.items() if n not in GREY]
     print(
-        f"mean: {np.mean(list(out.values())):+.2f} %"
+        f"{wavelet} mean: {np.mean(list(out.values())):+.2f} %"
         + (f", grey {np.mean(grey):+.2f} %" if grey else "")
-        + (f", colour {np.mean(colour):+.2f} %" if colour else ""),
+        + (f", colour {np.mean(colour):+.2f} %" if colour else "")
+        + f"; encode CPU on/off geometric mean x{math.exp(np.mean(np.log(cpu_ratios))):.3f}",
         flush=True,
     )
     return out
@@ -656,7 +697,8 @@ def main() -> None:
     parser.add_argument(
         "--rdoq",
         action="store_true",
-        help="only print the BD-rate of cdf97 with RDOQ against without (tuning pictures); "
+        help="only print the BD-rate of RDOQ against without (tuning pictures, cdf97 and "
+        "bspline2), with the rate control's counts, budget and quality misses, CPU time; "
         "with --peers: the peers' tables with RDOQ on",
     )
     parser.add_argument(
@@ -674,6 +716,11 @@ def main() -> None:
         default="fast",
         help="--rdoq: which RDOQ to measure; with --peers: run the encoder with it on",
     )
+    parser.add_argument(
+        "--rdoq-wavelets",
+        default="cdf97,bspline2",
+        help="--rdoq: the wavelets to measure it on (comma-separated)",
+    )
     args = parser.parse_args()
     if args.peers and args.rdoq:
         from wavecore import rdoq
@@ -687,7 +734,10 @@ def main() -> None:
         coder_bd_rates()
         return
     if args.rdoq:
-        rdoq_bd_rates(("camera",) if args.quick else IMAGES, method=args.rdoq_method)
+        for wavelet in args.rdoq_wavelets.split(","):
+            rdoq_bd_rates(
+                ("camera",) if args.quick else IMAGES, wavelet=wavelet, method=args.rdoq_method
+            )
         return
     names = ("camera",) if args.quick else IMAGES
     log = Path(args.from_log).read_text() if args.from_log else None

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from wavecore import decode, encode_curve, encode_image, encode_surface
+from wavecore import decode, encode_curve, encode_image, encode_surface, rdoq
 from wavecore.blockcoder import CodedBlocks
 from wavecore.codec import ratecontrol
 
@@ -166,7 +166,9 @@ def test_quality_codes_once_with_at_most_two_closed_loops(
     if wavelet == "cdf97":
         # Open loop only, verified by at most four quantizations (the prediction from the
         # coefficients, and corrections with the ratio measured), a synthesis each.
-        assert calls.closed_loops == 0 and 1 <= calls.open_loops <= 4
+        # (RDOQ's error moves less smoothly with the step: up to two more where it runs.)
+        most = 4 + (ratecontrol._QUALITY_RDOQ_VERIFIES if rdoq.ENABLED else 0)
+        assert calls.closed_loops == 0 and 1 <= calls.open_loops <= most
         assert calls.syntheses == calls.open_loops
         assert calls.trial_codings == 1 and calls.final_codings == 0
     else:
@@ -275,7 +277,9 @@ def test_quality_is_predicted_and_coded_once(calls: Calls, name: str, target: fl
         # Photographs: predicted from the coefficients, verified by a few open loops.  (On
         # the noisy ramp at 33 dB whole bands empty at once and the open loop's error jumps
         # with the step; the closed-loop search is the fallback there.)
-        assert calls.closed_loops == 0 and 1 <= calls.open_loops <= 4
+        # (RDOQ's error moves less smoothly with the step: up to two more where it runs.)
+        most = 4 + (ratecontrol._QUALITY_RDOQ_VERIFIES if rdoq.ENABLED else 0)
+        assert calls.closed_loops == 0 and 1 <= calls.open_loops <= most
 
 
 @pytest.mark.parametrize("target", [32.0, 40.0])

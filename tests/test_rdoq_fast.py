@@ -121,3 +121,78 @@ def test_the_decoder_reads_back_what_it_chose_and_the_encoder_hook_dispatches() 
         for band_a, band_b, band_c in zip(a, b, c, strict=True):
             assert np.array_equal(band_a, band_b)
             assert np.array_equal(band_a, band_c)
+
+
+@pytest.mark.parametrize("channels", [0, 3])
+def test_regions_decide_as_the_whole_pass_there_and_leave_the_rest(channels: int) -> None:
+    # The bpp search re-decides only its sample of code-blocks: inside them it must find what
+    # the whole pass finds (a region's decisions read the dead zone's indices around it).
+    coeffs, q, params = _quantized(_picture(5, channels), 5.0)
+    whole = rdoq.adapt_deadzone(coeffs, copy.deepcopy(q), params)
+    before = copy.deepcopy(q)
+    regions = np.array([[3, 0, 0, 40, 48], [3, 50, 60, 80, 96], [2, 10, 5, 30, 40]])
+    rdoq.adapt_deadzone(coeffs, q, params, regions=regions)
+    inside_changed = 0
+    for entry, (mine, everywhere, dead_zone) in enumerate(
+        zip(as_levels(q), as_levels(whole), as_levels(before), strict=True)
+    ):
+        for a, w, d in zip(mine, everywhere, dead_zone, strict=True):
+            inside = np.zeros(a.shape[:2], dtype=bool)
+            for _, r0, c0, r1, c1 in regions[regions[:, 0] == entry]:
+                inside[r0:r1, c0:c1] = True
+            assert np.array_equal(a[inside], w[inside])
+            assert np.array_equal(a[~inside], d[~inside])
+            inside_changed += int(np.count_nonzero(a[inside] != d[inside]))
+    assert inside_changed > 0  # the regions held decisions to make
+
+
+def test_the_same_indices_and_bundles_on_one_and_two_threads(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Threads split the pass by rows (or by regions): decisions read the dead zone's indices,
+    # never a neighbour's new one, so the result does not depend on who got there first.
+    import wavecore
+
+    rng = np.random.default_rng(4)
+    y, x = np.mgrid[:1024, :1024]
+    waves = [np.sin(x / (17.0 + 5 * c)) * np.cos(y / (23.0 - 3 * c)) for c in range(3)]
+    picture = np.stack([60 * w + 40.0 * ((x // 96 + y // 80) % 2) for w in waves], -1)
+    picture = np.clip(picture + 128 + rng.normal(0, 6, picture.shape), 0, 255).astype(np.uint8)
+    coeffs, q, params = _quantized(picture.astype(np.float64), 6.0)
+    regions = np.array([[3, 0, 0, 128, 128], [3, 256, 128, 384, 512], [2, 0, 0, 256, 256]])
+    results = {}
+    for count in ("1", "2"):
+        monkeypatch.setenv("WAVECORE_THREADS", count)
+        whole = rdoq.adapt_deadzone(coeffs, copy.deepcopy(q), params)
+        some = rdoq.adapt_deadzone(coeffs, copy.deepcopy(q), params, regions=regions)
+        bundles = [
+            wavecore.encode_image(picture, bpp=1.0),
+            wavecore.encode_image(picture[:512, :512, 0], bpp=0.5),
+            wavecore.encode_image(picture[:512, :512], quality=38.0),
+        ]
+        results[count] = (whole, some, bundles)
+    for one, two in zip(results["1"][:2], results["2"][:2], strict=True):
+        for a, b in zip(as_levels(one), as_levels(two), strict=True):
+            for band_a, band_b in zip(a, b, strict=True):
+                assert np.array_equal(band_a, band_b)
+    assert results["1"][2] == results["2"][2]
+
+
+def test_a_quality_target_takes_fewer_bytes_with_it() -> None:
+    # The point of it: the default quality search meets its target in fewer bytes.
+    data = pytest.importorskip("skimage.data", reason="the photographs come from scikit-image")
+    import wavecore
+
+    image = data.camera()
+    sizes = {}
+    for enabled in (False, True):
+        was = rdoq.ENABLED
+        rdoq.ENABLED = enabled
+        try:
+            bundle = wavecore.encode_image(image, quality=40.0)
+        finally:
+            rdoq.ENABLED = was
+        error = np.mean((wavecore.decode(bundle).astype(float) - image) ** 2)
+        assert 40.0 <= 10 * np.log10(255.0**2 / error) <= 40.05
+        sizes[enabled] = len(bundle)
+    assert sizes[True] < 0.995 * sizes[False]

@@ -52,18 +52,18 @@ __all__ = [
 #: Whether the image encoder's rate control re-decides the indices after each open-loop
 #: quantization (:func:`choose_indices`), and how: ``METHOD = "fast"`` runs
 #: :func:`adapt_deadzone` (one compiled pass, a dead zone that depends on the neighbourhood),
-#: ``"full"`` the greedy RDOQ of :func:`optimise_indices`.  BD-rate through
-#: ``encode_image(bpp=...)`` on the tuning pictures (cdf97, 0.25-2 bpp,
-#: ``benchmarks/rate_distortion.py --rdoq``): fast -1.11 % grey, -1.32 % colour; full -1.39 %
-#: grey, -2.18 % colour.  Off, because of what it costs the ``bpp`` search, not the pass itself:
-#: on a 2048² RGB picture the fast pass takes about 0.15 s (the full one 1.2-1.9 s) and runs
-#: twice (the size sample, the coding), but the sizes it gives stray from the search's
-#: predictions, so its codings land above the budget more often and are trimmed
-#: (``ratecontrol._trim_to_budget``), whose candidates (values of magnitude 1 in sparse
-#: blocks) are just the ones this already removed: at 1 bpp the encode took 1.6-2.1x the time
-#: with either (2 bpp: 3.7x, trims that fail and code again; 0.5 bpp: +6-14 %).  Turning it
-#: on needs a search that predicts with it (and a trim that knows it), in ``ratecontrol``.
-ENABLED = False
+#: ``"full"`` the greedy RDOQ of :func:`optimise_indices`.  Only where the closed loop does not
+#: run (``cdf97``, and ``bspline2`` above ``quantize.REFINE_MAX_COEFFICIENTS``): the closed loop
+#: aims alone.  The rate control predicts with it (``codec.ratecontrol``): the bpp search's
+#: sample of blocks is re-decided on its blocks alone (``regions``) and codes RDOQ's integers,
+#: pictures of many blocks sample twice (RDOQ's size over the dead zone's estimate moves with
+#: the step) and aim at the middle of the window, and the quality search verifies RDOQ's
+#: error (two more verifications at most, and without RDOQ where it still misses).
+#: Measured with ``benchmarks/rate_distortion.py --rdoq`` (``encode_image(bpp=r)`` on the
+#: tuning pictures, 0.25-2 bpp, cdf97): BD-rate -1.06 % (grey -1.13 %, colour -0.77 %), all 70
+#: codings in 97.5-100 % of their budget, encode CPU x1.10 (geometric mean).  On a 2048² RGB
+#: picture (``benchmarks/codec_speed.py``'s) at 0.5-2 bpp: +0.06 to +0.18 dB, CPU x1.46-1.49.
+ENABLED = True
 METHOD = "fast"
 
 #: The Lagrange multiplier in units of the band step squared per bit (see the module text).
@@ -372,6 +372,7 @@ FAST_ROUNDINGS = (0.05, 0.22, 0.33, 0.0, 0.12, 0.27)
 #: still read the dead zone's index whichever thread got there first: the result does not
 #: depend on the threads.  A second pass writes the new indices.
 _MARK = np.int32(1 << 30) + np.int32(1 << 29)
+_ALL_COLUMNS = 1 << 62
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -383,8 +384,9 @@ def _original(v):
 
 
 @njit(nogil=True, cache=True)
-def _neighbourhood_deadzone(q, x, inverse_steps, lo, hi, rounding, marked):
-    """Re-decide between 0 and 1 the details of rows ``lo .. hi - 1`` of one level (marked).
+def _neighbourhood_deadzone(q, x, inverse_steps, lo, hi, rounding, marked, col_lo, col_hi):
+    """Re-decide between 0 and 1 the details of rows ``lo .. hi - 1`` (columns ``col_lo ..
+    col_hi - 1``) of one level (marked).
 
     ``q``: three ``(H, W, C)`` int32 bands, the dead zone's indices; ``x``: their values;
     ``inverse_steps``: per band.  Larger indices stay as they are.  ``marked[i]`` is set where
@@ -398,7 +400,7 @@ def _neighbourhood_deadzone(q, x, inverse_steps, lo, hi, rounding, marked):
         rows, cols, channels = band.shape
         inverse = inverse_steps[k]
         for i in range(lo, min(hi, rows)):
-            for j in range(cols):
+            for j in range(col_lo, min(col_hi, cols)):
                 for c in range(channels):
                     value = values[i, j, c] * inverse
                     if not lowest <= abs(value) < highest:
@@ -431,6 +433,25 @@ def _neighbourhood_deadzone(q, x, inverse_steps, lo, hi, rounding, marked):
 
 
 @njit(nogil=True, cache=True)
+def _deadzone_boxes(q, x, inverse_steps, boxes, lo, hi, rounding, marked):
+    """:func:`_neighbourhood_deadzone` on boxes ``lo .. hi - 1`` of ``boxes`` (rows of
+    ``row0, col0, row1, col1``).  A box's decisions read only the dead zone's indices around
+    it, so they are the ones the whole level's pass makes there."""
+    for b in range(lo, hi):
+        _neighbourhood_deadzone(
+            q,
+            x,
+            inverse_steps,
+            boxes[b, 0],
+            boxes[b, 2],
+            rounding,
+            marked,
+            boxes[b, 1],
+            boxes[b, 3],
+        )
+
+
+@njit(nogil=True, cache=True)
 def _unmark(q, marked, lo, hi):
     """The new indices in place of the marks, in rows ``lo .. hi - 1`` that hold any."""
     for k in range(3):
@@ -452,6 +473,7 @@ def adapt_deadzone(
     params: dict[str, Any],
     *,
     roundings: Sequence[float] = FAST_ROUNDINGS,
+    regions: np.ndarray | None = None,
 ) -> Any:
     """Re-decide the 0/1 details of an image's quantization with a dead zone that depends on
     the neighbourhood, in place (the cheap stand-in for :func:`optimise_indices`).
@@ -463,6 +485,12 @@ def adapt_deadzone(
     roundings : sequence of 3 or 6 floats
         The dead zone's ``rounding`` for quiet, middling and busy neighbourhoods, for every
         channel or (6) for the first channel and then the others (``FAST_ROUNDINGS``).
+    regions : array of shape (n, 5), optional
+        Only these boxes are re-decided, rows of ``(level, row0, col0, row1, col1)`` (the
+        level as in ``layout.as_levels``, 1 the coarsest details; the block coder's
+        ``blockcoder.block_lengths`` regions), each the same in its level's three bands:
+        what the whole pass decides there (a box's decisions read only the dead zone's
+        indices around it), for a fraction of its cost.  Default: everything.
 
     Returns
     -------
@@ -478,11 +506,18 @@ def adapt_deadzone(
     if len(rounding) != 6 or not all(0.0 <= r < 1.0 for r in rounding):
         msg = f"roundings must be 3 or 6 numbers in [0, 1), not {roundings!r}"
         raise InvalidParameter(msg)
-    for bands, originals, weights in zip(
-        levels[1:], values[1:], params["weights"][1:], strict=True
+    if regions is not None:
+        regions = np.asarray(regions, dtype=np.int64).reshape(-1, 5)
+    for entry, (bands, originals, weights) in enumerate(
+        zip(levels[1:], values[1:], params["weights"][1:], strict=True), start=1
     ):
         if len(bands) != 3:
             return qcoeffs
+        boxes = None
+        if regions is not None:
+            boxes = np.ascontiguousarray(regions[regions[:, 0] == entry, 1:])
+            if boxes.shape[0] == 0:
+                continue
 
         def three_d(a: np.ndarray, dtype: Any) -> np.ndarray:
             a = np.ascontiguousarray(a, dtype=dtype)
@@ -491,7 +526,7 @@ def adapt_deadzone(
         q = tuple(three_d(b, np.int32) for b in bands)
         x = tuple(three_d(v, np.float64) for v in originals)
         inverse = np.array([1.0 / (step * w) for w in weights], dtype=np.float64)
-        _adapt_level(q, x, inverse, rounding)
+        _adapt_level(q, x, inverse, rounding, boxes)
         for band, new in zip(bands, q, strict=True):
             if not np.may_share_memory(band, new):
                 band[...] = new.reshape(band.shape)
@@ -499,20 +534,32 @@ def adapt_deadzone(
 
 
 def _adapt_level(
-    q: tuple[np.ndarray, ...], x: tuple[np.ndarray, ...], inverse: np.ndarray, rounding: tuple
+    q: tuple[np.ndarray, ...],
+    x: tuple[np.ndarray, ...],
+    inverse: np.ndarray,
+    rounding: tuple,
+    boxes: np.ndarray | None = None,
 ) -> None:
-    """:func:`_neighbourhood_deadzone`, then :func:`_unmark`, over the threads by rows."""
+    """:func:`_neighbourhood_deadzone`, then :func:`_unmark`, over the threads by rows (or
+    by ``boxes``, where given)."""
     rows = max(b.shape[0] for b in q)
     marked = np.zeros(rows, dtype=np.bool_)
     work = sum(b.size for b in q)
 
+    def decide_boxes(lo: int, hi: int) -> None:
+        _deadzone_boxes(q, x, inverse, boxes, lo, hi, rounding, marked)
+
     def decide(lo: int, hi: int) -> None:
-        _neighbourhood_deadzone(q, x, inverse, lo, hi, rounding, marked)
+        _neighbourhood_deadzone(q, x, inverse, lo, hi, rounding, marked, 0, _ALL_COLUMNS)
 
     def finish(lo: int, hi: int) -> None:
         _unmark(q, marked, lo, hi)
 
-    run_rows(decide, rows, work)
+    if boxes is None:
+        run_rows(decide, rows, work)
+    else:
+        area = int(((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])).sum())
+        run_rows(decide_boxes, boxes.shape[0], area * q[0].shape[2] * 3)
     run_rows(finish, rows, work)
 
 

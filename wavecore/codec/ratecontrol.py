@@ -108,6 +108,12 @@ _OTHER_PREDICTED_RATIO = 1.0
 #: The quality search's verifications in open loop (a synthesis each), where the closed loop
 #: does not run: the prediction, and corrections with the ratio measured.
 _QUALITY_OPEN_VERIFIES = 4
+#: Where RDOQ runs, the verifications in open loop it may add (its error moves with the step
+#: less smoothly than the dead zone's: the moon at 33 dB needs a fifth, between two that
+#: bracket the target), and the window of the result (dB above the target) outside which the
+#: quality search runs again without RDOQ.
+_QUALITY_RDOQ_VERIFIES = 2
+_QUALITY_RDOQ_WINDOW_DB = 0.05
 #: Where a closed loop keeps its fit (the quality search), a correction within this much of
 #: its step (relative, in log) is quantized from the fit (``quantize.ClosedLoopFit``, the cost
 #: of an open loop), and one further away runs a closed loop started from it (a warm start,
@@ -163,6 +169,23 @@ _TRIM_LIMIT_MANY_BLOCKS = 1.04
 _FILL_LIMIT = 0.85
 #: A sampled ratio this far (log) from the one its step was chosen with is sampled again.
 _RESAMPLE_LOG_RATIO = 0.03
+#: Where RDOQ re-decides the indices (``rdoq.ENABLED``), the bpp prediction's ratio moves with
+#: the step (see :class:`_RatioModel`), so pictures of many blocks sample up to this many
+#: steps (:func:`_rdoq_sampled_model`: the first where the typical ratio points, the next
+#: where the first one's points, unless within this relative step, in log); pictures of few
+#: blocks sample once (their sample is every other block, half a coding).  Beyond the sampled
+#: steps the ratio model extrapolates with at most this slope (log ratio over log step).
+_RDOQ_SAMPLES = 2
+_RDOQ_SAMPLE_RESOLUTION = 0.02
+_RATIO_MODEL_SLOPE = 1.0
+#: There, pictures of many blocks aim their one coding at the middle of the window, not above
+#: the budget: two samples predict it within 1-1.5 % (2048² RGB at 0.5-2 bpp), and a trim
+#: after RDOQ, whose cheap candidates (values of magnitude 1 in sparse blocks) RDOQ removed
+#: already, recoded 76-86 of that picture's 87 blocks and lost PSNR.  (Pictures of few blocks
+#: keep their aim above the budget and trim: aiming at the middle, their coding landed below
+#: the window more often, and the fills that brought it back lost more: BD-rate -0.58 %
+#: instead of -1.06 % on the tuning pictures.)
+_RDOQ_BPP_AIM_MANY_BLOCKS = 0.9875
 #: What making a nonzero index one larger costs, relative to a new nonzero (the fill's order).
 _LARGER_INDEX_SHARE = 0.25
 #: Closed loops (each coded once) the prediction may run before the old search takes over.
@@ -269,6 +292,7 @@ class _LossyEncoder:
         )
         self._may_refine = total <= REFINE_MAX_COEFFICIENTS
         self._refines = self._may_refine and plan.wavelet not in _OPEN_LOOP_WAVELETS
+        self._rdoq = True
         self._distortion: tuple[float, OpenLoopDistortion] | None = None
         self._predicted: dict[tuple[float, float], float] = {}
         self._quantized: dict[bool, tuple[tuple[float, float], list[Any], dict[str, Any]]] = {}
@@ -367,6 +391,21 @@ class _LossyEncoder:
     def _closed(self, closed: bool) -> bool:
         return closed and self._refines
 
+    def rdoq_active(self) -> bool:
+        """Whether open-loop quantizations are re-decided by ``rdoq.choose_indices`` (images
+        where the closed loop does not run: it aims alone)."""
+        return self._rdoq and rdoq.ENABLED and self.plan.kind == "image" and not self._refines
+
+    def use_rdoq(self, allowed: bool) -> None:
+        """Allow RDOQ (where :meth:`rdoq_active` finds it on) or not; what was quantized,
+        coded or measured before is forgotten."""
+        if allowed != self._rdoq:
+            self._rdoq = allowed
+            self._quantized.clear()
+            self._coded.clear()
+            self._errors_at.clear()
+            self.output = self.assembled = None
+
     def quantize(self, step: float, closed: bool = True) -> tuple[list[Any], dict[str, Any]]:
         closed = self._closed(closed)
         key = (step, self.kept_fraction)
@@ -409,8 +448,8 @@ class _LossyEncoder:
                     refine=REFINE_ITERATIONS if closed else 0,
                 )
                 self.closed_loops += closed
-            if rdoq.ENABLED and self.plan.kind == "image" and not self._refines:
-                q = rdoq.choose_indices(self.kept, q, params)  # the closed loop aims alone
+            if self.rdoq_active():
+                q = rdoq.choose_indices(self.kept, q, params)
             cached = self._quantized[closed] = (key, q, params)
         return cached[1], cached[2]
 
@@ -792,6 +831,22 @@ def _encode_lossy(
 
 
 def _encode_to_quality(encoder: _LossyEncoder, target: float, low: float, high: float) -> bytes:
+    """:func:`_quality_step`'s bundle.  Where RDOQ runs and the step found misses the window
+    (``target`` to ``_QUALITY_RDOQ_WINDOW_DB`` above it: pictures whose error jumps with the
+    step, as RDOQ's decisions flip together, like the sawtooth at 40 dB), the search runs
+    again without RDOQ."""
+    with_rdoq, refines = encoder.rdoq_active(), encoder.refines()
+    step = _quality_step(encoder, target, low, high)
+    if with_rdoq:
+        psnr = encoder.quality(step)[0]
+        if not target <= psnr <= target + _QUALITY_RDOQ_WINDOW_DB:
+            encoder.allow_closed_loop(refines)  # (its fallback may have turned it on)
+            encoder.use_rdoq(False)
+            step = _quality_step(encoder, target, low, high)
+    return encoder.bundle(step)
+
+
+def _quality_step(encoder: _LossyEncoder, target: float, low: float, high: float) -> float:
     """The largest step whose PSNR meets ``target`` (and exceeds it by at most ~0.04 dB).
 
     The step is predicted from the coefficients (:meth:`_LossyEncoder.predicted_sse`, a
@@ -822,12 +877,12 @@ def _encode_to_quality(encoder: _LossyEncoder, target: float, low: float, high: 
         if predicted is None:
             encoder.allow_closed_loop(False)
     if predicted is not None:
-        return encoder.bundle(predicted)
+        return predicted
     encoder.reuse_fit = False  # the search on measured errors runs real closed loops
     step = _searched_quality(encoder, target, bound, enough, first, low, high)
     if encoder.quality(step)[0] > target + _QUALITY_ACCEPT_DB and encoder.allow_closed_loop(True):
         step = _searched_quality(encoder, target, bound, enough, first, low, high)
-    return encoder.bundle(step)
+    return step
 
 
 def _predicted_quality_step(
@@ -871,7 +926,9 @@ def _predicted_quality_step(
     fitted = encoder.refines() and encoder.reuse_fit
     verifies = _QUALITY_FIT_VERIFIES if fitted else 2 if encoder.refines() else None
     closed_loops = seen = encoder.closed_loops
-    for _ in range(verifies or _QUALITY_OPEN_VERIFIES):
+    if verifies is None:
+        verifies = _QUALITY_OPEN_VERIFIES + (_QUALITY_RDOQ_VERIFIES if encoder.rdoq_active() else 0)
+    for _ in range(verifies):
         aim = (bound_at(target + _QUALITY_AIM_DB) - noise) * samples / ratio
         if aim <= 0:
             return None
@@ -1023,6 +1080,11 @@ def _times(measure: Callable[[float], float], factor: float, step: float) -> flo
     return measure(step) * factor
 
 
+def _ratio_model_size(encoder: _LossyEncoder, model: _RatioModel) -> Callable[[float], float]:
+    """The predicted coded size at a step: the first-order estimate times ``model`` there."""
+    return lambda step: encoder.size_estimate(step) * model(step)
+
+
 def _encode_to_tolerance(
     encoder: _LossyEncoder, tolerance: float, low: float, high: float
 ) -> bytes:
@@ -1165,26 +1227,32 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         return size
 
     colour = encoder.plan.colour != "none"
-    ratio = _TYPICAL_COLOUR_RATIO if colour else _TYPICAL_GREY_RATIO
+    typical = _TYPICAL_COLOUR_RATIO if colour else _TYPICAL_GREY_RATIO
+    ratio: float | _RatioModel = typical
     many_blocks = _code_block_count(encoder) >= _SAMPLING_MIN_BLOCKS
     bpp_aim, trim_limit = (
         (_BPP_AIM_MANY_BLOCKS, _TRIM_LIMIT_MANY_BLOCKS) if many_blocks else (_BPP_AIM, _TRIM_LIMIT)
     )
+    if many_blocks and encoder.rdoq_active():
+        bpp_aim = _RDOQ_BPP_AIM_MANY_BLOCKS
     # (Pictures of few blocks keep theirs: their sample is every other block, no finer.)
     tight = encoder.bpp_aim is not None and many_blocks and not encoder.refines()
     if tight and encoder.bpp_aim is not None:
         bpp_aim = encoder.bpp_aim
-    if not encoder.refines() and start is None:
-        sampled = _sampled_ratio(encoder, ratio, bpp_aim * budget, low, high)
+    if encoder.rdoq_active() and start is None and budget > 0:
+        samples = _RDOQ_SAMPLES if many_blocks else 1
+        ratio, start = _rdoq_sampled_model(encoder, typical, bpp_aim * budget, low, high, samples)
+    elif not encoder.refines() and start is None:
+        sampled = _sampled_ratio(encoder, typical, bpp_aim * budget, low, high)
         resample = not many_blocks  # (a sample of many blocks predicts well enough at once)
         if (
             resample
             and sampled is not None
-            and abs(math.log(sampled / ratio)) > _RESAMPLE_LOG_RATIO
+            and abs(math.log(sampled / typical)) > _RESAMPLE_LOG_RATIO
         ):
             # The coder's ratio moves with the step: sampled again where the first one points.
             sampled = _sampled_ratio(encoder, sampled, bpp_aim * budget, low, high) or sampled
-        ratio = sampled or ratio
+        ratio = sampled or typical
     step = _fit_budget(
         encoder,
         size_or_trimmed,
@@ -1207,6 +1275,34 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         )
         raise InvalidParameter(msg)
     return _last_bundle(encoder, step)
+
+
+def _rdoq_sampled_model(
+    encoder: _LossyEncoder, ratio: float, aim: float, low: float, high: float, samples: int
+) -> tuple[float | _RatioModel, float | None]:
+    """Where RDOQ re-decides the indices: the coder's ratio to the first-order estimate as a
+    function of the step (:class:`_RatioModel`), from samples of blocks at the steps it
+    points to in turn (``samples`` at most, until the step it solves for is one already
+    sampled, to ``_RDOQ_SAMPLE_RESOLUTION``), and the step it solves for, where the one full
+    coding starts.  The typical ``ratio`` and no start where the picture cannot be
+    sampled."""
+    model = _RatioModel()
+    step = _model_step(encoder, lambda s: encoder.size_estimate(s) * ratio, aim, low, high)
+    sampled_at = None
+    for _ in range(samples):
+        if step is None:
+            break
+        if sampled_at is not None and abs(math.log(step / sampled_at)) <= _RDOQ_SAMPLE_RESOLUTION:
+            break
+        measured = _sampled_ratio_at(encoder, step, ratio)
+        if measured is None:
+            break
+        model.add(step, measured)
+        sampled_at = step
+        step = _model_step(encoder, _ratio_model_size(encoder, model), aim, low, high)
+    if sampled_at is None:
+        return ratio, None
+    return model, step
 
 
 def _written_enough(budget: int, enough: int) -> int:
@@ -1265,6 +1361,23 @@ def _sampled_ratio(
     where there are too few blocks (a coding is cheap there) or the layout is not the block
     coder's.
     """
+    step = _model_step(encoder, lambda s: encoder.size_estimate(s) * ratio, aim, low, high)
+    return None if step is None else _sampled_ratio_at(encoder, step, ratio)
+
+
+def _model_step(
+    encoder: _LossyEncoder, model: Callable[[float], float], aim: float, low: float, high: float
+) -> float | None:
+    """The step where ``model`` (a predicted size) is ``aim`` within 0.4 %, or the closest."""
+    search = _Search(model, aim * 1.004, aim * 0.996, -1.0, low, high, aim=aim)
+    search.run(encoder.plan.peak / 16.0, _MODEL_EVALUATIONS)
+    found = search.within or search.last
+    return None if found is None else found[0]
+
+
+def _sampled_ratio_at(encoder: _LossyEncoder, step: float, ratio: float) -> float | None:
+    """:func:`_sampled_ratio` at ``step`` (``ratio`` stands in for a sampled level without
+    entropy)."""
     shapes = as_levels(encoder.kept)  # (only the shapes count here)
     if len(shapes) < 2 or any(len(bands) != 3 for bands in shapes[1:]):
         return None
@@ -1275,21 +1388,23 @@ def _sampled_ratio(
         if len(regions) >= _SAMPLING_MIN_BLOCKS
         else (1, 2)
     )
-    model = _Search(
-        functools.partial(_times, encoder.size_estimate, ratio),
-        aim * 1.004,
-        aim * 0.996,
-        -1.0,
-        low,
-        high,
-        aim=aim,
-    )
-    model.run(encoder.plan.peak / 16.0, _MODEL_EVALUATIONS)
-    found = model.within or model.last
-    if found is None:
-        return None
-    step = found[0]
-    levels = as_levels(encoder.quantize(step, closed=False)[0])
+    # Where RDOQ runs, the sample is quantized alone, its first-order entropies are the dead
+    # zone's (those of the size estimate) and RDOQ re-decides the sampled blocks only (what
+    # the whole pass decides there, for a fraction of its cost): the ratio of the coded
+    # blocks to those entropies is then RDOQ's coder over the dead zone's estimate.
+    alone = encoder.rdoq_active() and rdoq.METHOD == "fast"
+    if alone:
+        qcoeffs, qparams = quantize_bands(
+            encoder.kept,
+            step,
+            wavelet=encoder.plan.wavelet,
+            boundary=list(encoder.plan.boundary),
+            axes=encoder.plan.axes,
+            refine=0,
+        )
+    else:
+        qcoeffs, qparams = encoder.quantize(step, closed=False)
+    levels = as_levels(qcoeffs)
     entropies = _block_entropies(levels, regions)
     # Levels of few blocks (the coarse ones, small and dense) are coded whole; the others
     # (the fine ones, most of the bytes) one block in ``stride``, each level by its own ratio.
@@ -1302,12 +1417,14 @@ def _sampled_ratio(
     rank = np.arange(len(regions)) - np.searchsorted(entry_of, entry_of)  # index in its level
     chosen = ~sampled | (rank % stride == stride // 2)
     sample = np.flatnonzero(chosen)
+    if alone:
+        rdoq.adapt_deadzone(encoder.kept, qcoeffs, qparams, regions=regions[sample])
     lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample)
     coding_counts.sampled_blocks += int(sample.size)
     # Let the sample's quantization go now (the full coding quantizes at another step): its
     # bands are freed before the next ones are made, which can then take their memory
     # instead of faulting in fresh pages.
-    del levels
+    del levels, qcoeffs
     encoder._quantized.pop(False, None)
     coded = 0.0
     for entry in range(len(counts)):
@@ -1324,6 +1441,48 @@ def _sampled_ratio(
     # The chunks' tables of block lengths and the header, as the estimate counts them.
     predicted = coded + 2.0 * len(regions) + _HEADER_GUESS
     return predicted / encoder.size_estimate(step)
+
+
+class _RatioModel:
+    """The coder's size over the first-order estimate as a function of the step, from the
+    ratios measured at a few steps (on samples of blocks, or whole codings): linear in
+    log-log between the measured steps, extrapolated from the nearest two beyond them.
+
+    With RDOQ the ratio moves with the step far more than without (2048² RGB: 0.98 at step
+    0.6, 0.60 at 3.7, 0.64 at 8.8; the dead zone's 0.98, 0.89, 0.69), so one ratio measured
+    at one step predicts badly a few per cent of step away.
+    """
+
+    def __init__(self) -> None:
+        self.points: list[tuple[float, float]] = []  # (log step, log ratio), by step
+
+    def add(self, step: float, ratio: float) -> None:
+        """Record ``ratio`` measured on a sample at ``step`` (replacing one at that step)."""
+        x = math.log(step)
+        self.points = sorted([p for p in self.points if p[0] != x] + [(x, math.log(ratio))])
+
+    def correct(self, step: float, ratio: float) -> None:
+        """A whole coding measured ``ratio`` at ``step``: every point is scaled by its
+        ratio to the model there (the samples' shape kept, their level corrected)."""
+        if not self.points:
+            self.add(step, ratio)
+            return
+        shift = math.log(ratio) - math.log(self(step))
+        self.points = [(x, y + shift) for x, y in self.points]
+
+    def __call__(self, step: float) -> float:
+        x = math.log(step)
+        points = self.points
+        if len(points) == 1:
+            return math.exp(points[0][1])
+        i = min(max(int(np.searchsorted([p[0] for p in points], x)), 1), len(points) - 1)
+        (x0, y0), (x1, y1) = points[i - 1], points[i]
+        slope = (y1 - y0) / (x1 - x0)
+        if not x0 <= x <= x1:
+            # Beyond the measured steps the slope is not known: half of it, bounded.
+            slope = min(max(0.5 * slope, -_RATIO_MODEL_SLOPE), _RATIO_MODEL_SLOPE)
+            x0, y0 = (x0, y0) if x < x0 else (x1, y1)
+        return math.exp(y0 + slope * (x - x0))
 
 
 def _block_entropies(
@@ -1604,12 +1763,12 @@ def _trim_to_budget(
     )
     original_size = encoder.size_bound(step, closed)
     add = original_size < enough
+    target = budget - _TRIM_AIM * (budget - enough)
+    share = _TRIM_SAVING_SHARE
     candidates = _trim_candidates(encoder, levels, qparams, coded, add)
     if candidates is None:
         return None
     order, places, saving, values = candidates
-    target = budget - _TRIM_AIM * (budget - enough)
-    share = _TRIM_SAVING_SHARE
     few, many = 0, order.size + 1  # changes known to be too few, and too many
     widest = 0
     for _ in range(_TRIM_ROUNDS):
@@ -1763,7 +1922,7 @@ def _fit_budget(
     low: float,
     high: float,
     start: float | None,
-    ratio: float = _TYPICAL_CODED_RATIO,
+    ratio: float | _RatioModel = _TYPICAL_CODED_RATIO,
     tight: bool = False,
 ) -> float | None:
     """The step (and ``encoder``'s kept fraction) whose ``size`` is closest below ``budget``,
@@ -1778,7 +1937,10 @@ def _fit_budget(
     def scaled_model_step(step: float, value: float | None) -> float:
         nonlocal ratio
         if value is not None:
-            ratio = value / encoder.size_estimate(step)
+            if isinstance(ratio, _RatioModel):
+                ratio.correct(step, value / encoder.size_estimate(step))
+            else:
+                ratio = value / encoder.size_estimate(step)
         # The model only points the way, so a looser window will do for it, unless ``tight``
         # (a ratio measured on a sample is good to a per cent: its step is worth placing).
         high_end, low_end = (
@@ -1787,7 +1949,9 @@ def _fit_budget(
             else (max(budget, aim * 1.004), min(0.985 * budget, aim * 0.996))
         )
         model = _Search(
-            functools.partial(_times, encoder.size_estimate, ratio),
+            _ratio_model_size(encoder, ratio)
+            if isinstance(ratio, _RatioModel)
+            else functools.partial(_times, encoder.size_estimate, ratio),
             high_end,
             low_end,
             -1.0,
