@@ -46,7 +46,9 @@ BD-rate per picture against version 4 on the same integers, grey mean / astronau
   colour;
 * ``--parent 1 / 2 / 4``: −1.54 / −1.72 / −1.42 % grey, −1.43 / −1.63 / −1.32 % colour
   (weight 2: camera −0.98, moon −2.36, coins −1.82, brick −1.71, astronaut −1.63); with
-  ``--sets 3`` priors trained with it, count 8: −2.39 % grey, −2.30 % colour;
+  ``--sets 3`` priors trained with it, count 8: −2.39 % grey, −2.30 % colour.  The parent
+  term cost the variant's encoder 1.9 % more CPU (median of 7 interleaved runs over 3 rates of
+  the 5 pictures, the same variant with ``--parent 0`` as the peer);
 * bspline2 (its own ``capture``): ``--block 256`` −0.61 % grey, −0.49 % colour; ``--parent 2``
   −0.93 / −1.08 %; the cdf97 priors above (``--sets 3``, count 8) −0.33 / −0.33 %.
 
