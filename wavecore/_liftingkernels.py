@@ -131,6 +131,8 @@ def _coarse_reflect(i, ns, n):
 @njit(nogil=True, cache=True, inline="always")
 def _coarse_taps(i, ns, n):
     """The coarse samples ``i - 1, i, i + 1, i + 2`` of the 5/11-C detail correction."""
+    if i > 0 and i + 2 < ns:  # inside: no mirroring (a row lifted alone took it per sample)
+        return i - 1, i, i + 1, i + 2
     return (
         _coarse_reflect(i - 1, ns, n),
         _coarse_reflect(i, ns, n),
