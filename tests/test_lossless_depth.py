@@ -118,10 +118,13 @@ def test_kept_lifting_steps_give_the_same_decomposition() -> None:
     choices = lossless.filter_choices(data, 3, lifted=lifted)
     assert choices == lossless.filter_choices(data, 3)
     for chosen in choices:
-        assert all((tuple(chosen[:k]), chosen[k]) in lifted for k in range(3))
+        steps = [(tuple(chosen[:k]), chosen[k]) for k in range(3)]
+        assert all(step in lifted for step in steps)
         for depth in (1, 2, 3):
             fresh = _bands(lossless.forward(data, depth, (0, 1), chosen[:depth]))
-            kept = _bands(lossless.forward(data, depth, (0, 1), chosen[:depth], lifted=lifted))
+            taken = dict(lifted)
+            kept = _bands(lossless.forward(data, depth, (0, 1), chosen[:depth], lifted=taken))
+            assert not any(step in taken for step in steps[:depth])  # taken out, let go
             assert len(fresh) == len(kept) == 3 * depth + 1
             for x, y in zip(fresh, kept, strict=True):
                 assert x.dtype == y.dtype == np.int32

@@ -417,7 +417,8 @@ def forward(
 
     ``filters`` names the filter of each level, finest first (default: 5/3 everywhere).
     ``lifted``: the steps :func:`filter_choices` kept for the same ``data`` (a step not in it
-    is lifted here), the same result without lifting again.
+    is lifted here), the same result without lifting again; each step taken is removed from it,
+    so that its ``int64`` bands go as soon as they are cast.
 
     With two axes the result is ``[cA, (cH, cV, cD), ...]`` (``cH`` detail along the first
     axis), with one axis ``[cA, cD, ...]``.  Other axes (colour) are carried along.
@@ -445,11 +446,11 @@ def _forward(
     done: tuple[str, ...],
 ) -> list[Any]:
     """:func:`forward` of integer ``arr``, the coarse band after the steps ``done`` (finest
-    first): each step found in ``lifted`` under the filters before it is taken from there."""
+    first): each step found in ``lifted`` under the filters before it is taken (out of it)."""
     coarse: np.ndarray | None = None
     details: list[Any] = []
     for k, name in enumerate(names):
-        step = None if lifted is None else lifted.get(((*done, *names[:k]), name))
+        step = None if lifted is None else lifted.pop(((*done, *names[:k]), name), None)
         if step is None:
             if coarse is None:
                 coarse = arr.astype(np.int64)

@@ -60,7 +60,8 @@ def encode_lossless_image(arr: np.ndarray, level: int | None, effort: str = "def
         raise InvalidParameter(msg)
     # First-order entropy only guides the choice of filters (the context coder ranks them
     # differently), so code the choice with and without the closed bspline2 and keep the smaller.
-    # The choice lifts every level of each choice: kept, they are not lifted again to be coded.
+    # The choice lifts every level of each choice: kept, they are not lifted again to be coded
+    # (a level two choices share is taken by the first, and lifted again for the second).
     lifted: _lossless.Lifted = {}
     choices = _lossless.filter_choices(data, level, lifted=lifted)
     bundles = [
