@@ -104,3 +104,34 @@ def test_max_effort_keeps_an_explicit_level() -> None:
     assert np.array_equal(wavecore.decode(bundle), image)
     with pytest.raises(wavecore.InvalidParameter, match="too deep"):
         wavecore.encode_image(image, lossless=True, level=8, effort="max")
+
+
+def _bands(coeffs: list) -> list[np.ndarray]:
+    return [b for entry in coeffs for b in (entry if isinstance(entry, tuple) else (entry,))]
+
+
+def test_kept_lifting_steps_give_the_same_decomposition() -> None:
+    # The encoder lifts each level once, for the filter choice, and codes from those steps:
+    # they must be the very coefficients a fresh forward() makes, for every choice and depth.
+    data = _texture((96, 80), 5).astype(np.int64)
+    lifted: lossless.Lifted = {}
+    choices = lossless.filter_choices(data, 3, lifted=lifted)
+    assert choices == lossless.filter_choices(data, 3)
+    for chosen in choices:
+        steps = [(tuple(chosen[:k]), chosen[k]) for k in range(3)]
+        assert all(step in lifted for step in steps)
+        for depth in (1, 2, 3):
+            fresh = _bands(lossless.forward(data, depth, (0, 1), chosen[:depth]))
+            taken = dict(lifted)
+            kept = _bands(lossless.forward(data, depth, (0, 1), chosen[:depth], lifted=taken))
+            assert not any(step in taken for step in steps[:depth])  # taken out, let go
+            assert len(fresh) == len(kept) == 3 * depth + 1
+            for x, y in zip(fresh, kept, strict=True):
+                assert x.dtype == y.dtype == np.int32
+                assert np.array_equal(x, y)
+    # A step missing from the kept ones is lifted: the result is still the same.
+    partial = {key: step for key, step in lifted.items() if key[0]}
+    chosen = choices[0]
+    fresh = _bands(lossless.forward(data, 2, (0, 1), chosen[:2]))
+    kept = _bands(lossless.forward(data, 2, (0, 1), chosen[:2], lifted=partial))
+    assert all(np.array_equal(x, y) for x, y in zip(fresh, kept, strict=True))

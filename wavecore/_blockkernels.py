@@ -61,7 +61,17 @@ BLOCK_FIELDS = 6
 
 
 # The range coder.  Its state lives in local variables of the block loops (helpers take it and
-# return it, and are inlined): kept in an array it cost five times as much per bit.
+# return it, and are inlined): kept in an array it cost five times as much per bit.  The
+# encoder's per-bit helper takes and returns scalars only: an array handed to a helper inlined
+# into a loop is a new reference to it, and numba counted it up and down (two atomic calls)
+# at every bit; its model is read and written at the call site, and ``out`` is handed to
+# ``_shift_low`` only when ``rng`` falls below ``TOP`` (once per byte written).  That took a
+# fifth off the encoder's time, with the same bits.  Each encoder site reads:
+#
+#     low, rng, models[ctx] = _code_bit(low, rng, models[ctx], bit)
+#     while rng < TOP:
+#         rng <<= 8
+#         low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -86,8 +96,9 @@ def _shift_low(low, cache, pending, pos, out):
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _adapt(models, ctx, p, n, bit):
-    """The probability of a 0 moves towards the bit seen, by ``2**-RATE[n]``."""
+def _adapted(p, n, bit):
+    """A context's model (probability of a 0 and count) after ``bit``: the probability moves
+    towards the bit seen, by ``2**-RATE[n]``."""
     shift = RATE[n]
     if bit == 0:
         p += (PROB_ONE - p) >> shift
@@ -95,12 +106,13 @@ def _adapt(models, ctx, p, n, bit):
         p -= p >> shift
     if n < COUNT_CAP:
         n += 1
-    models[ctx] = (p << 8) | n
+    return (p << 8) | n
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _encode_bit(low, rng, cache, pending, pos, out, models, ctx, bit):
-    model = models[ctx]
+def _code_bit(low, rng, model, bit):
+    """One adaptive bit into the coder's ``low`` and ``rng`` (before normalization), and the
+    context's model after it."""
     p = model >> 8
     bound = (rng >> PROB_BITS) * p
     if bit == 0:
@@ -108,11 +120,7 @@ def _encode_bit(low, rng, cache, pending, pos, out, models, ctx, bit):
     else:
         low += bound
         rng -= bound
-    _adapt(models, ctx, p, model & 0xFF, bit)
-    while rng < TOP:
-        rng <<= 8
-        low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
-    return low, rng, cache, pending, pos
+    return low, rng, _adapted(p, model & 0xFF, bit)
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -127,26 +135,13 @@ def _decode_bit(code, rng, pos, end, data, models, ctx):
         code -= bound
         rng -= bound
         bit = 1
-    _adapt(models, ctx, p, model & 0xFF, bit)
+    models[ctx] = _adapted(p, model & 0xFF, bit)
     while rng < TOP:
         rng <<= 8
         byte = np.int64(data[pos]) if pos < end else np.int64(0)
         pos += 1
         code = ((code << 8) | byte) & MASK32
     return code, rng, pos, bit
-
-
-@njit(nogil=True, cache=True, inline="always")
-def _encode_raw(low, rng, cache, pending, pos, out, value, count):
-    """``count`` equiprobable bits of ``value``, most significant first."""
-    for k in range(count - 1, -1, -1):
-        rng >>= 1
-        if (value >> k) & 1:
-            low += rng
-        while rng < TOP:
-            rng <<= 8
-            low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
-    return low, rng, cache, pending, pos
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -167,13 +162,17 @@ def _decode_raw(code, rng, pos, end, data, count):
     return code, rng, pos, value
 
 
+#: ``BIT_LENGTH[v]``: the bit length of ``v`` below 256, looked up (most magnitudes are).
+BIT_LENGTH = np.array([int(v).bit_length() for v in range(256)], dtype=np.int64)
+
+
 @njit(nogil=True, cache=True, inline="always")
 def _bit_length(value):
     n = np.int64(0)
-    while value:
-        value >>= 1
-        n += 1
-    return n
+    while value >= 256:
+        value >>= 8
+        n += 8
+    return n + BIT_LENGTH[value]
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -359,9 +358,10 @@ def _encode_rows(
                     value = np.int64(flat[at])
                 magnitude = abs(value)
                 ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
-                low, rng, cache, pending, pos = _encode_bit(
-                    low, rng, cache, pending, pos, out, models, ctx, 1 if magnitude else 0
-                )
+                low, rng, models[ctx] = _code_bit(low, rng, models[ctx], 1 if magnitude else 0)
+                while rng < TOP:
+                    rng <<= 8
+                    low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
                 if approx:
                     scratch[srow + j] = magnitude
                 if magnitude == 0:
@@ -372,61 +372,42 @@ def _encode_rows(
                 klass = _bit_length(magnitude)
                 for k in range(1, klass + 1):
                     more = 1 if klass > k else 0
-                    low, rng, cache, pending, pos = _encode_bit(
-                        low,
-                        rng,
-                        cache,
-                        pending,
-                        pos,
-                        out,
-                        models,
-                        unary + min(k - 1, UNARY_INDICES - 1),
-                        more,
-                    )
+                    at_ctx = unary + min(k - 1, UNARY_INDICES - 1)
+                    low, rng, models[at_ctx] = _code_bit(low, rng, models[at_ctx], more)
+                    while rng < TOP:
+                        rng <<= 8
+                        low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
                 below = klass - 1
                 top = min(below, 2)
                 for position in range(top):
                     bit = (magnitude >> (below - 1 - position)) & 1
-                    low, rng, cache, pending, pos = _encode_bit(
-                        low,
-                        rng,
-                        cache,
-                        pending,
-                        pos,
-                        out,
-                        models,
-                        mantissa + position * (MAX_CLASS + 1) + klass,
-                        bit,
-                    )
+                    at_ctx = mantissa + position * (MAX_CLASS + 1) + klass
+                    low, rng, models[at_ctx] = _code_bit(low, rng, models[at_ctx], bit)
+                    while rng < TOP:
+                        rng <<= 8
+                        low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
                 if below > top:
                     rest = below - top
-                    low, rng, cache, pending, pos = _encode_raw(
-                        low,
-                        rng,
-                        cache,
-                        pending,
-                        pos,
-                        out,
-                        magnitude & ((np.int64(1) << rest) - 1),
-                        rest,
-                    )
+                    for k in range(rest - 1, -1, -1):  # equiprobable, the highest first
+                        rng >>= 1
+                        if (magnitude >> k) & 1:
+                            low += rng
+                        while rng < TOP:
+                            rng <<= 8
+                            low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
                 sw = sn = np.int64(0)  # residual signs: one context
                 if not approx:
                     if j > c0:
                         sw = _sign_of(flat[at - 1])
                     if i > r0:
                         sn = _sign_of(flat[at - cols])
-                low, rng, cache, pending, pos = _encode_bit(
-                    low,
-                    rng,
-                    cache,
-                    pending,
-                    pos,
-                    out,
-                    models,
-                    sign_base + (sw + 1) * 3 + sn + 1,
-                    1 if value < 0 else 0,
+                at_ctx = sign_base + (sw + 1) * 3 + sn + 1
+                low, rng, models[at_ctx] = _code_bit(
+                    low, rng, models[at_ctx], 1 if value < 0 else 0
                 )
+                while rng < TOP:
+                    rng <<= 8
+                    low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
     return low, rng, cache, pending, pos
 
 
@@ -576,12 +557,17 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
                     )
                     flag = 0
                     for i in range(r0 + tr * TILE, min(r0 + (tr + 1) * TILE, r1)):
+                        row = offset + i * cols
                         for j in range(c0 + tc * TILE, min(c0 + (tc + 1) * TILE, c1)):
-                            if flat[offset + i * cols + j] != 0:
+                            if flat[row + j] != 0:
                                 flag = 1
-                    low, rng, cache, pending, pos = _encode_bit(
-                        low, rng, cache, pending, pos, out, models, ctx, flag
-                    )
+                                break
+                        if flag:
+                            break
+                    low, rng, models[ctx] = _code_bit(low, rng, models[ctx], flag)
+                    while rng < TOP:
+                        rng <<= 8
+                        low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
                     flags[base + tr * grid_cols + tc] = flag
         if approx:
             low, rng, cache, pending, pos = _encode_rows(

@@ -63,6 +63,9 @@ def lift_steps(x, s, d, kind, o_lo, o_hi, j_lo, j_hi):
                 for j in range(j_lo, j_hi):
                     s[o, ns - 1, j] = x[o, n - 1, j]
             continue
+        if j_hi - j_lo >= _FUSED_LEAST:
+            _lift_fused(x, s, d, kind, o, n, ns, nd, j_lo, j_hi)
+            continue
         for i in range(nd):  # 5/3 predict: s[i + 1] past the end is s[ns - 1] (= x[2 i])
             right = 2 * i + 2 if 2 * i + 2 < n else 2 * i
             for j in range(j_lo, j_hi):
@@ -77,6 +80,40 @@ def lift_steps(x, s, d, kind, o_lo, o_hi, j_lo, j_hi):
                 a, b, c, e = _coarse_taps(i, ns, n)
                 for j in range(j_lo, j_hi):
                     d[o, i, j] += (s[o, a, j] - s[o, b, j] - s[o, c, j] + s[o, e, j] + 8) >> 4
+
+
+#: The fewest inner columns lifted row by row in one pass (``_lift_fused``): along an image's
+#: first axis (a row of columns each) it took 5/3 0.7x and 5/11-C 0.8x the time of a pass per
+#: step; along its second (one column) the pass per step is the quicker.
+_FUSED_LEAST = 8
+
+
+@njit(nogil=True, cache=True)
+def _lift_fused(x, s, d, kind, o, n, ns, nd, j_lo, j_hi):
+    """5/3 (``kind`` 0) or 5/11-C (3) of outer index ``o`` in one pass over the rows, each
+    coarse row made as soon as the details it reads are: row ``i``'s predict, then its update
+    (from ``d[i - 1]``, made the row before), then (5/11-C) the correction of the detail row
+    two back, whose coarse taps ``s[i - 3 .. i]`` are all made by then (the last two are
+    corrected after the loop).  The same formulas as :func:`lift_steps`' passes, in an order
+    that reads each row while it is in cache; an update never reads a corrected detail."""
+    for i in range(ns):
+        if i < nd:
+            right = 2 * i + 2 if 2 * i + 2 < n else 2 * i
+            for j in range(j_lo, j_hi):
+                d[o, i, j] = x[o, 2 * i + 1, j] - ((x[o, 2 * i, j] + x[o, right, j]) >> 1)
+        left = i - 1 if i > 0 else 0
+        right = i if i < nd else nd - 1
+        for j in range(j_lo, j_hi):
+            s[o, i, j] = x[o, 2 * i, j] + ((d[o, left, j] + d[o, right, j] + 2) >> 2)
+        if kind == 3 and i >= 2 and i - 2 < nd:
+            a, b, c, e = _coarse_taps(i - 2, ns, n)
+            for j in range(j_lo, j_hi):
+                d[o, i - 2, j] += (s[o, a, j] - s[o, b, j] - s[o, c, j] + s[o, e, j] + 8) >> 4
+    if kind == 3:
+        for i in range(max(ns - 2, 0), nd):
+            a, b, c, e = _coarse_taps(i, ns, n)
+            for j in range(j_lo, j_hi):
+                d[o, i, j] += (s[o, a, j] - s[o, b, j] - s[o, c, j] + s[o, e, j] + 8) >> 4
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -94,6 +131,8 @@ def _coarse_reflect(i, ns, n):
 @njit(nogil=True, cache=True, inline="always")
 def _coarse_taps(i, ns, n):
     """The coarse samples ``i - 1, i, i + 1, i + 2`` of the 5/11-C detail correction."""
+    if i > 0 and i + 2 < ns:  # inside: no mirroring (a row lifted alone took it per sample)
+        return i - 1, i, i + 1, i + 2
     return (
         _coarse_reflect(i - 1, ns, n),
         _coarse_reflect(i, ns, n),

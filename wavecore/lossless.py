@@ -87,6 +87,7 @@ __all__ = [
     "CHROMA_WEIGHTS",
     "FILTERS",
     "LOSSLESS_DEPTHS",
+    "Lifted",
     "band_shapes",
     "best_depth",
     "choose_depth",
@@ -137,6 +138,11 @@ DEPTH_GAIN = 0.9
 #: The weights of :func:`predict_chroma`, in eighths: Cr is predicted from Cb as ``w / 8 · Cb``.
 CHROMA_WEIGHTS = tuple(range(-8, 9))
 
+
+#: Lifting steps kept by :func:`filter_choices` for :func:`forward`: ``(coarse, details)`` of
+#: each level, under (the filters of the finer levels, finest first; this level's filter).
+Lifted = dict[tuple[tuple[str, ...], str], tuple[np.ndarray, Any]]
+_Memo = dict[tuple[tuple[str, ...], str], tuple[float, np.ndarray, Any]]
 
 #: The compiled kernels' number for each filter (anything else is lifted as 5/3, as before).
 _KINDS = {"legall53": 0, "haar": 1, "bspline2": 2, "511c": 3}
@@ -310,11 +316,15 @@ def filter_choices(
     level: int,
     axes: Sequence[int] = (0, 1),
     candidate_sets: Sequence[Sequence[str]] = CANDIDATE_SETS,
+    *,
+    lifted: Lifted | None = None,
 ) -> list[list[str]]:
     """:func:`choose_filters` for each candidate set, without repeats, in the sets' order.
 
     Each filter is lifted and its entropy measured once per level and path of earlier choices,
     whatever the number of sets that offer it (the encoder's two sets share all but one).
+    ``lifted``, a dict, if given, receives the lifting steps of the chosen paths, so that
+    :func:`forward` and :func:`best_depth` given it need not lift ``data`` again.
 
     Examples
     --------
@@ -324,12 +334,23 @@ def filter_choices(
     [['legall53', 'legall53']]
     """
     coarse = np.asarray(data).astype(np.int64)
-    memo: dict[tuple[tuple[str, ...], str], tuple[float, np.ndarray]] = {}
+    memo: _Memo = {}
     choices: list[list[str]] = []
+    on_paths: set[tuple[tuple[str, ...], str]] = set()
     for candidates in candidate_sets:
-        chosen = _choose(coarse, level, tuple(axes), candidates, memo)
+        chosen = _choose(
+            coarse, level, tuple(axes), candidates, memo, keep=lifted is not None, held=on_paths
+        )
         if chosen not in choices:
             choices.append(chosen)
+        on_paths.update((tuple(chosen[:k]), chosen[k]) for k in range(len(chosen)))
+    if lifted is not None:
+        # The steps on the chosen paths, for forward() and best_depth() to take.
+        lifted.update(
+            (key, (low, bands))
+            for key, (_, low, bands) in memo.items()
+            if key in on_paths and bands is not None
+        )
     return choices
 
 
@@ -338,10 +359,15 @@ def _choose(
     level: int,
     axes: tuple[int, ...],
     candidates: Sequence[str],
-    memo: dict[tuple[tuple[str, ...], str], tuple[float, np.ndarray]],
+    memo: _Memo,
+    keep: bool = False,
+    held: set[tuple[tuple[str, ...], str]] | None = None,
 ) -> list[str]:
     """:func:`choose_filters` on ``int64`` data, with ``memo`` holding each (earlier choices,
-    filter)'s detail entropy and coarse band, so that other candidate sets reuse them."""
+    filter)'s detail entropy and coarse band, so that other candidate sets reuse them; with
+    ``keep``, also the details of each level's best candidate so far (a beaten one's are let
+    go at once, unless ``held``, an earlier set's choice: so that few candidates' details are
+    held per level)."""
     chosen: list[str] = []
     for _ in range(level):
         best: tuple[float, str, np.ndarray] | None = None
@@ -352,14 +378,31 @@ def _choose(
             if key not in memo:
                 low, bands = _level_step(coarse, axes, name)
                 bits = _entropy_bits(bands if isinstance(bands, tuple) else (bands,))
-                memo[key] = (bits, low)
-            bits, low = memo[key]
+                memo[key] = (bits, low, bands if keep else None)
+            bits, low, _ = memo[key]
             if best is None or bits < best[0]:
+                if best is not None:
+                    _let_go(memo, (tuple(chosen), best[1]), held)
                 best = (bits, name, low)
+            else:
+                _let_go(memo, key, held)
         assert best is not None
         chosen.append(best[1])
         coarse = best[2]
     return chosen
+
+
+def _let_go(
+    memo: _Memo,
+    key: tuple[tuple[str, ...], str],
+    held: set[tuple[tuple[str, ...], str]] | None,
+) -> None:
+    """Drop the details kept for ``key`` (a beaten candidate) unless ``held``: :func:`forward`
+    lifts again in the rare case that a later candidate set chooses it after all."""
+    if held is not None and key in held:
+        return
+    bits, low, _ = memo[key]
+    memo[key] = (bits, low, None)
 
 
 def forward(
@@ -367,10 +410,15 @@ def forward(
     level: int,
     axes: Sequence[int] = (0, 1),
     filters: Sequence[str] | None = None,
+    *,
+    lifted: Lifted | None = None,
 ) -> list[Any]:
     """Multi-level reversible decomposition of integer data, in ``wavedec2`` layout (``int32``).
 
     ``filters`` names the filter of each level, finest first (default: 5/3 everywhere).
+    ``lifted``: the steps :func:`filter_choices` kept for the same ``data`` (a step not in it
+    is lifted here), the same result without lifting again; each step taken is removed from it,
+    so that its ``int64`` bands go as soon as they are cast.
 
     With two axes the result is ``[cA, (cH, cV, cD), ...]`` (``cH`` detail along the first
     axis), with one axis ``[cA, cD, ...]``.  Other axes (colour) are carried along.
@@ -387,16 +435,34 @@ def forward(
     if arr.dtype.kind not in "iu":
         msg = f"the reversible transform needs integer data, not {arr.dtype}"
         raise InvalidParameter(msg)
-    axes = tuple(axes)
-    names = _filters(filters, level)
-    coarse = arr.astype(np.int64)
+    return _forward(arr, _filters(filters, level), tuple(axes), lifted, ())
+
+
+def _forward(
+    arr: np.ndarray,
+    names: Sequence[str],
+    axes: tuple[int, ...],
+    lifted: Lifted | None,
+    done: tuple[str, ...],
+) -> list[Any]:
+    """:func:`forward` of integer ``arr``, the coarse band after the steps ``done`` (finest
+    first): each step found in ``lifted`` under the filters before it is taken (out of it)."""
+    coarse: np.ndarray | None = None
     details: list[Any] = []
-    for name in names:
-        coarse, bands = _level_step(coarse, axes, name)
+    for k, name in enumerate(names):
+        step = None if lifted is None else lifted.pop(((*done, *names[:k]), name), None)
+        if step is None:
+            if coarse is None:
+                coarse = arr.astype(np.int64)
+            coarse, bands = _level_step(coarse, axes, name)
+        else:
+            coarse, bands = step
         if isinstance(bands, tuple):
             details.append(tuple(b.astype(np.int32) for b in bands))
         else:
             details.append(bands.astype(np.int32))
+    if coarse is None:  # no levels
+        coarse = arr
     return [coarse.astype(np.int32), *reversed(details)]
 
 
@@ -434,6 +500,8 @@ def best_depth(
     code: Callable[[list[Any]], list[bytes]],
     depths: Sequence[int] = LOSSLESS_DEPTHS,
     axes: Sequence[int] = (0, 1),
+    *,
+    lifted: Lifted | None = None,
 ) -> tuple[int, list[bytes]]:
     """Of ``depths`` (each at most ``len(filters)``), the one whose coding is smallest, and its
     chunks (``code`` turns a :func:`forward` list into one chunk per entry).
@@ -441,15 +509,17 @@ def best_depth(
     The shallowest depth is coded whole; a deeper one only re-codes what changes, the coarse
     band split further: each level's chunk of the context coder is coded on its own (its blocks
     hold one level), so the finer chunks are the same.  The result is exactly the coding of
-    ``forward(data, depth, axes, filters[:depth])``.
+    ``forward(data, depth, axes, filters[:depth])``.  ``lifted``: as :func:`forward` takes it.
     """
     ordered = sorted(set(depths))
     first = ordered[0]
-    coeffs = forward(data, first, axes, filters[:first])
+    axes = tuple(axes)
+    coeffs = forward(data, first, axes, filters[:first], lifted=lifted)
     chunks = code(coeffs)
     best, best_size, chosen = chunks, sum(map(len, chunks)), first
     for depth in ordered[1:]:
-        part = code(forward(coeffs[0], depth - first, axes, filters[first:depth]))
+        names = _filters(filters[first:depth], depth - first)
+        part = code(_forward(coeffs[0], names, axes, lifted, tuple(filters[:first])))
         candidate = [*part, *chunks[1:]]
         size = sum(map(len, candidate))
         if size < best_size:
@@ -518,9 +588,9 @@ def choose_depth(data: np.ndarray, candidates: Sequence[str] = CANDIDATE_SETS[0]
     arr = np.asarray(data).astype(np.int64)
     if min(arr.shape[:2]) < 2:
         return []
-    memo: dict[tuple[tuple[str, ...], str], tuple[float, np.ndarray]] = {}
+    memo: _Memo = {}
     chosen = _choose(arr, 1, (0, 1), candidates, memo)
-    detail_bits, coarse = memo[((), chosen[0])]
+    detail_bits, coarse, _ = memo[((), chosen[0])]
     one_level = detail_bits + _predicted_bits(coarse)
     return chosen if one_level < DEPTH_GAIN * _predicted_bits(arr) else []
 

@@ -60,9 +60,12 @@ def encode_lossless_image(arr: np.ndarray, level: int | None, effort: str = "def
         raise InvalidParameter(msg)
     # First-order entropy only guides the choice of filters (the context coder ranks them
     # differently), so code the choice with and without the closed bspline2 and keep the smaller.
-    choices = _lossless.filter_choices(data, level)
+    # The choice lifts every level of each choice: kept, they are not lifted again to be coded
+    # (a level two choices share is taken by the first, and lifted again for the second).
+    lifted: _lossless.Lifted = {}
+    choices = _lossless.filter_choices(data, level, lifted=lifted)
     bundles = [
-        _coded_by_depth(arr, data, dtype, colour, level, lifting, search=search)
+        _coded_by_depth(arr, data, dtype, colour, level, lifting, search=search, lifted=lifted)
         for lifting in choices
     ]
     return min(bundles, key=len)
@@ -97,9 +100,11 @@ def _coded_by_depth(
     level: int,
     lifting: list[str],
     search: bool = False,
+    lifted: _lossless.Lifted | None = None,
 ) -> bytes:
     """The bundle of ``data`` lifted with ``lifting`` by the context coder, at the depth (of
-    ``LOSSLESS_DEPTHS`` up to ``level`` when ``search``) that codes smallest."""
+    ``LOSSLESS_DEPTHS`` up to ``level`` when ``search``) that codes smallest; ``lifted``, the
+    steps :func:`wavecore.lossless.filter_choices` kept."""
     coder = get_coder({"id": DEFAULT_CODER})
     coded: list[dict[str, Any]] = []
 
@@ -110,7 +115,7 @@ def _coded_by_depth(
 
     # No level given: the depth that codes smallest (wavecore.lossless.LOSSLESS_DEPTHS).
     depths = tuple(d for d in _lossless.LOSSLESS_DEPTHS if d <= level) if search else ()
-    level, chunks = _lossless.best_depth(data, lifting, code, depths or (level,))
+    level, chunks = _lossless.best_depth(data, lifting, code, depths or (level,), lifted=lifted)
     lifting = lifting[:level]
     return _lossless_bundle(arr, dtype, colour, level, lifting, coded[0], chunks)
 
