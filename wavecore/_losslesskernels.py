@@ -51,7 +51,6 @@ INPUTS = 4  # three models and a bias
 MIX_SETS = (
     ORIENTS * DECISIONS + ORIENTS
 ) * C_CLASSES  # value decisions, then the sign per orientation
-SIGN_SETS = ORIENTS * DECISIONS * C_CLASSES
 WEIGHT_INIT = 22000  # about a third of 1 << 16 for each model, nothing for the bias
 LEARNING = 14
 
@@ -459,11 +458,6 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                 qx = _qlog(x, X_CLASSES - 1)
                 qe = _qlog(e, X_CLASSES - 1)
                 qc = min(qs >> 2, C_CLASSES - 1)
-                # each model's decisions side by side: a value's decisions share cache lines
-                b1 = M1_BASE + (orient * S_CLASSES + qs) * DECISIONS
-                b2 = M2_BASE + ((orient * X_CLASSES + qx) * C_CLASSES + qc) * DECISIONS
-                b3 = M3_BASE + ((orient * X_CLASSES + qe) * C_CLASSES + qn) * DECISIONS
-                wb = (orient * C_CLASSES + qc) * DECISIONS
                 value = np.int64(0)
                 if not decoding:
                     value = np.int64(values[at]) - pred
@@ -472,10 +466,10 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                 klass = _bit_length(magnitude)
                 k = 0
                 for k in range(0, MAX_LENGTH + 1):
-                    dk = min(k, UNARY_LAST)
-                    c1 = b1 + dk
-                    c2 = b2 + dk
-                    c3 = b3 + dk
+                    ob = orient * DECISIONS + min(k, UNARY_LAST)
+                    c1 = M1_BASE + ob * S_CLASSES + qs
+                    c2 = M2_BASE + (ob * X_CLASSES + qx) * C_CLASSES + qc
+                    c3 = M3_BASE + (ob * X_CLASSES + qe) * C_CLASSES + qn
                     more = 1 if klass > k else 0
                     x1, x2, xc, pos, more = _mixed(
                         x1,
@@ -486,7 +480,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                         data,
                         probs,
                         weights,
-                        wb + dk,
+                        ob * C_CLASSES + qc,
                         c1,
                         c2,
                         c3,
@@ -515,9 +509,10 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                             dec = MANT0 + min(klass - 2, 9)
                         else:
                             dec = MANT1 + min(klass - 3, 9)
-                        c1 = b1 + dec
-                        c2 = b2 + dec
-                        c3 = b3 + dec
+                        ob = orient * DECISIONS + dec
+                        c1 = M1_BASE + ob * S_CLASSES + qs
+                        c2 = M2_BASE + (ob * X_CLASSES + qx) * C_CLASSES + qc
+                        c3 = M3_BASE + (ob * X_CLASSES + qe) * C_CLASSES + qn
                         x1, x2, xc, pos, bit = _mixed(
                             x1,
                             x2,
@@ -527,7 +522,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                             data,
                             probs,
                             weights,
-                            wb + dec,
+                            ob * C_CLASSES + qc,
                             c1,
                             c2,
                             c3,
@@ -569,7 +564,7 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                     data,
                     probs,
                     weights,
-                    SIGN_SETS + orient * C_CLASSES + qc,
+                    (ORIENTS * DECISIONS + orient) * C_CLASSES + qc,
                     c1,
                     c2,
                     c1,
