@@ -166,7 +166,7 @@ def _update(models, ctx, bit):
     """A model's probability of a 1 (16 bits, above 4 bits of count) moves towards the bit by
     ``2**-min(count + 1, RATE_LIMIT)``: fast at first, then steadier."""
     ctx = U(ctx)
-    model = np.int64(models[ctx])
+    model = models[ctx]
     n = model & 15
     p = model >> 4
     shift = min(n + 1, RATE_LIMIT)
