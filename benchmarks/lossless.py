@@ -307,9 +307,9 @@ def section(rows: list[dict[str, Any]]) -> str:
             "from the decoded picture; a region decodes the whole picture and crops it, and "
             "damage loses a whole level.  Each level is coded in stripes of 192 rows or more, "
             "in parallel.  It is not the default: it takes 1.05–1.18× the default's wall time "
-            "and 1.09–1.10× its CPU time (two runs of 2026-11-28 21:44–21:48 UTC at load "
-            "2.2–2.4, interleaved with the code before that day's speed-ups, which took "
-            "1.43–1.45× and 1.38–1.40×; the ratios are of one process's runs).",
+            "and 1.09–1.17× its CPU time (three runs of 2026-11-28 21:44–21:56 UTC at load "
+            "1.0–2.4, interleaved with the code before that day's speed-ups, which took "
+            "1.26–1.45× and 1.38–1.40×; the ratios are of one process's runs).",
             END,
         ]
     )
