@@ -301,13 +301,15 @@ def section(rows: list[dict[str, Any]]) -> str:
             "encoder codes the picture itself, predicted by JPEG XL's weighted predictor with "
             "LOCO-I's median edge detector as a fifth sub-predictor, unless one lifting level "
             "has a first-order entropy under 0.9 × the picture's "
-            "(`wavecore.lossless.choose_depth`): integer Haar wins one level of `moon`.  "
+            "(`wavecore.lossless.choose_depth`, which asks a sample of a tall picture's rows "
+            "first): integer Haar wins one level of `moon`.  "
             "`decode(level=k)` of such a bundle coded with fewer levels lifts the thumbnail "
             "from the decoded picture; a region decodes the whole picture and crops it, and "
             "damage loses a whole level.  Each level is coded in stripes of 192 rows or more, "
-            "in parallel.  It is not the default: it takes 1.2–1.4× the default's wall time "
-            "and 1.3–1.4× its CPU time, and in wall time it is only about as fast as PNG "
-            "(0.90–1.02× in the runs of 2026-11-28).",
+            "in parallel.  It is not the default: it takes 1.05–1.18× the default's wall time "
+            "and 1.09–1.17× its CPU time (three runs of 2026-11-28 21:44–21:56 UTC at load "
+            "1.0–2.4, interleaved with the code before that day's speed-ups, which took "
+            "1.26–1.45× and 1.38–1.40×; the ratios are of one process's runs).",
             END,
         ]
     )

@@ -128,3 +128,24 @@ def test_max_effort_bundles_name_the_context_coders_version_5() -> None:
     assert np.array_equal(wavecore.decode(bundle), image)
     region = (slice(5, 30), slice(3, 20))
     assert np.array_equal(wavecore.decode(bundle, region=region), image[region])
+
+
+def test_large_negative_parents_round_trip() -> None:
+    """Model 2 classes a detail by its parents' signed sum: sums below -4096 (16-bit pictures
+    at two levels or more) indexed outside the class table and crashed the process; they take
+    the top class now, and sums in (-4096, 0) keep the class every version-5 bundle used."""
+    rng = np.random.default_rng(0)
+    steps = rng.integers(-50, 51, (128, 96))
+    image = (np.cumsum(np.cumsum(steps, 0), 1) % 65536).astype(np.uint16)
+    coeffs = lossless.forward(image.astype(np.int64), 4)
+    assert 4 * int(coeffs[1][0].min()) < -4096  # the case: a parent sum far below -4096
+    bundle = wavecore.encode_image(image, lossless=True, effort="max", level=4)
+    assert np.array_equal(wavecore.decode(bundle), image)
+    # the classes of negative sums, as the compiled kernel gives them
+    from wavecore import _losslesskernels as kernels
+
+    table = kernels.QLOG
+    for x in (-1, -100, -3000, -4096):
+        assert kernels._parent_class(x, 15) == min(int(table[x + 4096]), 15)
+    assert kernels._parent_class(-4097, 15) == kernels._parent_class(-(10**9), 15) == 15
+    assert kernels._parent_class(37, 15) == kernels._qlog(37, 15)

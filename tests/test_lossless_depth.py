@@ -135,3 +135,16 @@ def test_kept_lifting_steps_give_the_same_decomposition() -> None:
     fresh = _bands(lossless.forward(data, 2, (0, 1), chosen[:2]))
     kept = _bands(lossless.forward(data, 2, (0, 1), chosen[:2], lifted=partial))
     assert all(np.array_equal(x, y) for x, y in zip(fresh, kept, strict=True))
+
+
+@pytest.mark.parametrize("repeated", [False, True])
+def test_max_effort_depth_of_a_tall_picture_asks_a_sample_first(repeated: bool) -> None:
+    """A picture of 2 × SAMPLE_ROWS × SAMPLE_EVERY rows or more is first judged on a sample:
+    the answer is the whole picture's, for a texture (no) and a 2x enlargement (yes, Haar)."""
+    rows = 2 * lossless.SAMPLE_ROWS * lossless.SAMPLE_EVERY
+    image = _texture((rows, 48), 7).astype(np.int64)
+    if repeated:
+        image = np.kron(image[: rows // 2, :24], np.ones((2, 2), dtype=np.int64))
+    whole = lossless._one_level_pays(image, lossless.CANDIDATE_SETS[0])
+    assert whole == (["haar"] if repeated else [])
+    assert lossless.choose_depth(image) == whole

@@ -105,20 +105,25 @@ QLOG = np.array(
 SQUASH = np.array([_squash_py(d) for d in range(-2048, 2048)], dtype=np.int64)
 
 
+#: Array indices as unsigned integers: numba then skips its wrap-around of negative indices
+#: (a test and an add per access, which the hot loops make hundreds of times per value).
+U = np.uint64
+
+
 @njit(nogil=True, cache=True, inline="always")
 def _squash(d):
     if d > 2047:
         d = 2047
     if d < -2047:
         d = -2047
-    return SQUASH[d + 2048]
+    return SQUASH[U(d + 2048)]
 
 
 @njit(nogil=True, cache=True, inline="always")
 def _qlog(x, top):
     """A class per half octave of ``x >= 0`` (0, 1, 2, 3, 4-5, 6-7, 8-11, …), at most ``top``."""
     if x < QLOG_SIZE:
-        return min(QLOG[x], top)
+        return min(QLOG[U(x)], top)
     if x < 4:
         k = x
     else:
@@ -132,9 +137,23 @@ def _qlog(x, top):
 
 
 @njit(nogil=True, cache=True, inline="always")
+def _parent_class(x, top):
+    """Model 2's class of a detail value from its parent band: ``x`` sums the parent's signed
+    values (not their magnitudes), as version 5 has always done; a negative sum takes the
+    class that numba's wrap-around of the negative index gave, ``QLOG[x + 4096]`` (how every
+    version-5 bundle was coded), and a sum below -4096, which read outside the table, the top
+    class (see ``docs/bundle-format.md``)."""
+    if x >= 0:
+        return _qlog(x, top)
+    if x >= -QLOG_SIZE:
+        return min(QLOG[U(x + QLOG_SIZE)], top)
+    return np.int64(top)
+
+
+@njit(nogil=True, cache=True, inline="always")
 def _bit_length(value):
     if value < QLOG_SIZE:
-        return BITLEN[value]
+        return BITLEN[U(value)]
     n = np.int64(0)
     while value:
         value >>= 1
@@ -146,6 +165,7 @@ def _bit_length(value):
 def _update(models, ctx, bit):
     """A model's probability of a 1 (16 bits, above 4 bits of count) moves towards the bit by
     ``2**-min(count + 1, RATE_LIMIT)``: fast at first, then steadier."""
+    ctx = U(ctx)
     model = models[ctx]
     n = model & 15
     p = model >> 4
@@ -171,10 +191,10 @@ def _code(x1, x2, x, pos, out, data, p, bit, decoding):
         x1 = xmid + 1
     while ((x1 ^ x2) & 0xFF000000) == 0:
         if decoding:
-            byte = np.int64(data[pos]) if pos < data.size else np.int64(0)
+            byte = np.int64(data[U(pos)]) if pos < data.size else np.int64(0)
             x = ((x << 8) & 0xFFFFFFFF) | byte
         elif pos < out.size:
-            out[pos] = (x2 >> 24) & 0xFF
+            out[U(pos)] = (x2 >> 24) & 0xFF
         pos += 1
         x1 = (x1 << 8) & 0xFFFFFFFF
         x2 = ((x2 << 8) & 0xFFFFFFFF) | 255
@@ -184,18 +204,19 @@ def _code(x1, x2, x, pos, out, data, p, bit, decoding):
 @njit(nogil=True, cache=True, inline="always")
 def _mixed(x1, x2, x, pos, out, data, probs, weights, wset, c1, c2, c3, bit, decoding):
     """A bit under the logistic mix of three models; every model and the mixer learn it."""
-    s1 = STRETCH[probs[c1] >> 8]
-    s2 = STRETCH[probs[c2] >> 8]
-    s3 = STRETCH[probs[c3] >> 8]
-    w = wset * INPUTS
-    dot = weights[w] * s1 + weights[w + 1] * s2 + weights[w + 2] * s3 + weights[w + 3] * 256
+    s1 = STRETCH[U(probs[U(c1)] >> 8)]
+    s2 = STRETCH[U(probs[U(c2)] >> 8)]
+    s3 = STRETCH[U(probs[U(c3)] >> 8)]
+    w = U(wset * INPUTS)
+    w1, w2, w3 = w + U(1), w + U(2), w + U(3)
+    dot = weights[w] * s1 + weights[w1] * s2 + weights[w2] * s3 + weights[w3] * 256
     p = _squash(dot >> 16)
     x1, x2, x, pos, bit = _code(x1, x2, x, pos, out, data, p, bit, decoding)
     err = ((bit << 12) - p) * LEARNING
     weights[w] += (s1 * err) >> 16
-    weights[w + 1] += (s2 * err) >> 16
-    weights[w + 2] += (s3 * err) >> 16
-    weights[w + 3] += (256 * err) >> 16
+    weights[w1] += (s2 * err) >> 16
+    weights[w2] += (s3 * err) >> 16
+    weights[w3] += (256 * err) >> 16
     _update(probs, c1, bit)
     _update(probs, c2, bit)
     _update(probs, c3, bit)
@@ -204,7 +225,7 @@ def _mixed(x1, x2, x, pos, out, data, probs, weights, wset, c1, c2, c3, bit, dec
 
 @njit(nogil=True, cache=True, inline="always")
 def _single(x1, x2, x, pos, out, data, probs, ctx, bit, decoding):
-    p = max(1, min(4095, probs[ctx] >> 8))
+    p = max(1, min(4095, probs[U(ctx)] >> 8))
     x1, x2, x, pos, bit = _code(x1, x2, x, pos, out, data, p, bit, decoding)
     _update(probs, ctx, bit)
     return x1, x2, x, pos, bit
@@ -215,7 +236,7 @@ def _at(values, off, rows, cols, i, j):
     """``values[off + i * cols + j]``, 0 outside the band or without one (``off < 0``)."""
     if off < 0 or i < 0 or j < 0 or i >= rows or j >= cols:
         return np.int64(0)
-    return np.int64(values[off + i * cols + j])
+    return np.int64(values[U(off + i * cols + j)])
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -237,7 +258,7 @@ def _error_weight(x, maxweight):
     shift = _bit_length(x + 1) - 1 - 5
     if shift < 0:
         shift = 0
-    return 4 + ((maxweight * DIVLOOKUP[x >> shift]) >> shift)
+    return 4 + ((maxweight * DIVLOOKUP[U(x >> shift)]) >> shift)
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -248,41 +269,41 @@ def _wp_predict(values, off, rows, cols, i, j, te, pe, subs, wts):
     sub-predictions.  ``te`` holds true errors, ``pe`` the sub-predictors' errors (4 planes)."""
     at = i * cols + j
     if j > 0:
-        w = np.int64(values[off + at - 1])
+        w = np.int64(values[U(off + at - 1)])
     elif i > 0:
-        w = np.int64(values[off + at - cols])
+        w = np.int64(values[U(off + at - cols)])
     else:
         w = np.int64(0)
-    n = np.int64(values[off + at - cols]) if i > 0 else w
-    nw = np.int64(values[off + at - cols - 1]) if i > 0 and j > 0 else n
-    ne = np.int64(values[off + at - cols + 1]) if i > 0 and j + 1 < cols else n
+    n = np.int64(values[U(off + at - cols)]) if i > 0 else w
+    nw = np.int64(values[U(off + at - cols - 1)]) if i > 0 and j > 0 else n
+    ne = np.int64(values[U(off + at - cols + 1)]) if i > 0 and j + 1 < cols else n
     # te and pe keep two rows: this one and the one above
     cur = (i & 1) * cols + j
     prv = ((i + 1) & 1) * cols + j
-    te_w = te[cur - 1] if j > 0 else np.int64(0)
-    te_n = te[prv] if i > 0 else np.int64(0)
-    te_nw = te[prv - 1] if i > 0 and j > 0 else te_n
-    te_ne = te[prv + 1] if i > 0 and j + 1 < cols else te_n
+    te_w = te[U(cur - 1)] if j > 0 else np.int64(0)
+    te_n = te[U(prv)] if i > 0 else np.int64(0)
+    te_nw = te[U(prv - 1)] if i > 0 and j > 0 else te_n
+    te_ne = te[U(prv + 1)] if i > 0 and j + 1 < cols else te_n
     total = np.int64(0)
     # the sub-predictors' errors, WP_N per position: at N, NW, NE (N again at the ends), W, WW
     up = prv * WP_N
     if i > 0 and 1 < j < cols - 1:  # the common case, without a test per neighbour
         for k in range(WP_N):
-            e = pe[up + k] + pe[up - WP_N + k] + pe[up + WP_N + k]
-            e += pe[(cur - 1) * WP_N + k] + pe[(cur - 2) * WP_N + k]
+            e = pe[U(up + k)] + pe[U(up - WP_N + k)] + pe[U(up + WP_N + k)]
+            e += pe[U((cur - 1) * WP_N + k)] + pe[U((cur - 2) * WP_N + k)]
             wts[k] = _error_weight(e, WP_W[k])
             total += wts[k]
     else:
         for k in range(WP_N):
             e = np.int64(0)
             if i > 0:
-                e += pe[up + k]
-                e += pe[up - WP_N + k] if j > 0 else pe[up + k]
-                e += pe[up + WP_N + k] if j + 1 < cols else pe[up + k]
+                e += pe[U(up + k)]
+                e += pe[U(up - WP_N + k)] if j > 0 else pe[U(up + k)]
+                e += pe[U(up + WP_N + k)] if j + 1 < cols else pe[U(up + k)]
             if j > 0:
-                e += pe[(cur - 1) * WP_N + k]
+                e += pe[U((cur - 1) * WP_N + k)]
             if j > 1:
-                e += pe[(cur - 2) * WP_N + k]
+                e += pe[U((cur - 2) * WP_N + k)]
             wts[k] = _error_weight(e, WP_W[k])
             total += wts[k]
     n8, w8, nw8, ne8 = n << 3, w << 3, nw << 3, ne << 3
@@ -305,7 +326,7 @@ def _wp_predict(values, off, rows, cols, i, j, te, pe, subs, wts):
     acc = (wsum >> 1) - 1
     for k in range(WP_N):
         acc += subs[k] * wts[k]
-    pred = (acc * DIVLOOKUP[wsum - 1]) >> 24
+    pred = (acc * DIVLOOKUP[U(wsum - 1)]) >> 24
     if ((te_n ^ te_w) | (te_n ^ te_nw)) <= 0:
         hi = max(w8, max(ne8, n8))
         lo = min(w8, min(ne8, n8))
@@ -324,9 +345,9 @@ def _wp_predict(values, off, rows, cols, i, j, te, pe, subs, wts):
 def _wp_update(value, at, pred8, subs, te, pe):
     """Record the true error and the sub-predictors' errors at ``at`` (of the two rows kept)."""
     v8 = value << 3
-    te[at] = pred8 - v8
+    te[U(at)] = pred8 - v8
     for k in range(WP_N):
-        pe[at * WP_N + k] = (abs(subs[k] - v8) + 3) >> 3
+        pe[U(at * WP_N + k)] = (abs(subs[k] - v8) + 3) >> 3
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -335,10 +356,10 @@ def _neighbourhood(mags, off, rows, cols, i, j):
     at = off + i * cols + j
     if i >= 2 and 2 <= j < cols - 1:  # the common case, without a test per neighbour
         up = at - cols
-        a = np.int64(mags[at - 1])
-        b = np.int64(mags[up])
-        s = 4 * (a + b) + 2 * (np.int64(mags[up - 1]) + np.int64(mags[up + 1]))
-        s += np.int64(mags[at - 2]) + np.int64(mags[up - cols])
+        a = np.int64(mags[U(at - 1)])
+        b = np.int64(mags[U(up)])
+        s = 4 * (a + b) + 2 * (np.int64(mags[U(up - 1)]) + np.int64(mags[U(up + 1)]))
+        s += np.int64(mags[U(at - 2)]) + np.int64(mags[U(up - cols)])
         return s, a, b
     a = _at(mags, off, rows, cols, i, j - 1)
     b = _at(mags, off, rows, cols, i - 1, j)
@@ -455,12 +476,12 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                     e += 4 * abs(_at(values, luma, rows, cols, i, j))
                     qn = min(_qlog(a + b, 2 * C_CLASSES) >> 1, C_CLASSES - 1)
                 qs = _qlog(s, S_CLASSES - 1)
-                qx = _qlog(x, X_CLASSES - 1)
+                qx = _parent_class(x, X_CLASSES - 1) if not approx else _qlog(x, X_CLASSES - 1)
                 qe = _qlog(e, X_CLASSES - 1)
                 qc = min(qs >> 2, C_CLASSES - 1)
                 value = np.int64(0)
                 if not decoding:
-                    value = np.int64(values[at]) - pred
+                    value = np.int64(values[U(at)]) - pred
                 magnitude = abs(value)
                 # the zero flag, then the bit length in unary
                 klass = _bit_length(magnitude)
@@ -492,9 +513,9 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                 if decoding:
                     klass = k
                 if klass == 0:
-                    mags[at] = 0
+                    mags[U(at)] = 0
                     if decoding:
-                        values[at] = pred
+                        values[U(at)] = pred
                     if approx:
                         _wp_update(pred, (i & 1) * cols + j, pred8, subs, te, pe)
                     continue
@@ -542,8 +563,8 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                     sw = _sgn(wv - nwv)
                     sn = _sgn(nv - nwv)
                     sp = _sgn(pred8 - 8 * pred)  # which way the prediction was rounded
-                    s1 = _sgn(te[(i & 1) * cols + j - 1]) if j > 0 else np.int64(0)
-                    s2 = _sgn(te[((i + 1) & 1) * cols + j]) if i > 0 else np.int64(0)
+                    s1 = _sgn(te[U((i & 1) * cols + j - 1)]) if j > 0 else np.int64(0)
+                    s2 = _sgn(te[U(((i + 1) & 1) * cols + j)]) if i > 0 else np.int64(0)
                     s3 = _sgn(big)
                 else:
                     sw = _sgn(_at(values, off, rows, cols, i, j - 1))
@@ -571,19 +592,19 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
                     negative,
                     decoding,
                 )
-                mags[at] = magnitude
+                mags[U(at)] = magnitude
                 if decoding:
                     value = pred - magnitude if negative else pred + magnitude
                     if value < INT32_MIN or value > INT32_MAX:
                         return np.int64(-1)  # no coder writes this: the stream is damaged
-                    values[at] = value
+                    values[U(at)] = value
                 if approx:
-                    _wp_update(np.int64(values[at]), (i & 1) * cols + j, pred8, subs, te, pe)
+                    _wp_update(np.int64(values[U(at)]), (i & 1) * cols + j, pred8, subs, te, pe)
     if not decoding:
         # flush: the top bytes of x1, so that any continuation decodes inside [x1, x2]
         for _ in range(4):
             if pos < out.size:
-                out[pos] = (x1 >> 24) & 0xFF
+                out[U(pos)] = (x1 >> 24) & 0xFF
             pos += 1
             x1 = (x1 << 8) & 0xFFFFFFFF
     return pos

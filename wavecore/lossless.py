@@ -133,6 +133,16 @@ LOSSLESS_DEPTHS = (2, 3)
 #: astronaut, where no level codes 1.8 %, 1.0 %, 9.0 % and 0.8 % smaller; and 0.626 on moon,
 #: a pixel-repeated enlargement, where one integer Haar level codes 29 % smaller.
 DEPTH_GAIN = 0.9
+#: :func:`choose_depth` first asks its question of a sample of a tall picture: blocks of
+#: ``SAMPLE_ROWS`` rows (even, so that a 2× enlargement keeps its pairs), one every
+#: ``SAMPLE_EVERY`` blocks, stacked.  A "no" there is final (the lifting and the residual
+#: counts of the whole picture were a tenth of the lossless coder's encode + decode CPU);
+#: a "yes" is confirmed on the whole picture, so that the filter chosen is the whole
+#: picture's.  Entropy ratios (one level / none) of the sample and of the whole picture, far
+#: from 0.9 either way: camera 1.010 and 0.994, coins 1.001 and 0.987, brick 1.057 and 1.034,
+#: astronaut 0.984 and 0.972, moon 0.628 and 0.626 (astronaut's choice 22 -> 7 ms of CPU).
+SAMPLE_ROWS = 32
+SAMPLE_EVERY = 4
 
 
 #: The weights of :func:`predict_chroma`, in eighths: Cr is predicted from Cb as ``w / 8 · Cb``.
@@ -588,6 +598,17 @@ def choose_depth(data: np.ndarray, candidates: Sequence[str] = CANDIDATE_SETS[0]
     arr = np.asarray(data).astype(np.int64)
     if min(arr.shape[:2]) < 2:
         return []
+    step = SAMPLE_ROWS * SAMPLE_EVERY
+    if arr.shape[0] >= 2 * step:  # tall: a "no" of the sample is final (SAMPLE_ROWS)
+        blocks = [arr[r : r + SAMPLE_ROWS] for r in range(0, arr.shape[0] - SAMPLE_ROWS + 1, step)]
+        if not _one_level_pays(np.concatenate(blocks), candidates):
+            return []
+    return _one_level_pays(arr, candidates)
+
+
+def _one_level_pays(arr: np.ndarray, candidates: Sequence[str]) -> list[str]:
+    """:func:`choose_depth`'s question on ``arr`` (``int64``): the one level's filters, or
+    ``[]`` when its entropy is not under :data:`DEPTH_GAIN` × the picture's."""
     memo: _Memo = {}
     chosen = _choose(arr, 1, (0, 1), candidates, memo)
     detail_bits, coarse, _ = memo[((), chosen[0])]
