@@ -306,10 +306,10 @@ def section(rows: list[dict[str, Any]]) -> str:
             "`decode(level=k)` of such a bundle coded with fewer levels lifts the thumbnail "
             "from the decoded picture; a region decodes the whole picture and crops it, and "
             "damage loses a whole level.  Each level is coded in stripes of 192 rows or more, "
-            "in parallel.  It is not the default: it takes 1.05–1.18× the default's wall time "
-            "and 1.09–1.17× its CPU time (three runs of 2026-11-28 21:44–21:56 UTC at load "
-            "1.0–2.4, interleaved with the code before that day's speed-ups, which took "
-            "1.26–1.45× and 1.38–1.40×; the ratios are of one process's runs).",
+            "in parallel.  It is not the default: it takes 1.24–1.33× the default's wall time "
+            "and 1.37–1.44× its CPU time (three runs of 2026-11-28 22:18–22:20 UTC, load "
+            "0.8–1.0; its own kernels got 10–20 % faster that day, the default's block coder "
+            "and lifting faster still).",
             END,
         ]
     )

@@ -765,7 +765,7 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument(
         "--effort",
         help="images with --lossless: default (faster than PNG) or max (a few %% smaller, "
-        "about 1.1-1.2x the CPU time)",
+        "about 1.4x the CPU time)",
     )
     enc.add_argument(
         "--kind",

@@ -109,7 +109,7 @@ async def encode_image(
         Literal["default", "max"],
         Form(
             description="With lossless: default (faster than PNG) or max (the lossless coder: "
-            "a few % smaller, about 1.1-1.2x the CPU time)"
+            "a few % smaller, about 1.4x the CPU time)"
         ),
     ] = "default",
 ) -> Response:

@@ -131,7 +131,7 @@ def encode_image(
         ``"default"``: the block context coder, faster than PNG, with block-level regions and
         damage.  ``"max"``: the lossless coder of :mod:`wavecore.losslesscoder` (JPEG XL's
         weighted predictor, three mixed models per bit), a few per cent smaller (smaller than
-        JPEG XL e7 on grey and WebP lossless on colour) at about 1.1–1.2× the encode + decode
+        JPEG XL e7 on grey and WebP lossless on colour) at about 1.4× the encode + decode
         CPU time; ``level=None`` then codes 0 or 1 levels, a region decodes the whole picture and
         crops it, and damage loses a whole level.  Either decodes with :func:`decode`.
 

@@ -33,7 +33,7 @@ def encode_lossless_image(arr: np.ndarray, level: int | None, effort: str = "def
     level : int or None
         Levels of integer lifting; ``None`` picks the depth that codes smallest.
     effort : {"default", "max"}
-        ``"max"`` codes with the lossless coder, a few per cent smaller at about 1.1–1.2× the
+        ``"max"`` codes with the lossless coder, a few per cent smaller at about 1.4× the
         CPU time.
 
     Returns
@@ -75,7 +75,7 @@ def _encode_at_max_effort(
     arr: np.ndarray, data: np.ndarray, dtype: str, colour: str, level: int | None, deepest: int
 ) -> bytes:
     """``effort="max"``: the lossless coder (:mod:`wavecore.losslesscoder`), a few per cent
-    smaller than the default path at about 1.1–1.2× its encode + decode CPU time."""
+    smaller than the default path at about 1.4× its encode + decode CPU time."""
     if level is None:  # none (prediction) or one level, by entropy (wavecore.lossless)
         lifting = _lossless.choose_depth(data)
     elif level > deepest:
