@@ -413,6 +413,18 @@ class _LossyEncoder:
             self._errors_at.clear()
             self.output = self.assembled = None
 
+    def dead_zone(self, step: float, refine: int = 0) -> tuple[list[Any], dict[str, Any]]:
+        """The kept coefficients quantized at ``step`` by ``quantize_bands`` (``refine``
+        closed-loop iterations), uncached and without RDOQ."""
+        return quantize_bands(
+            self.kept,
+            step,
+            wavelet=self.plan.wavelet,
+            boundary=list(self.plan.boundary),
+            axes=self.plan.axes,
+            refine=refine,
+        )
+
     def quantize(self, step: float, closed: bool = True) -> tuple[list[Any], dict[str, Any]]:
         closed = self._closed(closed)
         key = (step, self.kept_fraction)
@@ -446,14 +458,7 @@ class _LossyEncoder:
                 q, params = new_fit.quantize(step)
                 self.closed_loops += 1
             else:
-                q, params = quantize_bands(
-                    self.kept,
-                    step,
-                    wavelet=self.plan.wavelet,
-                    boundary=list(self.plan.boundary),
-                    axes=self.plan.axes,
-                    refine=REFINE_ITERATIONS if closed else 0,
-                )
+                q, params = self.dead_zone(step, REFINE_ITERATIONS if closed else 0)
                 self.closed_loops += closed
             if self.rdoq_active():
                 q = rdoq.choose_indices(self.kept, q, params)
@@ -1401,14 +1406,7 @@ def _sampled_ratio_at(encoder: _LossyEncoder, step: float, ratio: float) -> floa
     # blocks to those entropies is then RDOQ's coder over the dead zone's estimate.
     alone = encoder.rdoq_active() and rdoq.METHOD == "fast"
     if alone:
-        qcoeffs, qparams = quantize_bands(
-            encoder.kept,
-            step,
-            wavelet=encoder.plan.wavelet,
-            boundary=list(encoder.plan.boundary),
-            axes=encoder.plan.axes,
-            refine=0,
-        )
+        qcoeffs, qparams = encoder.dead_zone(step)
     else:
         qcoeffs, qparams = encoder.quantize(step, closed=False)
     levels = as_levels(qcoeffs)
