@@ -186,6 +186,15 @@ def test_coarse_levels_have_the_extent_of_the_original() -> None:
         decode(bundle, level=5)
 
 
+@pytest.mark.parametrize("levels", [0, 1])
+def test_a_shallow_curve_asked_for_a_deeper_level_is_refused_clearly(levels: int) -> None:
+    # The lossless thumbnail rule for 0- or 1-level pictures once asked a curve's 1-D shape
+    # for two axes: decode(level=2) of a 1-level curve raised a bare IndexError.
+    bundle = wavecore.encode_curve(np.sin(np.linspace(0.0, 6.0, 40)), level=levels)
+    with pytest.raises(InvalidParameter, match=f"deeper than the bundle's {levels} levels"):
+        decode(bundle, level=levels + 1)
+
+
 def test_coarse_level_is_the_transforms_coarse_approximation() -> None:
     image = smooth_image((128, 128))
     # The exact coarse band below is the paper's (wavedec2's default): encode with its filter.

@@ -166,10 +166,11 @@ def decode(
         level = drop_levels
     parsed, plan = _open(bundle)
     if (
-        plan.levels <= 1
-        and plan.levels < level <= _lossless.deepest(plan.shape)
-        and plan.transform.lossless
+        plan.transform.lossless
         and (parsed.header.get("cparams") or {}).get("version") == LOSSLESS_VERSION
+        and len(plan.shape) >= 2  # only pictures: a curve's level is checked below
+        and plan.levels <= 1
+        and plan.levels < level <= _lossless.deepest(plan.shape)
     ):
         # A bundle of the lossless coder (effort="max"), whose default depth is 0 or 1 levels:
         # the deeper thumbnail is lifted from the decoded picture (wavecore.lossless.coarser).
