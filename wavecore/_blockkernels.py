@@ -124,8 +124,9 @@ def _code_bit(low, rng, model, bit):
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _decode_bit(code, rng, pos, end, data, models, ctx):
-    model = models[ctx]
+def _split_bit(code, rng, model):
+    """The decoder's :func:`_code_bit`: the coder's ``code`` and ``rng`` (before
+    normalization), the context's model after the bit, and the bit."""
     p = model >> 8
     bound = (rng >> PROB_BITS) * p
     if code < bound:
@@ -135,13 +136,14 @@ def _decode_bit(code, rng, pos, end, data, models, ctx):
         code -= bound
         rng -= bound
         bit = 1
-    models[ctx] = _adapted(p, model & 0xFF, bit)
-    while rng < TOP:
-        rng <<= 8
-        byte = np.int64(data[pos]) if pos < end else np.int64(0)
-        pos += 1
-        code = ((code << 8) | byte) & MASK32
-    return code, rng, pos, bit
+    return code, rng, _adapted(p, model & 0xFF, bit), bit
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _shift_code(code, pos, end, data):
+    """The next byte of ``data[:end]`` (0 past its end) into ``code``."""
+    byte = np.int64(data[pos]) if pos < end else np.int64(0)
+    return ((code << 8) | byte) & MASK32, pos + 1
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -156,9 +158,7 @@ def _decode_raw(code, rng, pos, end, data, count):
         value = (value << 1) | bit
         while rng < TOP:
             rng <<= 8
-            byte = np.int64(data[pos]) if pos < end else np.int64(0)
-            pos += 1
-            code = ((code << 8) | byte) & MASK32
+            code, pos = _shift_code(code, pos, end, data)
     return code, rng, pos, value
 
 
@@ -464,7 +464,10 @@ def _decode_rows(
                     e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
                     e += 4 * _other_band(flat, y0, y0c, j)
                 ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
-                code, rng, pos, nonzero = _decode_bit(code, rng, pos, end, data, models, ctx)
+                code, rng, models[ctx], nonzero = _split_bit(code, rng, models[ctx])
+                while rng < TOP:
+                    rng <<= 8
+                    code, pos = _shift_code(code, pos, end, data)
                 if nonzero == 0:
                     if approx:
                         scratch[srow + j] = 0
@@ -473,15 +476,11 @@ def _decode_rows(
                 unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
                 klass = np.int64(1)
                 while True:
-                    code, rng, pos, more = _decode_bit(
-                        code,
-                        rng,
-                        pos,
-                        end,
-                        data,
-                        models,
-                        unary + min(klass - 1, UNARY_INDICES - 1),
-                    )
+                    at_ctx = unary + min(klass - 1, UNARY_INDICES - 1)
+                    code, rng, models[at_ctx], more = _split_bit(code, rng, models[at_ctx])
+                    while rng < TOP:
+                        rng <<= 8
+                        code, pos = _shift_code(code, pos, end, data)
                     if more == 0:
                         break
                     klass += 1
@@ -491,15 +490,11 @@ def _decode_rows(
                 top = 2 if below > 2 else below
                 magnitude = np.int64(1)
                 for position in range(top):
-                    code, rng, pos, bit = _decode_bit(
-                        code,
-                        rng,
-                        pos,
-                        end,
-                        data,
-                        models,
-                        mantissa + position * (MAX_CLASS + 1) + klass,
-                    )
+                    at_ctx = mantissa + position * (MAX_CLASS + 1) + klass
+                    code, rng, models[at_ctx], bit = _split_bit(code, rng, models[at_ctx])
+                    while rng < TOP:
+                        rng <<= 8
+                        code, pos = _shift_code(code, pos, end, data)
                     magnitude = (magnitude << 1) | bit
                 if below > top:
                     code, rng, pos, low_bits = _decode_raw(code, rng, pos, end, data, below - top)
@@ -510,9 +505,11 @@ def _decode_rows(
                         sw = _sign_of(flat[at - 1])
                     if i > r0:
                         sn = _sign_of(flat[at - cols])
-                code, rng, pos, negative = _decode_bit(
-                    code, rng, pos, end, data, models, sign_base + (sw + 1) * 3 + sn + 1
-                )
+                at_ctx = sign_base + (sw + 1) * 3 + sn + 1
+                code, rng, models[at_ctx], negative = _split_bit(code, rng, models[at_ctx])
+                while rng < TOP:
+                    rng <<= 8
+                    code, pos = _shift_code(code, pos, end, data)
                 if approx:
                     scratch[srow + j] = magnitude
                 result = prediction + (-magnitude if negative else magnitude)
@@ -676,7 +673,10 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch, flags)
                     ctx = _tile_context(
                         flags, base, tr, tc, grid_cols, tiles_per_plane, block, planes, p
                     )
-                    code, rng, pos, flag = _decode_bit(code, rng, pos, end, data, models, ctx)
+                    code, rng, models[ctx], flag = _split_bit(code, rng, models[ctx])
+                    while rng < TOP:
+                        rng <<= 8
+                        code, pos = _shift_code(code, pos, end, data)
                     flags[base + tr * grid_cols + tc] = flag
         if approx:
             code, rng, pos, bad = _decode_rows(
