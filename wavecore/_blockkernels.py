@@ -72,6 +72,11 @@ BLOCK_FIELDS = 6
 #     while rng < TOP:
 #         rng <<= 8
 #         low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
+#
+# and each decoder site, the same way (``_split_bit``, ``data`` handed to ``_shift_code`` once
+# per byte read).  The decoder compiled to the same refcounts before and after (numba had
+# pruned them there): its gain came from ``_neighbour_sum`` instead, the common case of
+# ``_neighbours`` with the six values read at the call site.
 
 
 @njit(nogil=True, cache=True, inline="always")
