@@ -307,8 +307,8 @@ def section(rows: list[dict[str, Any]]) -> str:
             "from the decoded picture; a region decodes the whole picture and crops it, and "
             "damage loses a whole level.  Each level is coded in stripes of 192 rows or more, "
             "in parallel.  It is not the default: it takes 1.24–1.33× the default's wall time "
-            "and 1.37–1.44× its CPU time (three runs of 2026-11-28 22:18–22:20 UTC, load "
-            "0.8–1.0; its own kernels got 10–20 % faster that day, the default's block coder "
+            "and 1.36–1.44× its CPU time (four runs of 2026-11-28 22:18–23:12 UTC, load "
+            "0.8–1.1; its own kernels got 10–20 % faster that day, the default's block coder "
             "and lifting faster still).",
             END,
         ]
