@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import wavecore
-from wavecore.blockcoder import BLOCK_SIZE, decode_blocks, encode_blocks
+from wavecore.blockcoder import BLOCK_SIZE, block_lengths, code_blocks, decode_blocks, encode_blocks
 from wavecore.entropy import _encode_context, decode_levels, encode_levels
 from wavecore.errors import BundleError
 
@@ -265,3 +265,22 @@ def test_the_table_cache_keeps_small_layouts_only() -> None:
         assert decode_blocks(chunks, shapes, False, BLOCK_SIZE)[-1][0].shape == shapes[-1][0]
     info = blockcoder._cached_structure.cache_info()
     assert info.currsize == 1, info
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_known_blocks_are_taken_as_coded(channels: int) -> None:
+    """Blocks coded beforehand (the bpp sample's) make the very chunks a full coding makes,
+    band counts included; the known blocks' bytes are taken, not coded again."""
+    entries = _bands(11 + channels, (150, 97), channels, 3)
+    whole = encode_blocks(entries, True, 32)
+    _, regions = block_lengths(entries, True, 32, np.zeros(0, dtype=np.int64))
+    for chosen in (np.arange(1, len(regions), 3), np.arange(len(regions))):
+        known = code_blocks(entries, True, 32, chosen)
+        assert np.array_equal(known.lengths, block_lengths(entries, True, 32, chosen)[0])
+        assert encode_blocks(entries, True, 32, known) == whole
+        counted = [getattr(c, "band_counts", None) for c in encode_blocks(entries, True, 32, known)]
+        assert counted == [getattr(c, "band_counts", None) for c in whole]
+    # Known bytes are trusted: a known block's payload changed shows in the chunks.
+    known = code_blocks(entries, True, 32, np.array([len(regions) - 1]))
+    altered = known._replace(payload=known.payload ^ np.uint8(1))
+    assert encode_blocks(entries, True, 32, altered) != whole

@@ -51,3 +51,33 @@ def test_block_entropies_count_each_block(shape: tuple[int, int], channels: int 
     assert len(regions) > len(levels)  # several blocks in the fine levels
     found = ratecontrol._block_entropies(levels, regions)
     assert np.allclose(found, direct_entropies(levels, regions), rtol=1e-12, atol=1e-9)
+
+
+def test_grid_coding_at_the_sample_step_takes_the_sampled_blocks(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A grid's bpp sample whose own step predicts a fit is the full coding's step, and that
+    coding takes the sample's coded blocks: the same bundle as coding every block."""
+    from matplotlib import cbook
+
+    import wavecore
+
+    with cbook.get_sample_data("jacksboro_fault_dem.npz") as data:
+        grid = np.tile(np.asarray(data["elevation"]), (3, 3))
+    given: list[bool] = []
+    encode_levels = ratecontrol.encode_levels
+
+    def counted(qcoeffs: list, *, coder: str, known_blocks: object = None) -> object:
+        given.append(known_blocks is not None)
+        return encode_levels(qcoeffs, coder=coder, known_blocks=known_blocks)
+
+    monkeypatch.setattr(ratecontrol, "encode_levels", counted)
+    reused = wavecore.encode_grid(grid, bpp=2.0)
+    assert given == [True]  # one full coding, from the sample
+    assert 0.975 * 2.0 * grid.size / 8 <= len(reused) <= 2.0 * grid.size / 8
+
+    def every_block(qcoeffs: list, *, coder: str, known_blocks: object = None) -> object:
+        return encode_levels(qcoeffs, coder=coder)
+
+    monkeypatch.setattr(ratecontrol, "encode_levels", every_block)
+    assert wavecore.encode_grid(grid, bpp=2.0) == reused

@@ -29,7 +29,7 @@ import functools
 import itertools
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -45,11 +45,13 @@ __all__ = [
     "BLOCK_SIZES",
     "CodedBlocks",
     "CodedChunk",
+    "KnownBlocks",
     "add_block_checks",
     "band_counts",
     "block_counts",
     "block_lengths",
     "block_table",
+    "code_blocks",
     "decode_block_windows",
     "decode_blocks",
     "encode_blocks",
@@ -229,10 +231,19 @@ def _cuts(weights: np.ndarray, spans: int) -> np.ndarray:
 
 
 def encode_blocks(
-    entries: list[list[np.ndarray]], two_d: bool, block: int = BLOCK_SIZE
+    entries: list[list[np.ndarray]],
+    two_d: bool,
+    block: int = BLOCK_SIZE,
+    known: KnownBlocks | None = None,
 ) -> list[bytes]:
-    """Code integer bands (``[[cA], [level L bands], ...]``) into one chunk per entry."""
+    """Code integer bands (``[[cA], [level L bands], ...]``) into one chunk per entry.
+
+    ``known``: blocks of these very bands coded already (:func:`code_blocks`, the bpp
+    search's sample at the step it settled on), whose bytes are taken as they are.
+    """
     layout = [[band.shape for band in bands] for bands in entries]
+    if known is not None and known.indices.size:
+        return _encode_blocks_knowing(entries, two_d, block, layout, known)
     planes, blocks, per_chunk, total, sizes = _structure_sizes(layout, two_d, block)
     flat = np.empty(total, dtype=np.int32)
     views = _plane_views(entries, two_d)
@@ -252,6 +263,14 @@ def encode_blocks(
     run_rows(run, spans, pieces=spans)
     payload = np.concatenate([r[0] for r in results])
     lengths = np.concatenate([r[1] for r in results])
+    return _assembled_chunks(entries, per_chunk, payload, lengths)
+
+
+def _assembled_chunks(
+    entries: list[list[np.ndarray]], per_chunk: list[int], payload: np.ndarray, lengths: np.ndarray
+) -> list[bytes]:
+    """The chunks of :func:`encode_blocks` from every block's bytes (``payload``, in block
+    order) and lengths."""
     ends = np.cumsum(lengths)
     # What bundle format 3.0 stores for a region decode: the counts of the detail chunks of
     # several blocks, all in one parallel region.
@@ -271,6 +290,50 @@ def encode_blocks(
         chunks.append(chunk)
         first = last
     return chunks
+
+
+class KnownBlocks(NamedTuple):
+    """Blocks coded already: their indices (ascending, in :func:`needed_blocks`' order), their
+    bytes one after another, and each one's length."""
+
+    indices: np.ndarray
+    payload: np.ndarray
+    lengths: np.ndarray
+
+
+def code_blocks(
+    entries: list[list[np.ndarray]], two_d: bool, block: int, indices: np.ndarray
+) -> KnownBlocks:
+    """Blocks ``indices`` of ``entries`` coded alone: exactly the bytes :func:`encode_blocks`
+    writes for them."""
+    layout = [[band.shape for band in bands] for bands in entries]
+    planes, blocks, _, _ = _structure(layout, two_d, block)
+    indices = np.asarray(indices, dtype=np.int64)
+    payload, lengths = _code_some(entries, two_d, planes, blocks, indices)
+    return KnownBlocks(indices, payload, lengths)
+
+
+def _encode_blocks_knowing(
+    entries: list[list[np.ndarray]],
+    two_d: bool,
+    block: int,
+    layout: list[list[tuple[int, ...]]],
+    known: KnownBlocks,
+) -> list[bytes]:
+    """:func:`encode_blocks` where ``known`` blocks are coded already: only the others are."""
+    planes, blocks, per_chunk, _ = _structure(layout, two_d, block)
+    rest = np.setdiff1d(np.arange(len(blocks), dtype=np.int64), known.indices)
+    parts: list[np.ndarray] = [np.zeros(0, dtype=np.uint8)] * len(blocks)
+    lengths = np.zeros(len(blocks), dtype=np.int64)
+    coded = [known]
+    if rest.size:
+        coded.append(KnownBlocks(rest, *_code_some(entries, two_d, planes, blocks, rest)))
+    for some in coded:
+        ends = np.cumsum(some.lengths)
+        for k, index in enumerate(some.indices.tolist()):
+            parts[index] = some.payload[int(ends[k] - some.lengths[k]) : int(ends[k])]
+            lengths[index] = some.lengths[k]
+    return _assembled_chunks(entries, per_chunk, np.concatenate(parts), lengths)
 
 
 class CodedChunk(bytes):

@@ -33,7 +33,7 @@ import constriction
 import numpy as np
 from numba import njit
 
-from .blockcoder import BLOCK_SIZE, decode_blocks, encode_blocks
+from .blockcoder import BLOCK_SIZE, KnownBlocks, decode_blocks, encode_blocks
 from .errors import BundleError, InvalidParameter
 from .layout import as_levels, is_band_group
 from .losslesscoder import LOSSLESS_VERSION, decode_lossless_levels
@@ -74,7 +74,7 @@ def _check_coder(coder: Any) -> str:
 
 
 def encode_levels(
-    qcoeffs: Sequence[Any], *, coder: str = "context"
+    qcoeffs: Sequence[Any], *, coder: str = "context", known_blocks: KnownBlocks | None = None
 ) -> tuple[list[bytes], dict[str, Any]]:
     """Entropy-code quantized coefficients, one chunk per resolution level.
 
@@ -86,6 +86,9 @@ def encode_levels(
     coder : {"context", "zlib"}
         ``"context"`` (default) is the context-modelling range coder; ``"zlib"`` the generic
         baseline.
+    known_blocks : wavecore.blockcoder.KnownBlocks, optional
+        Code-blocks of these very coefficients that the context coder has coded already
+        (:func:`wavecore.blockcoder.code_blocks`): their bytes are taken, not coded again.
 
     Returns
     -------
@@ -108,7 +111,7 @@ def encode_levels(
     coder = _check_coder(coder)
     entries = _entries(qcoeffs)
     if coder == "context":
-        return _encode_context(entries)
+        return _encode_context(entries, known=known_blocks)
     chunks = []
     for bands in entries:
         raw = b"".join(band.astype("<i4", copy=False).tobytes() for band in bands)
@@ -1060,11 +1063,13 @@ _BIT = _model.Uniform(2)
 
 
 def _encode_context(
-    entries: list[list[np.ndarray]], version: int = CONTEXT_VERSION
+    entries: list[list[np.ndarray]],
+    version: int = CONTEXT_VERSION,
+    known: KnownBlocks | None = None,
 ) -> tuple[list[bytes], dict[str, Any]]:
     two_d = len(entries) > 1 and len(entries[1]) == 3
     if version >= 4:
-        chunks = encode_blocks(entries, two_d, BLOCK_SIZE)
+        chunks = encode_blocks(entries, two_d, BLOCK_SIZE, known)
         return chunks, {"coder": "context", "version": version, "two_d": two_d, "block": BLOCK_SIZE}
     layout = [[band.shape for band in bands] for bands in entries]
     writer = _Writer()

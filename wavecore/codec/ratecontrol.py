@@ -46,7 +46,7 @@ from numba import njit
 from .. import rdoq
 from .._kernels import largest_scaled, log_histogram_counts, top_octave
 from ..blockcoder import BLOCK_SIZE as DEFAULT_BLOCK
-from ..blockcoder import CodedBlocks, block_lengths
+from ..blockcoder import CodedBlocks, KnownBlocks, block_lengths, code_blocks
 from ..bundle import read_bundle, write_bundle
 from ..colour import YCBCR_INVERSE_MATRIX
 from ..entropy import encode_levels
@@ -229,6 +229,13 @@ _GRID_WHOLE_LEVEL_BLOCKS = 1
 #: before; blocks coded again 267 instead of 468; RMSE at the same budget 0.997x (geometric
 #: mean, 0.963-1.010x).
 _GRID_BPP_AIM = 1.0
+#: The grids' bpp sample (``_LossyEncoder.reuse_sample``) is taken where this ratio of the
+#: coder to the first-order estimate puts the budget (the pictures' typical ratio, 0.78, put
+#: it at half the final step on the tiled elevation model at 4 bpp); where the sample then
+#: predicts the coding at its own step inside ``_REUSE_WINDOW`` of the budget, the full
+#: coding is at that step and codes only the blocks the sample did not.
+_GRID_SAMPLE_PRIOR = 0.94
+_REUSE_WINDOW = (0.982, 0.995)
 #: About how many tasks ``_block_entropies`` cuts its bands into (whole rows of blocks).
 _STRIPS_PER_PASS = 16
 _TRIM_ROUNDS = 6
@@ -328,6 +335,11 @@ class _LossyEncoder:
         #: Where the bpp search's sampled prediction aims (a share of the budget) and whether
         #: its model is solved to within 0.4 % of that aim: None keeps the pictures' aim.
         self.bpp_aim: float | None = None
+        #: Whether the bpp sample's coded blocks are kept (``_sample``, with its step and kept
+        #: fraction), for a full coding at that same step to take rather than code again (the
+        #: grids' choice: see ``_GRID_SAMPLE_PRIOR``).
+        self.reuse_sample = False
+        self._sample: tuple[tuple[float, float], KnownBlocks] | None = None
 
     def keep(self, fraction: float) -> None:
         if fraction == self.kept_fraction:
@@ -470,7 +482,12 @@ class _LossyEncoder:
         key = (step, self.kept_fraction)
         cached = self._coded.get(closed)
         if cached is None or cached[0] != key:
-            chunks, cparams = encode_levels(self.quantize(step, closed)[0], coder=DEFAULT_CODER)
+            # The open loop's own sample at this step (the same indices) is coded already.
+            sample = self._sample
+            known = sample[1] if sample and not closed and sample[0] == key else None
+            chunks, cparams = encode_levels(
+                self.quantize(step, closed)[0], coder=DEFAULT_CODER, known_blocks=known
+            )
             self.codings += 1
             coding_counts.full_codings += 1
             cached = self._coded[closed] = (key, chunks, cparams)
@@ -826,6 +843,7 @@ def _encode_lossy(
         encoder.least_sample_stride = _GRID_SAMPLE_STRIDE
         encoder.whole_level_blocks = _GRID_WHOLE_LEVEL_BLOCKS
         encoder.bpp_aim = _GRID_BPP_AIM
+        encoder.reuse_sample = True
     low, high = plan.peak * 2.0**-20, plan.peak * 4.0
     if keep is not None:
         encoder.keep(keep)
@@ -1255,7 +1273,18 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         samples = _RDOQ_SAMPLES if many_blocks else 1
         ratio, start = _rdoq_sampled_model(encoder, typical, bpp_aim * budget, low, high, samples)
     elif not encoder.refines() and start is None:
-        sampled = _sampled_ratio(encoder, typical, bpp_aim * budget, low, high)
+        # Where the sample's blocks are kept, it is taken where the grids' ratio points: the
+        # full coding then takes them if the sample predicts its own step to fit.
+        reuse = tight and encoder.reuse_sample
+        prior = _GRID_SAMPLE_PRIOR if reuse else typical
+        sample_step = _model_step(
+            encoder, lambda s: encoder.size_estimate(s) * prior, bpp_aim * budget, low, high
+        )
+        sampled = None if sample_step is None else _sampled_ratio_at(encoder, sample_step, typical)
+        if reuse and sampled is not None and sample_step is not None:
+            sample_size = encoder.size_estimate(sample_step) * sampled
+            if _REUSE_WINDOW[0] * budget <= sample_size <= _REUSE_WINDOW[1] * budget:
+                start = sample_step
         resample = not many_blocks  # (a sample of many blocks predicts well enough at once)
         if (
             resample
@@ -1424,13 +1453,18 @@ def _sampled_ratio_at(encoder: _LossyEncoder, step: float, ratio: float) -> floa
     sample = np.flatnonzero(chosen)
     if alone:
         rdoq.adapt_deadzone(encoder.kept, qcoeffs, qparams, regions=regions[sample])
-    lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample)
     coding_counts.sampled_blocks += int(sample.size)
-    # Let the sample's quantization go now (the full coding quantizes at another step): its
-    # bands are freed before the next ones are made, which can then take their memory
-    # instead of faulting in fresh pages.
-    del levels, qcoeffs
-    encoder._quantized.pop(False, None)
+    if encoder.reuse_sample and not alone:
+        known = code_blocks(levels, True, DEFAULT_BLOCK, sample)
+        encoder._sample = ((step, encoder.kept_fraction), known)
+        lengths = known.lengths
+    else:
+        lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample)
+        # Let the sample's quantization go now (the full coding quantizes at another step):
+        # its bands are freed before the next ones are made, which can then take their
+        # memory instead of faulting in fresh pages.
+        del levels, qcoeffs
+        encoder._quantized.pop(False, None)
     coded = 0.0
     for entry in range(len(counts)):
         mine = entry_of[sample] == entry
