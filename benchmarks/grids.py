@@ -328,16 +328,16 @@ def summary_lines() -> list[str]:
     ]
 
 
-def cpu_timed(function: Callable[[], Any], repeats: int = 2) -> tuple[float, float]:
-    """(best wall seconds, best CPU seconds of this process) over ``repeats`` runs: on a shared
-    machine the CPU time is the steadier figure of the two."""
-    wall, cpu = math.inf, math.inf
+def cpu_timed(function: Callable[[], Any], repeats: int = 3) -> tuple[float, float]:
+    """(median wall seconds, median CPU seconds of this process) over ``repeats`` runs: on a
+    shared machine the CPU time is the steadier figure of the two."""
+    walls, cpus = [], []
     for _ in range(repeats):
         start, start_cpu = time.perf_counter(), time.process_time()
         function()
-        wall = min(wall, time.perf_counter() - start)
-        cpu = min(cpu, time.process_time() - start_cpu)
-    return wall, cpu
+        walls.append(time.perf_counter() - start)
+        cpus.append(time.process_time() - start_cpu)
+    return float(np.median(walls)), float(np.median(cpus))
 
 
 def speed_lines(field: np.ndarray) -> list[str]:
@@ -346,7 +346,7 @@ def speed_lines(field: np.ndarray) -> list[str]:
     wavecore.encode_grid(field[:256, :256], rmse=t / 3)
     wavecore.encode_grid(field[:256, :256], bpp=6.0)
     lines = [
-        f"Encode speed, best of 2, on {os.cpu_count()} cores (`NUMBA_NUM_THREADS` "
+        f"Encode speed, median of 3, on {os.cpu_count()} cores (`NUMBA_NUM_THREADS` "
         f"{os.environ.get('NUMBA_NUM_THREADS', 'default')}), MB/s of the input, wall clock / "
         "CPU time of the process (the interpolation coder runs on one thread); `bpp` at the "
         "rate the `rmse` bundle took:",
@@ -387,7 +387,7 @@ def integer_speed_lines(elevation: np.ndarray) -> list[str]:
     mb = grid.nbytes / 1e6
     lines = [
         f"Encode speed of an integer grid, the elevation model as int16 tiled 3 × 3 "
-        f"({' × '.join(map(str, grid.shape))}, {mb:.1f} MB), best of 2, wall clock / CPU time "
+        f"({' × '.join(map(str, grid.shape))}, {mb:.1f} MB), median of 5, wall clock / CPU time "
         "of the process; the coder each target took, its bytes and RMSE:",
         "",
         "| target | coder | bytes | RMSE | encode MB/s |",
@@ -409,7 +409,7 @@ def integer_speed_lines(elevation: np.ndarray) -> list[str]:
             assert rmse <= value
         elif name == "bpp":
             assert 8 * len(bundle) <= value * grid.size
-        wall, cpu = cpu_timed(lambda k=kwargs: wavecore.encode_grid(grid, **k))
+        wall, cpu = cpu_timed(lambda k=kwargs: wavecore.encode_grid(grid, **k), repeats=5)
         lines.append(
             f"| `{name}={value}` | {wavecore.inspect(bundle)['wavelet']} | {len(bundle)} | "
             f"{rmse:.4g} | {mb / wall:.1f} / {mb / cpu:.1f} |"
@@ -423,7 +423,7 @@ def window_lines(field: np.ndarray, t: float) -> list[str]:
     whole_wall, whole_cpu = cpu_timed(lambda: wavecore.decode(bundle), repeats=3)
     lines = [
         f"Windows of the {' × '.join(map(str, field.shape))} field's `max_error` bundle ("
-        f"{wavecore.inspect(bundle)['version']}, tiles at the fine levels), best of 3, wall / "
+        f"{wavecore.inspect(bundle)['version']}, tiles at the fine levels), median of 3, wall / "
         f"CPU ms; the whole grid decodes in {whole_wall * 1e3:.1f} / {whole_cpu * 1e3:.1f} ms:",
         "",
         "| window | decode ms | whole / window (CPU) |",
