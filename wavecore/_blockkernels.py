@@ -1,4 +1,5 @@
-"""Compiled loops of the code-block coder (context coder version 4): see ``blockcoder.py``.
+"""Compiled loops of the code-block coder (context coder versions 4 and 6): see
+``blockcoder.py``.
 
 One binary range coder (LZMA's, with 15-bit adaptive probabilities) codes every block from
 start to end inside one compiled call that releases the GIL; a call codes a whole span of
@@ -40,6 +41,11 @@ SIGN_SIZE = 4 * 9
 TILE_BASE = SIGN_BASE + SIGN_SIZE
 TILE_SIZE = 6
 CONTEXTS = TILE_BASE + TILE_SIZE
+#: Version 6: the parent band's magnitude (the same orientation and channel one level coarser,
+#: at ``(i // 2, j // 2)``), times this, joins the other bands' sum ``e`` of a detail value's
+#: zero flag and bit-length contexts.  Callers give each plane's parent plane (``parents``,
+#: -1 for none: every plane of version 4).
+PARENT_WEIGHT = 2
 #: Detail planes first say, per ``TILE × TILE`` tile of the block, whether it holds a nonzero
 #: value; the positions of empty tiles are neither coded nor visited.
 TILE = 8
@@ -341,6 +347,7 @@ def _encode_rows(
     sib1,
     sib2,
     luma,
+    parent,
     sign_base,
     zero_base,
     unary_base,
@@ -359,6 +366,7 @@ def _encode_rows(
         s1, s1c = _row_of(sib1, i)
         s2, s2c = _row_of(sib2, i)
         y0, y0c = _row_of(luma, i)
+        pr, prc = _row_of(parent, i >> 1)
         for tc in range(tile_cols):
             if not approx and flags[tile_row + tc] == 0:
                 continue
@@ -394,6 +402,8 @@ def _encode_rows(
                         s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
                     e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
                     e += 4 * _other_band(flat, y0, y0c, j)
+                    if pr >= 0 and (j >> 1) < prc:  # version 6: the parent band
+                        e += PARENT_WEIGHT * abs(np.int64(flat[pr + (j >> 1)]))
                     value = np.int64(flat[at])
                 magnitude = abs(value)
                 ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
@@ -473,6 +483,7 @@ def _decode_rows(
     sib1,
     sib2,
     luma,
+    parent,
     sign_base,
     zero_base,
     unary_base,
@@ -488,6 +499,7 @@ def _decode_rows(
         s1, s1c = _row_of(sib1, i)
         s2, s2c = _row_of(sib2, i)
         y0, y0c = _row_of(luma, i)
+        pr, prc = _row_of(parent, i >> 1)
         for tc in range(tile_cols):
             if not approx and flags[tile_row + tc] == 0:
                 continue
@@ -524,6 +536,8 @@ def _decode_rows(
                         s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
                     e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
                     e += 4 * _other_band(flat, y0, y0c, j)
+                    if pr >= 0 and (j >> 1) < prc:  # version 6: the parent band
+                        e += PARENT_WEIGHT * abs(np.int64(flat[pr + (j >> 1)]))
                 ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
                 code, rng, models[ctx], nonzero = _split_bit(code, rng, models[ctx])
                 while rng < TOP:
@@ -581,7 +595,7 @@ def _decode_rows(
 
 
 @njit(nogil=True, cache=True)
-def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
+def _encode_block(flat, planes, parents, block, out, pos, models, scratch, flags):
     """Code one block (a region of every plane of one level) into ``out`` from ``pos``.
 
     Returns the position after its last byte (past ``out``'s end when it did not fit).
@@ -600,6 +614,7 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
         sib1 = _plane_info(planes, planes[p, P_SIB1])
         sib2 = _plane_info(planes, planes[p, P_SIB2])
         luma = _plane_info(planes, planes[p, P_LUMA])
+        parent = _plane_info(planes, parents[p])
         sign_base = SIGN_BASE + (3 if approx else planes[p, P_ORIENT]) * 9
         zero_base = ZERO_BASE + kind * LOCAL_CLASSES * EXTERNAL_CLASSES
         unary_base = UNARY_BASE + kind * (LOCAL_CLASSES + 1) * UNARY_INDICES
@@ -651,6 +666,7 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
                 sib1,
                 sib2,
                 luma,
+                parent,
                 sign_base,
                 zero_base,
                 unary_base,
@@ -680,6 +696,7 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
                 sib1,
                 sib2,
                 luma,
+                parent,
                 sign_base,
                 zero_base,
                 unary_base,
@@ -700,7 +717,7 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
 
 
 @njit(nogil=True, cache=True)
-def _decode_block(data, start, end, flat, planes, block, models, scratch, flags):
+def _decode_block(data, start, end, flat, planes, parents, block, models, scratch, flags):
     """Decode one block from ``data[start:end]`` into ``flat``; 0, or 1 if it is corrupt."""
     rng, pos = np.int64(MASK32), start
     code = np.int64(0)
@@ -721,6 +738,7 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch, flags)
         sib1 = _plane_info(planes, planes[p, P_SIB1])
         sib2 = _plane_info(planes, planes[p, P_SIB2])
         luma = _plane_info(planes, planes[p, P_LUMA])
+        parent = _plane_info(planes, parents[p])
         sign_base = SIGN_BASE + (3 if approx else planes[p, P_ORIENT]) * 9
         zero_base = ZERO_BASE + kind * LOCAL_CLASSES * EXTERNAL_CLASSES
         unary_base = UNARY_BASE + kind * (LOCAL_CLASSES + 1) * UNARY_INDICES
@@ -762,6 +780,7 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch, flags)
                 sib1,
                 sib2,
                 luma,
+                parent,
                 sign_base,
                 zero_base,
                 unary_base,
@@ -790,6 +809,7 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch, flags)
                 sib1,
                 sib2,
                 luma,
+                parent,
                 sign_base,
                 zero_base,
                 unary_base,
@@ -860,7 +880,7 @@ def _fresh_models(models):
 
 
 @njit(nogil=True, cache=True)
-def encode_span(flat, planes, blocks, lo, hi):
+def encode_span(flat, planes, parents, blocks, lo, hi):
     """Code blocks ``lo .. hi - 1``; return their bytes, concatenated, and each one's length.
 
     An all-zero block has length 0; any other block at least 1 byte.
@@ -890,7 +910,7 @@ def encode_span(flat, planes, blocks, lo, hi):
             continue
         while True:
             _fresh_models(models)
-            end = _encode_block(flat, planes, blocks[b], out, pos, models, scratch, flags)
+            end = _encode_block(flat, planes, parents, blocks[b], out, pos, models, scratch, flags)
             if end <= out.size:
                 break
             bigger = np.empty(2 * out.size + 2 * (end - pos), dtype=np.uint8)
@@ -910,7 +930,7 @@ def encode_span(flat, planes, blocks, lo, hi):
 
 
 @njit(nogil=True, cache=True)
-def decode_span(data, starts, lengths, planes, blocks, flat, lo, hi):
+def decode_span(data, starts, lengths, planes, parents, blocks, flat, lo, hi):
     """Decode blocks ``lo .. hi - 1`` into ``flat`` (zeros where a block's length is 0).
 
     ``data[starts[b] : starts[b] + lengths[b]]`` holds block ``b``.  Returns the number of
@@ -925,7 +945,16 @@ def decode_span(data, starts, lengths, planes, blocks, flat, lo, hi):
             continue
         _fresh_models(models)
         bad += _decode_block(
-            data, starts[b], starts[b] + lengths[b], flat, planes, blocks[b], models, scratch, flags
+            data,
+            starts[b],
+            starts[b] + lengths[b],
+            flat,
+            planes,
+            parents,
+            blocks[b],
+            models,
+            scratch,
+            flags,
         )
     return bad
 

@@ -46,7 +46,7 @@ from numba import njit
 from .. import rdoq
 from .._kernels import largest_scaled, log_histogram_counts, top_octave
 from ..blockcoder import BLOCK_SIZE as DEFAULT_BLOCK
-from ..blockcoder import CodedBlocks, block_lengths
+from ..blockcoder import PARENT_VERSION, CodedBlocks, block_lengths
 from ..bundle import read_bundle, write_bundle
 from ..colour import YCBCR_INVERSE_MATRIX
 from ..entropy import encode_levels
@@ -1424,7 +1424,8 @@ def _sampled_ratio_at(encoder: _LossyEncoder, step: float, ratio: float) -> floa
     sample = np.flatnonzero(chosen)
     if alone:
         rdoq.adapt_deadzone(encoder.kept, qcoeffs, qparams, regions=regions[sample])
-    lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample)
+    # The coder of two-dimensional layouts, version 6 (a sampled block reads its parent).
+    lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample, PARENT_VERSION)
     coding_counts.sampled_blocks += int(sample.size)
     # Let the sample's quantization go now (the full coding quantizes at another step): its
     # bands are freed before the next ones are made, which can then take their memory
@@ -1755,7 +1756,7 @@ def _trim_to_budget(
     chunks, cparams = encoder.code(step, closed)
     if not (
         cparams.get("coder") == "context"
-        and cparams.get("version") == 4
+        and cparams.get("version") in (4, PARENT_VERSION)
         and cparams.get("two_d") is True
         and isinstance(cparams.get("block"), int)
     ):
@@ -1764,7 +1765,11 @@ def _trim_to_budget(
     if len(levels) < 2 or any(len(bands) != 3 for bands in levels[1:]):
         return None
     coded = CodedBlocks(
-        chunks, [[b.shape for b in bands] for bands in levels], True, cparams["block"]
+        chunks,
+        [[b.shape for b in bands] for bands in levels],
+        True,
+        cparams["block"],
+        cparams["version"],
     )
     original_size = encoder.size_bound(step, closed)
     add = original_size < enough
