@@ -245,14 +245,6 @@ def _row_of(plane_info, i):
     return offset + i * cols, cols
 
 
-@njit(nogil=True, cache=True, inline="always")
-def _other_band(flat, start, cols, j):
-    """``|value|`` at column ``j`` of a row found by ``_row_of`` (0 outside it)."""
-    if start < 0 or j >= cols:
-        return np.int64(0)
-    return abs(np.int64(flat[start + j]))
-
-
 #: ``EXTERNAL_CLASS[min(e, 12)]``: the class of a weighted sum ``e`` of the other bands
 #: (0; 1-3; 4-11; 12 and more), looked up rather than branched on.
 EXTERNAL_CLASS = np.array([0, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3], dtype=np.int64)
@@ -367,6 +359,12 @@ def _encode_rows(
         s2, s2c = _row_of(sib2, i)
         y0, y0c = _row_of(luma, i)
         pr, prc = _row_of(parent, i >> 1)
+        # The columns below which each other band has a value on this row (0: none), so that
+        # a value costs one comparison per band, read here rather than in a helper.
+        l1 = s1c if s1 >= 0 else 0
+        l2 = s2c if s2 >= 0 else 0
+        ly = y0c if y0 >= 0 else 0
+        lp = 2 * prc if pr >= 0 else 0
         for tc in range(tile_cols):
             if not approx and flags[tile_row + tc] == 0:
                 continue
@@ -400,9 +398,14 @@ def _encode_rows(
                         )
                     else:
                         s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
-                    e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
-                    e += 4 * _other_band(flat, y0, y0c, j)
-                    if pr >= 0 and (j >> 1) < prc:  # version 6: the parent band
+                    e = np.int64(0)
+                    if j < l1:
+                        e += 2 * abs(np.int64(flat[s1 + j]))
+                    if j < l2:
+                        e += 2 * abs(np.int64(flat[s2 + j]))
+                    if j < ly:
+                        e += 4 * abs(np.int64(flat[y0 + j]))
+                    if j < lp:  # version 6: the parent band
                         e += PARENT_WEIGHT * abs(np.int64(flat[pr + (j >> 1)]))
                     value = np.int64(flat[at])
                 magnitude = abs(value)
@@ -500,6 +503,12 @@ def _decode_rows(
         s2, s2c = _row_of(sib2, i)
         y0, y0c = _row_of(luma, i)
         pr, prc = _row_of(parent, i >> 1)
+        # The columns below which each other band has a value on this row (0: none), so that
+        # a value costs one comparison per band, read here rather than in a helper.
+        l1 = s1c if s1 >= 0 else 0
+        l2 = s2c if s2 >= 0 else 0
+        ly = y0c if y0 >= 0 else 0
+        lp = 2 * prc if pr >= 0 else 0
         for tc in range(tile_cols):
             if not approx and flags[tile_row + tc] == 0:
                 continue
@@ -534,9 +543,14 @@ def _decode_rows(
                         )
                     else:
                         s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
-                    e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
-                    e += 4 * _other_band(flat, y0, y0c, j)
-                    if pr >= 0 and (j >> 1) < prc:  # version 6: the parent band
+                    e = np.int64(0)
+                    if j < l1:
+                        e += 2 * abs(np.int64(flat[s1 + j]))
+                    if j < l2:
+                        e += 2 * abs(np.int64(flat[s2 + j]))
+                    if j < ly:
+                        e += 4 * abs(np.int64(flat[y0 + j]))
+                    if j < lp:  # version 6: the parent band
                         e += PARENT_WEIGHT * abs(np.int64(flat[pr + (j >> 1)]))
                 ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
                 code, rng, models[ctx], nonzero = _split_bit(code, rng, models[ctx])
