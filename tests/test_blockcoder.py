@@ -349,3 +349,54 @@ def test_the_table_cache_keeps_small_layouts_only() -> None:
         assert decode_blocks(chunks, shapes, False, BLOCK_SIZE)[-1][0].shape == shapes[-1][0]
     info = blockcoder._cached_structure.cache_info()
     assert info.currsize == 1, info
+
+
+def test_version_6_decodes_a_block_with_its_ancestors_only() -> None:
+    """Skipping every block but a few and their ancestors (what a region decode of version 6
+    reads) decodes those exactly; skipping a needed parent block decodes a child wrongly."""
+    from wavecore.codec.chunks import _with_ancestors, _with_descendants
+
+    entries = _bands(21, (260, 230), 2, 3)
+    layout, block = _layout(entries), 16
+    chunks = encode_blocks(entries, True, block, 6)
+    parent_of = parent_blocks(layout, True, block)
+    rng = np.random.default_rng(3)
+    finest = np.flatnonzero(parent_of >= 0)[-40:]
+    wanted = np.zeros(len(parent_of), dtype=bool)
+    wanted[rng.choice(finest, 5, replace=False)] = True
+    closed = _with_ancestors(wanted, parent_of)
+    assert closed.sum() > wanted.sum()
+    for b in np.flatnonzero(closed):  # closed under "parent of"
+        assert parent_of[b] < 0 or closed[parent_of[b]]
+    back = decode_blocks(chunks, layout, True, block, skip=~closed, version=6)
+    full = decode_blocks(chunks, layout, True, block, version=6)
+    _assert_same(full, entries)
+    grid_cols = [-(-max(b.shape[1] for b in bands) // block) for bands in entries]
+    firsts = np.cumsum(
+        [0]
+        + [
+            -(-max(b.shape[0] for b in bands) // block) * g
+            for bands, g in zip(entries, grid_cols, strict=True)
+        ]
+    )
+    for b in np.flatnonzero(closed):
+        entry = int(np.searchsorted(firsts, b, side="right") - 1)
+        r, c = divmod(int(b - firsts[entry]), grid_cols[entry])
+        for got, want in zip(back[entry], full[entry], strict=True):
+            window = (slice(r * block, (r + 1) * block), slice(c * block, (c + 1) * block))
+            np.testing.assert_array_equal(got[window], want[window])
+    # Without its parent block, a child reads zeros where the encoder saw values.
+    child = int(np.flatnonzero(wanted)[0])
+    lost = closed.copy()
+    lost[parent_of[child]] = False
+    wrong = decode_blocks(chunks, layout, True, block, skip=~lost, version=6)
+    entry = int(np.searchsorted(firsts, child, side="right") - 1)
+    r, c = divmod(int(child - firsts[entry]), grid_cols[entry])
+    window = (slice(r * block, (r + 1) * block), slice(c * block, (c + 1) * block))
+    assert any(
+        not np.array_equal(g[window], w[window])
+        for g, w in zip(wrong[entry], full[entry], strict=True)
+    )
+    # ... which is why a lost block takes its descendants with it.
+    spread = _with_descendants(~lost, parent_of)
+    assert spread[child] and spread.sum() > (~lost).sum()
