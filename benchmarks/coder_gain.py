@@ -31,6 +31,8 @@ which depend on the number of blocks, counted as the bundle stores them).  The v
 * ``--parent W``: the parent band's magnitude (the same orientation and channel one level
   coarser, at ``(i // 2, j // 2)``), times ``W``, joins the external activity ``e`` of the
   zero flag and bit-length contexts.  A block would then need its parent block decoded first.
+  Context coder version 6 adopted it with weight 2: the variant sets the kernels' own
+  ``PARENT_WEIGHT`` (``measure``'s "today's coder" stays version 4, no parent).
 
 Measured on 2026-11-28 (``capture`` of cdf97; priors collected on :data:`TRAINING`, early 24;
 BD-rate per picture against version 4 on the same integers, grey mean / astronaut):
@@ -180,7 +182,6 @@ def variant_source(options: argparse.Namespace) -> str:
         f"MIX = {int(options.mix)}\nFAST = {options.fast}\nSLOW = {options.slow}\n"
         f"INIT = {options.init or ''!r}\nINIT_COUNT = {options.init_count}\n"
         f"EARLY = {options.early}\nSETS = {options.sets}\n"
-        f"PARENT = {options.parent}\nP_PARENT = {P_PARENT}\n"
     )
     src = src.replace("from numba import njit\n", "from numba import njit\n" + knobs, 1)
     deco = '@njit(nogil=True, cache=False, inline="always")\n'
@@ -200,8 +201,8 @@ def variant_source(options: argparse.Namespace) -> str:
     )
     src = _cut(src, "def _initial_models", "INITIAL_MODELS = _initial_models()", _INIT)
     src = src.replace(
-        "def encode_span(flat, planes, blocks, lo, hi):",
-        "def encode_span(flat, planes, blocks, lo, hi, sets):",
+        "def encode_span(flat, planes, parents, blocks, lo, hi):",
+        "def encode_span(flat, planes, parents, blocks, lo, hi, sets):",
     )
     src = src.replace(
         "            _fresh_models(models)\n            end =",
@@ -217,22 +218,8 @@ def variant_source(options: argparse.Namespace) -> str:
         "    return out[:pos].copy(), lengths, models[STATS + 1 :].copy()\n",
         1,
     )
-    if options.parent:  # the parent band's value (column P_PARENT) joins the external sum
-        src = src.replace("luma,\n", "luma,\nparent,\n")
-        src = src.replace(
-            "        luma = _plane_info(planes, planes[p, P_LUMA])\n",
-            "        luma = _plane_info(planes, planes[p, P_LUMA])\n"
-            "        parent = _plane_info(planes, planes[p, P_PARENT])\n",
-        )
-        src = src.replace(
-            "        y0, y0c = _row_of(luma, i)\n",
-            "        y0, y0c = _row_of(luma, i)\n        pr, prc = _row_of(parent, i >> 1)\n",
-        )
-        src = src.replace(
-            "                    e += 4 * _other_band(flat, y0, y0c, j)\n",
-            "                    e += 4 * _other_band(flat, y0, y0c, j)\n"
-            "                    e += PARENT * _other_band(flat, pr, prc, j >> 1)\n",
-        )
+    # The parent term is the kernels' own (context coder version 6): its weight, here.
+    src = src.replace("PARENT_WEIGHT = 2\n", f"PARENT_WEIGHT = {options.parent}\n", 1)
     plain = "@njit(nogil=True, cache=False)\n"
     src = _cut(src, plain + "def decode_span", plain + "def write_varints")
     return _cut(src, plain + "def _decode_block(", plain + "def _block_is_empty")
@@ -254,8 +241,8 @@ def capture(wavelet: str, pictures: str = "tuning") -> None:
     original = kernels.decode_span
     seen: dict[str, tuple] = {}
 
-    def recording(data_, starts, lengths, planes, blocks, flat, lo, hi):  # type: ignore[no-untyped-def]
-        bad = original(data_, starts, lengths, planes, blocks, flat, lo, hi)
+    def recording(data_, starts, lengths, planes, parents, blocks, flat, lo, hi):  # type: ignore[no-untyped-def]
+        bad = original(data_, starts, lengths, planes, parents, blocks, flat, lo, hi)
         seen["last"] = (flat, planes, blocks)
         return bad
 
@@ -295,19 +282,16 @@ def retile(planes: np.ndarray, blocks: np.ndarray, side: int) -> np.ndarray:
     return np.array(tables, dtype=np.int64).reshape(-1, kernels.BLOCK_FIELDS)
 
 
-#: The plane table's extra column for ``--parent``: the same band one level coarser (-1: none).
-P_PARENT = kernels.PLANE_FIELDS
-
-
 def with_parents(planes: np.ndarray, blocks: np.ndarray) -> np.ndarray:
-    """``planes`` with :data:`P_PARENT`: a detail plane's parent is the plane at the same
-    place in the previous chunk when that chunk is a detail chunk of as many planes."""
+    """Each plane's parent for ``--parent`` (-1: none): a detail plane's parent is the plane at
+    the same place in the previous chunk when that chunk is a detail chunk of as many planes
+    (as ``blockcoder``'s version 6 finds it)."""
     bounds = list(dict.fromkeys(map(tuple, blocks[:, [kernels.B_PLANE_LO, kernels.B_PLANE_HI]])))
     parent = np.full(len(planes), -1, dtype=np.int64)
     for (lo0, hi0), (lo, hi) in itertools.pairwise(bounds[1:]):
         if hi - lo == hi0 - lo0:
             parent[lo:hi] = np.arange(lo0, hi0)
-    return np.column_stack([planes, parent])
+    return parent
 
 
 def block_sets(planes: np.ndarray, blocks: np.ndarray, count: int) -> np.ndarray:
@@ -360,14 +344,15 @@ def measure(options: argparse.Namespace) -> dict[str, float]:
         for k in range(len(peers.EXACT_RATES)):
             key = f"{name}_{k}"
             flat, planes, blocks = (captured[key + s] for s in ("_flat", "_planes", "_blocks"))
-            lengths = kernels.encode_span(flat, planes, blocks, 0, len(blocks))[1]
+            none = np.full(len(planes), -1, dtype=np.int64)  # version 4: no parent
+            lengths = kernels.encode_span(flat, planes, none, blocks, 0, len(blocks))[1]
             today = int(lengths.sum()) + table_bytes(flat, planes, blocks, lengths)
             if options.block:
                 blocks = retile(planes, blocks, options.block)
             sets = block_sets(planes, blocks, options.sets)
-            if options.parent:
-                planes = with_parents(planes, blocks)
-            _, lengths, counts = variant.encode_span(flat, planes, blocks, 0, len(blocks), sets)  # type: ignore[attr-defined]
+            parents = with_parents(planes, blocks) if options.parent else none
+            coder = variant.encode_span  # type: ignore[attr-defined]
+            _, lengths, counts = coder(flat, planes, parents, blocks, 0, len(blocks), sets)
             stats = stats + counts.astype(np.int64)
             whole = int(captured[key + "_bytes"])
             new = int(lengths.sum()) + table_bytes(flat, planes, blocks, lengths)

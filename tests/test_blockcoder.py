@@ -1,4 +1,5 @@
-"""Context coder version 4: independent code-blocks coded by the compiled binary range coder."""
+"""Context coder versions 4 and 6: code-blocks coded by the compiled binary range coder (version
+6's detail contexts also read the parent band, in the parent block of the previous chunk)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import wavecore
-from wavecore.blockcoder import BLOCK_SIZE, block_lengths, code_blocks, decode_blocks, encode_blocks
+from wavecore.blockcoder import (
+    BLOCK_SIZE,
+    PARENT_VERSION,
+    block_lengths,
+    code_blocks,
+    decode_blocks,
+    encode_blocks,
+    parent_blocks,
+)
 from wavecore.entropy import _encode_context, decode_levels, encode_levels
 from wavecore.errors import BundleError
 
@@ -50,27 +59,91 @@ def _assert_same(a: list[list[np.ndarray]], b: list[list[np.ndarray]]) -> None:
             np.testing.assert_array_equal(x, y)
 
 
+@pytest.mark.parametrize("version", [4, 6])
 @pytest.mark.parametrize("block", [16, 32, 128])
 @pytest.mark.parametrize("channels", [1, 3, 4])
-def test_round_trip_over_many_blocks(block: int, channels: int) -> None:
+def test_round_trip_over_many_blocks(block: int, channels: int, version: int) -> None:
     entries = _bands(channels + block, (150, 97), channels, 3)
-    chunks = encode_blocks(entries, True, block)
+    chunks = encode_blocks(entries, True, block, version)
     assert len(chunks) == len(entries)
-    _assert_same(decode_blocks(chunks, _layout(entries), True, block), entries)
+    _assert_same(decode_blocks(chunks, _layout(entries), True, block, version=version), entries)
     # A prefix of the chunks decodes to the coarse levels alone.
-    _assert_same(decode_blocks(chunks[:2], _layout(entries)[:2], True, block), entries[:2])
+    _assert_same(
+        decode_blocks(chunks[:2], _layout(entries)[:2], True, block, version=version), entries[:2]
+    )
 
 
-def test_one_dimensional_layout_and_extreme_values() -> None:
+def test_version_6_reads_the_parent_band() -> None:
+    """Version 6 codes the same levels smaller than version 4 where the parent band predicts
+    the details (here each detail band is its parent band upsampled, plus noise), and the two
+    agree up to the coarsest details, which have no parent."""
+    rng = np.random.default_rng(7)
+    parent = [_laplace(rng, (40, 40), 4.0) for _ in range(3)]
+    child = [
+        (np.kron(p, np.ones((2, 2), np.int32)) + _laplace(rng, (80, 80), 0.5)).astype(np.int32)
+        for p in parent
+    ]
+    entries = [[rng.integers(-99, 99, (40, 40)).astype(np.int32)], parent, child]
+    four, six = encode_blocks(entries, True, 32, 4), encode_blocks(entries, True, 32, 6)
+    assert four[:2] == six[:2] and len(six[2]) < 0.95 * len(four[2])
+    _assert_same(decode_blocks(six, _layout(entries), True, 32, version=6), entries)
+    # Read with the other version's contexts, the finest chunk decodes to something else.
+    try:
+        wrong = decode_blocks(six, _layout(entries), True, 32, version=4)
+    except BundleError:
+        return
+    assert any(not np.array_equal(a, b) for a, b in zip(wrong[2], child, strict=True))
+
+
+@pytest.mark.parametrize("two_d", [True, False])
+def test_every_parent_value_lies_in_the_parent_block(two_d: bool) -> None:
+    """A detail position ``(i, j)`` of a block reads ``(i // 2, j // 2)`` of the parent plane:
+    that position, wherever it is inside the parent plane, is in the block's parent block."""
+    if two_d:
+        layout = [[(9, 8)], [(9, 8), (8, 9), (8, 8)], [(17, 16), (16, 17), (16, 16)]]
+        layout.append([(33, 33), (33, 32), (32, 32)])
+        block, rows_of = 8, lambda shape: shape[0]
+    else:
+        layout = [[(40, 2)], [(40, 2)], [(79, 2)], [(157, 2)], [(313, 2)]]
+        block, rows_of = 4, lambda shape: 1
+    parent_of = parent_blocks(layout, two_d, block)
+    side = (block, block) if two_d else (1, block * block)
+    # Each block's region, by chunk: the grid over the largest rows and columns.
+    regions = []
+    for entry, shapes in enumerate(layout):
+        height = max(rows_of(s) for s in shapes)
+        width = max(s[1] if two_d else s[0] for s in shapes)
+        for r in range(0, height, side[0]):
+            for c in range(0, width, side[1]):
+                regions.append((entry, r, c))
+    assert len(parent_of) == len(regions)
+    for b, (entry, r, c) in enumerate(regions):
+        if entry < 2:
+            assert parent_of[b] == -1
+            continue
+        shapes = layout[entry - 1]
+        height = max(rows_of(s) for s in shapes)
+        width = max(s[1] if two_d else s[0] for s in shapes)
+        for i in range(r, r + side[0]):
+            for j in range(c, c + side[1]):
+                if i // 2 < height and j // 2 < width:
+                    p = parent_of[b]
+                    assert p >= 0 and regions[p][0] == entry - 1
+                    assert regions[p][1] <= i // 2 < regions[p][1] + side[0]
+                    assert regions[p][2] <= j // 2 < regions[p][2] + side[1]
+
+
+@pytest.mark.parametrize("version", [4, 6])
+def test_one_dimensional_layout_and_extreme_values(version: int) -> None:
     rng = np.random.default_rng(3)
     top, bottom = np.iinfo(np.int32).max, np.iinfo(np.int32).min
     cA = np.array([[top, 0], [bottom, -1], [5, 7]], dtype=np.int32)
     cD = rng.integers(bottom, top, (40_000, 2), endpoint=True).astype(np.int32)
     cD[:100] = 0
-    entries = [[cA], [cD], [np.zeros((9, 2), dtype=np.int32)]]
-    chunks = encode_blocks(entries, False, 32)
+    entries = [[cA], [cD], [np.zeros((9, 2), dtype=np.int32)], [cD[:500]]]
+    chunks = encode_blocks(entries, False, 32, version)
     assert len(chunks[2]) == 1  # one all-zero block: a length of 0, no data
-    _assert_same(decode_blocks(chunks, _layout(entries), False, 32), entries)
+    _assert_same(decode_blocks(chunks, _layout(entries), False, 32, version=version), entries)
 
 
 def test_all_zero_blocks_cost_one_byte_each() -> None:
@@ -79,12 +152,22 @@ def test_all_zero_blocks_cost_one_byte_each() -> None:
     assert [len(c) for c in chunks] == [1, 5 * 5]  # 1 block, then 5 × 5 blocks of 64 × 64
 
 
-def test_bytes_do_not_depend_on_the_thread_count(monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("version", [4, 6])
+def test_bytes_do_not_depend_on_the_thread_count(
+    monkeypatch: pytest.MonkeyPatch, version: int
+) -> None:
     entries = _bands(11, (700, 800), 3, 4)  # large enough for the thread pool
-    threaded = encode_blocks(entries, True)
+    monkeypatch.setenv("WAVECORE_THREADS", "2")
+    threaded = encode_blocks(entries, True, BLOCK_SIZE, version)
+    # Two threads decode (version 6: each chunk after its parent chunk, over the threads).
+    _assert_same(
+        decode_blocks(threaded, _layout(entries), True, BLOCK_SIZE, version=version), entries
+    )
     monkeypatch.setenv("WAVECORE_THREADS", "1")
-    assert encode_blocks(entries, True) == threaded
-    _assert_same(decode_blocks(threaded, _layout(entries), True, BLOCK_SIZE), entries)
+    assert encode_blocks(entries, True, BLOCK_SIZE, version) == threaded
+    _assert_same(
+        decode_blocks(threaded, _layout(entries), True, BLOCK_SIZE, version=version), entries
+    )
 
 
 def test_a_damaged_block_loses_only_itself() -> None:
@@ -130,13 +213,15 @@ def test_tables_that_do_not_add_up_are_refused() -> None:
         decode_blocks(chunks, layout, True, 48)
 
 
-def test_version_four_is_the_default_and_versions_three_and_two_still_decode() -> None:
+def test_version_six_is_the_default_and_versions_four_to_two_still_decode() -> None:
     entries = _bands(8, (90, 90), 1, 3)
     q = [entries[0][0], *(tuple(b) for b in entries[1:])]
     shapes = [q[0].shape, *(tuple(b.shape for b in level) for level in q[1:])]
     params = encode_levels(q)[1]
-    assert params == {"coder": "context", "version": 4, "two_d": True, "block": BLOCK_SIZE}
-    for version in (2, 3, 4):
+    assert params == {"coder": "context", "version": 6, "two_d": True, "block": BLOCK_SIZE}
+    # One-dimensional layouts (curves) keep version 4.
+    assert encode_levels([np.arange(9, dtype=np.int32), np.ones(9, np.int32)])[1]["version"] == 4
+    for version in (2, 3, 4, PARENT_VERSION):
         old_chunks, old_params = _encode_context(entries, version)
         back = decode_levels(old_chunks, shapes, old_params)
         np.testing.assert_array_equal(back[0], q[0])
@@ -202,14 +287,14 @@ def _mutate(rng: np.random.Generator, chunk: bytes) -> bytes:
     return bytes(data)
 
 
-def _fuzz(cases: int, seed: int) -> None:
-    """Mutated version-4 chunks give arrays of the declared shapes or a BundleError."""
+def _fuzz(cases: int, seed: int, version: int = 4) -> None:
+    """Mutated chunks give arrays of the declared shapes or a BundleError."""
     rng = np.random.default_rng(seed)
     entries = _bands(seed, (80, 70), 3, 3)
     q = [entries[0][0], *(tuple(b) for b in entries[1:])]
     shapes = [q[0].shape, *(tuple(b.shape for b in level) for level in q[1:])]
-    params = {"coder": "context", "version": 4, "two_d": True, "block": 32}
-    chunks = encode_blocks(entries, True, 32)
+    params = {"coder": "context", "version": version, "two_d": True, "block": 32}
+    chunks = encode_blocks(entries, True, 32, version)
     outcomes = {"array": 0, "error": 0}
     for _ in range(cases):
         damaged = list(chunks)
@@ -227,8 +312,9 @@ def _fuzz(cases: int, seed: int) -> None:
     assert outcomes["array"] and outcomes["error"]
 
 
-def test_mutated_chunks_never_crash() -> None:
-    _fuzz(300, 1)
+@pytest.mark.parametrize("version", [4, 6])
+def test_mutated_chunks_never_crash(version: int) -> None:
+    _fuzz(300, 1, version)
 
 
 @pytest.mark.slow
@@ -242,7 +328,7 @@ def test_mutated_bundles_decode_or_raise_bundle_error() -> None:
     y, x = np.mgrid[0:70, 0:90]
     image = np.stack([x * 2, y * 3, x + y], axis=-1).astype(np.uint8)
     bundle = wavecore.encode_image(image, quality=38)
-    assert wavecore.inspect(bundle)["header"]["cparams"]["version"] == 4
+    assert wavecore.inspect(bundle)["header"]["cparams"]["version"] == 6
     for _ in range(100):
         try:
             out = wavecore.decode(_mutate(rng, bundle))
@@ -267,20 +353,76 @@ def test_the_table_cache_keeps_small_layouts_only() -> None:
     assert info.currsize == 1, info
 
 
+def test_version_6_decodes_a_block_with_its_ancestors_only() -> None:
+    """Skipping every block but a few and their ancestors (what a region decode of version 6
+    reads) decodes those exactly; skipping a needed parent block decodes a child wrongly."""
+    from wavecore.codec.chunks import _with_ancestors, _with_descendants
+
+    entries = _bands(21, (260, 230), 2, 3)
+    layout, block = _layout(entries), 16
+    chunks = encode_blocks(entries, True, block, 6)
+    parent_of = parent_blocks(layout, True, block)
+    rng = np.random.default_rng(3)
+    finest = np.flatnonzero(parent_of >= 0)[-40:]
+    wanted = np.zeros(len(parent_of), dtype=bool)
+    wanted[rng.choice(finest, 5, replace=False)] = True
+    closed = _with_ancestors(wanted, parent_of)
+    assert closed.sum() > wanted.sum()
+    for b in np.flatnonzero(closed):  # closed under "parent of"
+        assert parent_of[b] < 0 or closed[parent_of[b]]
+    back = decode_blocks(chunks, layout, True, block, skip=~closed, version=6)
+    full = decode_blocks(chunks, layout, True, block, version=6)
+    _assert_same(full, entries)
+    grid_cols = [-(-max(b.shape[1] for b in bands) // block) for bands in entries]
+    firsts = np.cumsum(
+        [0]
+        + [
+            -(-max(b.shape[0] for b in bands) // block) * g
+            for bands, g in zip(entries, grid_cols, strict=True)
+        ]
+    )
+    for b in np.flatnonzero(closed):
+        entry = int(np.searchsorted(firsts, b, side="right") - 1)
+        r, c = divmod(int(b - firsts[entry]), grid_cols[entry])
+        for got, want in zip(back[entry], full[entry], strict=True):
+            window = (slice(r * block, (r + 1) * block), slice(c * block, (c + 1) * block))
+            np.testing.assert_array_equal(got[window], want[window])
+    # Without its parent block, a child reads zeros where the encoder saw values.
+    child = int(np.flatnonzero(wanted)[0])
+    lost = closed.copy()
+    lost[parent_of[child]] = False
+    wrong = decode_blocks(chunks, layout, True, block, skip=~lost, version=6)
+    entry = int(np.searchsorted(firsts, child, side="right") - 1)
+    r, c = divmod(int(child - firsts[entry]), grid_cols[entry])
+    window = (slice(r * block, (r + 1) * block), slice(c * block, (c + 1) * block))
+    assert any(
+        not np.array_equal(g[window], w[window])
+        for g, w in zip(wrong[entry], full[entry], strict=True)
+    )
+    # ... which is why a lost block takes its descendants with it.
+    spread = _with_descendants(~lost, parent_of)
+    assert spread[child] and spread.sum() > (~lost).sum()
+
+
+@pytest.mark.parametrize("version", [4, PARENT_VERSION])
 @pytest.mark.parametrize("channels", [1, 3])
-def test_known_blocks_are_taken_as_coded(channels: int) -> None:
+def test_known_blocks_are_taken_as_coded(channels: int, version: int) -> None:
     """Blocks coded beforehand (the bpp sample's) make the very chunks a full coding makes,
     band counts included; the known blocks' bytes are taken, not coded again."""
     entries = _bands(11 + channels, (150, 97), channels, 3)
-    whole = encode_blocks(entries, True, 32)
+    whole = encode_blocks(entries, True, 32, version)
     _, regions = block_lengths(entries, True, 32, np.zeros(0, dtype=np.int64))
     for chosen in (np.arange(1, len(regions), 3), np.arange(len(regions))):
-        known = code_blocks(entries, True, 32, chosen)
-        assert np.array_equal(known.lengths, block_lengths(entries, True, 32, chosen)[0])
-        assert encode_blocks(entries, True, 32, known) == whole
-        counted = [getattr(c, "band_counts", None) for c in encode_blocks(entries, True, 32, known)]
+        known = code_blocks(entries, True, 32, chosen, version)
+        assert np.array_equal(known.lengths, block_lengths(entries, True, 32, chosen, version)[0])
+        reused = encode_blocks(entries, True, 32, version, known)
+        assert reused == whole
+        counted = [getattr(c, "band_counts", None) for c in reused]
         assert counted == [getattr(c, "band_counts", None) for c in whole]
-    # Known bytes are trusted: a known block's payload changed shows in the chunks.
-    known = code_blocks(entries, True, 32, np.array([len(regions) - 1]))
+    # Known bytes are trusted: a known block's payload changed shows in the chunks; blocks of
+    # another version are not taken.
+    known = code_blocks(entries, True, 32, np.array([len(regions) - 1]), version)
     altered = known._replace(payload=known.payload ^ np.uint8(1))
-    assert encode_blocks(entries, True, 32, altered) != whole
+    assert encode_blocks(entries, True, 32, version, altered) != whole
+    other = 4 if version == PARENT_VERSION else PARENT_VERSION
+    assert encode_blocks(entries, True, 32, version, altered._replace(version=other)) == whole

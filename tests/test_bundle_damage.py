@@ -99,6 +99,52 @@ def test_a_damaged_block_loses_only_itself(name: str, block: int) -> None:
     assert not (differs & ~reach).any()  # and nothing else is
 
 
+@pytest.mark.parametrize("name", ["grey lossy", "rgb lossy bspline2"])
+def test_a_damaged_block_of_version_6_takes_its_descendants(name: str) -> None:
+    """Version 6 decodes a block from its parent block's values: under ``damaged="zero"`` a
+    damaged block of a coarser chunk is zeroed with its descendants (the same picture area,
+    at the finer levels), and nothing outside that area changes."""
+    bundle = BUNDLES[name]
+    parsed = read_bundle(bundle)
+    assert parsed.header["cparams"]["version"] == 6
+    chunk = len(parsed.chunks) - 2
+    start, stop = _block_span(bundle, chunk, 0)
+    damaged = bytearray(bundle)
+    for at in range(start + 2, min(stop, start + 40), 7):
+        damaged[at] ^= 0xA5
+    with pytest.raises(BundleError, match=rf"chunk {chunk} is corrupt"):
+        decode(bytes(damaged))
+    from wavecore.codec import chunks as chunks_module
+
+    decoded: list[list[np.ndarray]] = []
+    original = chunks_module.decode_blocks
+
+    def recording(*args: object, **kwargs: object) -> list[list[np.ndarray]]:
+        levels = original(*args, **kwargs)  # type: ignore[arg-type]
+        decoded.append(levels)
+        return levels
+
+    chunks_module.decode_blocks = recording  # type: ignore[assignment]
+    try:
+        clean = decode(bundle)
+        out = decode(bytes(damaged), damaged="zero")
+    finally:
+        chunks_module.decode_blocks = original
+    differs = np.any(out != clean, axis=-1) if out.ndim == 3 else out != clean
+    reach = np.zeros(differs.shape, dtype=bool)
+    reach[_block_region(bundle, chunk, 0)] = True
+    assert differs.any() and not (differs & ~reach).any()
+    # The finest chunk's first block (a child of the damaged one) was not decoded: it holds
+    # stand-ins (1s and 2s restoring the band counts) or zeros, not the clean values.
+    side = parsed.header["cparams"]["block"]
+    finest_clean, finest_out = decoded[0][-1][0], decoded[1][-1][0]
+    child_clean, child_out = finest_clean[:side, :side], finest_out[:side, :side]
+    assert not np.array_equal(child_out, child_clean)
+    assert np.isin(child_out, [0, 1, 2]).all()
+    # Blocks that descend from no damaged block decode as before.
+    assert np.array_equal(finest_out[2 * side :, 2 * side :], finest_clean[2 * side :, 2 * side :])
+
+
 def test_strict_decode_names_the_block() -> None:
     bundle = BUNDLES["grey lossy"]
     finest = len(read_bundle(bundle).chunks) - 1

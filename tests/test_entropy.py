@@ -219,8 +219,9 @@ def test_tile_flags_make_sparse_details_cheaper() -> None:
 def test_unknown_context_versions_are_refused() -> None:
     q = _laplace_bands(13)
     chunks, params = encode_levels(q)
-    # 5 is the lossless coder's (wavecore.losslesscoder, encode_image(effort="max")).
-    for version in (1, 6, "3", None):
+    # 5 is the lossless coder's (wavecore.losslesscoder, encode_image(effort="max")); 6 the
+    # block coder with the parent band.
+    for version in (1, 7, "3", None):
         with pytest.raises(BundleError, match="version"):
             decode_levels(chunks, _shapes(q), {**params, "version": version})
 

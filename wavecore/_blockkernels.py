@@ -1,4 +1,5 @@
-"""Compiled loops of the code-block coder (context coder version 4): see ``blockcoder.py``.
+"""Compiled loops of the code-block coder (context coder versions 4 and 6): see
+``blockcoder.py``.
 
 One binary range coder (LZMA's, with 15-bit adaptive probabilities) codes every block from
 start to end inside one compiled call that releases the GIL; a call codes a whole span of
@@ -40,6 +41,11 @@ SIGN_SIZE = 4 * 9
 TILE_BASE = SIGN_BASE + SIGN_SIZE
 TILE_SIZE = 6
 CONTEXTS = TILE_BASE + TILE_SIZE
+#: Version 6: the parent band's magnitude (the same orientation and channel one level coarser,
+#: at ``(i // 2, j // 2)``), times this, joins the other bands' sum ``e`` of a detail value's
+#: zero flag and bit-length contexts.  Callers give each plane's parent plane (``parents``,
+#: -1 for none: every plane of version 4).
+PARENT_WEIGHT = 2
 #: Detail planes first say, per ``TILE × TILE`` tile of the block, whether it holds a nonzero
 #: value; the positions of empty tiles are neither coded nor visited.
 TILE = 8
@@ -239,14 +245,6 @@ def _row_of(plane_info, i):
     return offset + i * cols, cols
 
 
-@njit(nogil=True, cache=True, inline="always")
-def _other_band(flat, start, cols, j):
-    """``|value|`` at column ``j`` of a row found by ``_row_of`` (0 outside it)."""
-    if start < 0 or j >= cols:
-        return np.int64(0)
-    return abs(np.int64(flat[start + j]))
-
-
 #: ``EXTERNAL_CLASS[min(e, 12)]``: the class of a weighted sum ``e`` of the other bands
 #: (0; 1-3; 4-11; 12 and more), looked up rather than branched on.
 EXTERNAL_CLASS = np.array([0, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3], dtype=np.int64)
@@ -341,6 +339,7 @@ def _encode_rows(
     sib1,
     sib2,
     luma,
+    parent,
     sign_base,
     zero_base,
     unary_base,
@@ -359,6 +358,13 @@ def _encode_rows(
         s1, s1c = _row_of(sib1, i)
         s2, s2c = _row_of(sib2, i)
         y0, y0c = _row_of(luma, i)
+        pr, prc = _row_of(parent, i >> 1)
+        # The columns below which each other band has a value on this row (0: none), so that
+        # a value costs one comparison per band, read here rather than in a helper.
+        l1 = s1c if s1 >= 0 else 0
+        l2 = s2c if s2 >= 0 else 0
+        ly = y0c if y0 >= 0 else 0
+        lp = 2 * prc if pr >= 0 else 0
         for tc in range(tile_cols):
             if not approx and flags[tile_row + tc] == 0:
                 continue
@@ -392,8 +398,15 @@ def _encode_rows(
                         )
                     else:
                         s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
-                    e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
-                    e += 4 * _other_band(flat, y0, y0c, j)
+                    e = np.int64(0)
+                    if j < l1:
+                        e += 2 * abs(np.int64(flat[s1 + j]))
+                    if j < l2:
+                        e += 2 * abs(np.int64(flat[s2 + j]))
+                    if j < ly:
+                        e += 4 * abs(np.int64(flat[y0 + j]))
+                    if j < lp:  # version 6: the parent band
+                        e += PARENT_WEIGHT * abs(np.int64(flat[pr + (j >> 1)]))
                     value = np.int64(flat[at])
                 magnitude = abs(value)
                 ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
@@ -473,6 +486,7 @@ def _decode_rows(
     sib1,
     sib2,
     luma,
+    parent,
     sign_base,
     zero_base,
     unary_base,
@@ -488,6 +502,13 @@ def _decode_rows(
         s1, s1c = _row_of(sib1, i)
         s2, s2c = _row_of(sib2, i)
         y0, y0c = _row_of(luma, i)
+        pr, prc = _row_of(parent, i >> 1)
+        # The columns below which each other band has a value on this row (0: none), so that
+        # a value costs one comparison per band, read here rather than in a helper.
+        l1 = s1c if s1 >= 0 else 0
+        l2 = s2c if s2 >= 0 else 0
+        ly = y0c if y0 >= 0 else 0
+        lp = 2 * prc if pr >= 0 else 0
         for tc in range(tile_cols):
             if not approx and flags[tile_row + tc] == 0:
                 continue
@@ -522,8 +543,15 @@ def _decode_rows(
                         )
                     else:
                         s = _neighbours(flat, at, cols, i, j, r0, c0, c1)
-                    e = 2 * (_other_band(flat, s1, s1c, j) + _other_band(flat, s2, s2c, j))
-                    e += 4 * _other_band(flat, y0, y0c, j)
+                    e = np.int64(0)
+                    if j < l1:
+                        e += 2 * abs(np.int64(flat[s1 + j]))
+                    if j < l2:
+                        e += 2 * abs(np.int64(flat[s2 + j]))
+                    if j < ly:
+                        e += 4 * abs(np.int64(flat[y0 + j]))
+                    if j < lp:  # version 6: the parent band
+                        e += PARENT_WEIGHT * abs(np.int64(flat[pr + (j >> 1)]))
                 ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
                 code, rng, models[ctx], nonzero = _split_bit(code, rng, models[ctx])
                 while rng < TOP:
@@ -581,7 +609,7 @@ def _decode_rows(
 
 
 @njit(nogil=True, cache=True)
-def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
+def _encode_block(flat, planes, parents, block, out, pos, models, scratch, flags):
     """Code one block (a region of every plane of one level) into ``out`` from ``pos``.
 
     Returns the position after its last byte (past ``out``'s end when it did not fit).
@@ -600,6 +628,7 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
         sib1 = _plane_info(planes, planes[p, P_SIB1])
         sib2 = _plane_info(planes, planes[p, P_SIB2])
         luma = _plane_info(planes, planes[p, P_LUMA])
+        parent = _plane_info(planes, parents[p])
         sign_base = SIGN_BASE + (3 if approx else planes[p, P_ORIENT]) * 9
         zero_base = ZERO_BASE + kind * LOCAL_CLASSES * EXTERNAL_CLASSES
         unary_base = UNARY_BASE + kind * (LOCAL_CLASSES + 1) * UNARY_INDICES
@@ -651,6 +680,7 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
                 sib1,
                 sib2,
                 luma,
+                parent,
                 sign_base,
                 zero_base,
                 unary_base,
@@ -680,6 +710,7 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
                 sib1,
                 sib2,
                 luma,
+                parent,
                 sign_base,
                 zero_base,
                 unary_base,
@@ -700,7 +731,7 @@ def _encode_block(flat, planes, block, out, pos, models, scratch, flags):
 
 
 @njit(nogil=True, cache=True)
-def _decode_block(data, start, end, flat, planes, block, models, scratch, flags):
+def _decode_block(data, start, end, flat, planes, parents, block, models, scratch, flags):
     """Decode one block from ``data[start:end]`` into ``flat``; 0, or 1 if it is corrupt."""
     rng, pos = np.int64(MASK32), start
     code = np.int64(0)
@@ -721,6 +752,7 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch, flags)
         sib1 = _plane_info(planes, planes[p, P_SIB1])
         sib2 = _plane_info(planes, planes[p, P_SIB2])
         luma = _plane_info(planes, planes[p, P_LUMA])
+        parent = _plane_info(planes, parents[p])
         sign_base = SIGN_BASE + (3 if approx else planes[p, P_ORIENT]) * 9
         zero_base = ZERO_BASE + kind * LOCAL_CLASSES * EXTERNAL_CLASSES
         unary_base = UNARY_BASE + kind * (LOCAL_CLASSES + 1) * UNARY_INDICES
@@ -762,6 +794,7 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch, flags)
                 sib1,
                 sib2,
                 luma,
+                parent,
                 sign_base,
                 zero_base,
                 unary_base,
@@ -790,6 +823,7 @@ def _decode_block(data, start, end, flat, planes, block, models, scratch, flags)
                 sib1,
                 sib2,
                 luma,
+                parent,
                 sign_base,
                 zero_base,
                 unary_base,
@@ -860,7 +894,7 @@ def _fresh_models(models):
 
 
 @njit(nogil=True, cache=True)
-def encode_span(flat, planes, blocks, lo, hi):
+def encode_span(flat, planes, parents, blocks, lo, hi):
     """Code blocks ``lo .. hi - 1``; return their bytes, concatenated, and each one's length.
 
     An all-zero block has length 0; any other block at least 1 byte.
@@ -890,7 +924,7 @@ def encode_span(flat, planes, blocks, lo, hi):
             continue
         while True:
             _fresh_models(models)
-            end = _encode_block(flat, planes, blocks[b], out, pos, models, scratch, flags)
+            end = _encode_block(flat, planes, parents, blocks[b], out, pos, models, scratch, flags)
             if end <= out.size:
                 break
             bigger = np.empty(2 * out.size + 2 * (end - pos), dtype=np.uint8)
@@ -910,7 +944,7 @@ def encode_span(flat, planes, blocks, lo, hi):
 
 
 @njit(nogil=True, cache=True)
-def decode_span(data, starts, lengths, planes, blocks, flat, lo, hi):
+def decode_span(data, starts, lengths, planes, parents, blocks, flat, lo, hi):
     """Decode blocks ``lo .. hi - 1`` into ``flat`` (zeros where a block's length is 0).
 
     ``data[starts[b] : starts[b] + lengths[b]]`` holds block ``b``.  Returns the number of
@@ -925,7 +959,16 @@ def decode_span(data, starts, lengths, planes, blocks, flat, lo, hi):
             continue
         _fresh_models(models)
         bad += _decode_block(
-            data, starts[b], starts[b] + lengths[b], flat, planes, blocks[b], models, scratch, flags
+            data,
+            starts[b],
+            starts[b] + lengths[b],
+            flat,
+            planes,
+            parents,
+            blocks[b],
+            models,
+            scratch,
+            flags,
         )
     return bad
 

@@ -1,4 +1,4 @@
-"""Independent code-blocks: the context coder's version 4.
+"""Code-blocks: the context coder's versions 4 and 6.
 
 Every level's bands are cut into blocks of ``block × block`` positions (``1 × block²`` for the
 1-D layouts of curves).  A block holds that region of *every* band and channel of the level
@@ -19,7 +19,14 @@ symbols, which is where version 3 spends its time and why it holds the GIL.  An 
 binary range coder with adaptive probabilities is a few dozen lines, compiles with numba, and
 adapts after every bit (which also codes smaller than adapting after every run).
 
-The bit-level specification is in ``docs/bundle-format.md`` (context coder version 4).
+Version 6 (:data:`PARENT_VERSION`) adds one context term: a detail value's zero flag and
+bit-length contexts also look at the parent band (the same orientation and channel, one level
+coarser, at ``(i // 2, j // 2)``), which lies in one block of the previous chunk, the block's
+*parent block*.  A block then decodes from its own bytes and its parent block's values: the
+decoder decodes a chunk's parent chunk first, a region decodes the parent blocks of the blocks
+it needs, and a damaged block takes its descendants with it (:func:`parent_blocks`).
+
+The bit-level specification is in ``docs/bundle-format.md`` (context coder versions 4 and 6).
 """
 
 from __future__ import annotations
@@ -43,6 +50,7 @@ from .varints import encode_varint
 __all__ = [
     "BLOCK_SIZE",
     "BLOCK_SIZES",
+    "PARENT_VERSION",
     "CodedBlocks",
     "CodedChunk",
     "KnownBlocks",
@@ -57,6 +65,7 @@ __all__ = [
     "encode_blocks",
     "fill_stand_ins",
     "needed_blocks",
+    "parent_blocks",
     "strip_block_checks",
 ]
 
@@ -67,6 +76,9 @@ __all__ = [
 BLOCK_SIZE = 128
 #: The sides a reader accepts.
 BLOCK_SIZES = (16, 32, 64, 128, 256)
+#: The context coder's version whose detail contexts look at the parent band (version 4's do
+#: not; version 5 is the lossless coder, :mod:`wavecore.losslesscoder`).
+PARENT_VERSION = 6
 #: Runs of blocks per encode or decode, each its own task for the thread pool: blocks cost
 #: very unequal time (dense coarse blocks, nearly empty fine ones), so many small tasks handed
 #: to whichever thread is free keep both cores busy to the end (a few large tasks can leave
@@ -216,6 +228,77 @@ def _build_structure(
     return plane_table, np.concatenate(blocks), per_chunk, offset
 
 
+def _parents(
+    layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block: int, version: int
+) -> np.ndarray:
+    """Each plane's parent plane for the coder's ``version`` (-1: none; every plane but of
+    version 6): see :func:`_parent_tables`."""
+    if version != PARENT_VERSION:
+        return _no_parents(_structure(layout, two_d, block)[0].shape[0])
+    return _parent_tables(_layout_key(layout), two_d, block)[0]
+
+
+@functools.lru_cache(maxsize=8)
+def _no_parents(count: int) -> np.ndarray:
+    # Shared, read by the kernels only (a read-only array would compile them again).
+    return np.full(count, -1, dtype=np.int64)
+
+
+def parent_blocks(layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block: int) -> np.ndarray:
+    """Each block's parent block under version 6 (-1: none), in :func:`needed_blocks`' order.
+
+    The parent block is the block of the previous chunk that holds every parent value of the
+    block's detail values; it comes earlier in the order, so a pass from the last block to the
+    first can hand a block's needs on to its ancestors, and one from the first to the last a
+    parent's loss on to its descendants.
+    """
+    return _parent_tables(_layout_key(layout), two_d, block)[1]
+
+
+def _parent_tables(layout: _LayoutKey, two_d: bool, block: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_parents` and :func:`parent_blocks` of version 6, cached with the tables."""
+    if _table_bytes(layout, two_d, block) > _CACHED_TABLE_BYTES:
+        return _cached_parent_tables.__wrapped__(layout, two_d, block)
+    return _cached_parent_tables(layout, two_d, block)
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_parent_tables(
+    layout: _LayoutKey, two_d: bool, block: int
+) -> tuple[np.ndarray, np.ndarray]:
+    # A detail plane's parent is the plane at the same place (channel, then band) of the
+    # previous chunk, when that chunk is a detail chunk of the same bands and channels: the
+    # same orientation and channel one level coarser.  Chunk 1 (the coarsest details) has
+    # none: chunk 0 is the approximation.
+    planes, blocks, per_chunk, _ = _structure(layout, two_d, block)
+    block_rows, block_cols = (block, block) if two_d else (1, block * block)
+    parents = np.full(len(planes), -1, dtype=np.int64)
+    parent_of = np.full(len(blocks), -1, dtype=np.int64)
+    first_plane, first_block = 0, 0
+    previous: tuple[list[int], int, int, int, int] | None = None
+    for index, band_shapes in enumerate(layout):
+        dims = [_plane_dims(shape, two_d) for shape in band_shapes]
+        counts = [d[2] for d in dims]
+        count = sum(counts)
+        height = max((d[0] for d in dims), default=0)
+        width = max((d[1] for d in dims), default=0)
+        grid_rows, grid_cols = -(-height // block_rows), -(-width // block_cols)
+        if index >= 2 and previous is not None and previous[0] == counts:
+            _, plane0, block0, rows0, cols0 = previous
+            parents[first_plane : first_plane + count] = np.arange(plane0, plane0 + count)
+            table = blocks[first_block : first_block + per_chunk[index]]
+            prow = (table[:, kernels.B_ROW0] // 2) // block_rows
+            pcol = (table[:, kernels.B_COL0] // 2) // block_cols
+            inside = (prow < rows0) & (pcol < cols0)
+            parent_of[first_block : first_block + per_chunk[index]] = np.where(
+                inside, block0 + prow * cols0 + pcol, -1
+            )
+        previous = (counts, first_plane, first_block, grid_rows, grid_cols) if index else None
+        first_plane += count
+        first_block += per_chunk[index]
+    return parents, parent_of
+
+
 def _block_sizes(planes: np.ndarray, blocks: np.ndarray) -> np.ndarray:
     """Coefficients per block (for sharing the work out evenly): one compiled pass."""
     return tables.block_sizes(planes, blocks)
@@ -234,16 +317,20 @@ def encode_blocks(
     entries: list[list[np.ndarray]],
     two_d: bool,
     block: int = BLOCK_SIZE,
+    version: int = 4,
     known: KnownBlocks | None = None,
 ) -> list[bytes]:
-    """Code integer bands (``[[cA], [level L bands], ...]``) into one chunk per entry.
+    """Code integer bands (``[[cA], [level L bands], ...]``) into one chunk per entry, with
+    the context coder's ``version`` (4 or :data:`PARENT_VERSION`).
 
-    ``known``: blocks of these very bands coded already (:func:`code_blocks`, the bpp
-    search's sample at the step it settled on), whose bytes are taken as they are.
+    ``known``: blocks of these very bands coded already with the same ``version``
+    (:func:`code_blocks`: the bpp search's sample at the step it settled on), whose bytes are
+    taken as they are (blocks of another version are ignored).
     """
     layout = [[band.shape for band in bands] for bands in entries]
-    if known is not None and known.indices.size:
-        return _encode_blocks_knowing(entries, two_d, block, layout, known)
+    parents = _parents(layout, two_d, block, version)
+    if known is not None and known.indices.size and known.version == version:
+        return _encode_blocks_knowing(entries, two_d, block, layout, parents, known)
     planes, blocks, per_chunk, total, sizes = _structure_sizes(layout, two_d, block)
     flat = np.empty(total, dtype=np.int32)
     views = _plane_views(entries, two_d)
@@ -258,7 +345,9 @@ def encode_blocks(
 
     def run(lo: int, hi: int) -> None:
         for span in range(lo, hi):
-            results[span] = kernels.encode_span(flat, planes, blocks, cuts[span], cuts[span + 1])
+            results[span] = kernels.encode_span(
+                flat, planes, parents, blocks, cuts[span], cuts[span + 1]
+            )
 
     run_rows(run, spans, pieces=spans)
     payload = np.concatenate([r[0] for r in results])
@@ -294,23 +383,26 @@ def _assembled_chunks(
 
 class KnownBlocks(NamedTuple):
     """Blocks coded already: their indices (ascending, in :func:`needed_blocks`' order), their
-    bytes one after another, and each one's length."""
+    bytes one after another, each one's length, and the coder's version they were coded
+    with."""
 
     indices: np.ndarray
     payload: np.ndarray
     lengths: np.ndarray
+    version: int
 
 
 def code_blocks(
-    entries: list[list[np.ndarray]], two_d: bool, block: int, indices: np.ndarray
+    entries: list[list[np.ndarray]], two_d: bool, block: int, indices: np.ndarray, version: int = 4
 ) -> KnownBlocks:
-    """Blocks ``indices`` of ``entries`` coded alone: exactly the bytes :func:`encode_blocks`
-    writes for them."""
+    """Blocks ``indices`` of ``entries`` coded alone with the coder's ``version``: exactly the
+    bytes :func:`encode_blocks` writes for them."""
     layout = [[band.shape for band in bands] for bands in entries]
     planes, blocks, _, _ = _structure(layout, two_d, block)
     indices = np.asarray(indices, dtype=np.int64)
-    payload, lengths = _code_some(entries, two_d, planes, blocks, indices)
-    return KnownBlocks(indices, payload, lengths)
+    parents = _parents(layout, two_d, block, version)
+    payload, lengths = _code_some(entries, two_d, planes, blocks, indices, parents)
+    return KnownBlocks(indices, payload, lengths, version)
 
 
 def _encode_blocks_knowing(
@@ -318,6 +410,7 @@ def _encode_blocks_knowing(
     two_d: bool,
     block: int,
     layout: list[list[tuple[int, ...]]],
+    parents: np.ndarray,
     known: KnownBlocks,
 ) -> list[bytes]:
     """:func:`encode_blocks` where ``known`` blocks are coded already: only the others are."""
@@ -327,7 +420,8 @@ def _encode_blocks_knowing(
     lengths = np.zeros(len(blocks), dtype=np.int64)
     coded = [known]
     if rest.size:
-        coded.append(KnownBlocks(rest, *_code_some(entries, two_d, planes, blocks, rest)))
+        payload, sizes = _code_some(entries, two_d, planes, blocks, rest, parents)
+        coded.append(KnownBlocks(rest, payload, sizes, known.version))
     for some in coded:
         ends = np.cumsum(some.lengths)
         for k, index in enumerate(some.indices.tolist()):
@@ -384,19 +478,26 @@ class CodedBlocks:
     """The chunks of :func:`encode_blocks`, held block by block, so that rate control can code
     some blocks again (say, with details removed) without coding the others.
 
-    ``CodedBlocks(chunks, layout, two_d, block)`` splits chunks made by :func:`encode_blocks`
-    (their tables of block lengths say where each block's bytes are); :meth:`recode` codes the
-    given blocks again from new integer bands, by the same compiled coder, so a block's bytes
-    are exactly what :func:`encode_blocks` writes for its values; :meth:`chunks` puts the
+    ``CodedBlocks(chunks, layout, two_d, block, version)`` splits chunks made by
+    :func:`encode_blocks` (their tables of block lengths say where each block's bytes are);
+    :meth:`recode` codes the given blocks again from new integer bands, by the same compiled
+    coder, so a block's bytes are exactly what :func:`encode_blocks` writes for its values
+    (under version 6 with their child blocks, whose contexts read them); :meth:`chunks` puts the
     chunks back together.  ``regions[b]`` is block ``b``'s ``(entry, row0, col0, row1, col1)``:
     the positions it holds in every band (and channel) of layout entry ``entry``.
     """
 
     def __init__(
-        self, chunks: list[bytes], layout: list[list[tuple[int, ...]]], two_d: bool, block: int
+        self,
+        chunks: list[bytes],
+        layout: list[list[tuple[int, ...]]],
+        two_d: bool,
+        block: int,
+        version: int = 4,
     ) -> None:
-        self.layout, self.two_d, self.block = layout, two_d, block
+        self.layout, self.two_d, self.block, self.version = layout, two_d, block, version
         self._planes, self._blocks, self._per_chunk, self._total = _structure(layout, two_d, block)
+        self._parents = _parents(layout, two_d, block, version)
         self.payloads: list[bytes] = []
         # Bundle format 3.0 stores each detail band's counts beside its blocks (see CodedChunk).
         self.band_counts = [getattr(chunk, "band_counts", None) for chunk in chunks]
@@ -421,11 +522,18 @@ class CodedBlocks:
         )
 
     def recode(self, entries: list[list[np.ndarray]], indices: np.ndarray) -> None:
-        """Code blocks ``indices`` again from ``entries`` (integer bands of the same layout)."""
+        """Code blocks ``indices`` again from ``entries`` (integer bands of the same layout);
+        under version 6 their child blocks too, whose contexts read their values."""
         indices = np.asarray(indices, dtype=np.int64)
         if indices.size == 0:
             return
-        payload, lengths = _code_some(entries, self.two_d, self._planes, self._blocks, indices)
+        if self.version == PARENT_VERSION:
+            parent_of = parent_blocks(self.layout, self.two_d, self.block)
+            children = np.flatnonzero(np.isin(parent_of, indices))
+            indices = np.union1d(indices, children)
+        payload, lengths = _code_some(
+            entries, self.two_d, self._planes, self._blocks, indices, self._parents
+        )
         ends = np.cumsum(lengths)
         for k, index in enumerate(indices):
             start = int(ends[k - 1]) if k else 0
@@ -459,6 +567,7 @@ def _code_some(
     planes: np.ndarray,
     blocks: np.ndarray,
     indices: np.ndarray,
+    parents: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Blocks ``indices`` of the tables coded from ``entries``: their bytes and lengths.
 
@@ -468,6 +577,9 @@ def _code_some(
     blocks, and copying every plane for it cost as much as the coding of the sample.
     """
     sub_planes, sub_blocks, pieces, total = _compact_tables(planes, blocks, indices)
+    sub_parents, sub_planes, pieces, total = _with_parent_pieces(
+        sub_planes, pieces, total, planes, parents
+    )
     flat = np.empty(total, dtype=np.int32)
     views = _plane_views(entries, two_d)
     sources, targets = [], []
@@ -486,11 +598,52 @@ def _code_some(
     def run(lo: int, hi: int) -> None:
         for span in range(lo, hi):
             results[span] = kernels.encode_span(
-                flat, sub_planes, sub_blocks, cuts[span], cuts[span + 1]
+                flat, sub_planes, sub_parents, sub_blocks, cuts[span], cuts[span + 1]
             )
 
     run_rows(run, spans, pieces=spans)
     return np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results])
+
+
+def _with_parent_pieces(
+    sub_planes: np.ndarray, pieces: np.ndarray, total: int, planes: np.ndarray, parents: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Compact tables (:func:`_compact_tables`) with, for each compact plane whose plane has a
+    parent (version 6), a compact plane of the parent's values it reads, appended.
+
+    A block starts at even rows and columns, so its position ``(i, j)`` reads the parent's
+    ``(i // 2, j // 2)`` from a compact parent plane anchored at half the block's corner, cut
+    where the parent plane ends, as in the whole plane.  Returns the compact parents (-1:
+    none), the tables and the total size.
+    """
+    count = len(sub_planes)
+    sub_parents = np.full(count, -1, dtype=np.int64)
+    source = pieces[:, 0]
+    has = np.flatnonzero(
+        (parents[source] >= 0) & (pieces[:, 2] > pieces[:, 1]) & (pieces[:, 4] > pieces[:, 3])
+    )
+    if not has.size:
+        return sub_parents, sub_planes, pieces, total
+    q = parents[source[has]]
+    r0, c0 = pieces[has, 1] // 2, pieces[has, 3] // 2
+    r1 = np.minimum((pieces[has, 2] + 1) // 2, planes[q, kernels.P_ROWS])
+    c1 = np.minimum((pieces[has, 4] + 1) // 2, planes[q, kernels.P_COLS])
+    r1, c1 = np.maximum(r1, r0), np.maximum(c1, c0)
+    sizes = (r1 - r0) * (c1 - c0)
+    extra = planes[q].copy()
+    extra[:, kernels.P_OFFSET] = total + np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    extra[:, kernels.P_ROWS] = r1 - r0
+    extra[:, kernels.P_COLS] = c1 - c0
+    extra[:, [kernels.P_SIB1, kernels.P_SIB2, kernels.P_LUMA]] = -1  # never coded
+    sub_parents[has] = count + np.arange(has.size)
+    sub_parents = np.concatenate([sub_parents, np.full(has.size, -1, dtype=np.int64)])
+    extra_pieces = np.column_stack([q, r0, r1, c0, c1])
+    return (
+        sub_parents,
+        np.concatenate([sub_planes, extra]),
+        np.concatenate([pieces, extra_pieces]),
+        total + int(sizes.sum()),
+    )
 
 
 def _compact_tables(
@@ -508,11 +661,15 @@ def _compact_tables(
 
 
 def block_lengths(
-    entries: list[list[np.ndarray]], two_d: bool, block: int, indices: np.ndarray
+    entries: list[list[np.ndarray]],
+    two_d: bool,
+    block: int,
+    indices: np.ndarray,
+    version: int = 4,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The coded bytes of blocks ``indices`` alone (what :func:`encode_blocks` would write for
-    them), and every block's region ``(entry, row0, col0, row1, col1)``: for rate control to
-    sample the coder on a few blocks."""
+    them with the coder's ``version``), and every block's region ``(entry, row0, col0, row1,
+    col1)``: for rate control to sample the coder on a few blocks."""
     layout = [[band.shape for band in bands] for bands in entries]
     planes, blocks, per_chunk, _ = _structure(layout, two_d, block)
     entry_of = np.repeat(np.arange(len(per_chunk)), per_chunk)
@@ -528,7 +685,8 @@ def block_lengths(
     indices = np.asarray(indices, dtype=np.int64)
     if indices.size == 0:
         return np.zeros(0, dtype=np.int64), regions
-    return _code_some(entries, two_d, planes, blocks, indices)[1], regions
+    parents = _parents(layout, two_d, block, version)
+    return _code_some(entries, two_d, planes, blocks, indices, parents)[1], regions
 
 
 def _plane_views(entries: list[list[np.ndarray]], two_d: bool) -> list[np.ndarray]:
@@ -554,6 +712,7 @@ def decode_blocks(
     block: int,
     *,
     skip: np.ndarray | None = None,
+    version: int = 4,
 ) -> list[list[np.ndarray]]:
     """Decode the chunks of :func:`encode_blocks` into ``int32`` bands of the ``layout``'s shapes.
 
@@ -565,7 +724,10 @@ def decode_blocks(
     skip : numpy.ndarray of bool, optional
         One flag per block of these chunks (in :func:`needed_blocks`' order): a flagged block is
         not decoded, its coefficients are zero (a region decode's unneeded blocks, or the
-        damaged blocks of ``decode(..., damaged="zero")``).
+        damaged blocks of ``decode(..., damaged="zero")``).  Under version 6 the caller skips
+        no parent block of a block it decodes (see :func:`parent_blocks`).
+    version : int
+        The context coder's version (4 or :data:`PARENT_VERSION`).
 
     Raises
     ------
@@ -573,7 +735,7 @@ def decode_blocks(
         For a block table that does not add up to its chunk, or a block that decodes to
         something impossible.
     """
-    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip)
+    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip, version)
     return _bands_out(flat, planes, layout, two_d, total)
 
 
@@ -583,6 +745,7 @@ def _decode_flat(
     two_d: bool,
     block: int,
     skip: np.ndarray | None,
+    version: int,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Every plane decoded into one flat ``int32`` array: ``(flat, plane table, size)``."""
     if block not in BLOCK_SIZES:
@@ -614,17 +777,35 @@ def _decode_flat(
         block_lengths = np.where(skip[: len(block_lengths)], 0, block_lengths)
     flat = np.zeros(total, dtype=np.int32)
     sizes = np.where(block_lengths > 0, all_sizes, 0)
-    spans = _span_count(int(sizes.sum()))
-    cuts = _cuts(sizes, spans)
-    bad = [0] * spans
+    parents = _parents(layout, two_d, block, version)
+    # Version 6 reads the previous chunk's values: one chunk after the other, each over the
+    # threads (chunks 0 and 1 depend on none); version 4, every block at once.
+    waves = [0, len(sizes)]
+    if version == PARENT_VERSION:
+        ends = np.cumsum(per_chunk[: len(chunks)]).tolist()
+        waves = [0, *ends[1:]] if len(ends) > 1 else [0, *ends]
+    bad: list[int] = []
+    for first, last in itertools.pairwise(waves):
+        spans = _span_count(int(sizes[first:last].sum()))
+        cuts = first + _cuts(sizes[first:last], spans)
+        found = [0] * spans
 
-    def run(lo: int, hi: int) -> None:
-        for span in range(lo, hi):
-            bad[span] = kernels.decode_span(
-                data, block_starts, block_lengths, planes, blocks, flat, cuts[span], cuts[span + 1]
-            )
+        def run(lo: int, hi: int, cuts: np.ndarray = cuts, found: list[int] = found) -> None:
+            for span in range(lo, hi):
+                found[span] = kernels.decode_span(
+                    data,
+                    block_starts,
+                    block_lengths,
+                    planes,
+                    parents,
+                    blocks,
+                    flat,
+                    cuts[span],
+                    cuts[span + 1],
+                )
 
-    run_rows(run, spans, pieces=spans)
+        run_rows(run, spans, pieces=spans)
+        bad.extend(found)
     if sum(bad):
         msg = f"{sum(bad)} code-block(s) of the context-coded chunks are corrupt"
         raise BundleError(msg)
@@ -700,6 +881,7 @@ def decode_block_windows(
     skip: np.ndarray,
     windows: Sequence[Sequence[tuple[int, int, int, int]]],
     totals_for: Sequence[int] = (),
+    version: int = 4,
 ) -> tuple[list[list[np.ndarray]], dict[int, list[tuple[int, int]]]]:
     """:func:`decode_blocks` for a region: only ``windows`` of each band, and no more.
 
@@ -713,13 +895,15 @@ def decode_block_windows(
     totals_for : sequence of int
         Chunks whose bands' :func:`band_counts` over the whole band are wanted too (the
         chunks that do not store them: they are decoded whole, or not at all).
+    version : int
+        As for :func:`decode_blocks`.
 
     Returns
     -------
     list, dict
         The windows, shaped like their bands but for the window's sizes, and the counts.
     """
-    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip)
+    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip, version)
     totals: dict[int, list[tuple[int, int]]] = {}
     p = 0
     for index, band_shapes in enumerate(layout):

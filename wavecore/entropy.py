@@ -10,12 +10,13 @@ Coders:
 ``"zlib"``
     The generic baseline: the level's integers as little-endian ``int32``, deflated.
 ``"context"``
-    The default: context modelling and range coding, version 4 (:mod:`wavecore.blockcoder`):
-    each level is cut into independent 128 × 128 code-blocks (every band and channel of the
-    level in each), coded by a compiled binary range coder with adaptive probabilities, in
-    threads with the GIL released.  Versions 2 and 3 (constriction's range coder, adaptive
-    counts per context class driven from Python; version 3 with a flag per 8 × 8 tile) still
-    decode, by the code below.
+    The default: context modelling and range coding, version 6 for two-dimensional layouts
+    and 4 for the others (:mod:`wavecore.blockcoder`): each level is cut into 128 × 128
+    code-blocks (every band and channel of the level in each), coded by a compiled binary
+    range coder with adaptive probabilities, in threads with the GIL released; version 6's
+    detail contexts also read the parent band, one level coarser.  Versions 2 and 3
+    (constriction's range coder, adaptive counts per context class driven from Python;
+    version 3 with a flag per 8 × 8 tile) still decode, by the code below.
 
 The decoder treats its input as hostile: every chunk is checked against the sizes the caller
 declares (``shapes``), decompression is bounded by those sizes, and anything wrong raises
@@ -33,7 +34,7 @@ import constriction
 import numpy as np
 from numba import njit
 
-from .blockcoder import BLOCK_SIZE, KnownBlocks, decode_blocks, encode_blocks
+from .blockcoder import BLOCK_SIZE, PARENT_VERSION, KnownBlocks, decode_blocks, encode_blocks
 from .errors import BundleError, InvalidParameter
 from .layout import as_levels, is_band_group
 from .losslesscoder import LOSSLESS_VERSION, decode_lossless_levels
@@ -74,7 +75,11 @@ def _check_coder(coder: Any) -> str:
 
 
 def encode_levels(
-    qcoeffs: Sequence[Any], *, coder: str = "context", known_blocks: KnownBlocks | None = None
+    qcoeffs: Sequence[Any],
+    *,
+    coder: str = "context",
+    version: int | None = None,
+    known_blocks: KnownBlocks | None = None,
 ) -> tuple[list[bytes], dict[str, Any]]:
     """Entropy-code quantized coefficients, one chunk per resolution level.
 
@@ -86,9 +91,14 @@ def encode_levels(
     coder : {"context", "zlib"}
         ``"context"`` (default) is the context-modelling range coder; ``"zlib"`` the generic
         baseline.
+    version : int, optional
+        The context coder's version: by default 6 for two-dimensional layouts and 4 for the
+        others; 4 codes each chunk independently of the others (the lossless path re-codes
+        only the coarse chunks when it tries a deeper decomposition).
     known_blocks : wavecore.blockcoder.KnownBlocks, optional
-        Code-blocks of these very coefficients that the context coder has coded already
-        (:func:`wavecore.blockcoder.code_blocks`): their bytes are taken, not coded again.
+        Code-blocks of these very coefficients that the context coder has coded already, with
+        the same version (:func:`wavecore.blockcoder.code_blocks`): their bytes are taken,
+        not coded again.
 
     Returns
     -------
@@ -111,7 +121,7 @@ def encode_levels(
     coder = _check_coder(coder)
     entries = _entries(qcoeffs)
     if coder == "context":
-        return _encode_context(entries, known=known_blocks)
+        return _encode_context(entries, version, known_blocks)
     chunks = []
     for bands in entries:
         raw = b"".join(band.astype("<i4", copy=False).tobytes() for band in bands)
@@ -272,9 +282,11 @@ _W_DIRECT, _W_DIAGONAL, _W_PARENT, _W_SIBLING, _W_LUMA = 4, 2, 2, 1, 6
 #: by 18.
 _PARENT_SCALE = 18
 #: Version 3 adds the tile flags; version 4 codes independent code-blocks with a compiled
-#: binary range coder (:mod:`wavecore.blockcoder`).  Versions 2 and 3 still decode.
-CONTEXT_VERSION = 4
-CONTEXT_VERSIONS = (2, 3, 4)
+#: binary range coder (:mod:`wavecore.blockcoder`); version 6 adds the parent band to its
+#: detail contexts, and is what two-dimensional layouts are coded with (one-dimensional ones,
+#: curves, keep version 4).  Versions 2 to 4 still decode.
+CONTEXT_VERSION = PARENT_VERSION
+CONTEXT_VERSIONS = (2, 3, 4, PARENT_VERSION)
 #: Tiles of ``_TILE × _TILE`` detail coefficients: each is flagged as holding a nonzero value
 #: or not, and an all-zero tile costs nothing more (most of the finest levels, at most rates).
 _TILE = 8
@@ -1064,12 +1076,14 @@ _BIT = _model.Uniform(2)
 
 def _encode_context(
     entries: list[list[np.ndarray]],
-    version: int = CONTEXT_VERSION,
+    version: int | None = None,
     known: KnownBlocks | None = None,
 ) -> tuple[list[bytes], dict[str, Any]]:
     two_d = len(entries) > 1 and len(entries[1]) == 3
+    if version is None:
+        version = CONTEXT_VERSION if two_d else 4
     if version >= 4:
-        chunks = encode_blocks(entries, two_d, BLOCK_SIZE, known)
+        chunks = encode_blocks(entries, two_d, BLOCK_SIZE, version, known)
         return chunks, {"coder": "context", "version": version, "two_d": two_d, "block": BLOCK_SIZE}
     layout = [[band.shape for band in bands] for bands in entries]
     writer = _Writer()
@@ -1093,7 +1107,9 @@ def _decode_context(
         if isinstance(block, bool) or not isinstance(block, int):
             msg = f"context coder parameter 'block' must be an integer, not {block!r}"
             raise BundleError(msg)
-        return decode_blocks([bytes(c) for c in chunks], layout, params["two_d"], block)
+        return decode_blocks(
+            [bytes(c) for c in chunks], layout, params["two_d"], block, version=version
+        )
     readers = [_Reader(bytes(chunk)) for chunk in chunks]
     decoded = _code_levels(lambda index: readers[index], None, layout, params["two_d"], version)
     levels = []

@@ -58,6 +58,10 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
     y, x = np.mgrid[0:300, 0:270] / 300.0
     waves = 128 + 60 * np.sin(23 * x * (1 + y)) + 40 * np.cos(17 * y) * (x > 0.5)
     blocks_picture = (waves + rng.normal(0, 4, x.shape)).clip(0, 255).astype(np.uint8)
+    y, x = np.mgrid[0:520, 0:264] / 300.0
+    waves = 128 + 60 * np.sin(23 * x * (1 + y)) + 40 * np.cos(17 * y) * (x > 0.5)
+    noise = np.random.default_rng(66).normal(0, 4, x.shape)  # its own: the rest stay
+    parent_picture = (waves + noise).clip(0, 255).astype(np.uint8)
     return {
         "image_grey_u8_lossy": (
             "image",
@@ -99,6 +103,16 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
         "image_rgba_u16_lossless_ctx4": ("image", rgba16, {"lossless": True}),
         "curve_open_tolerance_ctx4": ("curve", open_curve, {"tolerance": 1e-4}),
         "surface_closed_open_ctx4": (
+            "surface",
+            surface,
+            {"closed": (True, False), "quality": 42.0},
+        ),
+        # Context coder version 6 (the parent band in the detail contexts): a grey picture
+        # whose two finest levels span several 128 × 128 blocks (so blocks of the finest
+        # level have different parent blocks), colour at a set rate, and a closed surface.
+        "image_grey_u8_parent_ctx6": ("image", parent_picture, {"quality": 36.0}),
+        "image_rgb_u8_bpp_ctx6": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 8.0}),
+        "surface_closed_open_ctx6": (
             "surface",
             surface,
             {"closed": (True, False), "quality": 42.0},

@@ -16,12 +16,14 @@ import numpy as np
 
 from ..blockcoder import (
     BLOCK_SIZES,
+    PARENT_VERSION,
     band_counts,
     block_counts,
     decode_block_windows,
     decode_blocks,
     fill_stand_ins,
     needed_blocks,
+    parent_blocks,
     strip_block_checks,
 )
 from ..bundle import Bundle
@@ -32,8 +34,8 @@ from .plan import Plan, plan_from_header
 from .stages import quantizer_of
 
 
-def block_coder(header: dict[str, Any]) -> tuple[bool, int] | None:
-    """``(two_d, block)`` when the header's coder codes in independent blocks, else None."""
+def block_coder(header: dict[str, Any]) -> tuple[bool, int, int] | None:
+    """``(two_d, block, version)`` when the header's coder codes in blocks, else None."""
     cparams = header.get("cparams")
     if header.get("coder") != "context" or not isinstance(cparams, dict):
         return None
@@ -42,7 +44,40 @@ def block_coder(header: dict[str, Any]) -> tuple[bool, int] | None:
         return None
     if not isinstance(two_d, bool) or isinstance(block, bool) or block not in BLOCK_SIZES:
         return None
-    return two_d, int(block)
+    return two_d, int(block), version
+
+
+def _parents_of(
+    entries: list[list[tuple[int, ...]]], coder: tuple[bool, int, int]
+) -> np.ndarray | None:
+    """Each block's parent block (version 6), or None (blocks that depend on none)."""
+    two_d, block, version = coder
+    return parent_blocks(entries, two_d, block) if version == PARENT_VERSION else None
+
+
+def _with_ancestors(wanted: np.ndarray, parent_of: np.ndarray | None) -> np.ndarray:
+    """``wanted`` and every ancestor of a wanted block (version 6 decodes a block from its
+    parent block's values)."""
+    if parent_of is None:
+        return wanted
+    wanted = wanted.copy()
+    while True:
+        up = parent_of[wanted & (parent_of >= 0)]
+        if wanted[up].all():
+            return wanted
+        wanted[up] = True
+
+
+def _with_descendants(lost: np.ndarray, parent_of: np.ndarray | None) -> np.ndarray:
+    """``lost`` and every descendant of a lost block (whose contexts read lost values)."""
+    if parent_of is None:
+        return lost
+    has = parent_of >= 0
+    while True:
+        more = lost | (has & lost[np.maximum(parent_of, 0)])
+        if np.array_equal(more, lost):
+            return lost
+        lost = more
 
 
 def band_entries(shapes: list[Any]) -> list[list[tuple[int, ...]]]:
@@ -68,13 +103,14 @@ def chunk_block_info(
         return None
     plan = plan_from_header(header)
     entries = band_entries(plan.band_shapes()[: len(chunks)])
-    counts = block_counts(entries, *coder)
+    two_d, block, version = coder
+    counts = block_counts(entries, two_d, block)
     known = [getattr(chunk, "band_counts", None) for chunk in chunks]
     missing = any(
         k is None and n > 1 and i for i, (k, n) in enumerate(zip(known, counts, strict=True))
     )
     if missing:
-        levels = decode_blocks([bytes(c) for c in chunks], entries, *coder)
+        levels = decode_blocks([bytes(c) for c in chunks], entries, two_d, block, version=version)
         known = [[band_counts(band) for band in bands] for bands in levels]
     return [(n, known[i] if n > 1 and i else None) for i, n in enumerate(counts)]
 
@@ -115,7 +151,7 @@ def whole_chunks(parsed: Bundle, count: int, damaged: str) -> list[bytes]:
 def decode_block_levels(
     parsed: Bundle,
     entries: list[list[tuple[int, ...]]],
-    coder: tuple[bool, int],
+    coder: tuple[bool, int, int],
     masks: list[list[tuple[np.ndarray, ...]]] | None,
     damaged: str,
 ) -> list[Any]:
@@ -123,9 +159,9 @@ def decode_block_levels(
 
     Checks what it reads: a chunk of several blocks of a 3.0 bundle block by block (the needed
     blocks only), any other chunk whole.  ``damaged="zero"`` zeroes what fails its check
-    instead of raising.
+    instead of raising (under version 6 with the blocks that descend from it).
     """
-    two_d, block = coder
+    two_d, block, version = coder
     counts = block_counts(entries, two_d, block)
     if masks is not None and two_d != (len(masks[0][0]) == 2):
         masks = None  # a layout the masks do not describe: decode every block
@@ -134,13 +170,14 @@ def decode_block_levels(
         # Before 3.0 the band counts that place dequantized values are not stored: they
         # come from every block of the band (see fill_stand_ins).
         masks = None
+    parent_of = _parents_of(entries, coder)
     wanted = (
-        needed_blocks(entries, two_d, block, masks)
+        _with_ancestors(needed_blocks(entries, two_d, block, masks), parent_of)
         if masks is not None
         else np.ones(sum(counts), dtype=bool)
     )
-    chunks, skip, stored = _read_chunks(parsed, entries, counts, wanted, damaged)
-    levels = decode_blocks(chunks, entries, two_d, block, skip=skip)
+    chunks, skip, stored = _read_chunks(parsed, entries, counts, wanted, damaged, parent_of)
+    levels = decode_blocks(chunks, entries, two_d, block, skip=skip, version=version)
     if uses_counts and skip.any():
         fill_stand_ins(levels, entries, two_d, block, skip, stored)
     out: list[Any] = []
@@ -155,9 +192,11 @@ def _read_chunks(
     counts: list[int],
     wanted: np.ndarray,
     damaged: str,
+    parent_of: np.ndarray | None,
 ) -> tuple[list[bytes], np.ndarray, list[list[tuple[int, int]] | None]]:
-    """The chunks in the coder's form, the blocks to skip (unwanted or lost), and each
-    chunk's stored band counts (None where it stores none or they are lost)."""
+    """The chunks in the coder's form, the blocks to skip (unwanted, lost, or under version 6
+    descended from a lost block), and each chunk's stored band counts (None where it stores
+    none or they are lost).  ``wanted`` holds the ancestors of what it holds (version 6)."""
     skip = ~wanted
     chunks: list[bytes] = []
     stored: list[list[tuple[int, int]] | None] = []
@@ -170,7 +209,9 @@ def _read_chunks(
         chunks.append(chunk)
         stored.append(band_counts)
         first += count
-    return chunks, skip, stored
+    # A block whose parent is skipped is skipped: either it is not wanted either (a wanted
+    # block's parent is wanted), or its parent is lost and its contexts would read zeros.
+    return chunks, _with_descendants(skip, parent_of), stored
 
 
 def decode_block_window(
@@ -178,7 +219,7 @@ def decode_block_window(
     plan: Plan,
     stages: Any,
     entries: list[list[tuple[int, ...]]],
-    coder: tuple[bool, int],
+    coder: tuple[bool, int, int],
     masks: list[list[tuple[np.ndarray, ...]]],
     window: list[tuple[int, int]],
     level: int,
@@ -186,10 +227,11 @@ def decode_block_window(
 ) -> np.ndarray:
     """A region of a 3.0 bundle (or a lossless 2.0 one), in samples: only the needed blocks
     are decoded, only the part of each band they need is kept, dequantized and synthesized."""
-    two_d, block = coder
+    two_d, block, version = coder
     counts = block_counts(entries, two_d, block)
-    wanted = needed_blocks(entries, two_d, block, masks)
-    chunks, skip, stored = _read_chunks(parsed, entries, counts, wanted, damaged)
+    parent_of = _parents_of(entries, coder)
+    wanted = _with_ancestors(needed_blocks(entries, two_d, block, masks), parent_of)
+    chunks, skip, stored = _read_chunks(parsed, entries, counts, wanted, damaged, parent_of)
     cuts: list[list[tuple[int, int, int, int]]] = []
     origins: list[Any] = []
     for band_masks_ in masks:
@@ -203,7 +245,9 @@ def decode_block_window(
         origins.append(entry_origins)
     uses_counts = stages.quantizer.uses_band_counts
     missing = [i for i in range(1, len(entries)) if stored[i] is None] if uses_counts else []
-    parts, totals = decode_block_windows(chunks, entries, two_d, block, skip, cuts, missing)
+    parts, totals = decode_block_windows(
+        chunks, entries, two_d, block, skip, cuts, missing, version=version
+    )
     qcoeffs: list[Any] = [parts[0][0]]
     for index, bands in enumerate(parts[1:], start=1):
         known = (stored[index] or totals[index]) if uses_counts else [None] * len(bands)

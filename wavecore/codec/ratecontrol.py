@@ -46,7 +46,7 @@ from numba import njit
 from .. import rdoq
 from .._kernels import largest_scaled, log_histogram_counts, top_octave
 from ..blockcoder import BLOCK_SIZE as DEFAULT_BLOCK
-from ..blockcoder import CodedBlocks, KnownBlocks, block_lengths, code_blocks
+from ..blockcoder import PARENT_VERSION, CodedBlocks, KnownBlocks, block_lengths, code_blocks
 from ..bundle import read_bundle, write_bundle
 from ..colour import YCBCR_INVERSE_MATRIX
 from ..entropy import encode_levels
@@ -1454,12 +1454,13 @@ def _sampled_ratio_at(encoder: _LossyEncoder, step: float, ratio: float) -> floa
     if alone:
         rdoq.adapt_deadzone(encoder.kept, qcoeffs, qparams, regions=regions[sample])
     coding_counts.sampled_blocks += int(sample.size)
+    # The coder of two-dimensional layouts, version 6 (a sampled block reads its parent).
     if encoder.reuse_sample and not alone:
-        known = code_blocks(levels, True, DEFAULT_BLOCK, sample)
+        known = code_blocks(levels, True, DEFAULT_BLOCK, sample, PARENT_VERSION)
         encoder._sample = ((step, encoder.kept_fraction), known)
         lengths = known.lengths
     else:
-        lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample)
+        lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample, PARENT_VERSION)
         # Let the sample's quantization go now (the full coding quantizes at another step):
         # its bands are freed before the next ones are made, which can then take their
         # memory instead of faulting in fresh pages.
@@ -1789,7 +1790,7 @@ def _trim_to_budget(
     chunks, cparams = encoder.code(step, closed)
     if not (
         cparams.get("coder") == "context"
-        and cparams.get("version") == 4
+        and cparams.get("version") in (4, PARENT_VERSION)
         and cparams.get("two_d") is True
         and isinstance(cparams.get("block"), int)
     ):
@@ -1798,7 +1799,11 @@ def _trim_to_budget(
     if len(levels) < 2 or any(len(bands) != 3 for bands in levels[1:]):
         return None
     coded = CodedBlocks(
-        chunks, [[b.shape for b in bands] for bands in levels], True, cparams["block"]
+        chunks,
+        [[b.shape for b in bands] for bands in levels],
+        True,
+        cparams["block"],
+        cparams["version"],
     )
     original_size = encoder.size_bound(step, closed)
     add = original_size < enough

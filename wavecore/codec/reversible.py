@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import lossless as _lossless
 from ..bundle import write_bundle
+from ..entropy import encode_levels
 from ..errors import InvalidParameter
 from ..losslesscoder import encode_lossless_levels
 from ..multilevel import default_level
@@ -109,7 +110,10 @@ def _coded_by_depth(
     coded: list[dict[str, Any]] = []
 
     def code(coeffs: list[Any]) -> list[bytes]:
-        chunks, params = coder.encode(coeffs)
+        # Context coder version 4: each chunk is coded independently of the others, which
+        # best_depth's re-coding of the coarse chunks alone needs (version 6 reads the
+        # parent chunk).
+        chunks, params = encode_levels(coeffs, coder=coder.codec_id, version=4)
         coded.append(params)
         return chunks
 
