@@ -393,6 +393,8 @@ def _decide_row(i, k, band, sib1, sib2, values, inverse, col_lo, col_hi, roundin
         return out
     lowest, highest = 1.0 - max(rounding), 1.0 - min(rounding)
     line = values.reshape(rows, cols * channels)[i]
+    inner_rows = min(sib1.shape[0], sib2.shape[0])
+    inner_cols = min(sib1.shape[1], sib2.shape[1])
     # Only values between the busiest and the quietest edge depend on the neighbourhood (some
     # 5 % at 1 bpp): they are listed first without a branch (a branch per value mispredicted
     # at every one of them), then decided.
@@ -418,21 +420,37 @@ def _decide_row(i, k, band, sib1, sib2, values, inverse, col_lo, col_hi, roundin
         busy = abs(value) >= 1.0 - rounding[first + 2]
         one = quiet
         if quiet != middling or middling != busy:
-            enough = 1 if middling == busy else 3
-            a = np.int64(0)
-            for e in range(8):
-                ii = i + _NEIGHBOUR_ROWS[e]
-                jj = j + _NEIGHBOUR_COLUMNS[e]
-                if 0 <= ii < rows and 0 <= jj < cols:
-                    a += abs(np.int64(band[ii, jj, c]))
-                    if a >= enough:
-                        break
-            if a < enough and i < sib1.shape[0] and j < sib1.shape[1]:
-                a += abs(np.int64(sib1[i, j, c]))
-            if a < enough and i < sib2.shape[0] and j < sib2.shape[1]:
-                a += abs(np.int64(sib2[i, j, c]))
-            if a < enough and c > 0:
-                a += abs(np.int64(band[i, j, 0]))
+            if 0 < i < rows - 1 and 0 < j < cols - 1 and i < inner_rows and j < inner_cols:
+                # Inside the band (and its siblings): every term, without a branch.
+                up = band[i - 1]
+                mid = band[i]
+                down = band[i + 1]
+                a = (
+                    abs(np.int64(up[j - 1, c]))
+                    + abs(np.int64(up[j, c]))
+                    + abs(np.int64(up[j + 1, c]))
+                    + abs(np.int64(mid[j - 1, c]))
+                    + abs(np.int64(mid[j + 1, c]))
+                    + abs(np.int64(down[j - 1, c]))
+                    + abs(np.int64(down[j, c]))
+                    + abs(np.int64(down[j + 1, c]))
+                    + abs(np.int64(sib1[i, j, c]))
+                    + abs(np.int64(sib2[i, j, c]))
+                    + (abs(np.int64(mid[j, 0])) if c > 0 else 0)
+                )
+            else:
+                a = np.int64(0)
+                for e in range(8):
+                    ii = i + _NEIGHBOUR_ROWS[e]
+                    jj = j + _NEIGHBOUR_COLUMNS[e]
+                    if 0 <= ii < rows and 0 <= jj < cols:
+                        a += abs(np.int64(band[ii, jj, c]))
+                if i < sib1.shape[0] and j < sib1.shape[1]:
+                    a += abs(np.int64(sib1[i, j, c]))
+                if i < sib2.shape[0] and j < sib2.shape[1]:
+                    a += abs(np.int64(sib2[i, j, c]))
+                if c > 0:
+                    a += abs(np.int64(band[i, j, 0]))
             one = quiet if a == 0 else (middling if a <= 2 else busy)
         new = 0
         if one:
