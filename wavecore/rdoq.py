@@ -414,7 +414,7 @@ def _decide_row(i, k, band, sib1, sib2, values, inverse, col_lo, col_hi, roundin
         c = t - j * channels
         first = 3 if c > 0 else 0
         # Whether each neighbourhood class (quiet, middling, busy) makes this a 1: the
-        # neighbourhood is summed only as far as tells those apart (0, >= 1, >= 3).
+        # neighbourhood is summed only where that depends on it.
         quiet = abs(value) >= 1.0 - rounding[first]
         middling = abs(value) >= 1.0 - rounding[first + 1]
         busy = abs(value) >= 1.0 - rounding[first + 2]
