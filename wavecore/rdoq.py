@@ -71,7 +71,9 @@ __all__ = [
 #: 0.5-1.0: 2048² RGB at 1 bpp cdf97 0.69x OpenJPEG's time and 9.9 MP/s to encode with it,
 #: 0.50x and 14.4 MP/s without; bspline2 0.53x / 12.8 MP/s against 0.37x / 21.5 MP/s; the
 #: 512² camera at 40 dB 0.92x against 0.73x), for 1 % fewer bytes.  Set ``ENABLED = True``
-#: to trade that time for those bytes.
+#: to trade that time for those bytes.  Since 6 Dec the pass takes about half the CPU (the same
+#: indices): encode CPU on over off 1.28x (cdf97) and 1.25x (bspline2) at 1 bpp, 1.09x for the
+#: camera at 40 dB; what is left is mostly the bpp search's second sample (docs/benchmarks.md).
 ENABLED = False
 METHOD = "fast"
 
