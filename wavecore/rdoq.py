@@ -72,8 +72,8 @@ __all__ = [
 #: 0.50x and 14.4 MP/s without; bspline2 0.53x / 12.8 MP/s against 0.37x / 21.5 MP/s; the
 #: 512² camera at 40 dB 0.92x against 0.73x), for 1 % fewer bytes.  Set ``ENABLED = True``
 #: to trade that time for those bytes.  Since 6 Dec the pass takes about half the CPU (the same
-#: indices): encode CPU on over off 1.28x (cdf97) and 1.25x (bspline2) at 1 bpp, 1.09x for the
-#: camera at 40 dB; what is left is mostly the bpp search's second sample (docs/benchmarks.md).
+#: indices): encode CPU on over off 1.28-1.33x (cdf97) and 1.25-1.30x (bspline2) at 1 bpp,
+#: 1.09x for the camera at 40 dB, where about 1.2x is needed (docs/benchmarks.md).
 ENABLED = False
 METHOD = "fast"
 
