@@ -71,7 +71,9 @@ __all__ = [
 #: 0.5-1.0: 2048² RGB at 1 bpp cdf97 0.69x OpenJPEG's time and 9.9 MP/s to encode with it,
 #: 0.50x and 14.4 MP/s without; bspline2 0.53x / 12.8 MP/s against 0.37x / 21.5 MP/s; the
 #: 512² camera at 40 dB 0.92x against 0.73x), for 1 % fewer bytes.  Set ``ENABLED = True``
-#: to trade that time for those bytes.
+#: to trade that time for those bytes.  Since 6 Dec the pass takes about half the CPU (the same
+#: indices): encode CPU on over off 1.28-1.33x (cdf97) and 1.25-1.30x (bspline2) at 1 bpp,
+#: 1.09x for the camera at 40 dB, where about 1.2x is needed (docs/benchmarks.md).
 ENABLED = False
 METHOD = "fast"
 
@@ -376,104 +378,161 @@ def optimise_indices(
 FAST_ROUNDINGS = (0.05, 0.22, 0.33, 0.0, 0.12, 0.27)
 
 
-#: While a level is re-decided, a changed index is stored as ``_MARK + 4 (new + 1) + (old + 1)``
-#: (far above any index the quantizer makes, ``MAX_INDEX = 2**30``), so that the neighbours
-#: still read the dead zone's index whichever thread got there first: the result does not
-#: depend on the threads.  A second pass writes the new indices.
-_MARK = np.int32(1 << 30) + np.int32(1 << 29)
+#: A box's columns run to the end of its rows.
 _ALL_COLUMNS = 1 << 62
+#: The eight neighbours' offsets (rows, columns), in the order they are summed.
+_NEIGHBOUR_ROWS = (-1, -1, -1, 0, 0, 1, 1, 1)
+_NEIGHBOUR_COLUMNS = (-1, 0, 1, -1, 1, -1, 0, 1)
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _original(v):
-    """The dead zone's ``|index|`` of a stored value (marked or not)."""
-    if v >= _MARK:
-        return abs(np.int64((v - _MARK) % 4) - 1)
-    return abs(np.int64(v))
+def _decide_row(i, k, band, sib1, sib2, values, inverse, col_lo, col_hi, rounding, found, out):
+    """Row ``i`` of band ``k`` (``sib1``, ``sib2``: the level's other two) for
+    :func:`_neighbourhood_deadzone`: its changes appended to ``out`` (``out[0]`` counts
+    them); ``found``: scratch of the band's row length.  Returns ``out``, grown if need be."""
+    rows, cols, channels = band.shape
+    if i >= rows:
+        return out
+    lowest, highest = 1.0 - max(rounding), 1.0 - min(rounding)
+    line = values.reshape(rows, cols * channels)[i]
+    inner_rows = min(sib1.shape[0], sib2.shape[0])
+    inner_cols = min(sib1.shape[1], sib2.shape[1])
+    # Only values between the busiest and the quietest edge depend on the neighbourhood (some
+    # 5 % at 1 bpp): they are listed first without a branch (a branch per value mispredicted
+    # at every one of them), then decided.
+    n = 0
+    for t in range(min(col_lo, cols) * channels, min(col_hi, cols) * channels):
+        a = abs(line[t] * inverse)
+        found[n] = t
+        n += (lowest <= a) & (a < highest)
+    if out[0] + n >= out.size:
+        grown = np.empty(2 * out.size + n, dtype=np.int64)
+        grown[: out.size] = out
+        out = grown
+    for m in range(n):
+        t = found[m]
+        value = line[t] * inverse
+        j = t // channels
+        c = t - j * channels
+        first = 3 if c > 0 else 0
+        # Whether each neighbourhood class (quiet, middling, busy) makes this a 1: the
+        # neighbourhood is summed only where that depends on it.
+        quiet = abs(value) >= 1.0 - rounding[first]
+        middling = abs(value) >= 1.0 - rounding[first + 1]
+        busy = abs(value) >= 1.0 - rounding[first + 2]
+        one = quiet
+        if quiet != middling or middling != busy:
+            if 0 < i < rows - 1 and 0 < j < cols - 1 and i < inner_rows and j < inner_cols:
+                # Inside the band (and its siblings): every term, without a branch.
+                up = band[i - 1]
+                mid = band[i]
+                down = band[i + 1]
+                a = (
+                    abs(np.int64(up[j - 1, c]))
+                    + abs(np.int64(up[j, c]))
+                    + abs(np.int64(up[j + 1, c]))
+                    + abs(np.int64(mid[j - 1, c]))
+                    + abs(np.int64(mid[j + 1, c]))
+                    + abs(np.int64(down[j - 1, c]))
+                    + abs(np.int64(down[j, c]))
+                    + abs(np.int64(down[j + 1, c]))
+                    + abs(np.int64(sib1[i, j, c]))
+                    + abs(np.int64(sib2[i, j, c]))
+                    + (abs(np.int64(mid[j, 0])) if c > 0 else 0)
+                )
+            else:
+                a = np.int64(0)
+                for e in range(8):
+                    ii = i + _NEIGHBOUR_ROWS[e]
+                    jj = j + _NEIGHBOUR_COLUMNS[e]
+                    if 0 <= ii < rows and 0 <= jj < cols:
+                        a += abs(np.int64(band[ii, jj, c]))
+                if i < sib1.shape[0] and j < sib1.shape[1]:
+                    a += abs(np.int64(sib1[i, j, c]))
+                if i < sib2.shape[0] and j < sib2.shape[1]:
+                    a += abs(np.int64(sib2[i, j, c]))
+                if c > 0:
+                    a += abs(np.int64(band[i, j, 0]))
+            one = quiet if a == 0 else (middling if a <= 2 else busy)
+        new = 0
+        if one:
+            new = 1 if value > 0 else -1
+        if new != band[i, j, c]:
+            out[0] += 1
+            out[out[0]] = ((i * cols * channels + t) * 3 + k) * 3 + new + 1
+    return out
 
 
 @njit(nogil=True, cache=True)
-def _neighbourhood_deadzone(q, x, inverse_steps, lo, hi, rounding, marked, col_lo, col_hi):
+def _neighbourhood_deadzone(q, x, inverse_steps, lo, hi, rounding, col_lo, col_hi):
     """Re-decide between 0 and 1 the details of rows ``lo .. hi - 1`` (columns ``col_lo ..
-    col_hi - 1``) of one level (marked).
+    col_hi - 1``) of one level, without changing them: the changes, for :func:`_apply`.
 
     ``q``: three ``(H, W, C)`` int32 bands, the dead zone's indices; ``x``: their values;
-    ``inverse_steps``: per band.  Larger indices stay as they are.  ``marked[i]`` is set where
-    row ``i`` of some band holds a changed index (see ``_MARK``; ``_unmark`` finishes).
+    ``inverse_steps``: per band.  Larger indices stay as they are.  Each decision reads the
+    dead zone's indices around it, which no call changes, so the result does not depend on
+    how the rows are cut between threads.
     """
-    # Only values between the busiest and the quietest edge depend on the neighbourhood: the
-    # rest keep the dead zone's index, and most details are skipped at once.
-    lowest, highest = 1.0 - max(rounding), 1.0 - min(rounding)
-    for k in range(3):
-        band, values = q[k], x[k]
-        rows, cols, channels = band.shape
-        inverse = inverse_steps[k]
-        for i in range(lo, min(hi, rows)):
-            for j in range(col_lo, min(col_hi, cols)):
-                for c in range(channels):
-                    value = values[i, j, c] * inverse
-                    if not lowest <= abs(value) < highest:
-                        continue
-                    a = np.int64(0)
-                    for di in range(-1, 2):
-                        ii = i + di
-                        if ii < 0 or ii >= rows:
-                            continue
-                        for dj in range(-1, 2):
-                            jj = j + dj
-                            if (di or dj) and 0 <= jj < cols:
-                                a += _original(band[ii, jj, c])
-                    for other in range(3):
-                        if other != k:
-                            sib = q[other]
-                            if i < sib.shape[0] and j < sib.shape[1]:
-                                a += _original(sib[i, j, c])
-                    if c > 0:
-                        a += _original(band[i, j, 0])
-                    first = 3 if c > 0 else 0
-                    r = rounding[first + (0 if a == 0 else (1 if a <= 2 else 2))]
-                    new = 0
-                    if abs(value) >= 1.0 - r:
-                        new = 1 if value > 0 else -1
-                    old = np.int64(band[i, j, c])
-                    if new != old:
-                        band[i, j, c] = _MARK + 4 * (new + 1) + (old + 1)
-                        marked[i] = True
+    # Row by row across the three bands, so that the other bands' rows a decision reads were
+    # read lately (band by band: some 15 % slower); the bands are passed apart (an array
+    # taken from the tuple by a variable index is counted up and down).
+    q0, q1, q2 = q
+    x0, x1, x2 = x
+    rows = max(q0.shape[0], max(q1.shape[0], q2.shape[0]))
+    width = max(
+        q0.shape[1] * q0.shape[2], max(q1.shape[1] * q1.shape[2], q2.shape[1] * q2.shape[2])
+    )
+    found = np.empty(width, dtype=np.int64)
+    out = np.zeros(width + 1, dtype=np.int64)
+    for i in range(lo, min(hi, rows)):
+        out = _decide_row(
+            i, 0, q0, q1, q2, x0, inverse_steps[0], col_lo, col_hi, rounding, found, out
+        )
+        out = _decide_row(
+            i, 1, q1, q0, q2, x1, inverse_steps[1], col_lo, col_hi, rounding, found, out
+        )
+        out = _decide_row(
+            i, 2, q2, q0, q1, x2, inverse_steps[2], col_lo, col_hi, rounding, found, out
+        )
+    return out[1 : out[0] + 1]
 
 
 @njit(nogil=True, cache=True)
-def _deadzone_boxes(q, x, inverse_steps, boxes, lo, hi, rounding, marked):
+def _deadzone_boxes(q, x, inverse_steps, boxes, lo, hi, rounding):
     """:func:`_neighbourhood_deadzone` on boxes ``lo .. hi - 1`` of ``boxes`` (rows of
     ``row0, col0, row1, col1``).  A box's decisions read only the dead zone's indices around
     it, so they are the ones the whole level's pass makes there."""
+    parts = []
+    total = 0
     for b in range(lo, hi):
-        _neighbourhood_deadzone(
-            q,
-            x,
-            inverse_steps,
-            boxes[b, 0],
-            boxes[b, 2],
-            rounding,
-            marked,
-            boxes[b, 1],
-            boxes[b, 3],
+        part = _neighbourhood_deadzone(
+            q, x, inverse_steps, boxes[b, 0], boxes[b, 2], rounding, boxes[b, 1], boxes[b, 3]
         )
+        parts.append(part)
+        total += part.size
+    out = np.empty(total, dtype=np.int64)
+    at = 0
+    for part in parts:
+        out[at : at + part.size] = part
+        at += part.size
+    return out
 
 
 @njit(nogil=True, cache=True)
-def _unmark(q, marked, lo, hi):
-    """The new indices in place of the marks, in rows ``lo .. hi - 1`` that hold any."""
-    for k in range(3):
-        band = q[k]
-        rows, cols, channels = band.shape
-        for i in range(lo, min(hi, rows)):
-            if not marked[i]:
-                continue
-            for j in range(cols):
-                for c in range(channels):
-                    v = band[i, j, c]
-                    if v >= _MARK:
-                        band[i, j, c] = (v - _MARK) // 4 - 1
+def _apply(q, changes):
+    """Write ``changes`` (from :func:`_neighbourhood_deadzone`: ``(flat position * 3 + band)
+    * 3 + new index + 1``) into the bands ``q``."""
+    flat0, flat1, flat2 = q[0].reshape(q[0].size), q[1].reshape(q[1].size), q[2].reshape(q[2].size)
+    for code in changes:
+        new = code % 3 - 1
+        rest = code // 3
+        k = rest % 3
+        if k == 0:
+            flat0[rest // 3] = new
+        elif k == 1:
+            flat1[rest // 3] = new
+        else:
+            flat2[rest // 3] = new
 
 
 def adapt_deadzone(
@@ -549,27 +608,23 @@ def _adapt_level(
     rounding: tuple,
     boxes: np.ndarray | None = None,
 ) -> None:
-    """:func:`_neighbourhood_deadzone`, then :func:`_unmark`, over the threads by rows (or
-    by ``boxes``, where given)."""
-    rows = max(b.shape[0] for b in q)
-    marked = np.zeros(rows, dtype=np.bool_)
-    work = sum(b.size for b in q)
+    """:func:`_neighbourhood_deadzone` over the threads by rows (or by ``boxes``, where
+    given), then :func:`_apply`."""
+    parts: list[np.ndarray] = []  # (list.append is atomic)
 
     def decide_boxes(lo: int, hi: int) -> None:
-        _deadzone_boxes(q, x, inverse, boxes, lo, hi, rounding, marked)
+        parts.append(_deadzone_boxes(q, x, inverse, boxes, lo, hi, rounding))
 
     def decide(lo: int, hi: int) -> None:
-        _neighbourhood_deadzone(q, x, inverse, lo, hi, rounding, marked, 0, _ALL_COLUMNS)
-
-    def finish(lo: int, hi: int) -> None:
-        _unmark(q, marked, lo, hi)
+        parts.append(_neighbourhood_deadzone(q, x, inverse, lo, hi, rounding, 0, _ALL_COLUMNS))
 
     if boxes is None:
-        run_rows(decide, rows, work)
+        run_rows(decide, max(b.shape[0] for b in q), sum(b.size for b in q))
     else:
         area = int(((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])).sum())
         run_rows(decide_boxes, boxes.shape[0], area * q[0].shape[2] * 3)
-    run_rows(finish, rows, work)
+    for part in parts:
+        _apply(q, part)
 
 
 def choose_indices(coeffs: Sequence[Any], qcoeffs: Sequence[Any], params: dict[str, Any]) -> Any:
