@@ -207,40 +207,47 @@ def _prediction(
     ones less it (``count - 1`` weights), plus weights times each axis's cubic less its linear
     one (``count`` weights); all ``1 / count`` is the mean of the cubic ones.  Written out per
     count, in scalars: the encoder's hot loop."""
-    if count == 0:
-        return 0.0
-    n0, n1, n2 = shape
-    la = lb = lc = ca = cb = cc = 0.0
-    k = 0
-    if odd0:
-        la, ca = _along(y, at, i0, n0, s * n1 * n2, s)
-        k = 1
-    if odd1:
-        if k == 0:
-            la, ca = _along(y, at, i1, n1, s * n2, s)
+    total = 0.0
+    if count > 0:
+        n0, n1, n2 = shape
+        la = lb = lc = ca = cb = cc = 0.0
+        k = 0
+        if odd0:
+            la, ca = _along(y, at, i0, n0, s * n1 * n2, s)
+            k = 1
+        if odd1:
+            if k == 0:
+                la, ca = _along(y, at, i1, n1, s * n2, s)
+            else:
+                lb, cb = _along(y, at, i1, n1, s * n2, s)
+            k += 1
+        if odd2:
+            if k == 0:
+                la, ca = _along(y, at, i2, n2, s, s)
+            elif k == 1:
+                lb, cb = _along(y, at, i2, n2, s, s)
+            else:
+                lc, cc = _along(y, at, i2, n2, s, s)
+        if count == 1:
+            total = la + w0 * (ca - la)
+        elif count == 2:
+            total = lb + w0 * (la - lb)
+            total += w1 * (ca - la)
+            total += w2 * (cb - lb)
         else:
-            lb, cb = _along(y, at, i1, n1, s * n2, s)
-        k += 1
-    if odd2:
-        if k == 0:
-            la, ca = _along(y, at, i2, n2, s, s)
-        elif k == 1:
-            lb, cb = _along(y, at, i2, n2, s, s)
-        else:
-            lc, cc = _along(y, at, i2, n2, s, s)
-    if count == 1:
-        total = la + w0 * (ca - la)
-    elif count == 2:
-        total = lb + w0 * (la - lb)
-        total += w1 * (ca - la)
-        total += w2 * (cb - lb)
-    else:
-        total = lc + w0 * (la - lc)
-        total += w1 * (lb - lc)
-        total += w2 * (ca - la)
-        total += w3 * (cb - lb)
-        total += w4 * (cc - lc)
-    return np.rint(total) if integer else total
+            total = lc + w0 * (la - lc)
+            total += w1 * (lb - lc)
+            total += w2 * (ca - la)
+            total += w3 * (cb - lb)
+            total += w4 * (cc - lc)
+        if integer:
+            total = np.rint(total)
+    # The last use of ``y`` is unconditional (a sample written back as it is), so that numba
+    # prunes the reference count it takes on ``y`` when inlining this: with early returns and
+    # reads in branches it counted ``y`` up and down at every sample (0.76-0.86x the encoder's
+    # CPU without it).  One exit, one ``np.rint``: the same values.
+    y[at] = y[at]
+    return total
 
 
 @njit(nogil=True, cache=True)
