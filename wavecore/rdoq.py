@@ -66,15 +66,14 @@ __all__ = [
 #: +0.52 %).  On ``benchmarks/codec_speed.py``'s 2048² RGB picture at 0.25-2 bpp: cdf97
 #: +0.02 to +0.20 dB, bspline2 +0.46 to +0.62 dB at the budget; encode CPU x1.35 (cdf97) and
 #: x1.33 (bspline2) at 1 bpp, interleaved runs.  The quality search at 40 dB: camera -1.1 %
-#: bytes, encode CPU x1.35.  Off by default all the same: the codec's speed targets do not
-#: survive it (``codec_speed.py``, same machine minutes apart, 2026-11-28 22:11-22:16 UTC, load
-#: 0.5-1.0: 2048² RGB at 1 bpp cdf97 0.69x OpenJPEG's time and 9.9 MP/s to encode with it,
-#: 0.50x and 14.4 MP/s without; bspline2 0.53x / 12.8 MP/s against 0.37x / 21.5 MP/s; the
-#: 512² camera at 40 dB 0.92x against 0.73x), for 1 % fewer bytes.  Set ``ENABLED = True``
-#: to trade that time for those bytes.  Since 6 Dec the pass takes about half the CPU (the same
-#: indices): encode CPU on over off 1.28-1.33x (cdf97) and 1.25-1.30x (bspline2) at 1 bpp,
-#: 1.09x for the camera at 40 dB, where about 1.2x is needed (docs/benchmarks.md).
-ENABLED = False
+#: bytes, encode CPU x1.35.  Off by default until 6 Dec: the codec's speed targets did not
+#: survive it then (2048² RGB at 1 bpp cdf97 0.69x OpenJPEG's time and 9.9 MP/s to encode).
+#: On since 6 Dec, when the pass took about half the CPU (the same indices) and the block
+#: coder's kernels got faster: ``codec_speed.py`` with it on, cdf97 0.49-0.50x OpenJPEG's time
+#: and 14.8-15.2 MP/s, the camera at 40 dB 0.74-0.84x (docs/benchmarks.md).  With context
+#: coder version 6 it gains -1.06 % on the grey tuning pictures and -0.57 % on the astronaut.
+#: ``ENABLED = False`` turns it off.
+ENABLED = True
 METHOD = "fast"
 
 #: The Lagrange multiplier in units of the band step squared per bit (see the module text).
