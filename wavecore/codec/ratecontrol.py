@@ -341,6 +341,13 @@ class _LossyEncoder:
         self.reuse_sample = False
         self._sample: tuple[tuple[float, float], KnownBlocks] | None = None
 
+    def forget_sample(self) -> None:
+        """Let the bpp sample's coded blocks and quantization go (the full coding is at
+        another step): its bands are freed before the next ones are made."""
+        if self._sample is not None:
+            self._sample = None
+            self._quantized.pop(False, None)
+
     def keep(self, fraction: float) -> None:
         if fraction == self.kept_fraction:
             return
@@ -1285,6 +1292,8 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
             sample_size = encoder.size_estimate(sample_step) * sampled
             if _REUSE_WINDOW[0] * budget <= sample_size <= _REUSE_WINDOW[1] * budget:
                 start = sample_step
+            else:  # coded at another step: the sample's blocks and bands are of no more use
+                encoder.forget_sample()
         resample = not many_blocks  # (a sample of many blocks predicts well enough at once)
         if (
             resample
