@@ -161,10 +161,15 @@ def _tables(
     layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block: int
 ) -> tuple[np.ndarray, np.ndarray, tuple[int, ...], int, np.ndarray]:
     """:func:`_cached_structure`, through the cache only while its tables are small."""
-    key = _layout_key(layout)
-    if _table_bytes(key, two_d, block) > _CACHED_TABLE_BYTES:
-        return _cached_structure.__wrapped__(key, two_d, block)
-    return _cached_structure(key, two_d, block)
+    return _while_small(_cached_structure, _layout_key(layout), two_d, block)
+
+
+def _while_small(cached: Any, layout: _LayoutKey, two_d: bool, block: int) -> Any:
+    """``cached(layout, two_d, block)`` (an ``lru_cache``'d function of the tables), through
+    its cache only while the layout's tables are small: large ones would pin their memory."""
+    if _table_bytes(layout, two_d, block) > _CACHED_TABLE_BYTES:
+        return cached.__wrapped__(layout, two_d, block)
+    return cached(layout, two_d, block)
 
 
 @functools.lru_cache(maxsize=32)
@@ -257,9 +262,7 @@ def parent_blocks(layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block:
 
 def _parent_tables(layout: _LayoutKey, two_d: bool, block: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_parents` and :func:`parent_blocks` of version 6, cached with the tables."""
-    if _table_bytes(layout, two_d, block) > _CACHED_TABLE_BYTES:
-        return _cached_parent_tables.__wrapped__(layout, two_d, block)
-    return _cached_parent_tables(layout, two_d, block)
+    return _while_small(_cached_parent_tables, layout, two_d, block)
 
 
 @functools.lru_cache(maxsize=32)
