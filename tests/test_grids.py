@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -102,6 +103,17 @@ def test_bound_on_a_tiny_tolerance_of_huge_values_is_still_held() -> None:
     # stores whatever the corrections cannot reach exactly.
     data = terrain((20, 30), seed=4) * 1e297
     assert_bound(data, 1e286)
+
+
+def test_huge_values_under_a_high_bpp_budget_raise_no_numpy_warning() -> None:
+    """The interpolation coder's weight fit overflows on values near the float64 limit and
+    falls back to its default weights, without NumPy's overflow warnings reaching the user."""
+    data = terrain((200, 260), seed=6) * 1e300
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        bundle = wavecore.encode_grid(data, bpp=4.0)
+    assert 8 * len(bundle) <= 4.0 * data.size
+    assert wavecore.decode(bundle).shape == data.shape
 
 
 def test_zero_bound_on_floats_is_exact() -> None:

@@ -590,11 +590,14 @@ def _fitted_weights(
         y_flat, x_flat, missing_flat, shape3, odd_flags, starts, strides, s, every, gram, moments
     )
     default = _default_weights(count)
-    ridge = 1e-9 * float(np.trace(gram)) + 1e-300
-    try:
-        weights = np.linalg.solve(gram + ridge * np.eye(n), moments)
-    except np.linalg.LinAlgError:
-        return default
+    # Values near the float64 limit overflow the sums to inf: the solve then gives NaNs, and
+    # the default weights are taken below (quietly: NumPy would warn).
+    with np.errstate(over="ignore", invalid="ignore"):
+        ridge = 1e-9 * float(np.trace(gram)) + 1e-300
+        try:
+            weights = np.linalg.solve(gram + ridge * np.eye(n), moments)
+        except np.linalg.LinAlgError:
+            return default
     if not np.all(np.isfinite(weights)) or np.abs(weights).max() > 1e6:
         return default
     return weights.astype(np.float32).astype(np.float64)
