@@ -386,7 +386,7 @@ def cmd_encode(args: argparse.Namespace) -> int:
         if getattr(args, name) is not None
     }
 
-    # No --wavelet: each kind keeps the library's own default (cdf97 for images, bspline2 for
+    # No --wavelet: each kind keeps the library's own default (auto for images, bspline2 for
     # curves), the one its measurement picks.
     chosen = {} if args.wavelet is None else {"wavelet": args.wavelet}
     # No --effort: the library's default; a value it refuses is its InvalidParameter.
@@ -759,7 +759,8 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument(
         "--wavelet",
         default=None,
-        help="images: cdf97 (default), bspline2, haar; curves: bspline2 (default), cdf97, haar",
+        help="images: auto (default: cdf97, or haar for mostly flat 2x2 blocks), cdf97, bspline2, "
+        "haar; curves: bspline2 (default), cdf97, haar",
     )
     enc.add_argument("--level", type=int, help="levels (default: automatic)")
     enc.add_argument(

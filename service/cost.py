@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import wavecore
+from wavecore.codec.choice import AUTO, AUTO_CANDIDATES
 
 from .errors import Problem
 from .settings import Settings
@@ -109,10 +110,14 @@ def check_image(
     if options.get("lossless"):
         fitted = [height, width]  # the reversible 5/3 lifting fits every size, unpadded
     else:
-        wavelet = options.get("wavelet", "bspline2")
-        fitted, _ = padded_lengths(
-            [height, width], options.get("level"), ["open", "open"], wavelet, "image"
-        )
+        wavelet = options.get("wavelet", AUTO)
+        # "auto" codes with one of its candidates: count the one that pads more.
+        fitted = [0, 0]
+        for name in AUTO_CANDIDATES if wavelet == AUTO else (wavelet,):
+            padded, _ = padded_lengths(
+                [height, width], options.get("level"), ["open", "open"], name, "image"
+            )
+            fitted = [max(a, b) for a, b in zip(fitted, padded, strict=True)]
     samples = fitted[0] * fitted[1] * bands
     what = f"a {width} × {height} image with {bands} channel{'s' * (bands > 1)}"
     if fitted != [height, width]:

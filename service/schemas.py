@@ -32,7 +32,7 @@ class CurveOptions(_Body):
     wavelet: str = Field(
         default="bspline2",
         description="bspline2 (the paper's, smooth; the curve default), haar (piecewise "
-        "constant) or cdf97.  Images default to cdf97 instead (POST /v1/images/encode).",
+        "constant) or cdf97.  Images default to auto instead (POST /v1/images/encode).",
     )
 
 

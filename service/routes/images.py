@@ -68,6 +68,8 @@ def encode_job(
         "X-Wavecore-PSNR": _format(info.get("psnr")),
         "X-Wavecore-Shape": "x".join(str(s) for s in image.shape),
         "X-Wavecore-Dtype": str(image.dtype),
+        # The wavelet coded with: wavelet="auto" names its choice here.
+        "X-Wavecore-Wavelet": str(info["wavelet"]),
     }
     return bundle, headers
 
@@ -90,10 +92,12 @@ async def encode_image(
     wavelet: Annotated[
         str,
         Form(
-            description="cdf97 (default: the best measured rate–distortion on photographs), "
-            "bspline2 (the paper's, smooth) or haar"
+            description="auto (default: cdf97, the best measured rate–distortion on "
+            "photographs, or haar for pictures of mostly flat 2 × 2 blocks such as "
+            "pixel-replicated or two-tone graphics), cdf97, bspline2 (the paper's, smooth) or "
+            "haar"
         ),
-    ] = "cdf97",
+    ] = "auto",
     level: Annotated[int | None, Form(ge=0, description="Levels; empty picks up to 5")] = None,
     keep: Annotated[
         float | None, Form(ge=0, le=1, allow_inf_nan=False, description="Fraction kept")

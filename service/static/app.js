@@ -205,10 +205,11 @@
     } else if (mode === "image" && target() === "tolerance") {
       document.querySelector('input[name="target"][value="quality"]').checked = true;
     }
-    // Each kind starts on its own default wavelet (cdf97 for images, the paper's bspline2 for
-    // curves) until the user picks one.
-    if (!state.waveletChosen && (mode === "image" || mode === "curve")) {
-      $("wavelet").value = mode === "curve" ? "bspline2" : "cdf97";
+    // Each kind starts on its own default wavelet (auto for images, the paper's bspline2 for
+    // curves) until the user picks one; curves have no "auto".
+    const curveOnAuto = mode === "curve" && $("wavelet").value === "auto";
+    if ((!state.waveletChosen || curveOnAuto) && (mode === "image" || mode === "curve")) {
+      $("wavelet").value = mode === "curve" ? "bspline2" : "auto";
     }
     state.mode = mode;
     document.body.dataset.mode = mode;
@@ -577,7 +578,9 @@
       const base = (file.name || "image").replace(/\.[^.]+$/, "");
       const bundle = new Blob([response.blob], { type: BUNDLE_TYPE });
       state.figuresFor = bundle; // header figures belong to this bundle only
-      await loadBundle(bundle, `${base}-${wavelet}.wcb`, {
+      // "auto" names the wavelet it chose in the response.
+      const used = response.header("X-Wavecore-Wavelet") || wavelet;
+      await loadBundle(bundle, `${base}-${used}.wcb`, {
         original: file,
       });
     } catch (err) {

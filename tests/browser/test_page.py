@@ -155,7 +155,8 @@ def test_haar_against_bspline_at_the_same_keep(page: Any, astronaut_png: Path, a
     page.click("#compare-run")
     page.wait_for_selector(f"#cmp-haar[data-keep='{keep}']")
     page.wait_for_selector(f"#cmp-bspline2[data-keep='{keep}']")
-    # Photographs are coded with the default, cdf97, which the comparison shows as well.
+    # Photographs are coded with the default, auto, which chooses cdf97; the comparison shows
+    # cdf97 as well.
     assert figure(page, "wavelet") == "cdf97"
     page.wait_for_selector(f"#cmp-cdf97[data-keep='{keep}']")
     smooth = png_pixels(image_bytes(page, "#cmp-bspline2"))
@@ -411,7 +412,8 @@ def test_drop_an_image_on_the_drop_zone(page: Any):
     )
     wait_for_bundle(page, 1)
     assert "dropped.png" in page.inner_text("#image-name")
-    assert page.get_attribute("#download", "download") == "dropped-cdf97.wcb"  # the default
+    # The default, auto, codes this two-tone graphic with Haar, and the file name says so.
+    assert page.get_attribute("#download", "download") == "dropped-haar.wcb"
 
 
 def test_levels_out_of_range_are_caught_before_any_upload(page: Any, astronaut_png: Path):

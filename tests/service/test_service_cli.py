@@ -307,7 +307,8 @@ def test_core_install_runs_the_library_commands_and_names_the_extra(tmp_path: Pa
 
 
 def test_wavelet_defaults_per_kind(tmp_path: Path, images: Path) -> None:
-    # Images default to cdf97 (issue 12), curves keep bspline2; --wavelet overrides either.
+    # Images default to auto, cdf97 on photographs (issue 12), curves keep bspline2; --wavelet
+    # overrides either.
     bundle = tmp_path / "a.wcb"
     assert main(["encode", str(images / "img0.png"), str(bundle), "-q"]) == 0
     assert wavecore.inspect(bundle.read_bytes())["wavelet"] == "cdf97"

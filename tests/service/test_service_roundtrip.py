@@ -57,8 +57,10 @@ async def test_image_round_trip(client: httpx.AsyncClient, shape: tuple[int, ...
     assert bpp == pytest.approx(8 * len(bundle) / (shape[0] * shape[1]), rel=1e-3)
     assert float(r.headers["x-wavecore-ratio"]) == pytest.approx(image.nbytes / len(bundle), 1e-3)
     assert float(r.headers["x-wavecore-psnr"]) >= 38
-    # No wavelet field: photographs get cdf97, the measured rate–distortion winner (issue 12).
+    # No wavelet field: "auto" gives photographs cdf97, the measured rate–distortion winner
+    # (issue 12), and says so.
     assert wavecore.inspect(bundle)["wavelet"] == "cdf97"
+    assert r.headers["x-wavecore-wavelet"] == "cdf97"
 
     info = (await client.post("/v1/bundles/inspect", content=bundle)).json()
     assert info["kind"] == "image" and info["shape"] == list(shape)
@@ -213,3 +215,16 @@ async def test_metrics_count_requests_bytes_and_errors(client: httpx.AsyncClient
         if ln.startswith('wavecore_http_request_body_bytes_total{route="/v1/bundles/inspect"}')
     )
     assert float(line.split()[-1]) >= len(b"not a bundle")
+
+
+async def test_auto_names_haar_for_a_pixel_replicated_picture(client: httpx.AsyncClient) -> None:
+    image = test_image((40, 48, 3)).repeat(2, axis=0).repeat(2, axis=1)
+    r = await client.post(
+        "/v1/images/encode",
+        files={"file": ("in.png", image_file(image), "image/png")},
+        data={"quality": "38"},
+    )
+    assert r.status_code == 200, r.text
+    assert r.headers["x-wavecore-wavelet"] == "haar"
+    assert wavecore.inspect(r.content)["wavelet"] == "haar"
+    assert psnr(wavecore.decode(r.content), image) >= 38

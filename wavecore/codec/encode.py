@@ -16,6 +16,7 @@ from ..bundle import read_bundle, with_header
 from ..errors import BundleError, InvalidParameter
 from ..filters import get_wavelet
 from ..threshold import check_share
+from .choice import AUTO, choose_image_wavelet
 from .decode import decode
 
 # The one-step surface coding's first home, where wavecore.grids and wavecore.gridcore find it.
@@ -84,7 +85,7 @@ def _refuses_as_parameter(encoder: Callable[..., _Encoded]) -> Callable[..., _En
 def encode_image(
     image: Any,
     *,
-    wavelet: str = "cdf97",
+    wavelet: str = AUTO,
     level: int | None = None,
     keep: float | None = None,
     quality: float | None = None,
@@ -103,10 +104,14 @@ def encode_image(
         ``scale``).  An alpha channel that decodes exactly, as an opaque one always does, is
         left out of ``quality`` and of the recorded PSNR, which are then the colour channels'.
     wavelet : str
-        The wavelet for lossy coding: ``"cdf97"`` by default, the one that wins the measured
-        rate–distortion on photographs (docs/benchmarks.md); ``"bspline2"`` (the paper's,
-        smooth, with interpolated ends), ``"haar"`` or an alias (see
-        :func:`wavecore.wavelet_names`).  The bundle records it, so any bundle decodes alike.
+        The wavelet for lossy coding.  ``"auto"`` (the default) chooses per picture:
+        ``"cdf97"``, the one that wins the measured rate–distortion on photographs
+        (docs/benchmarks.md), unless most 2 × 2 blocks of pixels are flat (pictures enlarged
+        by pixel replication, binary and two-tone graphics), where ``"haar"`` takes 45–70 %
+        fewer bytes (:mod:`wavecore.codec.choice`).  Or name one: ``"cdf97"``,
+        ``"bspline2"`` (the paper's, smooth, with interpolated ends), ``"haar"`` or an alias
+        (see :func:`wavecore.wavelet_names`).  The bundle records the wavelet used, so any
+        bundle decodes alike.
     level : int, optional
         Decomposition levels; ``None`` picks up to 5, keeping the coarsest band at least about
         4 pixels a side.  Any image size works: the image is edge-padded to a size that fits,
@@ -177,7 +182,7 @@ def encode_image(
     dtype = dtype_name(arr, "image")
     arr, scale = scaled(arr)
     colour = "ycbcr" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
-    bank = get_wavelet(wavelet)
+    bank = get_wavelet(choose_image_wavelet(arr) if wavelet == AUTO else wavelet)
     # Images use the paper's endpoint-interpolating rows; a wavelet without them (cdf97's
     # symmetric extension) uses its own non-periodic boundary.
     boundary = ("open", "open") if "open" in bank.rules else (next(iter(bank.rules)),) * 2

@@ -1,0 +1,89 @@
+"""``encode_image(wavelet="auto")``, the default: the image wavelet chosen per picture.
+
+CDF 9/7 wins the measured rate–distortion on photographs by 13–90 % (BD-rate against Haar on
+scikit-image's pictures).  Haar wins by 45–70 % where most 2 × 2 blocks of pixels are flat:
+pictures enlarged by pixel replication (scikit-image's ``moon`` is a 256² picture at 512²),
+binary and two-tone graphics (``horse``, ``binary_blobs``, ``checkerboard``).  Its finest
+details there are exactly zero, while CDF 9/7's long filters spread every edge over several
+coefficients.  Between those, at a flat share of 0.17–0.42 (``page``, ``logo``, ``retina``),
+CDF 9/7 wins or ties, so the threshold sits in the gap.
+
+The share is counted on a sample of the rows (a thirty-second of a large picture's) and, unless
+the sample is clearly a photograph's, again over every row.  A 2048² RGB photograph's choice
+takes about a millisecond.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "AUTO",
+    "AUTO_CANDIDATES",
+    "FLAT_SHARE_FOR_HAAR",
+    "choose_image_wavelet",
+    "flat_block_share",
+]
+
+#: The wavelet name that asks for the per-picture choice.
+AUTO = "auto"
+#: The wavelets it chooses from.
+AUTO_CANDIDATES = ("cdf97", "haar")
+#: Haar is chosen at or above this share of flat 2 × 2 blocks (measured: Haar wins at 0.81
+#: and above, CDF 9/7 at 0.42 and below).
+FLAT_SHARE_FOR_HAAR = 0.7
+#: The sample takes every this-many-th pair of rows (fewer on a short picture: at least
+#: :data:`_SAMPLE_PAIRS` pairs), a thirty-second of a large picture's rows.
+_SAMPLE_STEP = 32
+_SAMPLE_PAIRS = 16
+#: A sample this far below the threshold decides (cdf97) without the full count; Haar is
+#: only chosen on the full count.
+_SAMPLE_MARGIN = 0.2
+#: Row pairs compared at once (bounds the temporaries of a large picture).
+_PAIRS_PER_SLICE = 256
+
+
+def flat_block_share(image: np.ndarray, row_step: int = 1) -> float:
+    """The share of the picture's 2 × 2 blocks (even rows and columns, every channel) whose
+    four pixels are equal, over every ``row_step``-th pair of rows.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> flat_block_share(np.kron(np.arange(12).reshape(3, 4), np.ones((2, 2))))
+    1.0
+    >>> flat_block_share(np.arange(16.0).reshape(4, 4))
+    0.0
+    """
+    pairs, cols = image.shape[0] // 2, image.shape[1] // 2 * 2
+    if pairs == 0 or cols == 0:
+        return 0.0
+    chosen = range(0, pairs, row_step)
+    flat = 0
+    for start in range(0, len(chosen), _PAIRS_PER_SLICE):
+        rows = 2 * np.asarray(chosen[start : start + _PAIRS_PER_SLICE])
+        top, bottom = image[rows, :cols], image[rows + 1, :cols]
+        corner = top[:, 0::2]
+        same = (corner == top[:, 1::2]) & (corner == bottom[:, 0::2]) & (corner == bottom[:, 1::2])
+        if same.ndim == 3:  # every channel
+            same = same.all(axis=2)
+        flat += int(np.count_nonzero(same))
+    return flat / (len(chosen) * (cols // 2))
+
+
+def choose_image_wavelet(image: np.ndarray) -> str:
+    """``"haar"`` for a picture of mostly flat 2 × 2 blocks (:data:`FLAT_SHARE_FOR_HAAR`),
+    ``"cdf97"`` for any other (see the module text for the measurements).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> photo = rng.integers(0, 256, (64, 64))
+    >>> choose_image_wavelet(photo), choose_image_wavelet(np.kron(photo, np.ones((2, 2))))
+    ('cdf97', 'haar')
+    """
+    step = max(1, min(_SAMPLE_STEP, image.shape[0] // 2 // _SAMPLE_PAIRS))
+    if flat_block_share(image, step) < FLAT_SHARE_FOR_HAAR - _SAMPLE_MARGIN:
+        return "cdf97"
+    return "haar" if flat_block_share(image) >= FLAT_SHARE_FOR_HAAR else "cdf97"
