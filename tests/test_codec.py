@@ -386,9 +386,10 @@ def test_the_public_signatures_are_the_issues_contract() -> None:
     import inspect as pyinspect
 
     expected = {
-        # Issue 12: photographs default to cdf97, the measured rate–distortion winner; it
-        # added ``effort`` (the opt-in lossless coder) after the old parameters.
-        "encode_image": "(image, *, wavelet='cdf97', level=None, keep=None, quality=None, "
+        # Issue 12: images default to "auto" (cdf97, the measured rate–distortion winner on
+        # photographs; haar on flat-block graphics); it added ``effort`` (the opt-in lossless
+        # coder) after the old parameters.
+        "encode_image": "(image, *, wavelet='auto', level=None, keep=None, quality=None, "
         "bpp=None, lossless=False, effort='default')",
         # The contract's parameters, in order; ``wavelet`` was added after them (the upload
         # page compares B-spline and Haar curves), which extends the contract without changing it.
