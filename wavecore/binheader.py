@@ -11,7 +11,8 @@ specifies the bytes; in short, in this order:
   fields follow and which fields take their implied value (``fitted`` = ``shape`` + ``pads``,
   ``pads`` all zero or zero before, ``rounding`` = 0.27);
 * unsigned LEB128 varints for ``levels``, ``shape``, ``fitted`` and ``pads`` (then, for colour
-  code 3, the chroma weight of ``"rct-p<w>"``, zigzagged);
+  code 3, the chroma weight of ``"rct-p<w>"``, zigzagged; a weight of 0 stands for a
+  per-picture matrix, ``"klt:<m>"``, whose nine integers follow, zigzagged);
 * numbers in one *number* form (a varint whose low four bits say how to read it: a short
   decimal, an integer, a float32 or a float64, or null) — every value comes back bit for bit,
   except ``max_error``, which may be stored as the float32 at or above it (a diagnostic that
@@ -53,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from .colour import KLT_LIMIT, KLT_PREFIX, klt_matrix
 from .errors import BundleError
 from .varints import encode_varint, unzigzag, zigzag
 
@@ -65,6 +67,10 @@ COLOUR_CODES = ("none", "ycbcr", "rct")
 #: Colour code 3: the lossless RCT with Cr predicted from Cb, ``"rct-p<w>"``; its weight ``w``
 #: follows the pads as a zigzag varint.
 COLOUR_PREDICTED, PREDICTED_PREFIX = 3, "rct-p"
+#: Colour code 3 with the weight 0 (never an ``rct-p``: the RCT alone is code 2) is the
+#: per-picture matrix ``"klt:<m>"``; its nine integers follow as zigzag varints.  A reader
+#: from before it reads the name ``"rct-p0"``, which the header check refuses by name.
+MATRIX_WEIGHT = 0
 DTYPE_CODES = (
     "uint8",
     "uint16",
@@ -440,6 +446,19 @@ def _index(table: tuple[str, ...], value: Any, field: str) -> int:
     raise BundleError(msg)
 
 
+def _matrix_units(colour: Any) -> list[int] | None:
+    """The nine integers of a colour ``"klt:<m>"`` (None for any other colour; the header
+    check has made sure they are valid)."""
+    if not isinstance(colour, str) or not colour.startswith(KLT_PREFIX):
+        return None
+    try:
+        klt_matrix(colour)
+    except ValueError as exc:
+        msg = f"header field 'colour' is {colour[:80]!r}: {exc}"
+        raise BundleError(msg) from exc
+    return [int(unit) for unit in colour[len(KLT_PREFIX) :].split(",")]
+
+
 def _predicted_weight(colour: Any) -> int | None:
     """``w`` of a colour ``"rct-p<w>"`` (None for any other colour)."""
     if not isinstance(colour, str) or not colour.startswith(PREDICTED_PREFIX):
@@ -517,7 +536,10 @@ def pack(
     }
     kind = _index(KIND_CODES, header["kind"], "kind")
     weight = _predicted_weight(header["colour"])
-    if weight is None:
+    matrix = _matrix_units(header["colour"])
+    if matrix is not None:
+        colour, weight = COLOUR_PREDICTED, MATRIX_WEIGHT
+    elif weight is None:
         colour = _index(COLOUR_CODES, header["colour"], "colour")
     else:
         colour = COLOUR_PREDICTED
@@ -654,6 +676,8 @@ def pack(
             out += encode_varint(after)
     if weight is not None:
         out += encode_varint(zigzag(weight))
+    for unit in matrix or ():
+        out += encode_varint(zigzag(unit))
     if lifting_compact:
         assert isinstance(lifting, list)
         out += encode_varint(len(lifting))
@@ -952,7 +976,13 @@ def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool, Pin
     header["boundary"] = boundary
     header["levels"] = levels
     if colour_code == COLOUR_PREDICTED:
-        colour = f"{PREDICTED_PREFIX}{unzigzag(reader.varint('colour', 255))}"
+        weight = unzigzag(reader.varint("colour", 255))
+        if weight == MATRIX_WEIGHT:
+            limit = zigzag(-KLT_LIMIT)
+            units = [unzigzag(reader.varint("colour", limit)) for _ in range(9)]
+            colour = KLT_PREFIX + ",".join(map(str, units))
+        else:
+            colour = f"{PREDICTED_PREFIX}{weight}"
     header["colour"] = colour
     if wavelet_code == WAVELET_CODES.index("reversible"):
         count = reader.varint("lifting", 255)

@@ -115,7 +115,9 @@ version may add some.
                 transformed axis
 ``levels``      ``L``, the number of decomposition levels (``N = L + 1`` chunks)
 ``colour``      ``"none"``, ``"ycbcr"`` (irreversible, lossy) or ``"rct"`` (reversible), or
-                ``"rct-p<w>"`` (reversible, Cr less ``floor((w Cb + 4) / 8)``, ``w`` ±1 … ±8)
+                ``"rct-p<w>"`` (reversible, Cr less ``floor((w Cb + 4) / 8)``, ``w`` ±1 … ±8),
+                or ``"klt:<m>"`` (irreversible, lossy: the per-picture 3 × 3 forward matrix,
+                nine integers in units of 1/4096, row by row: ``wavecore.colour.klt_matrix``)
 ``quantizer``   the quantizer's name (``"none"`` for lossless) and ``qparams`` its parameters
 ``coder``       the entropy coder's name and ``cparams`` its parameters
 ``peak``        the peak value PSNR is measured against
@@ -165,6 +167,7 @@ from typing import Any
 from . import binheader
 from ._blocktables import crc16
 from .blockcoder import BLOCK_SIZES, CHECK_BYTES, add_block_checks, block_table, strip_block_checks
+from .colour import KLT_PREFIX, klt_matrix
 from .errors import BundleError
 
 __all__ = [
@@ -1521,7 +1524,15 @@ def check_header(header: Any) -> None:
     _choice(header, "kind", KINDS)
     _choice(header, "dtype", DTYPES)
     _choice(header, "fit", FITS)
-    _choice(header, "colour", COLOURS)
+    colour = _field(header, "colour", str)
+    if colour.startswith(KLT_PREFIX):
+        try:
+            klt_matrix(colour)
+        except ValueError as exc:
+            msg = f"header field 'colour' is {colour[:_NAME_MAX]!r}: {exc}"
+            raise BundleError(msg) from exc
+    else:
+        _choice(header, "colour", COLOURS)
     _name(header, "wavelet")
     _name(header, "quantizer")
     _name(header, "coder")

@@ -16,7 +16,7 @@ from ..bundle import read_bundle, with_header
 from ..errors import BundleError, InvalidParameter
 from ..filters import get_wavelet
 from ..threshold import check_share
-from .choice import AUTO, choose_image_wavelet
+from .choice import AUTO, choose_colour, choose_image_wavelet
 from .decode import decode
 
 # The one-step surface coding's first home, where wavecore.grids and wavecore.gridcore find it.
@@ -181,7 +181,7 @@ def encode_image(
     bpp = None if bpp is None else positive(bpp, "bpp", "bits per pixel")
     dtype = dtype_name(arr, "image")
     arr, scale = scaled(arr)
-    colour = "ycbcr" if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
+    colour = choose_colour(arr) if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
     bank = get_wavelet(choose_image_wavelet(arr) if wavelet == AUTO else wavelet)
     # Images use the paper's endpoint-interpolating rows; a wavelet without them (cdf97's
     # symmetric extension) uses its own non-periodic boundary.

@@ -48,7 +48,6 @@ from .._kernels import largest_scaled, log_histogram_counts, top_octave
 from ..blockcoder import BLOCK_SIZE as DEFAULT_BLOCK
 from ..blockcoder import PARENT_VERSION, CodedBlocks, KnownBlocks, block_lengths, code_blocks
 from ..bundle import read_bundle, write_bundle
-from ..colour import YCBCR_INVERSE_MATRIX
 from ..entropy import encode_levels
 from ..errors import InvalidParameter
 from ..layout import as_levels, from_levels
@@ -73,6 +72,7 @@ from .samples import decompose as _decompose
 from .samples import measure_errors as _errors
 from .samples import reconstruct_finished
 from .samples import unscaled as _unscaled
+from .stages import get_colour
 
 #: Without ``keep``/``quality``/``bpp``, images and surfaces are coded to this PSNR (dB).
 DEFAULT_QUALITY = 40.0
@@ -366,9 +366,10 @@ class _LossyEncoder:
         (``quantize.OpenLoopDistortion``, colour-weighted): no quantization, no synthesis."""
         if self._distortion is None or self._distortion[0] != self.kept_fraction:
             gains = None
-            if self.plan.colour == "ycbcr":
+            inverse = get_colour({"id": self.plan.colour}).inverse_matrix
+            if inverse is not None:
                 channels = self.original.shape[-1]
-                columns = (YCBCR_INVERSE_MATRIX**2).sum(axis=0)  # RGB error per unit of Y/Cb/Cr
+                columns = (inverse**2).sum(axis=0)  # RGB error per unit of each channel
                 alpha = [0.0 if self.plan.opaque else 1.0] * (channels - 3)
                 gains = [*map(float, columns), *alpha]
             self._distortion = (

@@ -16,7 +16,7 @@ from .._kernels import (
     squared_and_largest_error,
     squared_and_largest_integer_error,
 )
-from ..colour import YCBCR_INVERSE_MATRIX, YCBCR_MATRIX, ycbcr_forward
+from ..colour import KLT_PREFIX, YCBCR_INVERSE_MATRIX, YCBCR_MATRIX, klt_matrix
 from ..errors import InvalidParameter
 from ..filters import get_wavelet
 from ..transform import run_rows, synthesis_2d_integers
@@ -204,15 +204,26 @@ def to_integers(data: np.ndarray, dtype: str, matrix: np.ndarray | None) -> np.n
     return out.reshape(data.shape)
 
 
-def ycbcr_from(rgb: np.ndarray) -> np.ndarray:
-    """``ycbcr_forward(rgb.astype(float64))``, by one compiled pass in threads."""
+def ycbcr_from(rgb: np.ndarray, matrix: np.ndarray = YCBCR_MATRIX) -> np.ndarray:
+    """``ycbcr_forward(rgb.astype(float64))`` (or another forward ``matrix`` on the first three
+    channels), by one compiled pass in threads."""
     if rgb.dtype in _UNCOMPILED_DTYPES:
-        return ycbcr_forward(rgb.astype(np.float64))
+        out = rgb.astype(np.float64)
+        out[..., :3] = out[..., :3] @ matrix.T
+        return out
     out = np.empty(rgb.shape, dtype=np.float64)
-    run_rows(
-        lambda lo, hi: colour_to_floats(rgb, YCBCR_MATRIX, out, lo, hi), rgb.shape[0], rgb.size
-    )
+    run_rows(lambda lo, hi: colour_to_floats(rgb, matrix, out, lo, hi), rgb.shape[0], rgb.size)
     return out
+
+
+def forward_matrix(colour: str) -> np.ndarray | None:
+    """The lossy colour transform's forward matrix (``ycbcr`` or a per-picture
+    ``klt:...``), or None for any other colour."""
+    if colour == "ycbcr":
+        return YCBCR_MATRIX
+    if colour.startswith(KLT_PREFIX):
+        return klt_matrix(colour)
+    return None
 
 
 def fitted_samples(
@@ -223,16 +234,19 @@ def fitted_samples(
     boundary: Sequence[str],
     most: int,
 ) -> tuple[np.ndarray, tuple[tuple[int, int], ...], int]:
-    """``fit(ycbcr_from(arr) if colour == "ycbcr" else arr.astype(float64), ...)``, the same
+    """``fit(ycbcr_from(arr, matrix) if colour is ycbcr or a matrix else arr.astype(float64),
+    ...)``, the same
     values, with the colour transform (or the conversion to float64) written straight into the
     fitted array: the unpadded float64 picture is never made, nor its pages faulted in (a 2048²
     RGB picture's are 100 MB, tens of milliseconds of kernel time on two threads at once)."""
-    if colour == "ycbcr" and arr.dtype in _UNCOMPILED_DTYPES:
-        return fit(ycbcr_from(arr), level, wavelet, boundary, most)
-    if colour == "ycbcr":
+    matrix = forward_matrix(colour)
+    if matrix is not None and arr.dtype in _UNCOMPILED_DTYPES:
+        return fit(ycbcr_from(arr, matrix), level, wavelet, boundary, most)
+    if matrix is not None:
+        forward = matrix
 
         def convert(out: np.ndarray, lo: int, hi: int) -> None:
-            colour_to_floats(arr, YCBCR_MATRIX, out, lo, hi)
+            colour_to_floats(arr, forward, out, lo, hi)
 
     else:
         columns = arr.shape[1]

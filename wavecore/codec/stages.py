@@ -25,7 +25,15 @@ from typing import Any, ClassVar, NamedTuple, Protocol
 import numpy as np
 
 from .. import lossless as _lossless
-from ..colour import YCBCR_INVERSE_MATRIX, rct_forward, rct_inverse, ycbcr_forward, ycbcr_inverse
+from ..colour import (
+    KLT_PREFIX,
+    YCBCR_INVERSE_MATRIX,
+    klt_matrix,
+    rct_forward,
+    rct_inverse,
+    ycbcr_forward,
+    ycbcr_inverse,
+)
 from ..entropy import decode_levels, encode_levels
 from ..errors import BundleError, InvalidLength, InvalidParameter
 from ..filters import get_wavelet
@@ -265,7 +273,8 @@ class ReversibleTransform(Transform):
         """The lossless header's own rules; returns its ``lifting`` (raises ``BundleError``)."""
         kind, colour, boundary = header["kind"], header["colour"], header["boundary"]
         pads, levels, fitted = header["pads"], header["levels"], header["fitted"]
-        if kind != "image" or colour == "ycbcr" or header["dtype"] not in ("uint8", "uint16"):
+        lossy_colour = colour == "ycbcr" or str(colour).startswith(KLT_PREFIX)
+        if kind != "image" or lossy_colour or header["dtype"] not in ("uint8", "uint16"):
             msg = "header: the lossless wavelet is only for uint8/uint16 images"
             raise BundleError(msg)
         if any(b != "symmetric" for b in boundary):
@@ -424,7 +433,7 @@ class Colour(Stage):
     kind = "colour"
     #: The inverse as a 3 × 3 matrix, when it is one: the decoder then fuses it with the
     #: rounding to integers in one compiled pass.
-    inverse_matrix: ClassVar[np.ndarray | None] = None
+    inverse_matrix: np.ndarray | None = None
 
     def forward(self, data: np.ndarray) -> np.ndarray:
         return data
@@ -441,13 +450,42 @@ class NoColour(Colour):
 @register_stage
 class YCbCr(Colour):
     codec_id = "ycbcr"
-    inverse_matrix = YCBCR_INVERSE_MATRIX
+    inverse_matrix: np.ndarray | None = YCBCR_INVERSE_MATRIX
 
     def forward(self, data: np.ndarray) -> np.ndarray:
         return ycbcr_forward(data)
 
     def inverse(self, data: np.ndarray) -> np.ndarray:
         return ycbcr_inverse(data)
+
+
+class MatrixColour(Colour):
+    """A per-picture matrix on the first three channels (``klt:<nine integers>``,
+    :func:`wavecore.colour.klt_matrix`); not registered: :func:`get_colour` makes one for
+    each name."""
+
+    def __init__(self, name: str) -> None:
+        try:
+            self.matrix = klt_matrix(name)
+        except ValueError as exc:
+            msg = f"header field 'colour': {exc}"
+            raise BundleError(msg) from exc
+        self.name = name
+        self.unmix = np.ascontiguousarray(np.linalg.inv(self.matrix))
+        self.inverse_matrix = self.unmix
+
+    def get_config(self) -> dict[str, Any]:
+        return {"id": self.name}
+
+    def forward(self, data: np.ndarray) -> np.ndarray:
+        out = np.array(data, dtype=np.float64)
+        out[..., :3] = out[..., :3] @ self.matrix.T
+        return out
+
+    def inverse(self, data: np.ndarray) -> np.ndarray:
+        out = np.array(data, dtype=np.float64)
+        out[..., :3] = out[..., :3] @ self.unmix.T
+        return out
 
 
 @register_stage
@@ -517,7 +555,10 @@ def get_coder(config: dict[str, Any]) -> Coder:
 
 
 def get_colour(config: dict[str, Any]) -> Colour:
-    """:func:`get_stage` for a colour transform."""
+    """:func:`get_stage` for a colour transform (and a per-picture matrix's name)."""
+    name = config.get("id") if isinstance(config, dict) else None
+    if isinstance(name, str) and name.startswith(KLT_PREFIX):
+        return MatrixColour(name)
     stage = get_stage("colour", config)
     assert isinstance(stage, Colour)
     return stage
