@@ -58,6 +58,11 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
     y, x = np.mgrid[0:300, 0:270] / 300.0
     waves = 128 + 60 * np.sin(23 * x * (1 + y)) + 40 * np.cos(17 * y) * (x > 0.5)
     blocks_picture = (waves + rng.normal(0, 4, x.shape)).clip(0, 255).astype(np.uint8)
+    y, x = np.mgrid[0:48, 0:40] / 40.0
+    base = 120 + 60 * np.sin(9 * x) * np.cos(6 * y)
+    tint = np.stack([base, 0.5 * base + 40, 255 - base], -1)
+    tinted = (tint + np.random.default_rng(45).normal(0, 3, tint.shape)).clip(0, 255)
+    tinted = tinted.astype(np.uint8)
     y, x = np.mgrid[0:520, 0:264] / 300.0
     waves = 128 + 60 * np.sin(23 * x * (1 + y)) + 40 * np.cos(17 * y) * (x > 0.5)
     noise = np.random.default_rng(66).normal(0, 4, x.shape)  # its own: the rest stay
@@ -117,6 +122,9 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             surface,
             {"closed": (True, False), "quality": 42.0},
         ),
+        # A per-picture colour matrix (colour "klt:<m>": colour code 3 with weight 0 and nine
+        # integers): a tinted picture, whose details the matrix decorrelates better than YCbCr.
+        "image_rgb_u8_klt": ("image", tinted, {"quality": 38.0}),
         # Format 2.0 (the binary header): a curve, grey and colour pictures at their default
         # quality, lossless 16-bit RGBA (with its lifting list), a surface and huge floats
         # (the ``scale`` field).

@@ -29,6 +29,7 @@ __all__ = [
     "choose_colour",
     "choose_image_wavelet",
     "colour_cost",
+    "colour_details",
     "flat_block_share",
 ]
 
@@ -102,7 +103,7 @@ _COLOUR_SAMPLE_ROWS = 128
 _COLOUR_MARGIN = 0.01
 
 
-def _colour_details(image: np.ndarray) -> np.ndarray:
+def colour_details(image: np.ndarray) -> np.ndarray:
     """``(n, 3)`` differences of neighbouring pixels (down and across) on evenly spaced rows:
     the details that a wavelet codes, where a picture's smooth shading does not weigh in."""
     rows = image.shape[0]
@@ -151,7 +152,7 @@ def choose_colour(image: np.ndarray) -> str:
     if image.ndim != 3 or image.shape[2] < 3 or min(image.shape[:2]) < 2:
         return "ycbcr"
     with np.errstate(all="ignore"):
-        details = _colour_details(image)
+        details = colour_details(image)
         covariance = details.T @ details
         if not np.all(np.isfinite(covariance)):
             return "ycbcr"
