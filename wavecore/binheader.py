@@ -460,13 +460,17 @@ def _matrix_units(colour: Any) -> list[int] | None:
 
 
 def _predicted_weight(colour: Any) -> int | None:
-    """``w`` of a colour ``"rct-p<w>"`` (None for any other colour)."""
+    """``w`` of a colour ``"rct-p<w>"`` (None for any other colour, and for ``"rct-p0"``:
+    its code is the per-picture matrix's, :data:`MATRIX_WEIGHT`)."""
     if not isinstance(colour, str) or not colour.startswith(PREDICTED_PREFIX):
         return None
     text = colour[len(PREDICTED_PREFIX) :]
     if len(text) > 4 or not text.lstrip("-").isdigit():
         return None
-    return int(text) if f"{PREDICTED_PREFIX}{int(text)}" == colour else None
+    weight = int(text)
+    if weight == MATRIX_WEIGHT or f"{PREDICTED_PREFIX}{weight}" != colour:
+        return None
+    return weight
 
 
 def _sizes(value: Any, field: str) -> list[int]:

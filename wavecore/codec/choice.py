@@ -97,21 +97,29 @@ def choose_image_wavelet(image: np.ndarray) -> str:
     return "haar" if flat_block_share(image) >= FLAT_SHARE_FOR_HAAR else "cdf97"
 
 
-#: Rows whose differences the colour choice samples (evenly spaced).
-_COLOUR_SAMPLE_ROWS = 128
+#: The colour choice samples the differences at this many rows and columns at most (evenly
+#: spaced: 32 × 256 places, down and across, whatever the picture's size).
+_COLOUR_SAMPLE_ROWS = 32
+_COLOUR_SAMPLE_COLUMNS = 256
 #: The per-picture matrix must beat YCbCr's cost (:func:`colour_cost`) by this much.
 _COLOUR_MARGIN = 0.01
 
 
 def colour_details(image: np.ndarray) -> np.ndarray:
-    """``(n, 3)`` differences of neighbouring pixels (down and across) on evenly spaced rows:
+    """``(n, 3)`` differences of neighbouring pixels (down and across) at evenly spaced places:
     the details that a wavelet codes, where a picture's smooth shading does not weigh in."""
-    rows = image.shape[0]
-    step = max(1, (rows - 1) // _COLOUR_SAMPLE_ROWS)
-    top = image[0 : rows - 1 : step, :, :3].astype(np.float64)
-    down = image[1:rows:step, :, :3] - top
-    across = np.diff(top, axis=1)
+    rows = np.unique(np.linspace(0, image.shape[0] - 2, _COLOUR_SAMPLE_ROWS).astype(np.intp))
+    cols = np.unique(np.linspace(0, image.shape[1] - 2, _COLOUR_SAMPLE_COLUMNS).astype(np.intp))
+    here = image[np.ix_(rows, cols)][..., :3].astype(np.float64)
+    down = image[np.ix_(rows + 1, cols)][..., :3] - here
+    across = image[np.ix_(rows, cols + 1)][..., :3] - here
     return np.concatenate([down.reshape(-1, 3), across.reshape(-1, 3)])
+
+
+def _mixed(details: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """``details @ matrix.T``, a column at a time (NumPy's matmul of an ``(n, 3)`` array by a
+    3 × 3 one takes a slow path)."""
+    return np.stack([details @ row for row in matrix], axis=1)
 
 
 def colour_cost(details: np.ndarray, matrix: np.ndarray) -> float:
@@ -120,7 +128,7 @@ def colour_cost(details: np.ndarray, matrix: np.ndarray) -> float:
     (the column norms of the inverse).  A Laplacian's rate at a given distortion goes with
     that log; the mean magnitude, unlike the variance, is not ruled by the few largest edges.
     """
-    spread = np.abs(details @ matrix.T).mean(axis=0)
+    spread = np.abs(_mixed(details, matrix)).mean(axis=0)
     gains = np.sqrt((np.linalg.inv(matrix) ** 2).sum(axis=0))
     floor = 1e-9 * float(np.abs(details).mean()) + 1e-300  # flat channels tie, not -inf
     return float(np.log(spread * gains + floor).sum())
