@@ -102,15 +102,12 @@ def _estimate(flat, planes, blocks, start, rate, models):
                     if not live:
                         continue
                     at = offset + i * cols + j
-                    s = _K._neighbours(flat, at, cols, i, j, r0, c0, c1)
                     e = np.int64(0)
                     for slot, weight in ((_K.P_SIB1, 2), (_K.P_SIB2, 2), (_K.P_LUMA, 4)):
                         q = planes[p, slot]
                         if q >= 0 and i < planes[q, _K.P_ROWS] and j < planes[q, _K.P_COLS]:
                             other = planes[q, _K.P_OFFSET] + i * planes[q, _K.P_COLS] + j
                             e += weight * abs(np.int64(flat[other]))
-                    local = _K.LOCAL_CLASS[min(s, 255)]
-                    ctx0 = local * _K.EXTERNAL_CLASSES + _K.EXTERNAL_CLASS[min(e, 12)]
                     bit = 1 if flat[at] != 0 else 0
                     w_ = _abs_at(flat, at - 1, j > c0)
                     n_ = _abs_at(flat, at - cols, i > r0)
@@ -118,6 +115,9 @@ def _estimate(flat, planes, blocks, start, rate, models):
                     ne = _abs_at(flat, at - cols + 1, i > r0 and j + 1 < c1)
                     ww = _abs_at(flat, at - 2, j > c0 + 1)
                     nn = _abs_at(flat, at - 2 * cols, i > r0 + 1)
+                    s = 4 * (w_ + n_) + 2 * (nw + ne) + ww + nn
+                    local = _K.LOCAL_CLASS[min(s, 255)]
+                    ctx0 = local * _K.EXTERNAL_CLASSES + _K.EXTERNAL_CLASS[min(e, 12)]
                     count = (w_ > 0) + (n_ > 0) + (nw > 0) + (ne > 0)
                     if w_ > 1 or n_ > 1:
                         count = 5 + (w_ + n_ > 4) + (w_ + n_ > 10)
