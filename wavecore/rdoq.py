@@ -13,7 +13,9 @@ own order and, for each coefficient, keeps whichever of ``t = floor(|x| + TOP_RO
 * ``R`` is the number of bits the coder would spend, from adaptive probabilities that follow
   the coder's own contexts (``_blockkernels``: the local neighbourhood class times the other
   bands' class for the zero flag, the unary bit-length contexts; mantissa and sign bits count
-  one bit each), reset at each block as the coder resets them;
+  one bit each), reset at each block as the coder resets them; the other bands' sum holds the
+  parent band, as context coder version 6 (two-dimensional layouts) has it: the levels are
+  decided coarse to fine, so a level's parents are the indices already chosen;
 * ``λ = LAMBDA · step²`` in picture units, which is ``LAMBDA`` in the band's units: the slope
   of an entropy-coded uniform quantizer's distortion–rate curve at high rate is
   ``ln 2 / 6 · step² ≈ 0.12 step²`` per bit; ``LAMBDA`` was calibrated on the tuning pictures.
@@ -158,10 +160,11 @@ def _at(q, planes, p, i, j):
 
 
 @njit(nogil=True, cache=True)
-def _optimise_blocks(q, x, planes, offsets, lam, zero_start, lo, hi):
+def _optimise_blocks(q, x, planes, offsets, parent_q, parent_planes, lam, zero_start, lo, hi):
     """RDOQ in place of blocks ``lo .. hi - 1`` (row by row over the level's grid of blocks) of
-    one level's detail planes (``q`` indices, ``x`` values in step units).  Blocks touch only
-    their own positions, so runs of blocks go to threads."""
+    one level's detail planes (``q`` indices, ``x`` values in step units; ``parent_q`` and
+    ``parent_planes``: the level one coarser, already decided, its planes in the same order,
+    or no planes).  Blocks touch only their own positions, so runs of blocks go to threads."""
     width = 0
     for p in range(planes.shape[0]):
         width = max(width, planes[p, _COLS])
@@ -226,6 +229,8 @@ def _optimise_blocks(q, x, planes, offsets, lam, zero_start, lo, hi):
                         _at(q, planes, planes[p, _SIB1], i, j)
                         + _at(q, planes, planes[p, _SIB2], i, j)
                     ) + 4 * _at(q, planes, planes[p, _LUMA], i, j)
+                    if p < parent_planes.shape[0]:  # version 6: the parent band
+                        e += kernels.PARENT_WEIGHT * _at(parent_q, parent_planes, p, i >> 1, j >> 1)
                     ctx = kernels.LOCAL_CLASS[s if s < 255 else 255] * kernels.EXTERNAL_CLASSES
                     ctx += kernels.EXTERNAL_CLASS[min(e, 12)]
                     unary_base = (kernels.LOCAL_CLASS[min(s + e, 255)] >> 1) * kernels.UNARY_INDICES
@@ -307,6 +312,9 @@ def optimise_indices(
     values = as_levels(coeffs)
     step = float(params["step"])
     rounding = float(params["rounding"])
+    # The coarsest details have no parent band (context coder version 6).
+    parent_q = np.zeros(0, dtype=np.int32)
+    parent_planes = np.zeros((0, 6), dtype=np.int64)
     for bands, originals, weights in zip(
         levels[1:], values[1:], params["weights"][1:], strict=True
     ):
@@ -345,8 +353,11 @@ def optimise_indices(
         height = max(row[1] for row in table)
         width = max(row[2] for row in table)
         count = -(-height // BLOCK) * -(-width // BLOCK)
-        blocks = functools.partial(_optimise_blocks, q, x, planes, shifts, lam, _ZERO_START)
+        blocks = functools.partial(
+            _optimise_blocks, q, x, planes, shifts, parent_q, parent_planes, lam, _ZERO_START
+        )
         run_rows(blocks, count, q.size)
+        parent_q, parent_planes = q, planes
         for k, band in enumerate(bands):
             for channel in range(channels):
                 row = table[channel * len(bands) + k]
