@@ -32,32 +32,42 @@ def _quantized(picture: np.ndarray, step: float) -> tuple[list, list, dict]:
     return coeffs, q, params
 
 
-def _reference(coeffs: list, q: list, params: dict, roundings: tuple) -> list:
+def _reference(coeffs: list, q: list, params: dict, roundings: tuple, parent: int) -> list:
     """The rule, written out with NumPy over the dead zone's own indices."""
     out = copy.deepcopy(q)
-    six = tuple(roundings) * (2 if len(roundings) == 3 else 1)
+    table = np.asarray(tuple(roundings) * (2 if len(roundings) == 9 else 1)).reshape(2, 3, 3)
+
+    def three_d(band: np.ndarray) -> np.ndarray:
+        band = np.abs(np.asarray(band, dtype=np.int64))
+        return band if band.ndim == 3 else band[..., None]
+
     for index in range(1, len(q)):
-        bands = [np.abs(np.asarray(b, dtype=np.int64)) for b in q[index]]
-        bands = [b if b.ndim == 3 else b[..., None] for b in bands]
+        bands = [three_d(b) for b in q[index]]
         for k, band in enumerate(bands):
             padded = np.pad(band, ((1, 1), (1, 1), (0, 0)))
             rows, cols = band.shape[:2]
-            busy_sum = sum(
+            local = sum(
                 padded[1 + di : 1 + di + rows, 1 + dj : 1 + dj + cols]
                 for di in (-1, 0, 1)
                 for dj in (-1, 0, 1)
                 if di or dj
             )
-            busy_sum = busy_sum + sum(bands[o] for o in range(3) if o != k)
-            busy_sum[..., 1:] += band[..., :1]
+            external = 2 * sum(bands[o] for o in range(3) if o != k)
+            external[..., 1:] += 4 * band[..., :1]
+            if index >= 2:  # the same band one level coarser, at (i // 2, j // 2)
+                above = three_d(q[index - 1][k])
+                grown = above.repeat(2, axis=0).repeat(2, axis=1)[:rows, :cols]
+                external[: grown.shape[0], : grown.shape[1]] += parent * grown
             x = np.asarray(coeffs[index][k], dtype=np.float64)
             x = (x if x.ndim == 3 else x[..., None]) / (
                 params["step"] * params["weights"][index][k]
             )
-            classes = np.where(busy_sum == 0, 0, np.where(busy_sum <= 2, 1, 2))
-            classes[..., 1:] += 3  # the chroma channels' own roundings
-            r = np.asarray(six)[classes]
-            window = (np.abs(x) >= 1 - max(six)) & (np.abs(x) < 1 - min(six))
+            local_class = np.where(local == 0, 0, np.where(local <= 2, 1, 2))
+            external_class = np.where(external == 0, 0, np.where(external <= 3, 1, 2))
+            chroma = np.zeros(band.shape, dtype=np.int64)
+            chroma[..., 1:] = 1  # the chroma channels' own table
+            r = table[chroma, local_class, external_class]
+            window = (np.abs(x) >= 1 - table.max()) & (np.abs(x) < 1 - table.min())
             new = np.where(np.abs(x) >= 1 - r, np.sign(x), 0).astype(np.int32)
             target = out[index][k]
             view = target if target.ndim == 3 else target[..., None]
@@ -65,19 +75,26 @@ def _reference(coeffs: list, q: list, params: dict, roundings: tuple) -> list:
     return out
 
 
+_OTHER = (0.1, 0.2, 0.3, 0.25, 0.3, 0.4, 0.3, 0.4, 0.45)
+
+
 @pytest.mark.parametrize(
-    ("seed", "channels", "step", "roundings"),
+    ("seed", "channels", "step", "roundings", "parent"),
     [
-        (0, 0, 4.0, rdoq.FAST_ROUNDINGS),
-        (1, 3, 6.0, rdoq.FAST_ROUNDINGS),
-        (2, 0, 9.0, (0.1, 0.3, 0.45)),
+        (0, 0, 4.0, rdoq.FAST_ROUNDINGS, rdoq.PARENT_WEIGHT),
+        (1, 3, 6.0, rdoq.FAST_ROUNDINGS, rdoq.PARENT_WEIGHT),
+        (2, 0, 9.0, _OTHER, rdoq.PARENT_WEIGHT),
+        (6, 3, 5.0, rdoq.FAST_ROUNDINGS, 0),
     ],
 )
-def test_it_follows_its_rule(seed: int, channels: int, step: float, roundings: tuple) -> None:
+def test_it_follows_its_rule(
+    seed: int, channels: int, step: float, roundings: tuple, parent: int
+) -> None:
     coeffs, q, params = _quantized(_picture(seed, channels), step)
-    expected = _reference(coeffs, q, params, roundings)
+    expected = _reference(coeffs, q, params, roundings, parent)
     coarse = np.array(q[0], copy=True)
-    assert rdoq.adapt_deadzone(coeffs, q, params, roundings=roundings) is q  # in place
+    got = rdoq.adapt_deadzone(coeffs, q, params, roundings=roundings, parent_weight=parent)
+    assert got is q  # in place
     assert np.array_equal(q[0], coarse)
     changed = 0
     for mine, theirs, before in zip(
@@ -92,18 +109,37 @@ def test_it_follows_its_rule(seed: int, channels: int, step: float, roundings: t
     assert changed > 0  # the rule did something on this picture
 
 
-@pytest.mark.parametrize("roundings", [(0.1, 0.2), (0.1, 0.2, 1.0), (0.1, 0.2, -0.1, 0, 0, 0)])
+def test_the_parent_band_moves_decisions() -> None:
+    # Context coder version 6 reads the parent band: where it is nonzero, a 1 is cheaper.
+    coeffs, q, params = _quantized(_picture(9, 3), 5.0)
+    with_parent = rdoq.adapt_deadzone(coeffs, copy.deepcopy(q), params)
+    without = rdoq.adapt_deadzone(coeffs, copy.deepcopy(q), params, parent_weight=0)
+    differ = [
+        int(np.count_nonzero(a != b))
+        for level_a, level_b in zip(as_levels(with_parent), as_levels(without), strict=True)
+        for a, b in zip(level_a, level_b, strict=True)
+    ]
+    assert differ[0] == 0  # the coarse band
+    assert sum(differ[1:4]) == 0  # the coarsest details have no parent
+    assert sum(differ[4:]) > 0
+
+
+@pytest.mark.parametrize(
+    "roundings", [(0.1, 0.2, 0.3), (0.1,) * 8 + (1.0,), (0.1,) * 17 + (-0.5,), (0.1,) * 12]
+)
 def test_bad_roundings_are_refused_by_name(roundings: tuple) -> None:
     coeffs, q, params = _quantized(_picture(8), 5.0)
     with pytest.raises(InvalidParameter, match="roundings"):
         rdoq.adapt_deadzone(coeffs, q, params, roundings=roundings)
+    with pytest.raises(InvalidParameter, match="parent_weight"):
+        rdoq.adapt_deadzone(coeffs, q, params, parent_weight=-1)
 
 
 def test_neutral_roundings_change_nothing() -> None:
     coeffs, q, params = _quantized(_picture(3, 3), 5.0)
     before = copy.deepcopy(q)
     rounding = params["rounding"]
-    rdoq.adapt_deadzone(coeffs, q, params, roundings=(rounding, rounding, rounding))
+    rdoq.adapt_deadzone(coeffs, q, params, roundings=(rounding,) * 9)
     for a, b in zip(as_levels(q), as_levels(before), strict=True):
         for band_a, band_b in zip(a, b, strict=True):
             assert np.array_equal(band_a, band_b)

@@ -13,7 +13,9 @@ own order and, for each coefficient, keeps whichever of ``t = floor(|x| + TOP_RO
 * ``R`` is the number of bits the coder would spend, from adaptive probabilities that follow
   the coder's own contexts (``_blockkernels``: the local neighbourhood class times the other
   bands' class for the zero flag, the unary bit-length contexts; mantissa and sign bits count
-  one bit each), reset at each block as the coder resets them;
+  one bit each), reset at each block as the coder resets them; the other bands' sum holds the
+  parent band, as context coder version 6 (two-dimensional layouts) has it: the levels are
+  decided coarse to fine, so a level's parents are the indices already chosen;
 * ``λ = LAMBDA · step²`` in picture units, which is ``LAMBDA`` in the band's units: the slope
   of an entropy-coded uniform quantizer's distortion–rate curve at high rate is
   ``ln 2 / 6 · step² ≈ 0.12 step²`` per bit; ``LAMBDA`` was calibrated on the tuning pictures.
@@ -43,6 +45,7 @@ __all__ = [
     "FAST_ROUNDINGS",
     "LAMBDA",
     "METHOD",
+    "PARENT_WEIGHT",
     "TOP_ROUNDING",
     "adapt_deadzone",
     "choose_indices",
@@ -72,7 +75,9 @@ __all__ = [
 #: coder's kernels got faster: ``codec_speed.py`` with it on, cdf97 0.49-0.50x OpenJPEG's time
 #: and 14.8-15.2 MP/s, the camera at 40 dB 0.74-0.84x (docs/benchmarks.md).  With context
 #: coder version 6 it gains -1.06 % on the grey tuning pictures and -0.57 % on the astronaut.
-#: ``ENABLED = False`` turns it off.
+#: Since the fast pass's table reads the parent band as version 6 does
+#: (``FAST_ROUNDINGS``), ``encode_image(bpp=r)`` with it over the previous table: BD-rate
+#: -0.23 % on the tuning pictures (docs/benchmarks.md).  ``ENABLED = False`` turns it off.
 ENABLED = True
 METHOD = "fast"
 
@@ -158,10 +163,11 @@ def _at(q, planes, p, i, j):
 
 
 @njit(nogil=True, cache=True)
-def _optimise_blocks(q, x, planes, offsets, lam, zero_start, lo, hi):
+def _optimise_blocks(q, x, planes, offsets, parent_q, parent_planes, lam, zero_start, lo, hi):
     """RDOQ in place of blocks ``lo .. hi - 1`` (row by row over the level's grid of blocks) of
-    one level's detail planes (``q`` indices, ``x`` values in step units).  Blocks touch only
-    their own positions, so runs of blocks go to threads."""
+    one level's detail planes (``q`` indices, ``x`` values in step units; ``parent_q`` and
+    ``parent_planes``: the level one coarser, already decided, its planes in the same order,
+    or no planes).  Blocks touch only their own positions, so runs of blocks go to threads."""
     width = 0
     for p in range(planes.shape[0]):
         width = max(width, planes[p, _COLS])
@@ -226,6 +232,8 @@ def _optimise_blocks(q, x, planes, offsets, lam, zero_start, lo, hi):
                         _at(q, planes, planes[p, _SIB1], i, j)
                         + _at(q, planes, planes[p, _SIB2], i, j)
                     ) + 4 * _at(q, planes, planes[p, _LUMA], i, j)
+                    if p < parent_planes.shape[0]:  # version 6: the parent band
+                        e += kernels.PARENT_WEIGHT * _at(parent_q, parent_planes, p, i >> 1, j >> 1)
                     ctx = kernels.LOCAL_CLASS[s if s < 255 else 255] * kernels.EXTERNAL_CLASSES
                     ctx += kernels.EXTERNAL_CLASS[min(e, 12)]
                     unary_base = (kernels.LOCAL_CLASS[min(s + e, 255)] >> 1) * kernels.UNARY_INDICES
@@ -307,6 +315,9 @@ def optimise_indices(
     values = as_levels(coeffs)
     step = float(params["step"])
     rounding = float(params["rounding"])
+    # The coarsest details have no parent band (context coder version 6).
+    parent_q = np.zeros(0, dtype=np.int32)
+    parent_planes = np.zeros((0, 6), dtype=np.int64)
     for bands, originals, weights in zip(
         levels[1:], values[1:], params["weights"][1:], strict=True
     ):
@@ -345,8 +356,11 @@ def optimise_indices(
         height = max(row[1] for row in table)
         width = max(row[2] for row in table)
         count = -(-height // BLOCK) * -(-width // BLOCK)
-        blocks = functools.partial(_optimise_blocks, q, x, planes, shifts, lam, _ZERO_START)
+        blocks = functools.partial(
+            _optimise_blocks, q, x, planes, shifts, parent_q, parent_planes, lam, _ZERO_START
+        )
         run_rows(blocks, count, q.size)
+        parent_q, parent_planes = q, planes
         for k, band in enumerate(bands):
             for channel in range(channels):
                 row = table[channel * len(bands) + k]
@@ -362,19 +376,36 @@ def optimise_indices(
 # The fast variant: a dead zone that depends on the neighbourhood (one compiled pass)
 # --------------------------------------------------------------------------------------------
 
-#: The dead zone's ``rounding`` by how busy a detail's neighbourhood is, in the dead-zone
-#: quantizer's own integers (``A``: the sum of ``|q|`` over its eight neighbours, the other
-#: orientations at the same place and, for the second and third channels, the first one at the
-#: same place, as the coder's contexts see them): ``A = 0``, ``1 <= A <= 2``, ``A >= 3``, for
-#: the first channel (luma) and then for the others (chroma).  A 1 costs some 6-8 bits where
-#: everything around is 0 (its zero flag under a quiet context, often its tile's flag, the
-#: unary length and the sign) and 2-3 bits among busy neighbours, so the edge between 0 and 1
-#: moves from the quantizer's ``1 - 0.27`` to 0.95 in quiet places and to 0.67 in busy ones.
-#: Tuned by BD-rate on the tuning pictures (cdf97, open loop, 9 fixed steps): luma quiet 0.15 /
-#: 0.1 / 0.05 gave -1.11 / -1.27 / -1.30 % on grey; a busy rounding above 0.35 (promoting more
-#: values to 1) lost (0.45: +0.15 %); chroma with luma's values -1.01 %, with its own, a wider
-#: dead zone (0, 0.12, 0.27), -1.36 % on the astronaut.
-FAST_ROUNDINGS = (0.05, 0.22, 0.33, 0.0, 0.12, 0.27)
+#: The dead zone's ``rounding`` by the neighbourhood of a detail, as the coder's zero-flag
+#: contexts see it (``_blockkernels``), in the dead-zone quantizer's own integers: the local
+#: class of ``L``, the sum of ``|q|`` over its eight neighbours (``L = 0``, ``1 <= L <= 2``,
+#: ``L >= 3``) times the external class of ``E = 2 (|q|`` of the other two orientations at the
+#: same place ``) + 4 |q|`` of the first channel there (the second and third channels only)
+#: ``+ PARENT_WEIGHT |q|`` of the parent, the same band one level coarser at ``(i // 2,
+#: j // 2)`` (``E = 0``, ``1 <= E <= 3``, ``E >= 4``): a 3 × 3 table (local class by rows) for
+#: the first channel (luma), then one for the others (chroma).  Every term is the dead zone's
+#: index, the parent's too (so levels, and the bpp sample's regions, decide independently).
+#: A 1 costs some 6-8 bits where everything around is 0 (its zero flag under a quiet context,
+#: often its tile's flag, the unary length and the sign) and 2-3 bits among busy neighbours,
+#: so the edge between 0 and 1 moves from the quantizer's ``1 - 0.27`` to 1.0 in quiet places
+#: and to 0.64 in busy ones; a nonzero parent (context coder version 6) makes a 1 cheaper.
+#: Tuned on the tuning pictures (cdf97) against the previous rule (one class of ``A = L`` plus
+#: the other orientations and luma, unweighted, no parent: luma ``(0.05, 0.22, 0.33)``, chroma
+#: ``(0, 0.12, 0.27)``, tuned with context coder version 4): coordinate search on the BD-rate
+#: of bundles at the steps the bpp search took for the peers' seven rates (-0.48 %), then on
+#: that and ``encode_image(bpp=r)``'s BD-rate at eleven rates together (the bpp search's trims
+#: of a coding just outside the budget's window undo part of it: -0.23 % there, -0.30 % with
+#: the luma busy-local, busy-external rounding raised from 0.28 to 0.32, -0.44 % at the fixed
+#: steps).  The same table without the parent term: -0.10 % at the fixed steps; the parent
+#: added to ``A`` of the previous rule (weight 1): -0.02 %; the parent's decided index instead
+#: of its dead zone's: the same within 0.01 %.
+FAST_ROUNDINGS = (
+    *(0.0, 0.09, 0.17, 0.17, 0.25, 0.32, 0.31, 0.33, 0.36),
+    *(0.0, 0.12, 0.1, 0.12, 0.12, 0.22, 0.22, 0.25, 0.32),
+)
+#: The parent's weight in ``E``: context coder version 6's (``_blockkernels.PARENT_WEIGHT``);
+#: 0 for layouts coded with version 4, whose contexts do not read the parent band.
+PARENT_WEIGHT = kernels.PARENT_WEIGHT
 
 
 #: A box's columns run to the end of its rows.
@@ -385,10 +416,26 @@ _NEIGHBOUR_COLUMNS = (-1, 0, 1, -1, 1, -1, 0, 1)
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _decide_row(i, k, band, sib1, sib2, values, inverse, col_lo, col_hi, rounding, found, out):
-    """Row ``i`` of band ``k`` (``sib1``, ``sib2``: the level's other two) for
-    :func:`_neighbourhood_deadzone`: its changes appended to ``out`` (``out[0]`` counts
-    them); ``found``: scratch of the band's row length.  Returns ``out``, grown if need be."""
+def _decide_row(
+    i,
+    k,
+    band,
+    sib1,
+    sib2,
+    parent,
+    parent_weight,
+    values,
+    inverse,
+    col_lo,
+    col_hi,
+    rounding,
+    found,
+    out,
+):
+    """Row ``i`` of band ``k`` (``sib1``, ``sib2``: the level's other two; ``parent``: the same
+    band one level coarser, ``(0, 0, C)`` for none) for :func:`_neighbourhood_deadzone`: its
+    changes appended to ``out`` (``out[0]`` counts them); ``found``: scratch of the band's row
+    length.  Returns ``out``, grown if need be."""
     rows, cols, channels = band.shape
     if i >= rows:
         return out
@@ -396,6 +443,8 @@ def _decide_row(i, k, band, sib1, sib2, values, inverse, col_lo, col_hi, roundin
     line = values.reshape(rows, cols * channels)[i]
     inner_rows = min(sib1.shape[0], sib2.shape[0])
     inner_cols = min(sib1.shape[1], sib2.shape[1])
+    parent_rows = parent.shape[0] if i >> 1 < parent.shape[0] else 0
+    parent_cols = parent.shape[1]
     # Only values between the busiest and the quietest edge depend on the neighbourhood (some
     # 5 % at 1 bpp): they are listed first without a branch (a branch per value mispredicted
     # at every one of them), then decided.
@@ -413,48 +462,42 @@ def _decide_row(i, k, band, sib1, sib2, values, inverse, col_lo, col_hi, roundin
         value = line[t] * inverse
         j = t // channels
         c = t - j * channels
-        first = 3 if c > 0 else 0
-        # Whether each neighbourhood class (quiet, middling, busy) makes this a 1: the
-        # neighbourhood is summed only where that depends on it.
-        quiet = abs(value) >= 1.0 - rounding[first]
-        middling = abs(value) >= 1.0 - rounding[first + 1]
-        busy = abs(value) >= 1.0 - rounding[first + 2]
-        one = quiet
-        if quiet != middling or middling != busy:
-            if 0 < i < rows - 1 and 0 < j < cols - 1 and i < inner_rows and j < inner_cols:
-                # Inside the band (and its siblings): every term, without a branch.
-                up = band[i - 1]
-                mid = band[i]
-                down = band[i + 1]
-                a = (
-                    abs(np.int64(up[j - 1, c]))
-                    + abs(np.int64(up[j, c]))
-                    + abs(np.int64(up[j + 1, c]))
-                    + abs(np.int64(mid[j - 1, c]))
-                    + abs(np.int64(mid[j + 1, c]))
-                    + abs(np.int64(down[j - 1, c]))
-                    + abs(np.int64(down[j, c]))
-                    + abs(np.int64(down[j + 1, c]))
-                    + abs(np.int64(sib1[i, j, c]))
-                    + abs(np.int64(sib2[i, j, c]))
-                    + (abs(np.int64(mid[j, 0])) if c > 0 else 0)
-                )
-            else:
-                a = np.int64(0)
-                for e in range(8):
-                    ii = i + _NEIGHBOUR_ROWS[e]
-                    jj = j + _NEIGHBOUR_COLUMNS[e]
-                    if 0 <= ii < rows and 0 <= jj < cols:
-                        a += abs(np.int64(band[ii, jj, c]))
-                if i < sib1.shape[0] and j < sib1.shape[1]:
-                    a += abs(np.int64(sib1[i, j, c]))
-                if i < sib2.shape[0] and j < sib2.shape[1]:
-                    a += abs(np.int64(sib2[i, j, c]))
-                if c > 0:
-                    a += abs(np.int64(band[i, j, 0]))
-            one = quiet if a == 0 else (middling if a <= 2 else busy)
+        if 0 < i < rows - 1 and 0 < j < cols - 1 and i < inner_rows and j < inner_cols:
+            # Inside the band (and its siblings): every term, without a branch.
+            up = band[i - 1]
+            mid = band[i]
+            down = band[i + 1]
+            local = (
+                abs(np.int64(up[j - 1, c]))
+                + abs(np.int64(up[j, c]))
+                + abs(np.int64(up[j + 1, c]))
+                + abs(np.int64(mid[j - 1, c]))
+                + abs(np.int64(mid[j + 1, c]))
+                + abs(np.int64(down[j - 1, c]))
+                + abs(np.int64(down[j, c]))
+                + abs(np.int64(down[j + 1, c]))
+            )
+            external = 2 * (abs(np.int64(sib1[i, j, c])) + abs(np.int64(sib2[i, j, c])))
+        else:
+            local = np.int64(0)
+            for e in range(8):
+                ii = i + _NEIGHBOUR_ROWS[e]
+                jj = j + _NEIGHBOUR_COLUMNS[e]
+                if 0 <= ii < rows and 0 <= jj < cols:
+                    local += abs(np.int64(band[ii, jj, c]))
+            external = np.int64(0)
+            if i < sib1.shape[0] and j < sib1.shape[1]:
+                external += 2 * abs(np.int64(sib1[i, j, c]))
+            if i < sib2.shape[0] and j < sib2.shape[1]:
+                external += 2 * abs(np.int64(sib2[i, j, c]))
+        if c > 0:
+            external += 4 * abs(np.int64(band[i, j, 0]))
+        if j >> 1 < parent_cols and parent_rows:
+            external += parent_weight * abs(np.int64(parent[i >> 1, j >> 1, c]))
+        klass = (9 if c > 0 else 0) + (0 if local == 0 else (3 if local <= 2 else 6))
+        klass += 0 if external == 0 else (1 if external <= 3 else 2)
         new = 0
-        if one:
+        if abs(value) >= 1.0 - rounding[klass]:
             new = 1 if value > 0 else -1
         if new != band[i, j, c]:
             out[0] += 1
@@ -463,20 +506,24 @@ def _decide_row(i, k, band, sib1, sib2, values, inverse, col_lo, col_hi, roundin
 
 
 @njit(nogil=True, cache=True)
-def _neighbourhood_deadzone(q, x, inverse_steps, lo, hi, rounding, col_lo, col_hi):
+def _neighbourhood_deadzone(
+    q, x, up, parent_weight, inverse_steps, lo, hi, rounding, col_lo, col_hi
+):
     """Re-decide between 0 and 1 the details of rows ``lo .. hi - 1`` (columns ``col_lo ..
     col_hi - 1``) of one level, without changing them: the changes, for :func:`_apply`.
 
     ``q``: three ``(H, W, C)`` int32 bands, the dead zone's indices; ``x``: their values;
-    ``inverse_steps``: per band.  Larger indices stay as they are.  Each decision reads the
-    dead zone's indices around it, which no call changes, so the result does not depend on
-    how the rows are cut between threads.
+    ``up``: the bands one level coarser (``(0, 0, C)`` where there are none), whose ``|q|``
+    counts ``parent_weight`` times in the external sum; ``inverse_steps``: per band.  Larger
+    indices stay as they are.  Each decision reads the dead zone's indices around it, which no
+    call changes, so the result does not depend on how the rows are cut between threads.
     """
     # Row by row across the three bands, so that the other bands' rows a decision reads were
     # read lately (band by band: some 15 % slower); the bands are passed apart (an array
     # taken from the tuple by a variable index is counted up and down).
     q0, q1, q2 = q
     x0, x1, x2 = x
+    p0, p1, p2 = up
     rows = max(q0.shape[0], max(q1.shape[0], q2.shape[0]))
     width = max(
         q0.shape[1] * q0.shape[2], max(q1.shape[1] * q1.shape[2], q2.shape[1] * q2.shape[2])
@@ -485,19 +532,58 @@ def _neighbourhood_deadzone(q, x, inverse_steps, lo, hi, rounding, col_lo, col_h
     out = np.zeros(width + 1, dtype=np.int64)
     for i in range(lo, min(hi, rows)):
         out = _decide_row(
-            i, 0, q0, q1, q2, x0, inverse_steps[0], col_lo, col_hi, rounding, found, out
+            i,
+            0,
+            q0,
+            q1,
+            q2,
+            p0,
+            parent_weight,
+            x0,
+            inverse_steps[0],
+            col_lo,
+            col_hi,
+            rounding,
+            found,
+            out,
         )
         out = _decide_row(
-            i, 1, q1, q0, q2, x1, inverse_steps[1], col_lo, col_hi, rounding, found, out
+            i,
+            1,
+            q1,
+            q0,
+            q2,
+            p1,
+            parent_weight,
+            x1,
+            inverse_steps[1],
+            col_lo,
+            col_hi,
+            rounding,
+            found,
+            out,
         )
         out = _decide_row(
-            i, 2, q2, q0, q1, x2, inverse_steps[2], col_lo, col_hi, rounding, found, out
+            i,
+            2,
+            q2,
+            q0,
+            q1,
+            p2,
+            parent_weight,
+            x2,
+            inverse_steps[2],
+            col_lo,
+            col_hi,
+            rounding,
+            found,
+            out,
         )
     return out[1 : out[0] + 1]
 
 
 @njit(nogil=True, cache=True)
-def _deadzone_boxes(q, x, inverse_steps, boxes, lo, hi, rounding):
+def _deadzone_boxes(q, x, up, parent_weight, inverse_steps, boxes, lo, hi, rounding):
     """:func:`_neighbourhood_deadzone` on boxes ``lo .. hi - 1`` of ``boxes`` (rows of
     ``row0, col0, row1, col1``).  A box's decisions read only the dead zone's indices around
     it, so they are the ones the whole level's pass makes there."""
@@ -505,7 +591,16 @@ def _deadzone_boxes(q, x, inverse_steps, boxes, lo, hi, rounding):
     total = 0
     for b in range(lo, hi):
         part = _neighbourhood_deadzone(
-            q, x, inverse_steps, boxes[b, 0], boxes[b, 2], rounding, boxes[b, 1], boxes[b, 3]
+            q,
+            x,
+            up,
+            parent_weight,
+            inverse_steps,
+            boxes[b, 0],
+            boxes[b, 2],
+            rounding,
+            boxes[b, 1],
+            boxes[b, 3],
         )
         parts.append(part)
         total += part.size
@@ -541,6 +636,7 @@ def adapt_deadzone(
     *,
     roundings: Sequence[float] = FAST_ROUNDINGS,
     regions: np.ndarray | None = None,
+    parent_weight: int = PARENT_WEIGHT,
 ) -> Any:
     """Re-decide the 0/1 details of an image's quantization with a dead zone that depends on
     the neighbourhood, in place (the cheap stand-in for :func:`optimise_indices`).
@@ -549,15 +645,20 @@ def adapt_deadzone(
     ----------
     coeffs, qcoeffs, params
         As for :func:`optimise_indices` (2-D levels of three bands each).
-    roundings : sequence of 3 or 6 floats
-        The dead zone's ``rounding`` for quiet, middling and busy neighbourhoods, for every
-        channel or (6) for the first channel and then the others (``FAST_ROUNDINGS``).
+    roundings : sequence of 9 or 18 floats
+        The dead zone's ``rounding`` by the local class (rows) and the external class of the
+        neighbourhood (``FAST_ROUNDINGS``), for every channel or (18) for the first channel
+        and then the others; each in ``(-0.5, 1)``.
     regions : array of shape (n, 5), optional
         Only these boxes are re-decided, rows of ``(level, row0, col0, row1, col1)`` (the
         level as in ``layout.as_levels``, 1 the coarsest details; the block coder's
         ``blockcoder.block_lengths`` regions), each the same in its level's three bands:
         what the whole pass decides there (a box's decisions read only the dead zone's
-        indices around it), for a fraction of its cost.  Default: everything.
+        indices around them), for a fraction of its cost.  Default: everything.
+    parent_weight : int
+        The weight of the parent's ``|q|`` (the same band one level coarser, at ``(i // 2,
+        j // 2)``) in the external sum: ``PARENT_WEIGHT``, context coder version 6's; 0 for
+        version 4's contexts.
 
     Returns
     -------
@@ -568,62 +669,80 @@ def adapt_deadzone(
     values = as_levels(coeffs)
     step = float(params["step"])
     rounding = tuple(float(r) for r in roundings)
-    if len(rounding) == 3:
+    if len(rounding) == 9:
         rounding = rounding + rounding
-    if len(rounding) != 6 or not all(0.0 <= r < 1.0 for r in rounding):
-        msg = f"roundings must be 3 or 6 numbers in [0, 1), not {roundings!r}"
+    if len(rounding) != 18 or not all(-0.5 < r < 1.0 for r in rounding):
+        msg = f"roundings must be 9 or 18 numbers in (-0.5, 1), not {roundings!r}"
+        raise InvalidParameter(msg)
+    if parent_weight < 0:
+        msg = f"parent_weight must be >= 0, not {parent_weight!r}"
         raise InvalidParameter(msg)
     if regions is not None:
         regions = np.asarray(regions, dtype=np.int64).reshape(-1, 5)
+    if any(len(bands) != 3 for bands in levels[1:]):
+        return qcoeffs
+
+    def three_d(a: np.ndarray, dtype: Any) -> np.ndarray:
+        a = np.ascontiguousarray(a, dtype=dtype)
+        return a if a.ndim == 3 else a.reshape(*a.shape[:2], -1)
+
+    q = [tuple(three_d(b, np.int32) for b in bands) for bands in levels[1:]]
+    none = (np.zeros((0, 0, q[0][0].shape[2] if q else 1), dtype=np.int32),) * 3
+    # Every level decides from the dead zone's indices of its own and its parent's level (as
+    # a region does, whatever else is re-decided), so the changes wait until all are decided.
+    decided = []
     for entry, (bands, originals, weights) in enumerate(
-        zip(levels[1:], values[1:], params["weights"][1:], strict=True), start=1
+        zip(q, values[1:], params["weights"][1:], strict=True), start=1
     ):
-        if len(bands) != 3:
-            return qcoeffs
         boxes = None
         if regions is not None:
             boxes = np.ascontiguousarray(regions[regions[:, 0] == entry, 1:])
             if boxes.shape[0] == 0:
                 continue
-
-        def three_d(a: np.ndarray, dtype: Any) -> np.ndarray:
-            a = np.ascontiguousarray(a, dtype=dtype)
-            return a if a.ndim == 3 else a.reshape(*a.shape[:2], -1)
-
-        q = tuple(three_d(b, np.int32) for b in bands)
         x = tuple(three_d(v, np.float64) for v in originals)
         inverse = np.array([1.0 / (step * w) for w in weights], dtype=np.float64)
-        _adapt_level(q, x, inverse, rounding, boxes)
-        for band, new in zip(bands, q, strict=True):
-            if not np.may_share_memory(band, new):
-                band[...] = new.reshape(band.shape)
+        up = q[entry - 2] if entry >= 2 else none
+        changes = _adapt_level(bands, x, up, int(parent_weight), inverse, rounding, boxes)
+        decided.append((bands, changes))
+    for bands, changes in decided:
+        for part in changes:
+            _apply(bands, part)
+    for originals, new in zip(levels[1:], q, strict=True):
+        for band, b in zip(originals, new, strict=True):
+            if not np.may_share_memory(band, b):
+                band[...] = b.reshape(band.shape)
     return qcoeffs
 
 
 def _adapt_level(
     q: tuple[np.ndarray, ...],
     x: tuple[np.ndarray, ...],
+    up: tuple[np.ndarray, ...],
+    parent_weight: int,
     inverse: np.ndarray,
     rounding: tuple,
     boxes: np.ndarray | None = None,
-) -> None:
+) -> list[np.ndarray]:
     """:func:`_neighbourhood_deadzone` over the threads by rows (or by ``boxes``, where
-    given), then :func:`_apply`."""
+    given): the changes, for :func:`_apply`."""
     parts: list[np.ndarray] = []  # (list.append is atomic)
 
     def decide_boxes(lo: int, hi: int) -> None:
-        parts.append(_deadzone_boxes(q, x, inverse, boxes, lo, hi, rounding))
+        parts.append(_deadzone_boxes(q, x, up, parent_weight, inverse, boxes, lo, hi, rounding))
 
     def decide(lo: int, hi: int) -> None:
-        parts.append(_neighbourhood_deadzone(q, x, inverse, lo, hi, rounding, 0, _ALL_COLUMNS))
+        parts.append(
+            _neighbourhood_deadzone(
+                q, x, up, parent_weight, inverse, lo, hi, rounding, 0, _ALL_COLUMNS
+            )
+        )
 
     if boxes is None:
         run_rows(decide, max(b.shape[0] for b in q), sum(b.size for b in q))
     else:
         area = int(((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])).sum())
         run_rows(decide_boxes, boxes.shape[0], area * q[0].shape[2] * 3)
-    for part in parts:
-        _apply(q, part)
+    return parts
 
 
 def choose_indices(coeffs: Sequence[Any], qcoeffs: Sequence[Any], params: dict[str, Any]) -> Any:
