@@ -1261,7 +1261,11 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
             data = _trim_to_budget(encoder, step, False, budget, enough)
             if data is not None:
                 trimmed.append(data)
-                return float(len(data))
+                # The trimmed bundle is what the search returns, so it ends the search: its
+                # size as written may be up to the placeholders' excess under the stop that
+                # bounds need (_written_enough), which would have sent the search on for
+                # nothing (33 codings of a 2 KB budget).
+                return float(max(len(data), _written_enough(budget, enough)))
         return size
 
     colour = encoder.plan.colour != "none"
