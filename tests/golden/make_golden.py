@@ -117,6 +117,15 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             surface,
             {"closed": (True, False), "quality": 42.0},
         ),
+        # Context coder version 7 (directional zero-flag models for cH and cV, chosen per plane
+        # of a block by their running costs): the same three cases as version 6's.
+        "image_grey_u8_parent_ctx7": ("image", parent_picture, {"quality": 36.0}),
+        "image_rgb_u8_bpp_ctx7": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 8.0}),
+        "surface_closed_open_ctx7": (
+            "surface",
+            surface,
+            {"closed": (True, False), "quality": 42.0},
+        ),
         # Format 2.0 (the binary header): a curve, grey and colour pictures at their default
         # quality, lossless 16-bit RGBA (with its lifting list), a surface and huge floats
         # (the ``scale`` field).

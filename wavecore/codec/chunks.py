@@ -16,7 +16,7 @@ import numpy as np
 
 from ..blockcoder import (
     BLOCK_SIZES,
-    PARENT_VERSION,
+    PARENT_VERSIONS,
     band_counts,
     block_counts,
     decode_block_windows,
@@ -50,9 +50,9 @@ def block_coder(header: dict[str, Any]) -> tuple[bool, int, int] | None:
 def _parents_of(
     entries: list[list[tuple[int, ...]]], coder: tuple[bool, int, int]
 ) -> np.ndarray | None:
-    """Each block's parent block (version 6), or None (blocks that depend on none)."""
+    """Each block's parent block (versions 6 and 7), or None (blocks that depend on none)."""
     two_d, block, version = coder
-    return parent_blocks(entries, two_d, block) if version == PARENT_VERSION else None
+    return parent_blocks(entries, two_d, block) if version in PARENT_VERSIONS else None
 
 
 def _with_ancestors(wanted: np.ndarray, parent_of: np.ndarray | None) -> np.ndarray:
