@@ -251,13 +251,16 @@ def _neighbour_sum(w, n, nw, ne, ww, nn):
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _sums(w, n, nw, ne, ww, nn, along):
-    """A detail value's symmetric neighbour sum (:func:`_neighbour_sum`) and version 7's
-    directional one (``along`` 1: along rows, ``cH``; 2: along columns, ``cV``; 0: the
-    symmetric sum again), from the six causal neighbours read at the call site."""
+def _sums(w, n, nw, ne, ww, nn, along, directional):
+    """A detail value's symmetric neighbour sum (:func:`_neighbour_sum`) and, when
+    ``directional``, version 7's directional one (``along`` 1: along rows, ``cH``; 2: along
+    columns, ``cV``; else the symmetric sum again), from the six causal neighbours read at the
+    call site."""
     w, n, nw, ne = abs(np.int64(w)), abs(np.int64(n)), abs(np.int64(nw)), abs(np.int64(ne))
     ww, nn = abs(np.int64(ww)), abs(np.int64(nn))
     s = 4 * (w + n) + 2 * (nw + ne) + ww + nn
+    if not directional:
+        return s, s
     if along == 1:
         return s, ALONG * w + ACROSS * n + DIAGONAL * (nw + ne) + ALONG2 * ww
     if along == 2:
@@ -266,20 +269,22 @@ def _sums(w, n, nw, ne, ww, nn, along):
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _zero_context(s, sd, e, zero_base, cs, cd):
-    """A detail value's zero-flag context under its symmetric sum ``s``; the directional
-    sum ``sd``'s (version 7); whether the flag is coded under the latter (its running cost
-    ``cd`` in this plane of the block is below the symmetric one's, ``cs``); and the sum its
-    bit length's context then reads."""
+def _zero_context(s, sd, e, zero_base, cs, cd, directional):
+    """A value's zero-flag context under its symmetric sum ``s``; when ``directional``
+    (version 7), the directional sum ``sd``'s (else the same context again); whether the flag
+    is coded under the latter (its running cost ``cd`` in this plane of the block is below the
+    symmetric one's, ``cs``); and the sum its bit length's context then reads."""
     external = _external_class(e)
     ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + external
+    if not directional:
+        return ctx, ctx, False, s
     ctx_d = ZERO_DIR_BASE + LOCAL_CLASS[min(sd, 255)] * EXTERNAL_CLASSES + external
-    directional = cd < cs
-    return ctx, ctx_d, directional, sd if directional else s
+    chosen = cd < cs
+    return ctx, ctx_d, chosen, sd if chosen else s
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _track(cs, cd, model_s, model_d, directional, bit):
+def _track(cs, cd, model_s, model_d, chosen, bit):
     """Version 7, after a zero flag coded under one of its two models (both as they were
     before it), while the choice is not settled: both running costs grown by what each model
     would have cost, and the model not coded under adapted too."""
@@ -289,7 +294,7 @@ def _track(cs, cd, model_s, model_d, directional, bit):
         ps, pd = PROB_ONE - ps, PROB_ONE - pd
     cs += COST[ps >> 5]
     cd += COST[pd >> 5]
-    other = model_s if directional else model_d
+    other = model_s if chosen else model_d
     return cs, cd, _adapted(other >> 8, other & 0xFF, bit)
 
 
@@ -403,15 +408,18 @@ def _encode_rows(
     unary_base,
     mantissa,
     along,
+    directional,
 ):
     """The values of one plane of a block, row by row (the tiles flagged empty skipped).
 
-    Inlined at two call sites, one with ``approx`` True and one False, so that each copy is
-    compiled without the other kind's branches."""
+    Inlined at three call sites (the approximation; details; version 7's ``cH`` and ``cV``,
+    ``directional`` True), so that each copy is compiled without the other kinds' branches:
+    with one copy for all details, versions 4 and 6 took 8-12 % more time (the third copy
+    doubles the compile time of the spans, 51 to 107 s, once per machine)."""
     width = c1 - c0
     tile_cols = (c1 - c0 + TILE - 1) // TILE
     cs = cd = np.int64(0)  # version 7's running costs of the plane's zero flags, grown
-    tracking = along != 0  # until they differ by more than SETTLE
+    tracking = directional  # until they differ by more than SETTLE
     for i in range(r0, r1):
         row = offset + i * cols
         srow = (i - r0) * width - c0
@@ -467,6 +475,7 @@ def _encode_rows(
                             flat[_u(at - 2)],
                             flat[_u(up - cols)],
                             along,
+                            directional,
                         )
                     else:
                         here = at
@@ -479,6 +488,7 @@ def _encode_rows(
                             flat[_u(here - 2)] if j > c0 + 1 else 0,
                             flat[_u(up - cols)] if i > r0 + 1 else 0,
                             along,
+                            directional,
                         )
                     e = np.int64(0)
                     if j < l1:
@@ -492,8 +502,8 @@ def _encode_rows(
                     value = np.int64(flat[_u(at)])
                 magnitude = abs(value)
                 nonzero = 1 if magnitude else 0
-                ctx, ctx_d, directional, su = _zero_context(s, sd, e, zero_base, cs, cd)
-                coded = ctx_d if directional else ctx
+                ctx, ctx_d, chosen, su = _zero_context(s, sd, e, zero_base, cs, cd, directional)
+                coded = ctx_d if chosen else ctx
                 model_s, model_d = models[_u(ctx)], models[_u(ctx_d)]
                 low, rng, models[_u(coded)] = _code_bit(low, rng, models[_u(coded)], nonzero)
                 while rng < TOP:
@@ -501,7 +511,7 @@ def _encode_rows(
                     low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
                 if tracking:
                     cs, cd, models[_u(ctx + ctx_d - coded)] = _track(
-                        cs, cd, model_s, model_d, directional, nonzero
+                        cs, cd, model_s, model_d, chosen, nonzero
                     )
                     tracking = abs(cs - cd) <= SETTLE
                 if approx:
@@ -582,12 +592,13 @@ def _decode_rows(
     unary_base,
     mantissa,
     along,
+    directional,
 ):
     """The decoder's :func:`_encode_rows`; the last value is 1 for a corrupt block."""
     width = c1 - c0
     tile_cols = (c1 - c0 + TILE - 1) // TILE
     cs = cd = np.int64(0)  # version 7's running costs of the plane's zero flags, grown
-    tracking = along != 0  # until they differ by more than SETTLE
+    tracking = directional  # until they differ by more than SETTLE
     for i in range(r0, r1):
         row = offset + i * cols
         srow = (i - r0) * width - c0
@@ -644,6 +655,7 @@ def _decode_rows(
                             flat[_u(at - 2)],
                             flat[_u(up - cols)],
                             along,
+                            directional,
                         )
                     else:
                         here = at
@@ -656,6 +668,7 @@ def _decode_rows(
                             flat[_u(here - 2)] if j > c0 + 1 else 0,
                             flat[_u(up - cols)] if i > r0 + 1 else 0,
                             along,
+                            directional,
                         )
                     e = np.int64(0)
                     if j < l1:
@@ -666,8 +679,8 @@ def _decode_rows(
                         e += 4 * abs(np.int64(flat[_u(y0 + j)]))
                     if j < lp:  # version 6: the parent band
                         e += PARENT_WEIGHT * abs(np.int64(flat[_u(pr + (j >> 1))]))
-                ctx, ctx_d, directional, su = _zero_context(s, sd, e, zero_base, cs, cd)
-                coded = ctx_d if directional else ctx
+                ctx, ctx_d, chosen, su = _zero_context(s, sd, e, zero_base, cs, cd, directional)
+                coded = ctx_d if chosen else ctx
                 model_s, model_d = models[_u(ctx)], models[_u(ctx_d)]
                 code, rng, models[_u(coded)], nonzero = _split_bit(code, rng, models[_u(coded)])
                 while rng < TOP:
@@ -675,7 +688,7 @@ def _decode_rows(
                     code, pos = _shift_code(code, pos, end, data)
                 if tracking:
                     cs, cd, models[_u(ctx + ctx_d - coded)] = _track(
-                        cs, cd, model_s, model_d, directional, nonzero
+                        cs, cd, model_s, model_d, chosen, nonzero
                     )
                     tracking = abs(cs - cd) <= SETTLE
                 if nonzero == 0:
@@ -809,6 +822,39 @@ def _encode_block(flat, planes, parents, oriented, block, out, pos, models, scra
                 unary_base,
                 mantissa,
                 0,
+                False,
+            )
+        elif along:  # version 7: cH, cV
+            low, rng, cache, pending, pos = _encode_rows(
+                flat,
+                out,
+                models,
+                scratch,
+                flags,
+                low,
+                rng,
+                cache,
+                pending,
+                pos,
+                False,
+                offset,
+                cols,
+                r0,
+                r1,
+                c0,
+                c1,
+                base,
+                grid_cols,
+                sib1,
+                sib2,
+                luma,
+                parent,
+                sign_base,
+                zero_base,
+                unary_base,
+                mantissa,
+                along,
+                True,
             )
         else:
             low, rng, cache, pending, pos = _encode_rows(
@@ -839,7 +885,8 @@ def _encode_block(flat, planes, parents, oriented, block, out, pos, models, scra
                 zero_base,
                 unary_base,
                 mantissa,
-                along,
+                0,
+                False,
             )
 
     # End at the value in [low, low + range) with the most trailing zero bytes, and flush: the
@@ -927,6 +974,38 @@ def _decode_block(data, start, end, flat, planes, parents, oriented, block, mode
                 unary_base,
                 mantissa,
                 0,
+                False,
+            )
+        elif along:  # version 7: cH, cV
+            code, rng, pos, bad = _decode_rows(
+                data,
+                end,
+                flat,
+                models,
+                scratch,
+                flags,
+                code,
+                rng,
+                pos,
+                False,
+                offset,
+                cols,
+                r0,
+                r1,
+                c0,
+                c1,
+                base,
+                grid_cols,
+                sib1,
+                sib2,
+                luma,
+                parent,
+                sign_base,
+                zero_base,
+                unary_base,
+                mantissa,
+                along,
+                True,
             )
         else:
             code, rng, pos, bad = _decode_rows(
@@ -956,7 +1035,8 @@ def _decode_block(data, start, end, flat, planes, parents, oriented, block, mode
                 zero_base,
                 unary_base,
                 mantissa,
-                along,
+                0,
+                False,
             )
         if bad:
             return 1
