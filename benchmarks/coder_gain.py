@@ -54,6 +54,13 @@ BD-rate per picture against version 4 on the same integers, grey mean / astronau
 * bspline2 (its own ``capture``): ``--block 256`` −0.61 % grey, −0.49 % colour; ``--parent 2``
   −0.93 / −1.08 %; the cdf97 priors above (``--sets 3``, count 8) −0.33 / −0.33 %.
 
+``versions`` codes the captured integers with context coder versions 6 and 7 (the library's
+own kernels, ``oriented`` 0 and 1) and prints the BD-rate of 7 against 6 per picture
+(``rate_distortion.bd_rate`` over the 7 rates, the whole bundles' bytes at their PSNRs) and
+the two versions' ``encode_span`` and ``decode_span`` CPU time, interleaved (``--rounds``).
+Run on 2026-12-06: see docs/bundle-format.md, "Context coder version 7".  (``measure``'s
+variant source still patches model functions the kernels no longer have.)
+
 It is an experiment harness: nothing here is a format, and the variants are not decodable.
 """
 
@@ -241,9 +248,9 @@ def capture(wavelet: str, pictures: str = "tuning") -> None:
     original = kernels.decode_span
     seen: dict[str, tuple] = {}
 
-    def recording(data_, starts, lengths, planes, parents, blocks, flat, lo, hi):  # type: ignore[no-untyped-def]
-        bad = original(data_, starts, lengths, planes, parents, blocks, flat, lo, hi)
-        seen["last"] = (flat, planes, blocks)
+    def recording(data_, starts, lengths, planes, parents, oriented, blocks, flat, lo, hi):  # type: ignore[no-untyped-def]
+        bad = original(data_, starts, lengths, planes, parents, oriented, blocks, flat, lo, hi)
+        seen["last"] = (flat, planes, parents, blocks)
         return bad
 
     kernels.decode_span = recording
@@ -253,15 +260,17 @@ def capture(wavelet: str, pictures: str = "tuning") -> None:
             image = getattr(data, name)()
             for k, rate in enumerate(peers.EXACT_RATES):
                 bundle = wavecore.encode_image(image, wavelet=wavelet, bpp=rate)
-                wavecore.decode(bundle)  # records the integers it holds
-                flat, planes, blocks = seen.pop("last")
+                back = wavecore.decode(bundle)  # records the integers it holds
+                flat, planes, parents, blocks = seen.pop("last")
                 key = f"{name}_{k}"
                 out[key + "_flat"], out[key + "_planes"], out[key + "_blocks"] = (
                     flat.copy(),
                     planes,
                     blocks,
                 )
+                out[key + "_parents"] = parents
                 out[key + "_bytes"] = len(bundle)
+                out[key + "_psnr"] = peers.psnr(image, back)
                 print(f"{name:10s} {rate:.3f} bpp {len(bundle):7d} bytes", flush=True)
     finally:
         kernels.decode_span = original
@@ -345,7 +354,7 @@ def measure(options: argparse.Namespace) -> dict[str, float]:
             key = f"{name}_{k}"
             flat, planes, blocks = (captured[key + s] for s in ("_flat", "_planes", "_blocks"))
             none = np.full(len(planes), -1, dtype=np.int64)  # version 4: no parent
-            lengths = kernels.encode_span(flat, planes, none, blocks, 0, len(blocks))[1]
+            lengths = kernels.encode_span(flat, planes, none, 0, blocks, 0, len(blocks))[1]
             today = int(lengths.sum()) + table_bytes(flat, planes, blocks, lengths)
             if options.block:
                 blocks = retile(planes, blocks, options.block)
@@ -372,9 +381,85 @@ def measure(options: argparse.Namespace) -> dict[str, float]:
     return out
 
 
+def versions(wavelet: str, rounds: int) -> dict[str, float]:
+    """BD-rate (percent) of context coder version 7 against version 6 on the captured
+    integers, per picture, and the CPU time of the two (``encode_span`` and ``decode_span``
+    of every captured coding, the versions interleaved, ``rounds`` rounds, medians).
+
+    Both versions code the same integers with the library's own kernels (``oriented`` 0 and
+    1, the parents of the capture), so each rate point keeps its PSNR; the rate is the whole
+    bundle's bytes with the blocks' bytes and tables swapped.  BD-rate is
+    ``rate_distortion.bd_rate`` over the 7 points.
+    """
+    try:
+        import rate_distortion
+    except ImportError:
+        from benchmarks import rate_distortion
+    captured = np.load(WORK / f"capture_{wavelet}.npz")
+    out: dict[str, float] = {}
+    points = []
+    for name in NAMES:
+        rates: dict[int, list[float]] = {0: [], 1: []}
+        quality = []
+        for k in range(len(peers.EXACT_RATES)):
+            key = f"{name}_{k}"
+            flat, planes, parents, blocks = (
+                captured[key + s] for s in ("_flat", "_planes", "_parents", "_blocks")
+            )
+            sizes = {}
+            for oriented in (0, 1):
+                data_, lengths = kernels.encode_span(
+                    flat, planes, parents, oriented, blocks, 0, len(blocks)
+                )
+                sizes[oriented] = int(lengths.sum()) + table_bytes(flat, planes, blocks, lengths)
+                points.append((oriented, flat, planes, parents, blocks, data_, lengths))
+            whole = int(captured[key + "_bytes"])
+            for oriented in (0, 1):  # the capture was coded by the default (version 7)
+                rates[oriented].append(whole - sizes[1] + sizes[oriented])
+            quality.append(float(captured[key + "_psnr"]))
+        out[name] = rate_distortion.bd_rate(rates[0], quality, rates[1], quality)
+    grey = np.mean([out[n] for n in GREY])
+    print(
+        f"{wavelet}: version 7 against 6: "
+        + " ".join(f"{n} {v:+.2f} %" for n, v in out.items())
+        + f" | grey {grey:+.2f} %",
+        flush=True,
+    )
+    times: dict[tuple[str, int], list[float]] = {}
+    for _ in range(rounds):
+        for oriented in (0, 1):
+            for what in ("encode", "decode"):
+                start = time.process_time()
+                for o, flat, planes, parents, blocks, data_, lengths in points:
+                    if o != oriented:
+                        continue
+                    if what == "encode":
+                        kernels.encode_span(flat, planes, parents, o, blocks, 0, len(blocks))
+                    else:
+                        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+                        target = np.zeros_like(flat)
+                        kernels.decode_span(
+                            data_,
+                            starts,
+                            lengths,
+                            planes,
+                            parents,
+                            o,
+                            blocks,
+                            target,
+                            0,
+                            len(blocks),
+                        )
+                times.setdefault((what, oriented), []).append(time.process_time() - start)
+    for what in ("encode", "decode"):
+        six, seven = (float(np.median(times[(what, o)])) for o in (0, 1))
+        print(f"  {what}_span: version 6 {six:.3f} s, version 7 {seven:.3f} s ({seven / six:.3f}x)")
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("action", choices=("capture", "measure"))
+    parser.add_argument("action", choices=("capture", "measure", "versions"))
     parser.add_argument("--wavelet", default="cdf97")
     parser.add_argument("--pictures", choices=tuple(PICTURES), default="tuning")
     parser.add_argument("--block", type=int, default=0, help="code in blocks of this side")
@@ -387,9 +472,12 @@ def main() -> None:
     parser.add_argument("--init-count", type=int, default=4)
     parser.add_argument("--parent", type=int, default=0, help="weight of the parent band")
     parser.add_argument("--sets", type=int, default=1, help="initial models per level")
+    parser.add_argument("--rounds", type=int, default=7, help="versions: timing rounds")
     options = parser.parse_args()
     if options.action == "capture":
         capture(options.wavelet, options.pictures)
+    elif options.action == "versions":
+        versions(options.wavelet, options.rounds)
     else:
         measure(options)
 

@@ -1,5 +1,6 @@
-"""Context coder versions 4 and 6: code-blocks coded by the compiled binary range coder (version
-6's detail contexts also read the parent band, in the parent block of the previous chunk)."""
+"""Context coder versions 4, 6 and 7: code-blocks coded by the compiled binary range coder
+(version 6's detail contexts also read the parent band, in the parent block of the previous
+chunk; version 7's zero flags of cH and cV also have models under a directional neighbourhood)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from hypothesis import strategies as st
 import wavecore
 from wavecore.blockcoder import (
     BLOCK_SIZE,
+    ORIENT_VERSION,
     PARENT_VERSION,
     block_lengths,
     code_blocks,
@@ -59,7 +61,7 @@ def _assert_same(a: list[list[np.ndarray]], b: list[list[np.ndarray]]) -> None:
             np.testing.assert_array_equal(x, y)
 
 
-@pytest.mark.parametrize("version", [4, 6])
+@pytest.mark.parametrize("version", [4, 6, 7])
 @pytest.mark.parametrize("block", [16, 32, 128])
 @pytest.mark.parametrize("channels", [1, 3, 4])
 def test_round_trip_over_many_blocks(block: int, channels: int, version: int) -> None:
@@ -93,6 +95,56 @@ def test_version_6_reads_the_parent_band() -> None:
     except BundleError:
         return
     assert any(not np.array_equal(a, b) for a, b in zip(wrong[2], child, strict=True))
+
+
+def test_version_7_reads_the_orientation() -> None:
+    """Version 7 codes details whose nonzero values run along the band's orientation (cH's
+    along rows, cV's along columns) smaller than version 6, the approximation and the details
+    without runs (cD) alike; read with version 6's contexts they decode to something else."""
+    rng = np.random.default_rng(12)
+
+    def runs(shape: tuple[int, int], along_rows: bool) -> np.ndarray:
+        # Short runs of equal values along one axis, half the positions zero.
+        rows, cols = shape if along_rows else shape[::-1]
+        starts = rng.random((rows, cols // 4)) < 0.5
+        values = np.where(starts, rng.integers(1, 4, (rows, cols // 4)), 0)
+        band = np.repeat(values, 4, axis=1) * rng.choice([-1, 1], (rows, cols))
+        return (band if along_rows else band.T).astype(np.int32)
+
+    entries = [
+        [rng.integers(-99, 99, (32, 32)).astype(np.int32)],
+        [runs((64, 64), True), runs((64, 64), False), _laplace(rng, (64, 64), 1.0)],
+    ]
+    six, seven = encode_blocks(entries, True, 64, 6), encode_blocks(entries, True, 64, 7)
+    assert six[0] == seven[0] and len(seven[1]) < 0.95 * len(six[1])
+    _assert_same(decode_blocks(seven, _layout(entries), True, 64, version=7), entries)
+    # cD alone (cH and cV zero) codes as version 6 does.
+    quiet = [entries[0], [np.zeros((64, 64), np.int32)] * 2 + [entries[1][2]]]
+    assert encode_blocks(quiet, True, 64, 6) == encode_blocks(quiet, True, 64, 7)
+    try:
+        wrong = decode_blocks(seven, _layout(entries), True, 64, version=6)
+    except BundleError:
+        return
+    assert any(not np.array_equal(a, b) for a, b in zip(wrong[1], entries[1], strict=True))
+
+
+def test_version_7_tables_are_as_specified() -> None:
+    """The running costs' table is ``round(-256 log2((32 k + 16) / 32768))`` with no entry near
+    a rounding boundary (so every machine builds it alike), and the directional zero flags
+    start as the detail ones (docs/bundle-format.md, context coder version 7)."""
+    from wavecore import _blockkernels as kernels
+
+    exact = -256.0 * np.log2((32.0 * np.arange(1024) + 16.0) / 32768.0)
+    assert np.all(np.abs(exact - np.floor(exact) - 0.5) > 1e-4)
+    assert np.array_equal(kernels.COST, np.rint(exact).astype(np.int64))
+    assert kernels.COST[0] == 2816 and kernels.COST[1023] == 0
+    size = kernels.LOCAL_CLASSES * kernels.EXTERNAL_CLASSES
+    detail = kernels.ZERO_BASE + size
+    start = kernels.ZERO_DIR_BASE
+    assert start + size == kernels.CONTEXTS
+    np.testing.assert_array_equal(
+        kernels.INITIAL_MODELS[start : start + size], kernels.INITIAL_MODELS[detail : detail + size]
+    )
 
 
 @pytest.mark.parametrize("two_d", [True, False])
@@ -133,7 +185,7 @@ def test_every_parent_value_lies_in_the_parent_block(two_d: bool) -> None:
                     assert regions[p][2] <= j // 2 < regions[p][2] + side[1]
 
 
-@pytest.mark.parametrize("version", [4, 6])
+@pytest.mark.parametrize("version", [4, 6, 7])
 def test_one_dimensional_layout_and_extreme_values(version: int) -> None:
     rng = np.random.default_rng(3)
     top, bottom = np.iinfo(np.int32).max, np.iinfo(np.int32).min
@@ -152,14 +204,14 @@ def test_all_zero_blocks_cost_one_byte_each() -> None:
     assert [len(c) for c in chunks] == [1, 5 * 5]  # 1 block, then 5 × 5 blocks of 64 × 64
 
 
-@pytest.mark.parametrize("version", [4, 6])
+@pytest.mark.parametrize("version", [4, 6, 7])
 def test_bytes_do_not_depend_on_the_thread_count(
     monkeypatch: pytest.MonkeyPatch, version: int
 ) -> None:
     entries = _bands(11, (700, 800), 3, 4)  # large enough for the thread pool
     monkeypatch.setenv("WAVECORE_THREADS", "2")
     threaded = encode_blocks(entries, True, BLOCK_SIZE, version)
-    # Two threads decode (version 6: each chunk after its parent chunk, over the threads).
+    # Two threads decode (versions 6, 7: each chunk after its parent chunk, over the threads).
     _assert_same(
         decode_blocks(threaded, _layout(entries), True, BLOCK_SIZE, version=version), entries
     )
@@ -213,15 +265,15 @@ def test_tables_that_do_not_add_up_are_refused() -> None:
         decode_blocks(chunks, layout, True, 48)
 
 
-def test_version_six_is_the_default_and_versions_four_to_two_still_decode() -> None:
+def test_version_seven_is_the_default_and_versions_six_to_two_still_decode() -> None:
     entries = _bands(8, (90, 90), 1, 3)
     q = [entries[0][0], *(tuple(b) for b in entries[1:])]
     shapes = [q[0].shape, *(tuple(b.shape for b in level) for level in q[1:])]
     params = encode_levels(q)[1]
-    assert params == {"coder": "context", "version": 6, "two_d": True, "block": BLOCK_SIZE}
+    assert params == {"coder": "context", "version": 7, "two_d": True, "block": BLOCK_SIZE}
     # One-dimensional layouts (curves) keep version 4.
     assert encode_levels([np.arange(9, dtype=np.int32), np.ones(9, np.int32)])[1]["version"] == 4
-    for version in (2, 3, 4, PARENT_VERSION):
+    for version in (2, 3, 4, PARENT_VERSION, ORIENT_VERSION):
         old_chunks, old_params = _encode_context(entries, version)
         back = decode_levels(old_chunks, shapes, old_params)
         np.testing.assert_array_equal(back[0], q[0])
@@ -312,7 +364,7 @@ def _fuzz(cases: int, seed: int, version: int = 4) -> None:
     assert outcomes["array"] and outcomes["error"]
 
 
-@pytest.mark.parametrize("version", [4, 6])
+@pytest.mark.parametrize("version", [4, 6, 7])
 def test_mutated_chunks_never_crash(version: int) -> None:
     _fuzz(300, 1, version)
 
@@ -328,7 +380,7 @@ def test_mutated_bundles_decode_or_raise_bundle_error() -> None:
     y, x = np.mgrid[0:70, 0:90]
     image = np.stack([x * 2, y * 3, x + y], axis=-1).astype(np.uint8)
     bundle = wavecore.encode_image(image, quality=38)
-    assert wavecore.inspect(bundle)["header"]["cparams"]["version"] == 6
+    assert wavecore.inspect(bundle)["header"]["cparams"]["version"] == 7
     for _ in range(100):
         try:
             out = wavecore.decode(_mutate(rng, bundle))
@@ -353,14 +405,15 @@ def test_the_table_cache_keeps_small_layouts_only() -> None:
     assert info.currsize == 1, info
 
 
-def test_version_6_decodes_a_block_with_its_ancestors_only() -> None:
-    """Skipping every block but a few and their ancestors (what a region decode of version 6
-    reads) decodes those exactly; skipping a needed parent block decodes a child wrongly."""
+@pytest.mark.parametrize("version", [PARENT_VERSION, ORIENT_VERSION])
+def test_versions_6_and_7_decode_a_block_with_its_ancestors_only(version: int) -> None:
+    """Skipping every block but a few and their ancestors (what a region decode of versions 6
+    and 7 reads) decodes those exactly; skipping a needed parent block decodes a child wrongly."""
     from wavecore.codec.chunks import _with_ancestors, _with_descendants
 
     entries = _bands(21, (260, 230), 2, 3)
     layout, block = _layout(entries), 16
-    chunks = encode_blocks(entries, True, block, 6)
+    chunks = encode_blocks(entries, True, block, version)
     parent_of = parent_blocks(layout, True, block)
     rng = np.random.default_rng(3)
     finest = np.flatnonzero(parent_of >= 0)[-40:]
@@ -370,8 +423,8 @@ def test_version_6_decodes_a_block_with_its_ancestors_only() -> None:
     assert closed.sum() > wanted.sum()
     for b in np.flatnonzero(closed):  # closed under "parent of"
         assert parent_of[b] < 0 or closed[parent_of[b]]
-    back = decode_blocks(chunks, layout, True, block, skip=~closed, version=6)
-    full = decode_blocks(chunks, layout, True, block, version=6)
+    back = decode_blocks(chunks, layout, True, block, skip=~closed, version=version)
+    full = decode_blocks(chunks, layout, True, block, version=version)
     _assert_same(full, entries)
     grid_cols = [-(-max(b.shape[1] for b in bands) // block) for bands in entries]
     firsts = np.cumsum(
@@ -391,7 +444,7 @@ def test_version_6_decodes_a_block_with_its_ancestors_only() -> None:
     child = int(np.flatnonzero(wanted)[0])
     lost = closed.copy()
     lost[parent_of[child]] = False
-    wrong = decode_blocks(chunks, layout, True, block, skip=~lost, version=6)
+    wrong = decode_blocks(chunks, layout, True, block, skip=~lost, version=version)
     entry = int(np.searchsorted(firsts, child, side="right") - 1)
     r, c = divmod(int(child - firsts[entry]), grid_cols[entry])
     window = (slice(r * block, (r + 1) * block), slice(c * block, (c + 1) * block))
@@ -404,7 +457,7 @@ def test_version_6_decodes_a_block_with_its_ancestors_only() -> None:
     assert spread[child] and spread.sum() > (~lost).sum()
 
 
-@pytest.mark.parametrize("version", [4, PARENT_VERSION])
+@pytest.mark.parametrize("version", [4, PARENT_VERSION, ORIENT_VERSION])
 @pytest.mark.parametrize("channels", [1, 3])
 def test_known_blocks_are_taken_as_coded(channels: int, version: int) -> None:
     """Blocks coded beforehand (the bpp sample's) make the very chunks a full coding makes,

@@ -31,7 +31,9 @@ def _quantized(picture: np.ndarray, step: float) -> tuple[list, list, dict]:
 
 
 def _size(q: list) -> int:
-    return sum(map(len, encode_levels(q)[0]))
+    # Context coder version 6: the full RDOQ's rate model follows the symmetric contexts
+    # (versions 4 and 6), not version 7's directional zero-flag models.
+    return sum(map(len, encode_levels(q, version=6)[0]))
 
 
 def _distortion(coeffs: list, q: list, params: dict) -> float:

@@ -1,4 +1,4 @@
-"""Compiled loops of the code-block coder (context coder versions 4 and 6): see
+"""Compiled loops of the code-block coder (context coder versions 4, 6 and 7): see
 ``blockcoder.py``.
 
 One binary range coder (LZMA's, with 15-bit adaptive probabilities) codes every block from
@@ -40,12 +40,26 @@ SIGN_BASE = MANTISSA_BASE + MANTISSA_SIZE
 SIGN_SIZE = 4 * 9
 TILE_BASE = SIGN_BASE + SIGN_SIZE
 TILE_SIZE = 6
-CONTEXTS = TILE_BASE + TILE_SIZE
+#: Version 7: the zero flags of ``cH`` and ``cV`` under the *directional* neighbour sum.
+ZERO_DIR_BASE = TILE_BASE + TILE_SIZE
+ZERO_DIR_SIZE = LOCAL_CLASSES * EXTERNAL_CLASSES
+CONTEXTS = ZERO_DIR_BASE + ZERO_DIR_SIZE
 #: Version 6: the parent band's magnitude (the same orientation and channel one level coarser,
 #: at ``(i // 2, j // 2)``), times this, joins the other bands' sum ``e`` of a detail value's
 #: zero flag and bit-length contexts.  Callers give each plane's parent plane (``parents``,
 #: -1 for none: every plane of version 4).
 PARENT_WEIGHT = 2
+#: Version 7: the directional neighbour sum of ``cH`` (along its rows: ``W``, ``WW``) and ``cV``
+#: (along its columns: ``N``, ``NN``), ``ALONG·|a| + ACROSS·|c| + DIAGONAL·(|NW| + |NE|) +
+#: ALONG2·|a2|`` with ``a`` the neighbour along the band, ``c`` the one across and ``a2`` the
+#: second one along.  Callers say which planes use it (``along``: 1 along rows, 2 along
+#: columns, 0 none: every plane of versions 4 and 6).
+ALONG, ACROSS, DIAGONAL, ALONG2 = 8, 2, 1, 2
+#: Version 7: once a plane's two running costs differ by more than this (1/256 bits: 32 bits),
+#: they stop growing, so the choice is settled for the rest of the plane of the block, and
+#: only the model chosen is read and adapted (half the flags of the tuning pictures, for
+#: 0.01-0.04 % of the gain).
+SETTLE = 8192
 #: Detail planes first say, per ``TILE × TILE`` tile of the block, whether it holds a nonzero
 #: value; the positions of empty tiles are neither coded nor visited.
 TILE = 8
@@ -53,6 +67,11 @@ TILE = 8
 #: ``LOCAL_CLASS[s]``: the class of a weighted neighbour sum ``s`` (half-octave steps).
 _LOCAL_EDGES = np.array([0, 2, 4, 6, 9, 13, 19, 27, 39, 55, 79, 111, 160], dtype=np.int64)
 LOCAL_CLASS = np.searchsorted(_LOCAL_EDGES, np.arange(256), side="left").astype(np.int64)
+#: ``COST[p >> 5]``: the cost of a bit whose model gave it probability ``p`` (of 2**15), in
+#: 1/256 bits, ``round(-256 log2((32 k + 16) / 32768))``: version 7's running costs.  No entry
+#: lies within 2e-4 of a rounding boundary (log2's error is some 1e-12 here), so every machine
+#: builds the same table.
+COST = np.rint(-256.0 * np.log2((32.0 * np.arange(1024) + 16.0) / 32768.0)).astype(np.int64)
 #: ``RATE[n]``: the adaptation shift after ``n`` observations of a context (1, 2, 2, 3, ...).
 RATE = np.minimum(
     np.array([int(n + 1).bit_length() for n in range(COUNT_CAP + 1)], dtype=np.int64), RATE_LIMIT
@@ -232,6 +251,54 @@ def _neighbour_sum(w, n, nw, ne, ww, nn):
 
 
 @njit(nogil=True, cache=True, inline="always")
+def _sums(w, n, nw, ne, ww, nn, along, directional):
+    """A detail value's symmetric neighbour sum (:func:`_neighbour_sum`) and, when
+    ``directional``, version 7's directional one (``along`` 1: along rows, ``cH``; 2: along
+    columns, ``cV``; else the symmetric sum again), from the six causal neighbours read at the
+    call site."""
+    w, n, nw, ne = abs(np.int64(w)), abs(np.int64(n)), abs(np.int64(nw)), abs(np.int64(ne))
+    ww, nn = abs(np.int64(ww)), abs(np.int64(nn))
+    s = 4 * (w + n) + 2 * (nw + ne) + ww + nn
+    if not directional:
+        return s, s
+    if along == 1:
+        return s, ALONG * w + ACROSS * n + DIAGONAL * (nw + ne) + ALONG2 * ww
+    if along == 2:
+        return s, ALONG * n + ACROSS * w + DIAGONAL * (nw + ne) + ALONG2 * nn
+    return s, s
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _zero_context(s, sd, e, zero_base, cs, cd, directional):
+    """A value's zero-flag context under its symmetric sum ``s``; when ``directional``
+    (version 7), the directional sum ``sd``'s (else the same context again); whether the flag
+    is coded under the latter (its running cost ``cd`` in this plane of the block is below the
+    symmetric one's, ``cs``); and the sum its bit length's context then reads."""
+    external = _external_class(e)
+    ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + external
+    if not directional:
+        return ctx, ctx, False, s
+    ctx_d = ZERO_DIR_BASE + LOCAL_CLASS[min(sd, 255)] * EXTERNAL_CLASSES + external
+    chosen = cd < cs
+    return ctx, ctx_d, chosen, sd if chosen else s
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _track(cs, cd, model_s, model_d, chosen, bit):
+    """Version 7, after a zero flag coded under one of its two models (both as they were
+    before it), while the choice is not settled: both running costs grown by what each model
+    would have cost, and the model not coded under adapted too."""
+    ps = model_s >> 8
+    pd = model_d >> 8
+    if bit:
+        ps, pd = PROB_ONE - ps, PROB_ONE - pd
+    cs += COST[ps >> 5]
+    cd += COST[pd >> 5]
+    other = model_s if chosen else model_d
+    return cs, cd, _adapted(other >> 8, other & 0xFF, bit)
+
+
+@njit(nogil=True, cache=True, inline="always")
 def _row_of(plane_info, i):
     """Where row ``i`` of another plane of the block starts in ``flat`` (-1: no such row), and
     that plane's width."""
@@ -340,13 +407,19 @@ def _encode_rows(
     zero_base,
     unary_base,
     mantissa,
+    along,
+    directional,
 ):
     """The values of one plane of a block, row by row (the tiles flagged empty skipped).
 
-    Inlined at two call sites, one with ``approx`` True and one False, so that each copy is
-    compiled without the other kind's branches."""
+    Inlined at three call sites (the approximation; details; version 7's ``cH`` and ``cV``,
+    ``directional`` True), so that each copy is compiled without the other kinds' branches:
+    with one copy for all details, versions 4 and 6 took 8-12 % more time (the third copy
+    doubles the compile time of the spans, 51 to 107 s, once per machine)."""
     width = c1 - c0
     tile_cols = (c1 - c0 + TILE - 1) // TILE
+    cs = cd = np.int64(0)  # version 7's running costs of the plane's zero flags, grown
+    tracking = directional  # until they differ by more than SETTLE
     for i in range(r0, r1):
         row = offset + i * cols
         srow = (i - r0) * width - c0
@@ -388,29 +461,34 @@ def _encode_rows(
                             scratch[_u(here - 2)] if j > c0 + 1 else 0,
                             scratch[_u(up - width)] if i > r0 + 1 else 0,
                         )
+                    sd = s
                     e = np.int64(0)
                     value = np.int64(flat[_u(at)]) - _predict(flat, at, cols, i, j, r0, c0)
                 else:
                     if i > r0 + 1 and c0 + 1 < j < c1 - 1:
                         up = at - cols
-                        s = _neighbour_sum(
+                        s, sd = _sums(
                             flat[_u(at - 1)],
                             flat[_u(up)],
                             flat[_u(up - 1)],
                             flat[_u(up + 1)],
                             flat[_u(at - 2)],
                             flat[_u(up - cols)],
+                            along,
+                            directional,
                         )
                     else:
                         here = at
                         up = here - cols
-                        s = _neighbour_sum(
+                        s, sd = _sums(
                             flat[_u(here - 1)] if j > c0 else 0,
                             flat[_u(up)] if i > r0 else 0,
                             flat[_u(up - 1)] if i > r0 and j > c0 else 0,
                             flat[_u(up + 1)] if i > r0 and j + 1 < c1 else 0,
                             flat[_u(here - 2)] if j > c0 + 1 else 0,
                             flat[_u(up - cols)] if i > r0 + 1 else 0,
+                            along,
+                            directional,
                         )
                     e = np.int64(0)
                     if j < l1:
@@ -423,20 +501,26 @@ def _encode_rows(
                         e += PARENT_WEIGHT * abs(np.int64(flat[_u(pr + (j >> 1))]))
                     value = np.int64(flat[_u(at)])
                 magnitude = abs(value)
-                ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
-                low, rng, models[_u(ctx)] = _code_bit(
-                    low, rng, models[_u(ctx)], 1 if magnitude else 0
-                )
+                nonzero = 1 if magnitude else 0
+                ctx, ctx_d, chosen, su = _zero_context(s, sd, e, zero_base, cs, cd, directional)
+                coded = ctx_d if chosen else ctx
+                model_s, model_d = models[_u(ctx)], models[_u(ctx_d)]
+                low, rng, models[_u(coded)] = _code_bit(low, rng, models[_u(coded)], nonzero)
                 while rng < TOP:
                     rng <<= 8
                     low, cache, pending, pos = _shift_low(low, cache, pending, pos, out)
+                if tracking:
+                    cs, cd, models[_u(ctx + ctx_d - coded)] = _track(
+                        cs, cd, model_s, model_d, chosen, nonzero
+                    )
+                    tracking = abs(cs - cd) <= SETTLE
                 if approx:
                     scratch[_u(srow + j)] = magnitude
                 if magnitude == 0:
                     continue
                 # The bit length in unary, then the bits below the leading one: the top two
                 # under adaptive models, the rest raw.
-                unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
+                unary = unary_base + (LOCAL_CLASS[min(su + e, 255)] >> 1) * UNARY_INDICES
                 klass = _bit_length(magnitude)
                 for k in range(1, klass + 1):
                     more = 1 if klass > k else 0
@@ -507,10 +591,14 @@ def _decode_rows(
     zero_base,
     unary_base,
     mantissa,
+    along,
+    directional,
 ):
     """The decoder's :func:`_encode_rows`; the last value is 1 for a corrupt block."""
     width = c1 - c0
     tile_cols = (c1 - c0 + TILE - 1) // TILE
+    cs = cd = np.int64(0)  # version 7's running costs of the plane's zero flags, grown
+    tracking = directional  # until they differ by more than SETTLE
     for i in range(r0, r1):
         row = offset + i * cols
         srow = (i - r0) * width - c0
@@ -553,29 +641,34 @@ def _decode_rows(
                             scratch[_u(here - 2)] if j > c0 + 1 else 0,
                             scratch[_u(up - width)] if i > r0 + 1 else 0,
                         )
+                    sd = s
                     e = np.int64(0)
                     prediction = _predict(flat, at, cols, i, j, r0, c0)
                 else:
                     if i > r0 + 1 and c0 + 1 < j < c1 - 1:
                         up = at - cols
-                        s = _neighbour_sum(
+                        s, sd = _sums(
                             flat[_u(at - 1)],
                             flat[_u(up)],
                             flat[_u(up - 1)],
                             flat[_u(up + 1)],
                             flat[_u(at - 2)],
                             flat[_u(up - cols)],
+                            along,
+                            directional,
                         )
                     else:
                         here = at
                         up = here - cols
-                        s = _neighbour_sum(
+                        s, sd = _sums(
                             flat[_u(here - 1)] if j > c0 else 0,
                             flat[_u(up)] if i > r0 else 0,
                             flat[_u(up - 1)] if i > r0 and j > c0 else 0,
                             flat[_u(up + 1)] if i > r0 and j + 1 < c1 else 0,
                             flat[_u(here - 2)] if j > c0 + 1 else 0,
                             flat[_u(up - cols)] if i > r0 + 1 else 0,
+                            along,
+                            directional,
                         )
                     e = np.int64(0)
                     if j < l1:
@@ -586,17 +679,24 @@ def _decode_rows(
                         e += 4 * abs(np.int64(flat[_u(y0 + j)]))
                     if j < lp:  # version 6: the parent band
                         e += PARENT_WEIGHT * abs(np.int64(flat[_u(pr + (j >> 1))]))
-                ctx = zero_base + LOCAL_CLASS[min(s, 255)] * EXTERNAL_CLASSES + _external_class(e)
-                code, rng, models[_u(ctx)], nonzero = _split_bit(code, rng, models[_u(ctx)])
+                ctx, ctx_d, chosen, su = _zero_context(s, sd, e, zero_base, cs, cd, directional)
+                coded = ctx_d if chosen else ctx
+                model_s, model_d = models[_u(ctx)], models[_u(ctx_d)]
+                code, rng, models[_u(coded)], nonzero = _split_bit(code, rng, models[_u(coded)])
                 while rng < TOP:
                     rng <<= 8
                     code, pos = _shift_code(code, pos, end, data)
+                if tracking:
+                    cs, cd, models[_u(ctx + ctx_d - coded)] = _track(
+                        cs, cd, model_s, model_d, chosen, nonzero
+                    )
+                    tracking = abs(cs - cd) <= SETTLE
                 if nonzero == 0:
                     if approx:
                         scratch[_u(srow + j)] = 0
                     flat[_u(at)] = prediction
                     continue
-                unary = unary_base + (LOCAL_CLASS[min(s + e, 255)] >> 1) * UNARY_INDICES
+                unary = unary_base + (LOCAL_CLASS[min(su + e, 255)] >> 1) * UNARY_INDICES
                 klass = np.int64(1)
                 while True:
                     at_ctx = unary + min(klass - 1, UNARY_INDICES - 1)
@@ -643,7 +743,7 @@ def _decode_rows(
 
 
 @njit(nogil=True, cache=True)
-def _encode_block(flat, planes, parents, block, out, pos, models, scratch, flags):
+def _encode_block(flat, planes, parents, oriented, block, out, pos, models, scratch, flags):
     """Code one block (a region of every plane of one level) into ``out`` from ``pos``.
 
     Returns the position after its last byte (past ``out``'s end when it did not fit).
@@ -667,6 +767,8 @@ def _encode_block(flat, planes, parents, block, out, pos, models, scratch, flags
         zero_base = ZERO_BASE + kind * LOCAL_CLASSES * EXTERNAL_CLASSES
         unary_base = UNARY_BASE + kind * (LOCAL_CLASSES + 1) * UNARY_INDICES
         mantissa = MANTISSA_BASE + kind * 2 * (MAX_CLASS + 1)
+        # Version 7: cH's zero flags also under the sum along rows, cV's along columns.
+        along = 1 + planes[p, P_ORIENT] if oriented and planes[p, P_ORIENT] < 2 else 0
         base = (p - block[B_PLANE_LO]) * tiles_per_plane
         tile_rows = (r1 - r0 + TILE - 1) // TILE
         tile_cols = (c1 - c0 + TILE - 1) // TILE
@@ -719,6 +821,40 @@ def _encode_block(flat, planes, parents, block, out, pos, models, scratch, flags
                 zero_base,
                 unary_base,
                 mantissa,
+                0,
+                False,
+            )
+        elif along:  # version 7: cH, cV
+            low, rng, cache, pending, pos = _encode_rows(
+                flat,
+                out,
+                models,
+                scratch,
+                flags,
+                low,
+                rng,
+                cache,
+                pending,
+                pos,
+                False,
+                offset,
+                cols,
+                r0,
+                r1,
+                c0,
+                c1,
+                base,
+                grid_cols,
+                sib1,
+                sib2,
+                luma,
+                parent,
+                sign_base,
+                zero_base,
+                unary_base,
+                mantissa,
+                along,
+                True,
             )
         else:
             low, rng, cache, pending, pos = _encode_rows(
@@ -749,6 +885,8 @@ def _encode_block(flat, planes, parents, block, out, pos, models, scratch, flags
                 zero_base,
                 unary_base,
                 mantissa,
+                0,
+                False,
             )
 
     # End at the value in [low, low + range) with the most trailing zero bytes, and flush: the
@@ -765,7 +903,7 @@ def _encode_block(flat, planes, parents, block, out, pos, models, scratch, flags
 
 
 @njit(nogil=True, cache=True)
-def _decode_block(data, start, end, flat, planes, parents, block, models, scratch, flags):
+def _decode_block(data, start, end, flat, planes, parents, oriented, block, models, scratch, flags):
     """Decode one block from ``data[start:end]`` into ``flat``; 0, or 1 if it is corrupt."""
     rng, pos = np.int64(MASK32), start
     code = np.int64(0)
@@ -791,6 +929,8 @@ def _decode_block(data, start, end, flat, planes, parents, block, models, scratc
         zero_base = ZERO_BASE + kind * LOCAL_CLASSES * EXTERNAL_CLASSES
         unary_base = UNARY_BASE + kind * (LOCAL_CLASSES + 1) * UNARY_INDICES
         mantissa = MANTISSA_BASE + kind * 2 * (MAX_CLASS + 1)
+        # Version 7: cH's zero flags also under the sum along rows, cV's along columns.
+        along = 1 + planes[p, P_ORIENT] if oriented and planes[p, P_ORIENT] < 2 else 0
         base = (p - block[B_PLANE_LO]) * tiles_per_plane
         tile_rows = (r1 - r0 + TILE - 1) // TILE
         tile_cols = (c1 - c0 + TILE - 1) // TILE
@@ -833,6 +973,39 @@ def _decode_block(data, start, end, flat, planes, parents, block, models, scratc
                 zero_base,
                 unary_base,
                 mantissa,
+                0,
+                False,
+            )
+        elif along:  # version 7: cH, cV
+            code, rng, pos, bad = _decode_rows(
+                data,
+                end,
+                flat,
+                models,
+                scratch,
+                flags,
+                code,
+                rng,
+                pos,
+                False,
+                offset,
+                cols,
+                r0,
+                r1,
+                c0,
+                c1,
+                base,
+                grid_cols,
+                sib1,
+                sib2,
+                luma,
+                parent,
+                sign_base,
+                zero_base,
+                unary_base,
+                mantissa,
+                along,
+                True,
             )
         else:
             code, rng, pos, bad = _decode_rows(
@@ -862,6 +1035,8 @@ def _decode_block(data, start, end, flat, planes, parents, block, models, scratc
                 zero_base,
                 unary_base,
                 mantissa,
+                0,
+                False,
             )
         if bad:
             return 1
@@ -905,6 +1080,10 @@ def _initial_models() -> np.ndarray:
                 level = max(8, 15 - local - external)
                 p[ctx] = level * PROB_ONE // 16
                 n[ctx] = 2
+    # Version 7's directional zero flags start as the detail ones.
+    detail = ZERO_BASE + LOCAL_CLASSES * EXTERNAL_CLASSES
+    p[ZERO_DIR_BASE : ZERO_DIR_BASE + ZERO_DIR_SIZE] = p[detail : detail + ZERO_DIR_SIZE]
+    n[ZERO_DIR_BASE : ZERO_DIR_BASE + ZERO_DIR_SIZE] = 2
     return ((p << 8) | n).astype(np.int32)
 
 
@@ -928,10 +1107,12 @@ def _fresh_models(models):
 
 
 @njit(nogil=True, cache=True)
-def encode_span(flat, planes, parents, blocks, lo, hi):
+def encode_span(flat, planes, parents, oriented, blocks, lo, hi):
     """Code blocks ``lo .. hi - 1``; return their bytes, concatenated, and each one's length.
 
-    An all-zero block has length 0; any other block at least 1 byte.
+    An all-zero block has length 0; any other block at least 1 byte.  ``parents``: each
+    plane's parent plane (-1: none; versions 6 and 7); ``oriented``: 1 for version 7 (the
+    directional zero-flag models of ``cH`` and ``cV``), else 0.
     """
     # Room for 8 bits per position to begin with: a block that does not fit is coded again
     # from its start into a larger buffer, and at 2 bits per position (as before) every dense
@@ -958,7 +1139,9 @@ def encode_span(flat, planes, parents, blocks, lo, hi):
             continue
         while True:
             _fresh_models(models)
-            end = _encode_block(flat, planes, parents, blocks[b], out, pos, models, scratch, flags)
+            end = _encode_block(
+                flat, planes, parents, oriented, blocks[b], out, pos, models, scratch, flags
+            )
             if end <= out.size:
                 break
             bigger = np.empty(2 * out.size + 2 * (end - pos), dtype=np.uint8)
@@ -978,11 +1161,11 @@ def encode_span(flat, planes, parents, blocks, lo, hi):
 
 
 @njit(nogil=True, cache=True)
-def decode_span(data, starts, lengths, planes, parents, blocks, flat, lo, hi):
+def decode_span(data, starts, lengths, planes, parents, oriented, blocks, flat, lo, hi):
     """Decode blocks ``lo .. hi - 1`` into ``flat`` (zeros where a block's length is 0).
 
-    ``data[starts[b] : starts[b] + lengths[b]]`` holds block ``b``.  Returns the number of
-    blocks found corrupt.
+    ``data[starts[b] : starts[b] + lengths[b]]`` holds block ``b``; ``parents`` and
+    ``oriented`` as :func:`encode_span`'s.  Returns the number of blocks found corrupt.
     """
     models = np.empty(CONTEXTS, dtype=np.int32)
     scratch = np.empty(_scratch_size(blocks, lo, hi), dtype=np.int64)
@@ -999,6 +1182,7 @@ def decode_span(data, starts, lengths, planes, parents, blocks, flat, lo, hi):
             flat,
             planes,
             parents,
+            oriented,
             blocks[b],
             models,
             scratch,

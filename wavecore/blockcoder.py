@@ -1,4 +1,4 @@
-"""Code-blocks: the context coder's versions 4 and 6.
+"""Code-blocks: the context coder's versions 4, 6 and 7.
 
 Every level's bands are cut into blocks of ``block × block`` positions (``1 × block²`` for the
 1-D layouts of curves).  A block holds that region of *every* band and channel of the level
@@ -26,7 +26,15 @@ coarser, at ``(i // 2, j // 2)``), which lies in one block of the previous chunk
 decoder decodes a chunk's parent chunk first, a region decodes the parent blocks of the blocks
 it needs, and a damaged block takes its descendants with it (:func:`parent_blocks`).
 
-The bit-level specification is in ``docs/bundle-format.md`` (context coder versions 4 and 6).
+Version 7 (:data:`ORIENT_VERSION`) is version 6 whose ``cH`` and ``cV`` zero flags also have
+models under a *directional* neighbour sum (along the band's rows for ``cH``, its columns for
+``cV``, as EBCOT's contexts are): both models learn from every flag, and each flag is coded
+under the one that would have cost less so far in that plane of the block, which the decoder
+finds the same way (no side information).  Its blocks depend on their parent blocks as
+version 6's do.
+
+The bit-level specification is in ``docs/bundle-format.md`` (context coder versions 4, 6 and
+7).
 """
 
 from __future__ import annotations
@@ -50,7 +58,9 @@ from .varints import encode_varint
 __all__ = [
     "BLOCK_SIZE",
     "BLOCK_SIZES",
+    "ORIENT_VERSION",
     "PARENT_VERSION",
+    "PARENT_VERSIONS",
     "CodedBlocks",
     "CodedChunk",
     "KnownBlocks",
@@ -79,6 +89,10 @@ BLOCK_SIZES = (16, 32, 64, 128, 256)
 #: The context coder's version whose detail contexts look at the parent band (version 4's do
 #: not; version 5 is the lossless coder, :mod:`wavecore.losslesscoder`).
 PARENT_VERSION = 6
+#: Version 6 plus the directional zero-flag models of ``cH`` and ``cV``.
+ORIENT_VERSION = 7
+#: The versions whose blocks read their parent blocks' values.
+PARENT_VERSIONS = (PARENT_VERSION, ORIENT_VERSION)
 #: Runs of blocks per encode or decode, each its own task for the thread pool: blocks cost
 #: very unequal time (dense coarse blocks, nearly empty fine ones), so many small tasks handed
 #: to whichever thread is free keep both cores busy to the end (a few large tasks can leave
@@ -237,10 +251,15 @@ def _parents(
     layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block: int, version: int
 ) -> np.ndarray:
     """Each plane's parent plane for the coder's ``version`` (-1: none; every plane but of
-    version 6): see :func:`_parent_tables`."""
-    if version != PARENT_VERSION:
+    versions 6 and 7): see :func:`_parent_tables`."""
+    if version not in PARENT_VERSIONS:
         return _no_parents(_structure(layout, two_d, block)[0].shape[0])
     return _parent_tables(_layout_key(layout), two_d, block)[0]
+
+
+def _oriented(version: int) -> int:
+    """The kernels' ``oriented`` argument: 1 for version 7, else 0."""
+    return int(version == ORIENT_VERSION)
 
 
 @functools.lru_cache(maxsize=8)
@@ -250,7 +269,7 @@ def _no_parents(count: int) -> np.ndarray:
 
 
 def parent_blocks(layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block: int) -> np.ndarray:
-    """Each block's parent block under version 6 (-1: none), in :func:`needed_blocks`' order.
+    """Each block's parent block under versions 6 and 7 (-1: none), in :func:`needed_blocks`' order.
 
     The parent block is the block of the previous chunk that holds every parent value of the
     block's detail values; it comes earlier in the order, so a pass from the last block to the
@@ -261,7 +280,7 @@ def parent_blocks(layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block:
 
 
 def _parent_tables(layout: _LayoutKey, two_d: bool, block: int) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_parents` and :func:`parent_blocks` of version 6, cached with the tables."""
+    """:func:`_parents` and :func:`parent_blocks` of versions 6 and 7, cached with the tables."""
     return _while_small(_cached_parent_tables, layout, two_d, block)
 
 
@@ -324,7 +343,7 @@ def encode_blocks(
     known: KnownBlocks | None = None,
 ) -> list[bytes]:
     """Code integer bands (``[[cA], [level L bands], ...]``) into one chunk per entry, with
-    the context coder's ``version`` (4 or :data:`PARENT_VERSION`).
+    the context coder's ``version`` (4, :data:`PARENT_VERSION` or :data:`ORIENT_VERSION`).
 
     ``known``: blocks of these very bands coded already with the same ``version``
     (:func:`code_blocks`: the bpp search's sample at the step it settled on), whose bytes are
@@ -333,7 +352,7 @@ def encode_blocks(
     layout = [[band.shape for band in bands] for bands in entries]
     parents = _parents(layout, two_d, block, version)
     if known is not None and known.indices.size and known.version == version:
-        return _encode_blocks_knowing(entries, two_d, block, layout, parents, known)
+        return _encode_blocks_knowing(entries, two_d, block, layout, parents, known, version)
     planes, blocks, per_chunk, total, sizes = _structure_sizes(layout, two_d, block)
     flat = np.empty(total, dtype=np.int32)
     views = _plane_views(entries, two_d)
@@ -345,11 +364,12 @@ def encode_blocks(
     spans = _span_count(int(total))
     cuts = _cuts(sizes, spans)
     results: list[Any] = [None] * spans
+    oriented = _oriented(version)
 
     def run(lo: int, hi: int) -> None:
         for span in range(lo, hi):
             results[span] = kernels.encode_span(
-                flat, planes, parents, blocks, cuts[span], cuts[span + 1]
+                flat, planes, parents, oriented, blocks, cuts[span], cuts[span + 1]
             )
 
     run_rows(run, spans, pieces=spans)
@@ -404,7 +424,7 @@ def code_blocks(
     planes, blocks, _, _ = _structure(layout, two_d, block)
     indices = np.asarray(indices, dtype=np.int64)
     parents = _parents(layout, two_d, block, version)
-    payload, lengths = _code_some(entries, two_d, planes, blocks, indices, parents)
+    payload, lengths = _code_some(entries, two_d, planes, blocks, indices, parents, version)
     return KnownBlocks(indices, payload, lengths, version)
 
 
@@ -415,6 +435,7 @@ def _encode_blocks_knowing(
     layout: list[list[tuple[int, ...]]],
     parents: np.ndarray,
     known: KnownBlocks,
+    version: int,
 ) -> list[bytes]:
     """:func:`encode_blocks` where ``known`` blocks are coded already: only the others are."""
     planes, blocks, per_chunk, _ = _structure(layout, two_d, block)
@@ -423,7 +444,7 @@ def _encode_blocks_knowing(
     lengths = np.zeros(len(blocks), dtype=np.int64)
     coded = [known]
     if rest.size:
-        payload, sizes = _code_some(entries, two_d, planes, blocks, rest, parents)
+        payload, sizes = _code_some(entries, two_d, planes, blocks, rest, parents, version)
         coded.append(KnownBlocks(rest, payload, sizes, known.version))
     for some in coded:
         ends = np.cumsum(some.lengths)
@@ -485,9 +506,10 @@ class CodedBlocks:
     :func:`encode_blocks` (their tables of block lengths say where each block's bytes are);
     :meth:`recode` codes the given blocks again from new integer bands, by the same compiled
     coder, so a block's bytes are exactly what :func:`encode_blocks` writes for its values
-    (under version 6 with their child blocks, whose contexts read them); :meth:`chunks` puts the
-    chunks back together.  ``regions[b]`` is block ``b``'s ``(entry, row0, col0, row1, col1)``:
-    the positions it holds in every band (and channel) of layout entry ``entry``.
+    (under versions 6 and 7 with their child blocks, whose contexts read them); :meth:`chunks`
+    puts the chunks back together.  ``regions[b]`` is block ``b``'s ``(entry, row0, col0,
+    row1, col1)``: the positions it holds in every band (and channel) of layout entry
+    ``entry``.
     """
 
     def __init__(
@@ -526,16 +548,16 @@ class CodedBlocks:
 
     def recode(self, entries: list[list[np.ndarray]], indices: np.ndarray) -> None:
         """Code blocks ``indices`` again from ``entries`` (integer bands of the same layout);
-        under version 6 their child blocks too, whose contexts read their values."""
+        under versions 6 and 7 their child blocks too, whose contexts read their values."""
         indices = np.asarray(indices, dtype=np.int64)
         if indices.size == 0:
             return
-        if self.version == PARENT_VERSION:
+        if self.version in PARENT_VERSIONS:
             parent_of = parent_blocks(self.layout, self.two_d, self.block)
             children = np.flatnonzero(np.isin(parent_of, indices))
             indices = np.union1d(indices, children)
         payload, lengths = _code_some(
-            entries, self.two_d, self._planes, self._blocks, indices, self._parents
+            entries, self.two_d, self._planes, self._blocks, indices, self._parents, self.version
         )
         ends = np.cumsum(lengths)
         for k, index in enumerate(indices):
@@ -571,8 +593,10 @@ def _code_some(
     blocks: np.ndarray,
     indices: np.ndarray,
     parents: np.ndarray,
+    version: int,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Blocks ``indices`` of the tables coded from ``entries``: their bytes and lengths.
+    """Blocks ``indices`` of the tables coded from ``entries`` with the coder's ``version``
+    (whose parent planes are ``parents``): their bytes and lengths.
 
     Only the chosen blocks' regions are copied, each into planes of its own (a block's coding
     reads nothing outside it, and depends on its planes' sizes only where they cut it short,
@@ -597,11 +621,12 @@ def _code_some(
     spans = _span_count(int(sizes.sum()))
     cuts = _cuts(sizes, spans)
     results: list[Any] = [None] * spans
+    oriented = _oriented(version)
 
     def run(lo: int, hi: int) -> None:
         for span in range(lo, hi):
             results[span] = kernels.encode_span(
-                flat, sub_planes, sub_parents, sub_blocks, cuts[span], cuts[span + 1]
+                flat, sub_planes, sub_parents, oriented, sub_blocks, cuts[span], cuts[span + 1]
             )
 
     run_rows(run, spans, pieces=spans)
@@ -612,7 +637,7 @@ def _with_parent_pieces(
     sub_planes: np.ndarray, pieces: np.ndarray, total: int, planes: np.ndarray, parents: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Compact tables (:func:`_compact_tables`) with, for each compact plane whose plane has a
-    parent (version 6), a compact plane of the parent's values it reads, appended.
+    parent (versions 6 and 7), a compact plane of the parent's values it reads, appended.
 
     A block starts at even rows and columns, so its position ``(i, j)`` reads the parent's
     ``(i // 2, j // 2)`` from a compact parent plane anchored at half the block's corner, cut
@@ -689,7 +714,7 @@ def block_lengths(
     if indices.size == 0:
         return np.zeros(0, dtype=np.int64), regions
     parents = _parents(layout, two_d, block, version)
-    return _code_some(entries, two_d, planes, blocks, indices, parents)[1], regions
+    return _code_some(entries, two_d, planes, blocks, indices, parents, version)[1], regions
 
 
 def _plane_views(entries: list[list[np.ndarray]], two_d: bool) -> list[np.ndarray]:
@@ -727,10 +752,10 @@ def decode_blocks(
     skip : numpy.ndarray of bool, optional
         One flag per block of these chunks (in :func:`needed_blocks`' order): a flagged block is
         not decoded, its coefficients are zero (a region decode's unneeded blocks, or the
-        damaged blocks of ``decode(..., damaged="zero")``).  Under version 6 the caller skips
-        no parent block of a block it decodes (see :func:`parent_blocks`).
+        damaged blocks of ``decode(..., damaged="zero")``).  Under versions 6 and 7 the caller
+        skips no parent block of a block it decodes (see :func:`parent_blocks`).
     version : int
-        The context coder's version (4 or :data:`PARENT_VERSION`).
+        The context coder's version (4, :data:`PARENT_VERSION` or :data:`ORIENT_VERSION`).
 
     Raises
     ------
@@ -781,10 +806,11 @@ def _decode_flat(
     flat = np.zeros(total, dtype=np.int32)
     sizes = np.where(block_lengths > 0, all_sizes, 0)
     parents = _parents(layout, two_d, block, version)
-    # Version 6 reads the previous chunk's values: one chunk after the other, each over the
-    # threads (chunks 0 and 1 depend on none); version 4, every block at once.
+    # Versions 6 and 7 read the previous chunk's values: one chunk after the other, each over
+    # the threads (chunks 0 and 1 depend on none); version 4, every block at once.
     waves = [0, len(sizes)]
-    if version == PARENT_VERSION:
+    oriented = _oriented(version)
+    if version in PARENT_VERSIONS:
         ends = np.cumsum(per_chunk[: len(chunks)]).tolist()
         waves = [0, *ends[1:]] if len(ends) > 1 else [0, *ends]
     bad: list[int] = []
@@ -801,6 +827,7 @@ def _decode_flat(
                     block_lengths,
                     planes,
                     parents,
+                    oriented,
                     blocks,
                     flat,
                     cuts[span],

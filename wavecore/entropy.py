@@ -10,13 +10,15 @@ Coders:
 ``"zlib"``
     The generic baseline: the level's integers as little-endian ``int32``, deflated.
 ``"context"``
-    The default: context modelling and range coding, version 6 for two-dimensional layouts
+    The default: context modelling and range coding, version 7 for two-dimensional layouts
     and 4 for the others (:mod:`wavecore.blockcoder`): each level is cut into 128 × 128
     code-blocks (every band and channel of the level in each), coded by a compiled binary
     range coder with adaptive probabilities, in threads with the GIL released; version 6's
-    detail contexts also read the parent band, one level coarser.  Versions 2 and 3
-    (constriction's range coder, adaptive counts per context class driven from Python;
-    version 3 with a flag per 8 × 8 tile) still decode, by the code below.
+    detail contexts also read the parent band, one level coarser, and version 7's zero flags
+    of ``cH`` and ``cV`` also have models under a neighbourhood along the band's orientation.
+    Version 6 still decodes, and so do versions 2 and 3 (constriction's range coder,
+    adaptive counts per context class driven from Python; version 3 with a flag per 8 × 8
+    tile), by the code below.
 
 The decoder treats its input as hostile: every chunk is checked against the sizes the caller
 declares (``shapes``), decompression is bounded by those sizes, and anything wrong raises
@@ -34,7 +36,14 @@ import constriction
 import numpy as np
 from numba import njit
 
-from .blockcoder import BLOCK_SIZE, PARENT_VERSION, KnownBlocks, decode_blocks, encode_blocks
+from .blockcoder import (
+    BLOCK_SIZE,
+    ORIENT_VERSION,
+    PARENT_VERSION,
+    KnownBlocks,
+    decode_blocks,
+    encode_blocks,
+)
 from .errors import BundleError, InvalidParameter
 from .layout import as_levels, is_band_group
 from .losslesscoder import LOSSLESS_VERSION, decode_lossless_levels
@@ -92,7 +101,7 @@ def encode_levels(
         ``"context"`` (default) is the context-modelling range coder; ``"zlib"`` the generic
         baseline.
     version : int, optional
-        The context coder's version: by default 6 for two-dimensional layouts and 4 for the
+        The context coder's version: by default 7 for two-dimensional layouts and 4 for the
         others; 4 codes each chunk independently of the others (the lossless path re-codes
         only the coarse chunks when it tries a deeper decomposition).
     known_blocks : wavecore.blockcoder.KnownBlocks, optional
@@ -283,10 +292,11 @@ _W_DIRECT, _W_DIAGONAL, _W_PARENT, _W_SIBLING, _W_LUMA = 4, 2, 2, 1, 6
 _PARENT_SCALE = 18
 #: Version 3 adds the tile flags; version 4 codes independent code-blocks with a compiled
 #: binary range coder (:mod:`wavecore.blockcoder`); version 6 adds the parent band to its
-#: detail contexts, and is what two-dimensional layouts are coded with (one-dimensional ones,
-#: curves, keep version 4).  Versions 2 to 4 still decode.
-CONTEXT_VERSION = PARENT_VERSION
-CONTEXT_VERSIONS = (2, 3, 4, PARENT_VERSION)
+#: detail contexts; version 7 adds directional zero-flag models for ``cH`` and ``cV``, and is
+#: what two-dimensional layouts are coded with (one-dimensional ones, curves, keep version 4).
+#: Versions 2 to 4 and 6 still decode.
+CONTEXT_VERSION = ORIENT_VERSION
+CONTEXT_VERSIONS = (2, 3, 4, PARENT_VERSION, ORIENT_VERSION)
 #: Tiles of ``_TILE × _TILE`` detail coefficients: each is flagged as holding a nonzero value
 #: or not, and an all-zero tile costs nothing more (most of the finest levels, at most rates).
 _TILE = 8

@@ -122,6 +122,15 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             surface,
             {"closed": (True, False), "quality": 42.0},
         ),
+        # Context coder version 7 (directional zero-flag models for cH and cV, chosen per plane
+        # of a block by their running costs): the same three cases as version 6's.
+        "image_grey_u8_parent_ctx7": ("image", parent_picture, {"quality": 36.0}),
+        "image_rgb_u8_bpp_ctx7": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 8.0}),
+        "surface_closed_open_ctx7": (
+            "surface",
+            surface,
+            {"closed": (True, False), "quality": 42.0},
+        ),
         # A per-picture colour matrix (colour "klt:<m>": colour code 3 with weight 0 and nine
         # integers): a tinted picture, whose details the matrix decorrelates better than YCbCr.
         "image_rgb_u8_klt": ("image", tinted, {"quality": 38.0}),

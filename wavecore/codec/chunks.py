@@ -16,7 +16,7 @@ import numpy as np
 
 from ..blockcoder import (
     BLOCK_SIZES,
-    PARENT_VERSION,
+    PARENT_VERSIONS,
     band_counts,
     block_counts,
     decode_block_windows,
@@ -50,13 +50,13 @@ def block_coder(header: dict[str, Any]) -> tuple[bool, int, int] | None:
 def _parents_of(
     entries: list[list[tuple[int, ...]]], coder: tuple[bool, int, int]
 ) -> np.ndarray | None:
-    """Each block's parent block (version 6), or None (blocks that depend on none)."""
+    """Each block's parent block (versions 6 and 7), or None (blocks that depend on none)."""
     two_d, block, version = coder
-    return parent_blocks(entries, two_d, block) if version == PARENT_VERSION else None
+    return parent_blocks(entries, two_d, block) if version in PARENT_VERSIONS else None
 
 
 def _with_ancestors(wanted: np.ndarray, parent_of: np.ndarray | None) -> np.ndarray:
-    """``wanted`` and every ancestor of a wanted block (version 6 decodes a block from its
+    """``wanted`` and every ancestor of a wanted block (versions 6 and 7 decode a block from its
     parent block's values)."""
     if parent_of is None:
         return wanted
@@ -159,7 +159,7 @@ def decode_block_levels(
 
     Checks what it reads: a chunk of several blocks of a 3.0 bundle block by block (the needed
     blocks only), any other chunk whole.  ``damaged="zero"`` zeroes what fails its check
-    instead of raising (under version 6 with the blocks that descend from it).
+    instead of raising (under versions 6 and 7 with the blocks that descend from it).
     """
     two_d, block, version = coder
     counts = block_counts(entries, two_d, block)
@@ -194,9 +194,9 @@ def _read_chunks(
     damaged: str,
     parent_of: np.ndarray | None,
 ) -> tuple[list[bytes], np.ndarray, list[list[tuple[int, int]] | None]]:
-    """The chunks in the coder's form, the blocks to skip (unwanted, lost, or under version 6
+    """The chunks in the coder's form, the blocks to skip (unwanted, lost, or under versions 6-7
     descended from a lost block), and each chunk's stored band counts (None where it stores
-    none or they are lost).  ``wanted`` holds the ancestors of what it holds (version 6)."""
+    none or they are lost).  ``wanted`` holds the ancestors of what it holds (versions 6, 7)."""
     skip = ~wanted
     chunks: list[bytes] = []
     stored: list[list[tuple[int, int]] | None] = []

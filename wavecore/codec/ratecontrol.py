@@ -46,9 +46,9 @@ from numba import njit
 from .. import rdoq
 from .._kernels import largest_scaled, log_histogram_counts, top_octave
 from ..blockcoder import BLOCK_SIZE as DEFAULT_BLOCK
-from ..blockcoder import PARENT_VERSION, CodedBlocks, KnownBlocks, block_lengths, code_blocks
+from ..blockcoder import PARENT_VERSIONS, CodedBlocks, KnownBlocks, block_lengths, code_blocks
 from ..bundle import read_bundle, write_bundle
-from ..entropy import encode_levels
+from ..entropy import CONTEXT_VERSION, encode_levels
 from ..errors import InvalidParameter
 from ..layout import as_levels, from_levels
 from ..quantize import (
@@ -1468,13 +1468,13 @@ def _sampled_ratio_at(encoder: _LossyEncoder, step: float, ratio: float) -> floa
     if alone:
         rdoq.adapt_deadzone(encoder.kept, qcoeffs, qparams, regions=regions[sample])
     coding_counts.sampled_blocks += int(sample.size)
-    # The coder of two-dimensional layouts, version 6 (a sampled block reads its parent).
+    # The coder of two-dimensional layouts, version 7 (a sampled block reads its parent).
     if encoder.reuse_sample and not alone:
-        known = code_blocks(levels, True, DEFAULT_BLOCK, sample, PARENT_VERSION)
+        known = code_blocks(levels, True, DEFAULT_BLOCK, sample, CONTEXT_VERSION)
         encoder._sample = ((step, encoder.kept_fraction), known)
         lengths = known.lengths
     else:
-        lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample, PARENT_VERSION)
+        lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample, CONTEXT_VERSION)
         # Let the sample's quantization go now (the full coding quantizes at another step):
         # its bands are freed before the next ones are made, which can then take their
         # memory instead of faulting in fresh pages.
@@ -1804,7 +1804,7 @@ def _trim_to_budget(
     chunks, cparams = encoder.code(step, closed)
     if not (
         cparams.get("coder") == "context"
-        and cparams.get("version") in (4, PARENT_VERSION)
+        and cparams.get("version") in (4, *PARENT_VERSIONS)
         and cparams.get("two_d") is True
         and isinstance(cparams.get("block"), int)
     ):
