@@ -260,8 +260,11 @@ def test_bpp_in_open_loop_is_coded_once(calls: Calls, name: str, bpp: float) -> 
     codings = extra.get((name, bpp), 1)
     assert calls.trial_codings == codings
     assert ratecontrol.coding_counts.full_codings == codings
-    # (Six rounds of recoded blocks and their children, in the case of two codings.)
-    assert ratecontrol.coding_counts.blocks_recoded <= (2 if codings == 1 else 8) * _BLOCKS_512
+    # (Six rounds of recoded blocks and their children, in the case of two codings.  With
+    # context coder version 7 and RDOQ's parent-aware table, the coins at 0.25 bpp take a
+    # third round of the trim: 21 blocks recoded of its 9.)
+    rounds = 8 if codings > 1 else 3 if (name, bpp) == ("coins", 0.25) else 2
+    assert ratecontrol.coding_counts.blocks_recoded <= rounds * _BLOCKS_512
 
 
 def test_bpp_on_the_sawtooth_codes_fewer_times(calls: Calls) -> None:
