@@ -67,17 +67,21 @@ def test_grid_coding_at_the_sample_step_takes_the_sampled_blocks(
     given: list[bool] = []
     encode_levels = ratecontrol.encode_levels
 
-    def counted(qcoeffs: list, *, coder: str, known_blocks: object = None) -> object:
+    def counted(
+        qcoeffs: list, *, coder: str, version: int | None = None, known_blocks: object = None
+    ) -> object:
         given.append(known_blocks is not None)
-        return encode_levels(qcoeffs, coder=coder, known_blocks=known_blocks)
+        return encode_levels(qcoeffs, coder=coder, version=version, known_blocks=known_blocks)
 
     monkeypatch.setattr(ratecontrol, "encode_levels", counted)
     reused = wavecore.encode_grid(grid, bpp=2.0)
     assert given == [True]  # one full coding, from the sample
     assert 0.975 * 2.0 * grid.size / 8 <= len(reused) <= 2.0 * grid.size / 8
 
-    def every_block(qcoeffs: list, *, coder: str, known_blocks: object = None) -> object:
-        return encode_levels(qcoeffs, coder=coder)
+    def every_block(
+        qcoeffs: list, *, coder: str, version: int | None = None, known_blocks: object = None
+    ) -> object:
+        return encode_levels(qcoeffs, coder=coder, version=version)
 
     monkeypatch.setattr(ratecontrol, "encode_levels", every_block)
     assert wavecore.encode_grid(grid, bpp=2.0) == reused

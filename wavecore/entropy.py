@@ -293,8 +293,9 @@ _PARENT_SCALE = 18
 #: Version 3 adds the tile flags; version 4 codes independent code-blocks with a compiled
 #: binary range coder (:mod:`wavecore.blockcoder`); version 6 adds the parent band to its
 #: detail contexts; version 7 adds directional zero-flag models for ``cH`` and ``cV``, and is
-#: what two-dimensional layouts are coded with (one-dimensional ones, curves, keep version 4).
-#: Versions 2 to 4 and 6 still decode.
+#: the default of two-dimensional layouts (one-dimensional ones, curves, keep version 4); the
+#: codec codes pictures with it and surfaces and grids with version 6
+#: (``codec.plan.Plan.context_version``).  Versions 2 to 4 and 6 still decode.
 CONTEXT_VERSION = ORIENT_VERSION
 CONTEXT_VERSIONS = (2, 3, 4, PARENT_VERSION, ORIENT_VERSION)
 #: Tiles of ``_TILE × _TILE`` detail coefficients: each is flagged as holding a nonzero value

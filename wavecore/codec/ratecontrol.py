@@ -494,7 +494,10 @@ class _LossyEncoder:
             sample = self._sample
             known = sample[1] if sample and not closed and sample[0] == key else None
             chunks, cparams = encode_levels(
-                self.quantize(step, closed)[0], coder=DEFAULT_CODER, known_blocks=known
+                self.quantize(step, closed)[0],
+                coder=DEFAULT_CODER,
+                version=self.plan.context_version,
+                known_blocks=known,
             )
             self.codings += 1
             coding_counts.full_codings += 1
@@ -1468,13 +1471,14 @@ def _sampled_ratio_at(encoder: _LossyEncoder, step: float, ratio: float) -> floa
     if alone:
         rdoq.adapt_deadzone(encoder.kept, qcoeffs, qparams, regions=regions[sample])
     coding_counts.sampled_blocks += int(sample.size)
-    # The coder of two-dimensional layouts, version 7 (a sampled block reads its parent).
+    # The plan's coder version (pictures 7, surfaces 6: a sampled block reads its parent).
+    version = encoder.plan.context_version or CONTEXT_VERSION
     if encoder.reuse_sample and not alone:
-        known = code_blocks(levels, True, DEFAULT_BLOCK, sample, CONTEXT_VERSION)
+        known = code_blocks(levels, True, DEFAULT_BLOCK, sample, version)
         encoder._sample = ((step, encoder.kept_fraction), known)
         lengths = known.lengths
     else:
-        lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample, CONTEXT_VERSION)
+        lengths, _ = block_lengths(levels, True, DEFAULT_BLOCK, sample, version)
         # Let the sample's quantization go now (the full coding quantizes at another step):
         # its bands are freed before the next ones are made, which can then take their
         # memory instead of faulting in fresh pages.
