@@ -311,15 +311,22 @@ def worst_case_heads() -> int:
     colour = dict(worst, shape=[4094, 8190, 3], fitted=[4096, 8192, 3], levels=12)
     colour["pads"] = [[0, 2], [0, 2]]
     colour["colour"] = "ycbcr"
+    # The per-picture colour rotation instead: its three angles at their longest (7 bytes).
+    rotated = dict(colour, colour="klt:-4096,-2048,-4096")
     # cdf97 (and bspline2) reach 11 levels at most: 8192 × 16384 fits them.
     deep_cdf97 = dict(worst, wavelet="cdf97", levels=11, shape=[8192, 16384])
     deep_cdf97.update(fitted=[8192, 16384], pads=[[0, 0], [0, 0]])
+    # In colour with the rotation: 11 levels of 8192 × 8192 (the channels are not counted).
+    deep_rotated = dict(deep_cdf97, shape=[8192, 8192, 3], fitted=[8192, 8192, 3])
+    deep_rotated["colour"] = "klt:-4096,-2048,-4096"
     cases_ = {
         "Haar grey 4064 × 16384, 13 levels": (worst, 0),
         "Haar grey 4064 × 16384, 13 levels, one pin more": (worst, 1),
         "Haar RGB 4094 × 8190, 12 levels, one pin more": (colour, 1),
+        "Haar RGB 4094 × 8190, 12 levels, colour rotation, one pin more": (rotated, 1),
         "cdf97 grey 8192 × 16384, 11 levels": (deep_cdf97, 0),
         "cdf97 grey 8192 × 16384, 11 levels, one pin more": (deep_cdf97, 1),
+        "cdf97 RGB 8192 × 8192, 11 levels, colour rotation, two pins more": (deep_rotated, 2),
     }
     from wavecore.bundle import derived_weights
 

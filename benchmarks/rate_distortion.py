@@ -275,11 +275,15 @@ functions; a closed loop that keeps the dead zone's zeros and re-fits the kept c
 the image by least squares (a few conjugate-gradient steps with the exact adjoint of the
 synthesis; images up to 2**20 coefficients), which is what the non-orthogonal `bspline2` needs
 (about +1 dB); reconstruction offsets fitted from each band's own histogram (no side
-information); and the context coder (version 4, `wavecore/blockcoder.py`): independent
-128 × 128 code-blocks, each coded by an LZMA-style binary range coder with adaptive
-probabilities, after a flag per 8 × 8 tile that says whether the tile holds anything; its
-contexts are the causal neighbours in the same band, the other orientations of the same level
-and the first (luma) channel at the same place.  Rate control scales the first-order
+information); RDOQ's dead zone that depends on the neighbourhood and the parent band
+(`wavecore/rdoq.py`, where the closed loop does not run); for colour, YCbCr or the picture's
+own colour matrix (`wavecore.codec.choice`); and the context coder (version 7,
+`wavecore/blockcoder.py`): independent 128 × 128 code-blocks, each coded by an LZMA-style
+binary range coder with adaptive probabilities, after a flag per 8 × 8 tile that says whether
+the tile holds anything; its contexts are the causal neighbours in the same band (for the
+horizontal and vertical details also along the band's orientation, each block choosing by
+the bits it has cost), the other orientations of the same level, the parent band one level
+coarser and the first (luma) channel at the same place.  Rate control scales the first-order
 estimate by what the real coder measured and codes for real once or twice; it accepts
 97.5–100 % of the budget.  Our rates include the whole bundle: the binary header (format 2.0)
 is under 100 bytes, about 1 % of the budget at 0.25 bpp on a 512 × 512 picture."""

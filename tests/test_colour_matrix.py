@@ -1,5 +1,5 @@
-"""The per-picture colour matrix of lossy colour pictures (colour ``"klt:<m>"``): its name, its
-header bytes, its choice, and round trips through every decode path."""
+"""The per-picture colour rotation of lossy colour pictures (colour ``"klt:<a>,<b>,<c>"``): its
+name, its header bytes, its choice, and round trips through every decode path."""
 
 from __future__ import annotations
 
@@ -33,24 +33,27 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_names_round_trip_and_round_to_units() -> None:
-    matrix = np.array([[0.5, 0.25, -0.125], [0, 1, 0], [0.3, -0.3, 0.9]])
-    name = klt_name(matrix)
-    assert name == "klt:2048,1024,-512,0,4096,0,1229,-1229,3686"
-    assert np.allclose(klt_matrix(name), matrix, atol=0.5 / 4096)
+    rotation = klt_matrix("klt:1000,-700,3000")
+    assert np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
+    assert np.isclose(np.linalg.det(rotation), 1.0)
+    assert klt_name(rotation) == "klt:1000,-700,3000"
+    # A rotation off the grid of angles comes back within half a unit of each.
+    turned = klt_matrix("klt:1000,-700,3000") @ klt_matrix("klt:1,0,0")
+    assert np.allclose(klt_matrix(klt_name(turned)), turned, atol=2 * np.pi / 4096)
 
 
 @pytest.mark.parametrize(
     "name",
     [
-        "klt:1,2,3",  # too few
-        "klt:4096,0,0,0,4096,0,0,0,4096,0",  # too many
-        "klt:+4096,0,0,0,4096,0,0,0,4096",  # not canonical
-        "klt:04096,0,0,0,4096,0,0,0,4096",
-        "klt:-0,0,0,0,4096,0,0,0,4096",
-        f"klt:{KLT_LIMIT + 1},0,0,0,4096,0,0,0,4096",  # too large
-        "klt:4096,0,0,4096,0,0,0,0,4096",  # singular
-        "klt:4096,0,0,0,4,0,0,0,4096",  # too close to singular
-        "klt:a,b,c,d,e,f,g,h,i",
+        "klt:1,2",  # too few
+        "klt:1,2,3,4",  # too many
+        "klt:+1,0,0",  # not canonical
+        "klt:01,0,0",
+        "klt:-0,0,0",
+        f"klt:{KLT_LIMIT + 1},0,0",  # out of range
+        f"klt:0,{KLT_LIMIT // 2 + 1},0",
+        f"klt:0,0,-{KLT_LIMIT + 1}",
+        "klt:a,b,c",
         "ycbcr",
     ],
 )
@@ -63,26 +66,26 @@ def test_a_bad_matrix_in_a_header_is_a_bundle_error_naming_the_colour() -> None:
     bundle = encode_image(tinted(), quality=36)
     header = read_bundle(bundle).header
     assert header["colour"].startswith("klt:")
-    header["colour"] = "klt:4096,0,0,4096,0,0,0,0,4096"
+    header["colour"] = f"klt:0,{KLT_LIMIT},0"
     with pytest.raises(BundleError, match="colour"):
         check_header(header)
     with pytest.raises(BundleError, match="colour"):
         binheader.pack(header)
 
 
-def test_the_header_holds_the_matrix_in_nineteen_bytes() -> None:
+def test_the_header_holds_the_matrix_in_seven_bytes() -> None:
     image = tinted()
     header = read_bundle(encode_image(image, quality=36)).header
     standard = dict(header, colour="ycbcr")
     packed, plain = binheader.pack(header), binheader.pack(standard)
-    assert len(packed) - len(plain) <= 19
+    assert len(packed) - len(plain) <= 7
     assert binheader.unpack(packed) == header
 
 
 def test_hostile_matrix_bytes_are_refused_by_name() -> None:
     header = read_bundle(encode_image(tinted(), quality=36)).header
     packed = bytearray(binheader.pack(header))
-    # The first matrix integer, pushed past the limit: a varint bigger than the largest.
+    # The first angle, pushed past the limit: a varint bigger than the largest.
     name = header["colour"]
     first = int(name[4:].split(",")[0])
     encoded = wavecore.varints.encode_varint(wavecore.varints.zigzag(first))

@@ -12,7 +12,7 @@ specifies the bytes; in short, in this order:
   ``pads`` all zero or zero before, ``rounding`` = 0.27);
 * unsigned LEB128 varints for ``levels``, ``shape``, ``fitted`` and ``pads`` (then, for colour
   code 3, the chroma weight of ``"rct-p<w>"``, zigzagged; a weight of 0 stands for a
-  per-picture matrix, ``"klt:<m>"``, whose nine integers follow, zigzagged);
+  per-picture colour rotation, ``"klt:<a>,<b>,<c>"``, whose three angles follow, zigzagged);
 * numbers in one *number* form (a varint whose low four bits say how to read it: a short
   decimal, an integer, a float32 or a float64, or null) — every value comes back bit for bit,
   except ``max_error``, which may be stored as the float32 at or above it (a diagnostic that
@@ -68,7 +68,8 @@ COLOUR_CODES = ("none", "ycbcr", "rct")
 #: follows the pads as a zigzag varint.
 COLOUR_PREDICTED, PREDICTED_PREFIX = 3, "rct-p"
 #: Colour code 3 with the weight 0 (never an ``rct-p``: the RCT alone is code 2) is the
-#: per-picture matrix ``"klt:<m>"``; its nine integers follow as zigzag varints.  A reader
+#: per-picture colour rotation ``"klt:<a>,<b>,<c>"``; its three angles follow as zigzag
+#: varints.  A reader
 #: from before it reads the name ``"rct-p0"``, which the header check refuses by name.
 MATRIX_WEIGHT = 0
 DTYPE_CODES = (
@@ -447,8 +448,7 @@ def _index(table: tuple[str, ...], value: Any, field: str) -> int:
 
 
 def _matrix_units(colour: Any) -> list[int] | None:
-    """The nine integers of a colour ``"klt:<m>"`` (None for any other colour; the header
-    check has made sure they are valid)."""
+    """The three angles of a colour ``"klt:<a>,<b>,<c>"`` (None for any other colour)."""
     if not isinstance(colour, str) or not colour.startswith(KLT_PREFIX):
         return None
     try:
@@ -983,7 +983,7 @@ def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool, Pin
         weight = unzigzag(reader.varint("colour", 255))
         if weight == MATRIX_WEIGHT:
             limit = zigzag(-KLT_LIMIT)
-            units = [unzigzag(reader.varint("colour", limit)) for _ in range(9)]
+            units = [unzigzag(reader.varint("colour", limit)) for _ in range(3)]
             colour = KLT_PREFIX + ",".join(map(str, units))
         else:
             colour = f"{PREDICTED_PREFIX}{weight}"

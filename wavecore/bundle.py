@@ -116,8 +116,9 @@ version may add some.
 ``levels``      ``L``, the number of decomposition levels (``N = L + 1`` chunks)
 ``colour``      ``"none"``, ``"ycbcr"`` (irreversible, lossy) or ``"rct"`` (reversible), or
                 ``"rct-p<w>"`` (reversible, Cr less ``floor((w Cb + 4) / 8)``, ``w`` ±1 … ±8),
-                or ``"klt:<m>"`` (irreversible, lossy: the per-picture 3 × 3 forward matrix,
-                nine integers in units of 1/4096, row by row: ``wavecore.colour.klt_matrix``)
+                or ``"klt:<a>,<b>,<c>"`` (irreversible, lossy: the per-picture rotation of
+                the colour space, ``Rz(a) Ry(b) Rx(c)`` with angles in units of pi/4096:
+                ``wavecore.colour.klt_matrix``)
 ``quantizer``   the quantizer's name (``"none"`` for lossless) and ``qparams`` its parameters
 ``coder``       the entropy coder's name and ``cparams`` its parameters
 ``peak``        the peak value PSNR is measured against

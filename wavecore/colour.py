@@ -5,10 +5,10 @@
   decorrelating the channels lets the quantizer spend bits where the eye and PSNR want them.
 - :func:`rct_forward` / :func:`rct_inverse`: the reversible colour transform (RCT) for lossless
   coding, integer in and integer out, exactly invertible.
-- :func:`klt_name` / :func:`klt_matrix`: a per-picture 3 × 3 matrix for lossy coding (the
-  Karhunen–Loève transform of the picture's colour details, chosen by
-  :func:`wavecore.codec.choice.choose_colour`), named ``"klt:<nine integers>"``: the matrix
-  in units of ``1 / KLT_SCALE``, row by row, which is all a decoder needs.
+- :func:`klt_name` / :func:`klt_matrix`: a per-picture rotation of the colour space for lossy
+  coding (the Karhunen–Loève transform of the picture's colour details, chosen by
+  :func:`wavecore.codec.choice.choose_colour`), named ``"klt:<a>,<b>,<c>"``: its three angles
+  in units of ``pi / KLT_SCALE``, which is all a decoder needs.
 
 Both act on the last axis (``(..., C)`` with ``C >= 3``); channels after the third (alpha) pass
 through unchanged.
@@ -48,63 +48,77 @@ YCBCR_MATRIX = np.ascontiguousarray(_ICT)
 YCBCR_INVERSE_MATRIX = np.ascontiguousarray(_ICT_INVERSE)
 
 
-#: A per-picture matrix's colour name starts with this; nine integers follow.
+#: A per-picture matrix's colour name starts with this; three integers follow: the angles
+#: ``(a, b, c)`` of the rotation ``Rz(a) · Ry(b) · Rx(c)``, in units of ``pi / KLT_SCALE``.
 KLT_PREFIX = "klt:"
-#: Its entries are integers in units of ``1 / KLT_SCALE`` …
 KLT_SCALE = 4096
-#: … of magnitude at most this (each one fits two bytes of the binary header's varints).
-KLT_LIMIT = 8191
+#: The angles' ranges: ``a`` and ``c`` in ``[-KLT_LIMIT, KLT_LIMIT]`` (a half turn either
+#: way), ``b`` in half that (each fits two bytes of the binary header's varints).
+KLT_LIMIT = KLT_SCALE
 _CANONICAL_INTEGER = re.compile(r"0|-?[1-9][0-9]{0,3}")
-#: A matrix's smallest singular value over its largest must be at least this: the decoder's
-#: inverse then amplifies an error by at most a thousandfold.
-_KLT_MIN_CONDITION = 1e-3
+
+
+def _rotation(a: float, b: float, c: float) -> np.ndarray:
+    """``Rz(a) · Ry(b) · Rx(c)``: an orthonormal matrix (its inverse is its transpose)."""
+    ca, sa, cb, sb, cc, sc = np.cos(a), np.sin(a), np.cos(b), np.sin(b), np.cos(c), np.sin(c)
+    return np.array(
+        [
+            [ca * cb, ca * sb * sc - sa * cc, ca * sb * cc + sa * sc],
+            [sa * cb, sa * sb * sc + ca * cc, sa * sb * cc - ca * sc],
+            [-sb, cb * sc, cb * cc],
+        ]
+    )
 
 
 def klt_name(matrix: np.ndarray) -> str:
-    """The colour name of a 3 × 3 forward ``matrix``, rounded to units of ``1 / KLT_SCALE``.
+    """The colour name of an orthonormal 3 × 3 forward ``matrix`` of determinant 1 (a
+    rotation), its angles rounded to units of ``pi / KLT_SCALE``.
 
     Examples
     --------
     >>> import numpy as np
     >>> klt_name(np.eye(3))
-    'klt:4096,0,0,0,4096,0,0,0,4096'
+    'klt:0,0,0'
+    >>> quarter = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    >>> klt_name(quarter)
+    'klt:2048,0,0'
     """
-    units = np.rint(np.asarray(matrix, dtype=np.float64).reshape(9) * KLT_SCALE).astype(int)
-    return KLT_PREFIX + ",".join(str(int(u)) for u in units)
+    m = np.asarray(matrix, dtype=np.float64)
+    b = float(np.arcsin(np.clip(-m[2, 0], -1.0, 1.0)))
+    a = float(np.arctan2(m[1, 0], m[0, 0]))
+    c = float(np.arctan2(m[2, 1], m[2, 2]))
+    units = [int(np.clip(np.rint(v / np.pi * KLT_SCALE), -KLT_LIMIT, KLT_LIMIT)) for v in (a, b, c)]
+    units = [0 if u == 0 else u for u in units]  # no "-0"
+    return KLT_PREFIX + ",".join(map(str, units))
 
 
 def klt_matrix(name: str) -> np.ndarray:
-    """The forward matrix that a colour name of :func:`klt_name`'s form gives.
+    """The forward matrix (a rotation) that a colour name of :func:`klt_name`'s form gives.
 
     Raises
     ------
     ValueError
-        If ``name`` is not nine integers of at most :data:`KLT_LIMIT` after
-        :data:`KLT_PREFIX`, in the canonical form :func:`klt_name` writes, or they make a
-        matrix too close to singular to invert safely.
+        If ``name`` is not three integers after :data:`KLT_PREFIX`, in the canonical form
+        :func:`klt_name` writes, with ``a`` and ``c`` of magnitude at most :data:`KLT_LIMIT`
+        and ``b`` at most half that.
 
     Examples
     --------
-    >>> klt_matrix("klt:4096,0,0,0,2048,0,0,0,-4096").diagonal().tolist()
-    [1.0, 0.5, -1.0]
+    >>> np.round(klt_matrix("klt:2048,0,0"), 12).tolist() == [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
+    True
     """
     if not isinstance(name, str) or not name.startswith(KLT_PREFIX):
         msg = f"a colour matrix's name starts with {KLT_PREFIX!r}"
         raise ValueError(msg)
     parts = name[len(KLT_PREFIX) :].split(",")
-    if len(parts) != 9 or not all(_CANONICAL_INTEGER.fullmatch(p) for p in parts):
-        msg = f"a colour matrix is nine integers after {KLT_PREFIX!r} (as -12, not +12 or 012)"
+    if len(parts) != 3 or not all(_CANONICAL_INTEGER.fullmatch(p) for p in parts):
+        msg = f"a colour matrix is three integers after {KLT_PREFIX!r} (as -12, not +12 or 012)"
         raise ValueError(msg)
-    units = [int(p) for p in parts]
-    if any(abs(u) > KLT_LIMIT for u in units):
-        msg = f"a colour matrix's integers are at most {KLT_LIMIT} in magnitude"
+    a, b, c = (int(p) for p in parts)
+    if max(abs(a), abs(c)) > KLT_LIMIT or abs(b) > KLT_LIMIT // 2:
+        msg = f"a colour matrix's angles are at most {KLT_LIMIT} (b: {KLT_LIMIT // 2}) in magnitude"
         raise ValueError(msg)
-    matrix = np.array(units, dtype=np.float64).reshape(3, 3) / KLT_SCALE
-    singular = np.linalg.svd(matrix, compute_uv=False)
-    if not singular[-1] >= _KLT_MIN_CONDITION * singular[0]:
-        msg = "a colour matrix must be invertible (its condition number is at most 1000)"
-        raise ValueError(msg)
-    return matrix
+    return _rotation(*(np.pi * v / KLT_SCALE for v in (a, b, c)))
 
 
 def _check(data: np.ndarray) -> None:

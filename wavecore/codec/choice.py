@@ -169,6 +169,8 @@ def choose_colour(image: np.ndarray) -> str:
         for row in matrix:
             if row[np.argmax(np.abs(row))] < 0:
                 row *= -1
+        if np.linalg.det(matrix) < 0:  # a rotation, which three angles name
+            matrix[2] *= -1
         try:
             name = klt_name(matrix)
             quantized = klt_matrix(name)

@@ -460,7 +460,7 @@ class YCbCr(Colour):
 
 
 class MatrixColour(Colour):
-    """A per-picture matrix on the first three channels (``klt:<nine integers>``,
+    """A per-picture rotation of the first three channels (``klt:<a>,<b>,<c>``,
     :func:`wavecore.colour.klt_matrix`); not registered: :func:`get_colour` makes one for
     each name."""
 
@@ -471,7 +471,7 @@ class MatrixColour(Colour):
             msg = f"header field 'colour': {exc}"
             raise BundleError(msg) from exc
         self.name = name
-        self.unmix = np.ascontiguousarray(np.linalg.inv(self.matrix))
+        self.unmix = np.ascontiguousarray(self.matrix.T)  # a rotation: its inverse
         self.inverse_matrix = self.unmix
 
     def get_config(self) -> dict[str, Any]:
