@@ -46,3 +46,10 @@ def test_haar_is_chosen_on_the_full_count_only() -> None:
     assert flat_block_share(image, 32) == 1.0
     assert flat_block_share(image) < FLAT_SHARE_FOR_HAAR
     assert choose_image_wavelet(image) == "cdf97"
+
+
+def test_an_unknown_wavelet_names_auto_among_the_accepted() -> None:
+    import wavecore
+
+    with pytest.raises(wavecore.InvalidParameter, match="'auto' \\(the default"):
+        wavecore.encode_image(np.zeros((8, 8), np.uint8), wavelet="nope")

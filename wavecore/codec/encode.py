@@ -182,7 +182,11 @@ def encode_image(
     dtype = dtype_name(arr, "image")
     arr, scale = scaled(arr)
     colour = choose_colour(arr) if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
-    bank = get_wavelet(choose_image_wavelet(arr) if wavelet == AUTO else wavelet)
+    try:
+        bank = get_wavelet(choose_image_wavelet(arr) if wavelet == AUTO else wavelet)
+    except InvalidParameter as exc:  # images take "auto" too: say so
+        msg = f"{exc}, or {AUTO!r} (the default: chosen per picture)"
+        raise InvalidParameter(msg) from None
     # Images use the paper's endpoint-interpolating rows; a wavelet without them (cdf97's
     # symmetric extension) uses its own non-periodic boundary.
     boundary = ("open", "open") if "open" in bank.rules else (next(iter(bank.rules)),) * 2
