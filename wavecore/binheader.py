@@ -69,8 +69,8 @@ COLOUR_CODES = ("none", "ycbcr", "rct")
 COLOUR_PREDICTED, PREDICTED_PREFIX = 3, "rct-p"
 #: Colour code 3 with the weight 0 (never an ``rct-p``: the RCT alone is code 2) is the
 #: per-picture colour rotation ``"klt:<a>,<b>,<c>"``; its three angles follow as zigzag
-#: varints.  A reader
-#: from before it reads the name ``"rct-p0"``, which the header check refuses by name.
+#: varints.  A reader from before it reads the name ``"rct-p0"``, which the header check
+#: refuses by name.
 MATRIX_WEIGHT = 0
 DTYPE_CODES = (
     "uint8",
