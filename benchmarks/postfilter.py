@@ -30,6 +30,7 @@ filters (all keep the DC gain 1: the centre tap is 1 minus the others and is not
   2 bytes each), as ALF classifies; ``dia5cNd``: × 3 direction classes (horizontal or
   vertical gradients twice the other's, or neither: ALF's test), 3N filters.  A class whose
   quantized filter would not lower its squared error is off (1 byte);
+* ``best:a,b,...``: each of those kinds, the best PSNR kept;
 * colour (astronaut), ``--colour ycc`` (the default): Y gets the kind, Cb and Cr one ``dia5``
   each (the filters then run in YCbCr and the result goes back to RGB); ``--colour rgb``:
   each of R, G, B gets the kind.
@@ -91,6 +92,18 @@ thresholds and 24 coefficients) takes 87 bytes where the packed field takes 31. 
 more whenever the filter is on (``--extra 56``): ``dia5c4`` grey mean −1.30 %, astronaut
 (ycc) −0.74 %; ``dia5c8`` −1.53 % / −1.08 %.
 
+Held-out pictures (not tuning ones: ``coder_gain.TRAINING``'s first six grey ones and chelsea;
+``capture --images ...``), float source, BD-rate sep7 / dia5 / dia5c4 / dia5c8: text −1.02 /
+−1.03 / −2.12 / −2.13; page −1.23 / −0.96 / −2.83 / −3.09; grass −0.46 / −0.95 / −1.68 /
+−1.69; gravel −1.36 / −1.09 / −2.00 / −1.99; cell −10.90 / −4.98 / −0.53 / +0.78; clock −0.32
+/ −0.27 / −0.27 / −0.21; grey mean −2.55 / −1.55 / −1.57 / −1.39 (without cell, whose 57–101
+dB curve is an outlier: −0.88 / −0.86 / −1.78 / −1.82); chelsea (ycc) −0.26 / −0.36 / −0.75 /
+−0.65.  ``dia5c4`` from the uint8 output: grey mean −1.35 (cell +0.05, clock +0.01).  On cell
+a strong smoothing pays that the classified diamond's 7-bit taps miss; an encoder trying
+``best:sep7,dia5,dia5c4`` and keeping the best (its mode byte says which): tuning grey mean
+−1.62 (the same as ``dia5c4``: it always won), held-out −3.26 (cell −10.59, gravel −2.04,
+the others as ``dia5c4``).
+
 So a single Wiener filter, separable (AV1's form) or not, does not pay here (grey −0.2 to
 −0.7 %, per-unit worse); a 5×5 diamond per class of local activity (ALF's form, 4 classes,
 31 bytes) does: −1.6 % grey inside the decoder, −1.1 % as a pass over the uint8 output.
@@ -133,9 +146,9 @@ RATES = peers.EXACT_RATES
 SCALE, BITS = 128, 7
 
 
-def capture() -> None:
+def capture(images: tuple[str, ...] = IMAGES) -> None:
     arrays: dict[str, np.ndarray] = {}
-    for name in IMAGES:
+    for name in images:
         image = getattr(data, name)()
         arrays[f"{name}/original"] = image
         sizes = []
@@ -147,7 +160,11 @@ def capture() -> None:
             sizes.append(len(bundle))
             print(f"{name:9s} {rate:.3f} bpp: {len(bundle)} bytes", flush=True)
         arrays[f"{name}/sizes"] = np.asarray(sizes)
-    np.savez_compressed(CAPTURE, **arrays)
+    np.savez_compressed(_capture_path(images), **arrays)
+
+
+def _capture_path(images: tuple[str, ...]) -> Path:
+    return CAPTURE if images == IMAGES else CAPTURE.with_name(f"postfilter_{'_'.join(images)}.npz")
 
 
 # --- filters --------------------------------------------------------------------------------
@@ -329,6 +346,20 @@ def _inputs(store: Any, name: str, i: int, source: str) -> np.ndarray:
     return _decode(parsed, dataclasses.replace(plan, dtype="float64"), None, 0)
 
 
+def _filtered(x: np.ndarray, y: np.ndarray, kind: str, colour: str) -> tuple[np.ndarray, int]:
+    """:func:`restore` over a picture's channels (see ``--colour``)."""
+    if x.ndim == 2:
+        return restore(x, y, kind)
+    if colour == "rgb":
+        parts = [restore(x[..., c], y[..., c], kind) for c in range(3)]
+        return np.stack([p[0] for p in parts], axis=-1), sum(p[1] for p in parts)
+    # in YCbCr: luma gets ``kind``, the chroma one diamond each
+    xc, yc = x @ YCBCR_MATRIX.T, y @ YCBCR_MATRIX.T
+    parts = [restore(xc[..., c], yc[..., c], kind if c == 0 else "dia5") for c in range(3)]
+    filtered = np.stack([p[0] for p in parts], axis=-1) @ YCBCR_INVERSE_MATRIX.T
+    return filtered, sum(p[1] for p in parts)
+
+
 def measure(
     kinds: tuple[str, ...],
     source: str,
@@ -336,7 +367,7 @@ def measure(
     images: tuple[str, ...] = IMAGES,
     extra_bytes: int = 0,
 ) -> None:
-    store = np.load(CAPTURE)
+    store = np.load(_capture_path(images))
     grey_bd: dict[str, list[float]] = {k: [] for k in kinds}
     for name in images:
         original = store[f"{name}/original"]
@@ -349,23 +380,14 @@ def measure(
         for kind in kinds:
             rates, psnrs, gains, extra = [], [], [], []
             for i in range(len(RATES)):
-                x = inputs[i]
                 y = original.astype(np.float64)
-                if x.ndim == 2:
-                    filtered, size = restore(x, y, kind)
-                elif colour == "rgb":
-                    parts = [restore(x[..., c], y[..., c], kind) for c in range(3)]
-                    filtered = np.stack([p[0] for p in parts], axis=-1)
-                    size = sum(p[1] for p in parts)
-                else:  # in YCbCr: luma gets ``kind``, the chroma one diamond each
-                    xc, yc = x @ YCBCR_MATRIX.T, y @ YCBCR_MATRIX.T
-                    parts = [
-                        restore(xc[..., c], yc[..., c], kind if c == 0 else "dia5")
-                        for c in range(3)
-                    ]
-                    filtered = np.stack([p[0] for p in parts], axis=-1) @ YCBCR_INVERSE_MATRIX.T
-                    size = sum(p[1] for p in parts)
-                quality = peers.psnr(to_uint8(filtered), original)
+                # "best:a,b,...": the encoder tries each kind and keeps the best (the mode byte
+                # every kind counts says which)
+                options = kind.split(":")[1].split(",") if kind.startswith("best:") else [kind]
+                tried = [_filtered(inputs[i], y, k, colour) for k in options]
+                qualities = [peers.psnr(to_uint8(f), original) for f, _ in tried]
+                quality = max(qualities)
+                size = tried[qualities.index(quality)][1]
                 size += extra_bytes
                 if quality <= base_psnr[i]:  # the encoder turns it off: one byte says so
                     quality, size = base_psnr[i], 1
@@ -374,10 +396,10 @@ def measure(
                 gains.append(quality - base_psnr[i])
                 extra.append(size)
             bd = bd_rate(base_rate, base_psnr, rates, psnrs)
-            if name in GREY:
+            if original.ndim == 2:
                 grey_bd[kind].append(bd)
             print(
-                f"{name:9s} {kind:7s} BD {bd:+6.2f} %  gains dB "
+                f"{name:9s} {kind[:7]:7s} BD {bd:+6.2f} %  gains dB "
                 + " ".join(f"{g:+.3f}" for g in gains)
                 + "  bytes "
                 + ",".join(map(str, extra)),
@@ -541,7 +563,7 @@ def main() -> None:
     args = parser.parse_args()
     globals().update(SCALE=args.scale, BITS=args.bits)
     if args.what == "capture":
-        capture()
+        capture(tuple(args.images))
     elif args.what == "measure":
         measure(tuple(args.kinds), args.source, args.colour, tuple(args.images), args.extra)
     else:
