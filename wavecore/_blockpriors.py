@@ -1,5 +1,5 @@
-"""Context coder version 8's initial models, by level class (see docs/bundle-format.md,
-"Context coder version 8").
+"""Context coder version 8's initial models, by level class (see
+``docs/bundle-format.md``, "Context coder version 8").
 
 Written by ``benchmarks/coder_gain.py priors`` from the bits seen in the first 24 uses of each
 context of each block, coded with version 7, on scikit-image's pictures that are not benchmark
