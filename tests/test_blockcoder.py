@@ -1,6 +1,7 @@
-"""Context coder versions 4, 6 and 7: code-blocks coded by the compiled binary range coder
+"""Context coder versions 4, 6, 7 and 8: code-blocks coded by the compiled binary range coder
 (version 6's detail contexts also read the parent band, in the parent block of the previous
-chunk; version 7's zero flags of cH and cV also have models under a directional neighbourhood)."""
+chunk; version 7's zero flags of cH and cV also have models under a directional neighbourhood;
+version 8's blocks start from models trained per level class)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from wavecore.blockcoder import (
     BLOCK_SIZE,
     ORIENT_VERSION,
     PARENT_VERSION,
+    PRIOR_VERSION,
     block_lengths,
     code_blocks,
     decode_blocks,
@@ -273,7 +275,7 @@ def test_version_seven_is_the_default_and_versions_six_to_two_still_decode() -> 
     assert params == {"coder": "context", "version": 7, "two_d": True, "block": BLOCK_SIZE}
     # One-dimensional layouts (curves) keep version 4.
     assert encode_levels([np.arange(9, dtype=np.int32), np.ones(9, np.int32)])[1]["version"] == 4
-    for version in (2, 3, 4, PARENT_VERSION, ORIENT_VERSION):
+    for version in (2, 3, 4, PARENT_VERSION, ORIENT_VERSION, PRIOR_VERSION):
         old_chunks, old_params = _encode_context(entries, version)
         back = decode_levels(old_chunks, shapes, old_params)
         np.testing.assert_array_equal(back[0], q[0])
@@ -364,7 +366,7 @@ def _fuzz(cases: int, seed: int, version: int = 4) -> None:
     assert outcomes["array"] and outcomes["error"]
 
 
-@pytest.mark.parametrize("version", [4, 6, 7])
+@pytest.mark.parametrize("version", [4, 6, 7, 8])
 def test_mutated_chunks_never_crash(version: int) -> None:
     _fuzz(300, 1, version)
 
@@ -380,7 +382,7 @@ def test_mutated_bundles_decode_or_raise_bundle_error() -> None:
     y, x = np.mgrid[0:70, 0:90]
     image = np.stack([x * 2, y * 3, x + y], axis=-1).astype(np.uint8)
     bundle = wavecore.encode_image(image, quality=38)
-    assert wavecore.inspect(bundle)["header"]["cparams"]["version"] == 7
+    assert wavecore.inspect(bundle)["header"]["cparams"]["version"] == 8
     for _ in range(100):
         try:
             out = wavecore.decode(_mutate(rng, bundle))
@@ -405,8 +407,8 @@ def test_the_table_cache_keeps_small_layouts_only() -> None:
     assert info.currsize == 1, info
 
 
-@pytest.mark.parametrize("version", [PARENT_VERSION, ORIENT_VERSION])
-def test_versions_6_and_7_decode_a_block_with_its_ancestors_only(version: int) -> None:
+@pytest.mark.parametrize("version", [PARENT_VERSION, ORIENT_VERSION, PRIOR_VERSION])
+def test_versions_6_to_8_decode_a_block_with_its_ancestors_only(version: int) -> None:
     """Skipping every block but a few and their ancestors (what a region decode of versions 6
     and 7 reads) decodes those exactly; skipping a needed parent block decodes a child wrongly."""
     from wavecore.codec.chunks import _with_ancestors, _with_descendants
@@ -457,7 +459,7 @@ def test_versions_6_and_7_decode_a_block_with_its_ancestors_only(version: int) -
     assert spread[child] and spread.sum() > (~lost).sum()
 
 
-@pytest.mark.parametrize("version", [4, PARENT_VERSION, ORIENT_VERSION])
+@pytest.mark.parametrize("version", [4, PARENT_VERSION, ORIENT_VERSION, PRIOR_VERSION])
 @pytest.mark.parametrize("channels", [1, 3])
 def test_known_blocks_are_taken_as_coded(channels: int, version: int) -> None:
     """Blocks coded beforehand (the bpp sample's) make the very chunks a full coding makes,
@@ -479,3 +481,24 @@ def test_known_blocks_are_taken_as_coded(channels: int, version: int) -> None:
     assert encode_blocks(entries, True, 32, version, altered) != whole
     other = 4 if version == PARENT_VERSION else PARENT_VERSION
     assert encode_blocks(entries, True, 32, version, altered._replace(version=other)) == whole
+
+
+def test_version_8_decodes_a_prefix_with_the_whole_layouts_level_classes() -> None:
+    """A coarse level's decode of version 8 gives the number of chunks coded: its blocks
+    started from the models of their level counted from the finest chunk coded, which the
+    prefix alone would place elsewhere (and decode wrongly)."""
+    entries = _bands(3, (200, 180), 1, 4)
+    layout = [[band.shape for band in bands] for bands in entries]
+    chunks = encode_blocks(entries, True, 64, PRIOR_VERSION)
+    prefix = 3  # the approximation and the two coarsest detail levels
+    back = decode_blocks(
+        chunks[:prefix], layout[:prefix], True, 64, version=PRIOR_VERSION, chunks_total=5
+    )
+    for got, want in zip(back, entries[:prefix], strict=True):
+        for x, y in zip(got, want, strict=True):
+            np.testing.assert_array_equal(x, y)
+    try:
+        wrong = decode_blocks(chunks[:prefix], layout[:prefix], True, 64, version=PRIOR_VERSION)
+    except BundleError:
+        return
+    assert not all(np.array_equal(x, y) for x, y in zip(wrong[2], entries[2], strict=True))

@@ -1,7 +1,8 @@
-"""Context coder versions 4 and 7 re-implemented in plain Python from docs/bundle-format.md
-("Context coder version 4: code-blocks", "... version 7: orientation"), for one block of a
-grey picture's approximation or coarsest details (no parent band, no luma), and compared
-byte for byte with the compiled kernels: the specification is exact enough to re-implement.
+"""Context coder versions 4, 7 and 8 re-implemented in plain Python from
+docs/bundle-format.md ("Context coder version 4: code-blocks", "... version 7: orientation",
+"... version 8: priors by level"), for one block of a grey picture's approximation or
+coarsest details (no parent band, no luma), and compared byte for byte with the compiled
+kernels: the specification is exact enough to re-implement.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from wavecore._blockpriors import PRIORS
 from wavecore.blockcoder import encode_blocks
 from wavecore.varints import encode_varint
 
@@ -26,19 +28,39 @@ def _external_class(e: int) -> int:
     return 0 if e == 0 else 1 if e < 4 else 2 if e < 12 else 3
 
 
+def _index(ctx: tuple) -> int:
+    """A context's index in version 8's tables (the specification's context numbering)."""
+    what, *rest = ctx
+    if what == "zero":  # kind, local class, external class
+        return (rest[0] * 14 + rest[1]) * 4 + rest[2]
+    if what == "unary":  # kind, halved class, index
+        return 112 + (rest[0] * 15 + rest[1]) * 8 + rest[2]
+    if what == "mantissa":  # kind, position, bit length
+        return 352 + (rest[0] * 2 + rest[1]) * 35 + rest[2]
+    if what == "sign":  # orientation (3: the approximation), sign of W, sign of N
+        return 492 + rest[0] * 9 + (rest[1] + 1) * 3 + rest[2] + 1
+    if what == "tile":  # near, other
+        return 528 + rest[0] * 2 + rest[1]
+    return 534 + rest[0] * 4 + rest[1]  # zero_d: local class, external class
+
+
 class _Coder:
     """LZMA's binary range coder and the adaptive models, as the specification says."""
 
-    def __init__(self) -> None:
+    def __init__(self, priors: np.ndarray | None = None) -> None:
         self.low, self.range, self.cache, self.pending = 0, 0xFFFFFFFF, 0, 1
         self.out: list[int] = []
         self.models: dict[tuple, list[int]] = {}
+        self.priors = priors  # version 8: the block's level class's row of PRIORS
 
     def model(self, ctx: tuple) -> list[int]:
         if ctx not in self.models:
             p, n = 16384, 0
             if ctx[0] in ("zero", "zero_d"):
                 p, n = max(8, 15 - ctx[-2] - ctx[-1]) * 2048, 2
+            if self.priors is not None:
+                word = int(self.priors[_index(ctx)])
+                p, n = word >> 8, word & 0xFF
             self.models[ctx] = [p, n]
         return self.models[ctx]
 
@@ -109,13 +131,17 @@ def _magnitude(coder: _Coder, kind: int, a: int, m: int) -> None:
 
 
 def reference_block(
-    planes: list[np.ndarray], detail: bool, version: int, seen: dict[str, int] | None = None
+    planes: list[np.ndarray],
+    detail: bool,
+    version: int,
+    seen: dict[str, int] | None = None,
+    level: int = 0,
 ) -> bytes:
     """One block holding every plane whole (the block at (0, 0), larger than the planes);
-    ``seen`` counts version 7's flags coded under the directional models and its planes that
-    settled."""
+    ``seen`` counts version 7's (and 8's) flags coded under the directional models and its
+    planes that settled; ``level``: version 8's level class of the block."""
     seen = {} if seen is None else seen
-    coder = _Coder()
+    coder = _Coder(PRIORS[level] if version == 8 else None)
     flags: list[dict[tuple[int, int], int]] = []
     for p, plane in enumerate(planes):
         rows, cols = plane.shape
@@ -136,7 +162,7 @@ def reference_block(
             flags.append(tiles)
         residual = np.zeros((rows, cols), dtype=np.int64)
         cost_s = cost_d = 0
-        settled = not (detail and version == 7 and p < 2)
+        settled = not (detail and version >= 7 and p < 2)
         for i in range(rows):
             for j in range(cols):
                 if detail and not tiles[(i // 8, j // 8)]:
@@ -173,7 +199,7 @@ def reference_block(
                 m = abs(value)
                 ctx_s = ("zero", kind, _local_class(s), _external_class(e))
                 a_unary = s
-                if detail and version == 7 and p < 2:
+                if detail and version >= 7 and p < 2:
                     along, across, along2 = (w, n, ww) if p == 0 else (n, w, nn)
                     d = 8 * along + 2 * across + (nw + ne) + 2 * along2
                     ctx_d = ("zero_d", _local_class(d), _external_class(e))
@@ -216,12 +242,13 @@ def _runs(rng: np.random.Generator, shape: tuple[int, int], along_rows: bool) ->
     return (band if along_rows else band.T).astype(np.int32)
 
 
-@pytest.mark.parametrize("version", [4, 7])
+@pytest.mark.parametrize("version", [4, 7, 8])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_the_specification_codes_the_kernels_bytes(version: int, seed: int) -> None:
     """Chunk 0 (the approximation) and chunk 1 (cH with runs along rows, cV along columns,
     cD noise with an empty corner) of one 64 × 64 block each: the reference's bytes are the
-    kernels'.  The runs make version 7 choose its directional models and settle."""
+    kernels'.  The runs make versions 7 and 8 choose their directional models and settle;
+    under version 8 chunk 0 is of level class 1, chunk 1 (the finest) of class 0."""
     rng = np.random.default_rng(seed)
     approx = rng.integers(-500, 500, (21, 22)).astype(np.int32)
     c_d = np.round(rng.laplace(0, 2.0, (21, 22)) * (rng.random((21, 22)) < 0.5)).astype(np.int32)
@@ -231,9 +258,12 @@ def test_the_specification_codes_the_kernels_bytes(version: int, seed: int) -> N
     chunks = encode_blocks(entries, True, 64, version)
     seen: dict[str, int] = {}
     for chunk, planes, detail in ((chunks[0], [approx], False), (chunks[1], details, True)):
-        expected = reference_block(planes, detail, version, seen)
+        expected = reference_block(planes, detail, version, seen, level=int(detail is False))
         table = encode_varint(len(expected))  # the chunk's table: its one block's length
         assert chunk == table + expected
-    if version == 7:  # the directional models were used: version 6 writes other bytes
+    if version >= 7:  # the directional models were used: version 6 writes other bytes
         assert seen["directional"] > 100 and seen["settled"] == 2
         assert encode_blocks(entries, True, 64, 6)[1] != chunks[1]
+    if version == 8:  # the priors were used: version 7 writes other bytes in both chunks
+        seven = encode_blocks(entries, True, 64, 7)
+        assert seven[0] != chunks[0] and seven[1] != chunks[1]

@@ -60,7 +60,7 @@ def _random_tables(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
             planes.append([0, rows - (k == 2), cols, 1, sibling, -1, -1, k])
         for r0 in range(0, rows, 4):
             for c0 in range(0, cols, 4):
-                blocks.append([first, len(planes), r0, c0, r0 + 4, c0 + 4])
+                blocks.append([first, len(planes), r0, c0, r0 + 4, c0 + 4, 1 - level])
         del level
     return np.array(planes, dtype=np.int64), np.array(blocks, dtype=np.int64)
 
@@ -75,7 +75,7 @@ def test_block_sizes_and_compact_tables_match_their_definition() -> None:
         offset = 0
         n = 0
         for k, b in enumerate(indices):
-            lo, hi, r0, c0, r1, c1 = blocks[b]
+            lo, hi, r0, c0, r1, c1, level = blocks[b]
             expected_size = 0
             for p in range(lo, hi):
                 height = max(0, min(r1, planes[p, kernels.P_ROWS]) - r0)
@@ -92,7 +92,7 @@ def test_block_sizes_and_compact_tables_match_their_definition() -> None:
                 offset += height * width
                 n += 1
             assert sizes[b] == expected_size
-            assert sub_blocks[k].tolist() == [n - (hi - lo), n, 0, 0, r1 - r0, c1 - c0]
+            assert sub_blocks[k].tolist() == [n - (hi - lo), n, 0, 0, r1 - r0, c1 - c0, level]
         assert total == offset == sizes[indices].sum()
 
 

@@ -100,13 +100,13 @@ def test_a_damaged_block_loses_only_itself(name: str, block: int) -> None:
 
 
 @pytest.mark.parametrize("name", ["grey lossy", "rgb lossy bspline2"])
-def test_a_damaged_block_of_version_7_takes_its_descendants(name: str) -> None:
-    """Version 7 (as 6) decodes a block from its parent block's values: under ``damaged="zero"`` a
-    damaged block of a coarser chunk is zeroed with its descendants (the same picture area,
-    at the finer levels), and nothing outside that area changes."""
+def test_a_damaged_block_of_version_8_takes_its_descendants(name: str) -> None:
+    """Version 8 (as 6 and 7) decodes a block from its parent block's values: under
+    ``damaged="zero"`` a damaged block of a coarser chunk is zeroed with its descendants (the
+    same picture area, at the finer levels), and nothing outside that area changes."""
     bundle = BUNDLES[name]
     parsed = read_bundle(bundle)
-    assert parsed.header["cparams"]["version"] == 7
+    assert parsed.header["cparams"]["version"] == 8
     chunk = len(parsed.chunks) - 2
     start, stop = _block_span(bundle, chunk, 0)
     damaged = bytearray(bundle)

@@ -220,8 +220,8 @@ def test_unknown_context_versions_are_refused() -> None:
     q = _laplace_bands(13)
     chunks, params = encode_levels(q)
     # 5 is the lossless coder's (wavecore.losslesscoder, encode_image(effort="max")); 6 the
-    # block coder with the parent band, 7 with orientation too.
-    for version in (1, 8, "3", None):
+    # block coder with the parent band, 7 with orientation too, 8 with priors by level.
+    for version in (1, 9, "3", None):
         with pytest.raises(BundleError, match="version"):
             decode_levels(chunks, _shapes(q), {**params, "version": version})
 

@@ -255,8 +255,9 @@ def test_bpp_in_open_loop_is_coded_once(calls: Calls, name: str, bpp: float) -> 
     # the noisy ramp at 0.25 bpp lands at 125 %, then 83 %, then 104 % of its budget, which
     # the trim brings in; the astronaut at 0.25 bpp lands at 84 %, then 105 %, trimmed to
     # 97.6 % as written (a trimmed bundle ends the search even where its written size is
-    # under the stop that size bounds need: it went on for 33 codings before).
-    extra = {("ramp", 0.25): 3, ("astronaut", 0.25): 2} if rdoq.ENABLED else {("camera", 2.0): 2}
+    # under the stop that size bounds need: it went on for 33 codings before).  With context
+    # coder version 8 the ramp needs one coding less (two).
+    extra = {("ramp", 0.25): 2, ("astronaut", 0.25): 2} if rdoq.ENABLED else {("camera", 2.0): 2}
     codings = extra.get((name, bpp), 1)
     assert calls.trial_codings == codings
     assert ratecontrol.coding_counts.full_codings == codings

@@ -1,4 +1,4 @@
-"""Compiled loops of the code-block coder (context coder versions 4, 6 and 7): see
+"""Compiled loops of the code-block coder (context coder versions 4, 6, 7 and 8): see
 ``blockcoder.py``.
 
 One binary range coder (LZMA's, with 15-bit adaptive probabilities) codes every block from
@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from ._blockpriors import PRIORS
 
 # Probabilities of a 0 bit, in units of 2**-PROB_BITS, adapted after every bit with a rate
 # that starts fast (a count-based estimate) and settles at 2**-RATE_LIMIT.
@@ -80,9 +82,12 @@ RATE = np.minimum(
 # Plane descriptor columns (``planes``): where the plane lives in ``flat`` and its context.
 P_OFFSET, P_ROWS, P_COLS, P_KIND, P_SIB1, P_SIB2, P_LUMA, P_ORIENT = range(8)
 PLANE_FIELDS = 8
-# Block descriptor columns (``blocks``): planes [lo, hi) of its level, and its region.
-B_PLANE_LO, B_PLANE_HI, B_ROW0, B_COL0, B_ROW1, B_COL1 = range(6)
-BLOCK_FIELDS = 6
+# Block descriptor columns (``blocks``): planes [lo, hi) of its level, its region, and its
+# level class (version 8's initial models: 0 for the finest level, 1 for the next, 2 for the
+# coarser ones and the approximation).
+B_PLANE_LO, B_PLANE_HI, B_ROW0, B_COL0, B_ROW1, B_COL1, B_LEVEL = range(7)
+BLOCK_FIELDS = 7
+LEVEL_CLASSES = 3
 
 
 # The range coder.  Its state lives in local variables of the block loops (helpers take it and
@@ -1088,6 +1093,10 @@ def _initial_models() -> np.ndarray:
 
 
 INITIAL_MODELS = _initial_models()
+#: Each block's starting models by the kernels' ``oriented`` argument and level class: row 0
+#: for versions 4, 6 and 7 (:data:`INITIAL_MODELS`), row ``1 + B_LEVEL`` for version 8 (its
+#: trained priors, :data:`wavecore._blockpriors.PRIORS`).
+STARTING_MODELS = np.concatenate([INITIAL_MODELS[None], PRIORS]).astype(np.int32)
 
 
 @njit(nogil=True, cache=True)
@@ -1102,8 +1111,11 @@ def _flags_size(planes, blocks, lo, hi):
 
 
 @njit(nogil=True, cache=True)
-def _fresh_models(models):
-    models[:] = INITIAL_MODELS
+def _fresh_models(models, oriented, block):
+    """A block's models at its start: version 8's priors of its level class, else
+    :data:`INITIAL_MODELS`."""
+    row = 1 + block[B_LEVEL] if oriented == 2 else 0
+    models[:] = STARTING_MODELS[row]
 
 
 @njit(nogil=True, cache=True)
@@ -1111,8 +1123,9 @@ def encode_span(flat, planes, parents, oriented, blocks, lo, hi):
     """Code blocks ``lo .. hi - 1``; return their bytes, concatenated, and each one's length.
 
     An all-zero block has length 0; any other block at least 1 byte.  ``parents``: each
-    plane's parent plane (-1: none; versions 6 and 7); ``oriented``: 1 for version 7 (the
-    directional zero-flag models of ``cH`` and ``cV``), else 0.
+    plane's parent plane (-1: none; versions 6, 7 and 8); ``oriented``: 1 for version 7 (the
+    directional zero-flag models of ``cH`` and ``cV``), 2 for version 8 (version 7 whose
+    blocks start from the priors of their level class, ``blocks[:, B_LEVEL]``), else 0.
     """
     # Room for 8 bits per position to begin with: a block that does not fit is coded again
     # from its start into a larger buffer, and at 2 bits per position (as before) every dense
@@ -1138,7 +1151,7 @@ def encode_span(flat, planes, parents, oriented, blocks, lo, hi):
         if _block_is_empty(flat, planes, blocks[b]):
             continue
         while True:
-            _fresh_models(models)
+            _fresh_models(models, oriented, blocks[b])
             end = _encode_block(
                 flat, planes, parents, oriented, blocks[b], out, pos, models, scratch, flags
             )
@@ -1174,7 +1187,7 @@ def decode_span(data, starts, lengths, planes, parents, oriented, blocks, flat, 
     for b in range(lo, hi):
         if lengths[b] == 0:
             continue
-        _fresh_models(models)
+        _fresh_models(models, oriented, blocks[b])
         bad += _decode_block(
             data,
             starts[b],

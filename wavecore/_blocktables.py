@@ -17,6 +17,7 @@ from numba import njit
 from ._blockkernels import (
     B_COL0,
     B_COL1,
+    B_LEVEL,
     B_PLANE_HI,
     B_PLANE_LO,
     B_ROW0,
@@ -172,4 +173,5 @@ def compact_tables(
         sub_blocks[k, B_COL0] = 0
         sub_blocks[k, B_ROW1] = r1 - r0
         sub_blocks[k, B_COL1] = c1 - c0
+        sub_blocks[k, B_LEVEL] = blocks[b, B_LEVEL]
     return sub_planes, sub_blocks, pieces, offset

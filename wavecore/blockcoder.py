@@ -1,4 +1,4 @@
-"""Code-blocks: the context coder's versions 4, 6 and 7.
+"""Code-blocks: the context coder's versions 4, 6, 7 and 8.
 
 Every level's bands are cut into blocks of ``block × block`` positions (``1 × block²`` for the
 1-D layouts of curves).  A block holds that region of *every* band and channel of the level
@@ -33,8 +33,12 @@ under the one that would have cost less so far in that plane of the block, which
 finds the same way (no side information).  Its blocks depend on their parent blocks as
 version 6's do.
 
-The bit-level specification is in ``docs/bundle-format.md`` (context coder versions 4, 6 and
-7).
+Version 8 (:data:`PRIOR_VERSION`) is version 7 whose blocks start from models trained per
+level class (the finest level, the next one, the coarser ones and the approximation:
+:mod:`wavecore._blockpriors`) instead of version 7's one hand-made start.
+
+The bit-level specification is in ``docs/bundle-format.md`` (context coder versions 4, 6, 7
+and 8).
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ __all__ = [
     "ORIENT_VERSION",
     "PARENT_VERSION",
     "PARENT_VERSIONS",
+    "PRIOR_VERSION",
     "CodedBlocks",
     "CodedChunk",
     "KnownBlocks",
@@ -91,8 +96,10 @@ BLOCK_SIZES = (16, 32, 64, 128, 256)
 PARENT_VERSION = 6
 #: Version 6 plus the directional zero-flag models of ``cH`` and ``cV``.
 ORIENT_VERSION = 7
+#: Version 7 whose blocks start from trained models of their level class.
+PRIOR_VERSION = 8
 #: The versions whose blocks read their parent blocks' values.
-PARENT_VERSIONS = (PARENT_VERSION, ORIENT_VERSION)
+PARENT_VERSIONS = (PARENT_VERSION, ORIENT_VERSION, PRIOR_VERSION)
 #: Runs of blocks per encode or decode, each its own task for the thread pool: blocks cost
 #: very unequal time (dense coarse blocks, nearly empty fine ones), so many small tasks handed
 #: to whichever thread is free keep both cores busy to the end (a few large tasks can leave
@@ -241,6 +248,8 @@ def _build_structure(
         table[:, kernels.B_COL0] = cols0.ravel()
         table[:, kernels.B_ROW1] = rows0.ravel() + block_rows
         table[:, kernels.B_COL1] = cols0.ravel() + block_cols
+        # Version 8's level class: 0 for the finest level (the last chunk), 1 the next, 2 the rest.
+        table[:, kernels.B_LEVEL] = min(len(layout) - 1 - index, kernels.LEVEL_CLASSES - 1)
         blocks.append(table)
         per_chunk.append(len(table))
     plane_table = np.array(planes, dtype=np.int64).reshape(-1, kernels.PLANE_FIELDS)
@@ -251,15 +260,15 @@ def _parents(
     layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block: int, version: int
 ) -> np.ndarray:
     """Each plane's parent plane for the coder's ``version`` (-1: none; every plane but of
-    versions 6 and 7): see :func:`_parent_tables`."""
+    versions 6, 7 and 8): see :func:`_parent_tables`."""
     if version not in PARENT_VERSIONS:
         return _no_parents(_structure(layout, two_d, block)[0].shape[0])
     return _parent_tables(_layout_key(layout), two_d, block)[0]
 
 
 def _oriented(version: int) -> int:
-    """The kernels' ``oriented`` argument: 1 for version 7, else 0."""
-    return int(version == ORIENT_VERSION)
+    """The kernels' ``oriented`` argument: 1 for version 7, 2 for version 8, else 0."""
+    return {ORIENT_VERSION: 1, PRIOR_VERSION: 2}.get(version, 0)
 
 
 @functools.lru_cache(maxsize=8)
@@ -269,7 +278,7 @@ def _no_parents(count: int) -> np.ndarray:
 
 
 def parent_blocks(layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block: int) -> np.ndarray:
-    """Each block's parent block under versions 6 and 7 (-1: none), in :func:`needed_blocks`' order.
+    """Each block's parent block under versions 6 to 8 (-1: none), in :func:`needed_blocks`' order.
 
     The parent block is the block of the previous chunk that holds every parent value of the
     block's detail values; it comes earlier in the order, so a pass from the last block to the
@@ -280,7 +289,7 @@ def parent_blocks(layout: Sequence[Sequence[Sequence[int]]], two_d: bool, block:
 
 
 def _parent_tables(layout: _LayoutKey, two_d: bool, block: int) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_parents` and :func:`parent_blocks` of versions 6 and 7, cached with the tables."""
+    """:func:`_parents` and :func:`parent_blocks` of versions 6 to 8, cached with the tables."""
     return _while_small(_cached_parent_tables, layout, two_d, block)
 
 
@@ -506,7 +515,7 @@ class CodedBlocks:
     :func:`encode_blocks` (their tables of block lengths say where each block's bytes are);
     :meth:`recode` codes the given blocks again from new integer bands, by the same compiled
     coder, so a block's bytes are exactly what :func:`encode_blocks` writes for its values
-    (under versions 6 and 7 with their child blocks, whose contexts read them); :meth:`chunks`
+    (under versions 6 to 8 with their child blocks, whose contexts read them); :meth:`chunks`
     puts the chunks back together.  ``regions[b]`` is block ``b``'s ``(entry, row0, col0,
     row1, col1)``: the positions it holds in every band (and channel) of layout entry
     ``entry``.
@@ -548,7 +557,7 @@ class CodedBlocks:
 
     def recode(self, entries: list[list[np.ndarray]], indices: np.ndarray) -> None:
         """Code blocks ``indices`` again from ``entries`` (integer bands of the same layout);
-        under versions 6 and 7 their child blocks too, whose contexts read their values."""
+        under versions 6 to 8 their child blocks too, whose contexts read their values."""
         indices = np.asarray(indices, dtype=np.int64)
         if indices.size == 0:
             return
@@ -637,7 +646,7 @@ def _with_parent_pieces(
     sub_planes: np.ndarray, pieces: np.ndarray, total: int, planes: np.ndarray, parents: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Compact tables (:func:`_compact_tables`) with, for each compact plane whose plane has a
-    parent (versions 6 and 7), a compact plane of the parent's values it reads, appended.
+    parent (versions 6 to 8), a compact plane of the parent's values it reads, appended.
 
     A block starts at even rows and columns, so its position ``(i, j)`` reads the parent's
     ``(i // 2, j // 2)`` from a compact parent plane anchored at half the block's corner, cut
@@ -741,6 +750,7 @@ def decode_blocks(
     *,
     skip: np.ndarray | None = None,
     version: int = 4,
+    chunks_total: int | None = None,
 ) -> list[list[np.ndarray]]:
     """Decode the chunks of :func:`encode_blocks` into ``int32`` bands of the ``layout``'s shapes.
 
@@ -752,10 +762,15 @@ def decode_blocks(
     skip : numpy.ndarray of bool, optional
         One flag per block of these chunks (in :func:`needed_blocks`' order): a flagged block is
         not decoded, its coefficients are zero (a region decode's unneeded blocks, or the
-        damaged blocks of ``decode(..., damaged="zero")``).  Under versions 6 and 7 the caller
+        damaged blocks of ``decode(..., damaged="zero")``).  Under versions 6 to 8 the caller
         skips no parent block of a block it decodes (see :func:`parent_blocks`).
     version : int
-        The context coder's version (4, :data:`PARENT_VERSION` or :data:`ORIENT_VERSION`).
+        The context coder's version (4, :data:`PARENT_VERSION`, :data:`ORIENT_VERSION` or
+        :data:`PRIOR_VERSION`).
+    chunks_total : int, optional
+        The number of chunks of the whole layout the encoder coded, when ``layout`` is only
+        its first chunks (a coarse level's decode): version 8's blocks start from the models
+        of their level counted from the *finest* chunk coded.  Default: ``len(layout)``.
 
     Raises
     ------
@@ -763,8 +778,17 @@ def decode_blocks(
         For a block table that does not add up to its chunk, or a block that decodes to
         something impossible.
     """
-    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip, version)
+    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip, version, chunks_total)
     return _bands_out(flat, planes, layout, two_d, total)
+
+
+def _level_classes(blocks: np.ndarray, per_chunk: Sequence[int], chunks_total: int) -> np.ndarray:
+    """A copy of the block table whose level classes count from the finest of
+    ``chunks_total`` chunks (the whole layout's), not of the ``len(per_chunk)`` given."""
+    index = np.repeat(np.arange(len(per_chunk)), per_chunk)
+    out = blocks.copy()
+    out[:, kernels.B_LEVEL] = np.minimum(chunks_total - 1 - index, kernels.LEVEL_CLASSES - 1)
+    return out
 
 
 def _decode_flat(
@@ -774,12 +798,15 @@ def _decode_flat(
     block: int,
     skip: np.ndarray | None,
     version: int,
+    chunks_total: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Every plane decoded into one flat ``int32`` array: ``(flat, plane table, size)``."""
     if block not in BLOCK_SIZES:
         msg = f"context coder block size {block!r} is not one of {BLOCK_SIZES}"
         raise BundleError(msg)
     planes, blocks, per_chunk, total, all_sizes = _structure_sizes(layout, two_d, block)
+    if chunks_total is not None and chunks_total != len(per_chunk):
+        blocks = _level_classes(blocks, per_chunk, chunks_total)
     per_chunk = per_chunk[: len(chunks)]
     parts, starts, lengths = [], [], []
     offset = 0
@@ -912,6 +939,7 @@ def decode_block_windows(
     windows: Sequence[Sequence[tuple[int, int, int, int]]],
     totals_for: Sequence[int] = (),
     version: int = 4,
+    chunks_total: int | None = None,
 ) -> tuple[list[list[np.ndarray]], dict[int, list[tuple[int, int]]]]:
     """:func:`decode_blocks` for a region: only ``windows`` of each band, and no more.
 
@@ -925,7 +953,7 @@ def decode_block_windows(
     totals_for : sequence of int
         Chunks whose bands' :func:`band_counts` over the whole band are wanted too (the
         chunks that do not store them: they are decoded whole, or not at all).
-    version : int
+    version, chunks_total : int
         As for :func:`decode_blocks`.
 
     Returns
@@ -933,7 +961,7 @@ def decode_block_windows(
     list, dict
         The windows, shaped like their bands but for the window's sizes, and the counts.
     """
-    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip, version)
+    flat, planes, total = _decode_flat(chunks, layout, two_d, block, skip, version, chunks_total)
     totals: dict[int, list[tuple[int, int]]] = {}
     p = 0
     for index, band_shapes in enumerate(layout):

@@ -630,7 +630,7 @@ def _delimited_length(view: memoryview, count: int) -> int | None:
 
 def self_delimiting_blocks(header: dict[str, Any]) -> list[int] | None:
     """How many code-blocks each chunk holds, when the header's coder writes chunks that
-    delimit themselves (the ``context`` coder, versions 4, 6 and 7: a chunk starts with the byte
+    delimit themselves (the ``context`` coder, versions 4, 6, 7 and 8: a chunk starts with the byte
     length of each of its blocks); else None.  Format 5.0 then stores no chunk lengths.
 
     Raises
@@ -638,7 +638,7 @@ def self_delimiting_blocks(header: dict[str, Any]) -> list[int] | None:
     BundleError
         If the header does not describe a consistent plan.
     """
-    if header["cparams"].get("version") not in (4, 6, 7):
+    if header["cparams"].get("version") not in (4, 6, 7, 8):
         return None
     layout = block_layout(header)
     return None if layout is None else layout[0]
@@ -752,11 +752,11 @@ def _checked_curve_bytes(packed: bytes, header: dict[str, Any], chunks: Sequence
 
 def _delimits_itself(header: dict[str, Any]) -> bool:
     """Whether 3.1 stores no chunk lengths for this header: the ``context`` coder in blocks
-    (versions 4 to 7, lossy and lossless), whose chunks start with their blocks' lengths."""
+    (versions 4 to 8, lossy and lossless), whose chunks start with their blocks' lengths."""
     cparams = header["cparams"]
     return (
         header["coder"] == "context"
-        and cparams.get("version") in (4, 5, 6, 7)
+        and cparams.get("version") in (4, 5, 6, 7, 8)
         and block_layout(header) is not None
     )
 
@@ -1169,7 +1169,7 @@ def _read_binary(reader: _Reader, major: int, minor: int) -> Bundle:
     if delimited and not _delimits_itself(header):
         msg = (
             "binary header field 'coder': code 3 (chunks that delimit themselves) needs the "
-            f"context coder in blocks (version 4, 5, 6 or 7), not {header['cparams']!r}"
+            f"context coder in blocks (version 4, 5, 6, 7 or 8), not {header['cparams']!r}"
         )
         raise BundleError(msg)
     lengths = (

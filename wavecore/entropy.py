@@ -40,6 +40,7 @@ from .blockcoder import (
     BLOCK_SIZE,
     ORIENT_VERSION,
     PARENT_VERSION,
+    PRIOR_VERSION,
     KnownBlocks,
     decode_blocks,
     encode_blocks,
@@ -293,11 +294,12 @@ _PARENT_SCALE = 18
 #: Version 3 adds the tile flags; version 4 codes independent code-blocks with a compiled
 #: binary range coder (:mod:`wavecore.blockcoder`); version 6 adds the parent band to its
 #: detail contexts; version 7 adds directional zero-flag models for ``cH`` and ``cV``, and is
-#: the default of two-dimensional layouts (one-dimensional ones, curves, keep version 4); the
-#: codec codes pictures with it and surfaces and grids with version 6
-#: (``codec.plan.Plan.context_version``).  Versions 2 to 4 and 6 still decode.
+#: the default of two-dimensional layouts (one-dimensional ones, curves, keep version 4);
+#: version 8 starts version 7's blocks from models trained per level class.  The codec codes
+#: pictures with version 8 and surfaces and grids with version 6
+#: (``codec.plan.Plan.context_version``).  Versions 2 to 4, 6 and 7 still decode.
 CONTEXT_VERSION = ORIENT_VERSION
-CONTEXT_VERSIONS = (2, 3, 4, PARENT_VERSION, ORIENT_VERSION)
+CONTEXT_VERSIONS = (2, 3, 4, PARENT_VERSION, ORIENT_VERSION, PRIOR_VERSION)
 #: Tiles of ``_TILE × _TILE`` detail coefficients: each is flagged as holding a nonzero value
 #: or not, and an all-zero tile costs nothing more (most of the finest levels, at most rates).
 _TILE = 8

@@ -131,6 +131,10 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             surface,
             {"closed": (True, False), "quality": 42.0},
         ),
+        # Context coder version 8 (version 7 whose blocks start from models trained per level
+        # class): version 7's two picture cases (surfaces stay on version 6).
+        "image_grey_u8_parent_ctx8": ("image", parent_picture, {"quality": 36.0}),
+        "image_rgb_u8_bpp_ctx8": ("image", rgb.clip(0, 255).astype(np.uint8), {"bpp": 8.0}),
         # A per-picture colour matrix (colour "klt:<m>": colour code 3 with weight 0 and nine
         # integers): a tinted picture, whose details the matrix decorrelates better than YCbCr.
         "image_rgb_u8_klt": ("image", tinted, {"quality": 38.0}),

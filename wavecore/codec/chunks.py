@@ -50,13 +50,13 @@ def block_coder(header: dict[str, Any]) -> tuple[bool, int, int] | None:
 def _parents_of(
     entries: list[list[tuple[int, ...]]], coder: tuple[bool, int, int]
 ) -> np.ndarray | None:
-    """Each block's parent block (versions 6 and 7), or None (blocks that depend on none)."""
+    """Each block's parent block (versions 6 to 8), or None (blocks that depend on none)."""
     two_d, block, version = coder
     return parent_blocks(entries, two_d, block) if version in PARENT_VERSIONS else None
 
 
 def _with_ancestors(wanted: np.ndarray, parent_of: np.ndarray | None) -> np.ndarray:
-    """``wanted`` and every ancestor of a wanted block (versions 6 and 7 decode a block from its
+    """``wanted`` and every ancestor of a wanted block (versions 6 to 8 decode a block from its
     parent block's values)."""
     if parent_of is None:
         return wanted
@@ -110,7 +110,14 @@ def chunk_block_info(
         k is None and n > 1 and i for i, (k, n) in enumerate(zip(known, counts, strict=True))
     )
     if missing:
-        levels = decode_blocks([bytes(c) for c in chunks], entries, two_d, block, version=version)
+        levels = decode_blocks(
+            [bytes(c) for c in chunks],
+            entries,
+            two_d,
+            block,
+            version=version,
+            chunks_total=len(plan.band_shapes()),
+        )
         known = [[band_counts(band) for band in bands] for bands in levels]
     return [(n, known[i] if n > 1 and i else None) for i, n in enumerate(counts)]
 
@@ -159,7 +166,7 @@ def decode_block_levels(
 
     Checks what it reads: a chunk of several blocks of a 3.0 bundle block by block (the needed
     blocks only), any other chunk whole.  ``damaged="zero"`` zeroes what fails its check
-    instead of raising (under versions 6 and 7 with the blocks that descend from it).
+    instead of raising (under versions 6 to 8 with the blocks that descend from it).
     """
     two_d, block, version = coder
     counts = block_counts(entries, two_d, block)
@@ -177,7 +184,11 @@ def decode_block_levels(
         else np.ones(sum(counts), dtype=bool)
     )
     chunks, skip, stored = _read_chunks(parsed, entries, counts, wanted, damaged, parent_of)
-    levels = decode_blocks(chunks, entries, two_d, block, skip=skip, version=version)
+    # Version 8's level classes count from the bundle's finest chunk, decoded or not.
+    whole = parsed.header["levels"] + 1
+    levels = decode_blocks(
+        chunks, entries, two_d, block, skip=skip, version=version, chunks_total=whole
+    )
     if uses_counts and skip.any():
         fill_stand_ins(levels, entries, two_d, block, skip, stored)
     out: list[Any] = []
@@ -194,9 +205,9 @@ def _read_chunks(
     damaged: str,
     parent_of: np.ndarray | None,
 ) -> tuple[list[bytes], np.ndarray, list[list[tuple[int, int]] | None]]:
-    """The chunks in the coder's form, the blocks to skip (unwanted, lost, or under versions 6-7
+    """The chunks in the coder's form, the blocks to skip (unwanted, lost, or under versions 6-8
     descended from a lost block), and each chunk's stored band counts (None where it stores
-    none or they are lost).  ``wanted`` holds the ancestors of what it holds (versions 6, 7)."""
+    none or they are lost).  ``wanted`` holds the ancestors of what it holds (versions 6 to 8)."""
     skip = ~wanted
     chunks: list[bytes] = []
     stored: list[list[tuple[int, int]] | None] = []
@@ -246,7 +257,15 @@ def decode_block_window(
     uses_counts = stages.quantizer.uses_band_counts
     missing = [i for i in range(1, len(entries)) if stored[i] is None] if uses_counts else []
     parts, totals = decode_block_windows(
-        chunks, entries, two_d, block, skip, cuts, missing, version=version
+        chunks,
+        entries,
+        two_d,
+        block,
+        skip,
+        cuts,
+        missing,
+        version=version,
+        chunks_total=parsed.header["levels"] + 1,
     )
     qcoeffs: list[Any] = [parts[0][0]]
     for index, bands in enumerate(parts[1:], start=1):

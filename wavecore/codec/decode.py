@@ -11,6 +11,7 @@ import numpy as np
 
 from .. import curvesets, grids
 from .. import lossless as _lossless
+from ..blockcoder import PRIOR_VERSION
 from ..bundle import Bundle, read_bundle
 from ..errors import BundleError, InvalidParameter
 from ..layout import band_names
@@ -269,7 +270,12 @@ def _decode(
             unpadded = dataclasses.replace(plan, pads=((0, 0),) * len(plan.axes))
             return np.ascontiguousarray(finish(unpadded, samples[steps], 0))
     with np.errstate(all="ignore"):
-        if coder is not None and (masks is not None or damaged != "strict" or parsed.block_checks):
+        # A coarse level of version 8 too: its blocks' starting models depend on how many
+        # chunks the encoder coded (decode_block_levels knows; the coder stage does not).
+        partial = coder is not None and coder[2] == PRIOR_VERSION and count < plan.levels + 1
+        if coder is not None and (
+            masks is not None or damaged != "strict" or parsed.block_checks or partial
+        ):
             qcoeffs = decode_block_levels(parsed, band_entries(shapes), coder, masks, damaged)
         else:
             qcoeffs = stages.coder.decode(whole_chunks(parsed, count, damaged), shapes)

@@ -1471,7 +1471,7 @@ def _sampled_ratio_at(encoder: _LossyEncoder, step: float, ratio: float) -> floa
     if alone:
         rdoq.adapt_deadzone(encoder.kept, qcoeffs, qparams, regions=regions[sample])
     coding_counts.sampled_blocks += int(sample.size)
-    # The plan's coder version (pictures 7, surfaces 6: a sampled block reads its parent).
+    # The plan's coder version (pictures 8, surfaces 6: a sampled block reads its parent).
     version = encoder.plan.context_version or CONTEXT_VERSION
     if encoder.reuse_sample and not alone:
         known = code_blocks(levels, True, DEFAULT_BLOCK, sample, version)
