@@ -98,10 +98,28 @@ def warm_up() -> None:
     _warm = True
 
 
-def _start_worker(memory_bytes: int) -> None:
-    """A worker's initializer: cap its address space, then warm up (unless forked warm)."""
+def worker_threads(concurrency: int) -> int:
+    """The library's threads in each worker: the cores shared out among the workers.
+
+    ``WAVECORE_THREADS`` set by the operator wins.  Otherwise each of ``concurrency`` workers
+    gets ``cores // concurrency`` threads (at least 1), so busy workers do not fight over the
+    cores: on 2 cores with 2 workers, one thread each gave 32 concurrent 512² encodes 1.9×
+    the throughput of one client in sequence, against 1.6× with two threads each
+    (``benchmarks/load.py``; docs/deploy.md).
+    """
+    with contextlib.suppress(ValueError):
+        if int(os.environ.get("WAVECORE_THREADS", "0")) > 0:
+            return int(os.environ["WAVECORE_THREADS"])
+    return max(1, (os.cpu_count() or 1) // max(1, concurrency))
+
+
+def _start_worker(memory_bytes: int, threads: int = 0) -> None:
+    """A worker's initializer: cap its address space, set the library's thread count
+    (:func:`worker_threads`), then warm up (unless forked warm)."""
     if memory_bytes > 0:
         resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
+    if threads > 0:  # read by the library at each call, so it holds from the first job
+        os.environ["WAVECORE_THREADS"] = str(threads)
     if not _warm:
         warm_up()
 
@@ -111,15 +129,56 @@ def _worker_pid(pause: float) -> int:
     return os.getpid()
 
 
+#: A worker gives its freed heap back only beyond this much: below it, the next job reuses the
+#: pages instead of faulting them in again (a 512² encode after a trim took 3-5 ms more, a
+#: fifth of its time), and an idle worker holds at most this much more than it needs.
+KEEP_FREE_BYTES = 64 << 20
+
+
+class _MallInfo2(ctypes.Structure):
+    """glibc's ``struct mallinfo2`` (glibc 2.33 and later): ten ``size_t`` counts."""
+
+    _fields_ = [
+        (name, ctypes.c_size_t)
+        for name in (
+            "arena",
+            "ordblks",
+            "smblks",
+            "hblks",
+            "hblkhd",
+            "usmblks",
+            "fsmblks",
+            "uordblks",
+            "fordblks",
+            "keepcost",
+        )
+    ]
+
+
+def free_heap_bytes() -> int | None:
+    """The free bytes glibc's heap holds (``fordblks``), or None where it cannot say."""
+    try:
+        mallinfo2 = ctypes.CDLL("libc.so.6").mallinfo2
+    except (OSError, AttributeError):
+        return None
+    mallinfo2.restype = _MallInfo2
+    return int(mallinfo2().fordblks)
+
+
 def _give_back_memory(collect: bool = True) -> None:
     """Return a job's freed memory to the system, so the worker idles small again.
 
     ``wavecore`` makes glibc keep freed arrays in its heap for the next coding
-    (``wavecore._heap``); ``malloc_trim`` gives them back.  ``collect`` first runs the garbage
-    collector, for a failed job whose arrays may sit in reference cycles.
+    (``wavecore._heap``); ``malloc_trim`` gives them back when more than
+    :data:`KEEP_FREE_BYTES` of it is free (always where glibc cannot say).  ``collect``
+    first runs the garbage collector, for a failed job whose arrays may sit in reference
+    cycles.
     """
     if collect:
         gc.collect()
+    free = free_heap_bytes()
+    if free is not None and free <= KEEP_FREE_BYTES:
+        return
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL("libc.so.6").malloc_trim(0)
 
@@ -188,7 +247,7 @@ class _SharedPools:
                 pool = ProcessPool(
                     max_workers=workers,
                     initializer=_start_worker,
-                    initargs=(memory_bytes,),
+                    initargs=(memory_bytes, worker_threads(workers)),
                     context=_context(),
                 )
             self._pools[key] = (pool, holders + hold)

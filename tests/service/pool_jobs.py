@@ -47,3 +47,21 @@ def allocate(pid_file: str, nbytes: int) -> int:
     Path(pid_file).write_text(str(os.getpid()))
     pieces = [np.ones(64 << 20, dtype=np.uint8) for _ in range(nbytes >> 26)]
     return len(pieces)
+
+
+def library_threads() -> str:
+    """The library's thread count as the worker's environment sets it."""
+    return os.environ.get("WAVECORE_THREADS", "")
+
+
+def encode_faults() -> int:
+    """The page faults of one 512² encode in this worker (the heap it finds decides them)."""
+    import resource
+
+    from skimage import data
+
+    import wavecore
+
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    wavecore.encode_image(data.camera())
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
