@@ -129,58 +129,46 @@ def _worker_pid(pause: float) -> int:
     return os.getpid()
 
 
-#: A worker gives its freed heap back only beyond this much: below it, the next job reuses the
-#: pages instead of faulting them in again (a 512² encode after a trim took 3-5 ms more, a
-#: fifth of its time), and an idle worker holds at most this much more than it needs.
+#: A worker gives its freed heap back only once it holds this much more than after its last
+#: trim: below that, the next job reuses the pages instead of faulting them in again (a 512²
+#: encode after a trim took 3-5 ms more, a fifth of its time), and an idle worker holds at
+#: most this much more than it needs.
 KEEP_FREE_BYTES = 64 << 20
+_trimmed_rss: int | None = None  # this worker's resident bytes right after its last trim
 
 
-class _MallInfo2(ctypes.Structure):
-    """glibc's ``struct mallinfo2`` (glibc 2.33 and later): ten ``size_t`` counts."""
-
-    _fields_ = [
-        (name, ctypes.c_size_t)
-        for name in (
-            "arena",
-            "ordblks",
-            "smblks",
-            "hblks",
-            "hblkhd",
-            "usmblks",
-            "fsmblks",
-            "uordblks",
-            "fordblks",
-            "keepcost",
-        )
-    ]
-
-
-def free_heap_bytes() -> int | None:
-    """The free bytes glibc's heap holds (``fordblks``), or None where it cannot say."""
+def resident_bytes() -> int | None:
+    """This process's resident memory (``/proc/self/statm``), or None where it cannot say."""
     try:
-        mallinfo2 = ctypes.CDLL("libc.so.6").mallinfo2
-    except (OSError, AttributeError):
+        with open("/proc/self/statm", "rb") as statm:
+            return int(statm.read().split()[1]) * resource.getpagesize()
+    except (OSError, ValueError, IndexError):
         return None
-    mallinfo2.restype = _MallInfo2
-    return int(mallinfo2().fordblks)
 
 
 def _give_back_memory(collect: bool = True) -> None:
     """Return a job's freed memory to the system, so the worker idles small again.
 
     ``wavecore`` makes glibc keep freed arrays in its heap for the next coding
-    (``wavecore._heap``); ``malloc_trim`` gives them back when more than
-    :data:`KEEP_FREE_BYTES` of it is free (always where glibc cannot say).  ``collect``
-    first runs the garbage collector, for a failed job whose arrays may sit in reference
-    cycles.
+    (``wavecore._heap``); ``malloc_trim`` gives them back once the worker holds more than
+    :data:`KEEP_FREE_BYTES` over what it held after its last trim (always where the resident
+    size is unknown).  The resident size, not the heap's free count, decides: after a trim
+    glibc still counts the pages it gave back as free.  ``collect`` first runs the garbage
+    collector, for a failed job whose arrays may sit in reference cycles.
     """
+    global _trimmed_rss
     if collect:
         gc.collect()
-    free = free_heap_bytes()
-    if free is not None and free <= KEEP_FREE_BYTES:
+    resident = resident_bytes()
+    if (
+        resident is not None
+        and _trimmed_rss is not None
+        and resident <= _trimmed_rss + KEEP_FREE_BYTES
+    ):
         return
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL("libc.so.6").malloc_trim(0)
+    _trimmed_rss = resident_bytes()
 
 
 class JobProblem(Exception):

@@ -65,3 +65,14 @@ def encode_faults() -> int:
     before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
     wavecore.encode_image(data.camera())
     return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+
+
+def encode_large() -> int:
+    """A 1024² RGB encode at 1 bpp: its freed heap is fragmented (glibc still counts some
+    85 MiB of it as free after a trim)."""
+    import numpy as np
+    from skimage import data
+
+    import wavecore
+
+    return len(wavecore.encode_image(np.tile(data.astronaut(), (2, 2, 1)), bpp=1.0))

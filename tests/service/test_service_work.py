@@ -165,17 +165,22 @@ async def test_a_worker_gives_a_finished_jobs_memory_back(tmp_path: Path) -> Non
     pool.processes.stop()
 
 
-async def test_a_worker_keeps_a_small_jobs_freed_heap_for_the_next() -> None:
+async def test_a_worker_keeps_a_small_jobs_freed_heap_for_the_next(tmp_path: Path) -> None:
     """Below KEEP_FREE_BYTES a job's freed heap is kept for the next one: trimmed after every
-    512² encode, the next encode faulted its pages in again (3-5 ms, a fifth of its time)."""
+    512² encode, the next encode faulted its pages in again (3-5 ms, a fifth of its time).
+    A large job in between is trimmed, and does not make every later job trim."""
     pool = WorkPool(Settings(concurrency=1))
     slot = pool.admit()
     assert slot is not None
     first = await pool.run(slot, pool_jobs.encode_faults)
     again = [await pool.run(slot, pool_jobs.encode_faults) for _ in range(3)]
+    assert await pool.run(slot, pool_jobs.allocate, str(tmp_path / "pid"), 192 << 20) == 3
+    assert await pool.run(slot, pool_jobs.encode_large) > 0
+    after_large = [await pool.run(slot, pool_jobs.encode_faults) for _ in range(3)]
     slot.release()
     pool.processes.stop()
     assert min(again) < 300, (first, again)
+    assert min(after_large) < 300, after_large
 
 
 @pytest.mark.slow
