@@ -56,6 +56,14 @@ import numpy as np
 
 from .colour import KLT_LIMIT, KLT_PREFIX, klt_matrix
 from .errors import BundleError
+from .restoration import (
+    CLASSES,
+    FILTERED_DTYPES,
+    TAPS,
+    check_restore,
+    colour_channels,
+    largest_activity,
+)
 from .varints import encode_varint, unzigzag, zigzag
 
 __all__ = ["MAX_VARINT_BYTES", "PinnedWeights", "pack", "unpack", "unpack_pinned", "weights_check"]
@@ -101,6 +109,10 @@ IN_EXTENSION = 2
 #: 3.0 reader refuses each one by name ("binary header field 'coder' … unknown code 3")
 #: before it reads the chunk table it would misread.
 DELIMITED_CONTEXT = 3
+#: The coder byte's version nibble 9: the context coder's version 8 (``RESTORED_BASE``) with a
+#: restoration record after the byte (the header's ``restore``: :mod:`wavecore.restoration`).
+#: A reader from before it names the coder version it does not know.
+RESTORED_VERSION, RESTORED_BASE = 9, 8
 
 #: The rounding the codec uses today; a flag stands for it.
 DEFAULT_ROUNDING = 0.27
@@ -433,6 +445,72 @@ def _compact_cparams(header: dict[str, Any]) -> bytes | None:
     return bytes([version | two_d << 4 | block_code << 5])
 
 
+def _pack_restore(header: dict[str, Any], cparams: bytes) -> bytes | None:
+    """The restoration record of ``header["restore"]`` (docs/bundle-format.md, "The
+    restoration record"), or None where it goes to the extension instead: no ``restore``, a
+    coder other than version 8, or a ``restore`` that :func:`restoration.check_restore`
+    refuses (the header check names it)."""
+    restore = header.get("restore")
+    if restore is None or len(cparams) != 1 or cparams[0] & 15 != RESTORED_BASE:
+        return None
+    try:
+        check_restore(header)
+    except BundleError:
+        return None
+    out = bytearray()
+    for item in restore:
+        if item is None:
+            out.append(0)
+            continue
+        out.append(sum(1 << c for c, taps in enumerate(item["taps"]) if taps is not None))
+        edges = item["edges"]
+        for low, high in zip([0, *edges[:-1]], edges, strict=True):
+            out += encode_varint(high - low)
+        bits = count = 0
+        for taps in item["taps"]:
+            for tap in taps or ():
+                bits |= (tap & 127) << count
+                count += 7
+        out += bits.to_bytes((count + 7) // 8, "little")
+    return bytes(out)
+
+
+def _unpack_restore(reader: _Reader, header: dict[str, Any]) -> list[Any]:
+    shape, dtype = header["shape"], header.get("dtype")
+    if len(shape) not in (2, 3) or dtype not in FILTERED_DTYPES:
+        raise reader.fail("cparams", "a restoration record in a header that is not a picture's")
+    largest = largest_activity(dtype)
+    restore: list[Any] = []
+    for _ in range(colour_channels(shape)):
+        mask = reader.byte("restore")
+        if mask >= 1 << CLASSES:
+            raise reader.fail("restore", f"class mask {mask} has bits beyond {CLASSES} classes")
+        if mask == 0:
+            restore.append(None)
+            continue
+        edges: list[int] = []
+        for _ in range(CLASSES - 1):
+            edges.append((edges[-1] if edges else 0) + reader.varint("restore", largest))
+        on = [bool(mask >> c & 1) for c in range(CLASSES)]
+        count = 7 * TAPS * sum(on)
+        bits = int.from_bytes(reader.take((count + 7) // 8, "restore"), "little")
+        if bits >> count:
+            raise reader.fail("restore", "the taps' padding bits are not zero")
+        taps: list[Any] = []
+        for c in range(CLASSES):
+            if not on[c]:
+                taps.append(None)
+                continue
+            row = []
+            for _ in range(TAPS):
+                value = bits & 127
+                row.append(value - 128 if value >= 64 else value)
+                bits >>= 7
+            taps.append(row)
+        restore.append({"edges": edges, "taps": taps})
+    return restore
+
+
 def default_cparams_for(boundary: Any) -> dict[str, Any]:
     """The coder parameters a 4.0 header stores in no bytes: the context coder's version 4
     with 128-sample blocks, two-dimensional when there are two axes."""
@@ -629,6 +707,10 @@ def pack(
     if coder_code == IN_EXTENSION:
         extension["coder"] = coder
     cparams = _compact_cparams(header) if coder_code != IN_EXTENSION else None
+    record = None if cparams is None or major >= 4 else _pack_restore(header, cparams)
+    if cparams is not None and record is not None:  # the version nibble says a record follows
+        cparams = bytes([cparams[0] & ~15 | RESTORED_VERSION]) + record
+        extension.pop("restore", None)
     if cparams is None:
         extension["cparams"] = header["cparams"]
         if major >= 4 and coder_code != IN_EXTENSION:
@@ -1036,6 +1118,9 @@ def _read_fields(reader: _Reader, major: int) -> tuple[dict[str, Any], bool, Pin
         if byte >> 5:
             cparams["block"] = 2 ** ((byte >> 5) + 3)
         header["cparams"] = cparams
+        if cparams["version"] == RESTORED_VERSION:
+            cparams["version"] = RESTORED_BASE
+            header["restore"] = _unpack_restore(reader, header)
     psnr_head = reader.varint("psnr", _MAX_NUMBER_HEAD)
     if psnr_head == 0:
         header["psnr"] = None

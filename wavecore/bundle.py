@@ -170,6 +170,7 @@ from ._blocktables import crc16
 from .blockcoder import BLOCK_SIZES, CHECK_BYTES, add_block_checks, block_table, strip_block_checks
 from .colour import KLT_PREFIX, klt_matrix
 from .errors import BundleError
+from .restoration import check_restore
 
 __all__ = [
     "COMPACT_MAGIC",
@@ -1579,6 +1580,8 @@ def check_header(header: Any) -> None:
         raise BundleError(msg)
     if "opaque" in header:
         _field(header, "opaque", bool)
+    if "restore" in header:
+        check_restore(header)
     if "scale" in header:
         scale = _field(header, "scale", int)
         if not -MAX_SCALE <= scale <= MAX_SCALE:

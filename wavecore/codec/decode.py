@@ -17,6 +17,7 @@ from ..errors import BundleError, InvalidParameter
 from ..layout import band_names
 from ..losslesscoder import LOSSLESS_VERSION
 from ..regions import band_masks, windowed_inverse
+from ..restoration import APRON, apply_restoration
 from ..threshold import check_share
 from .chunks import (
     band_entries,
@@ -184,7 +185,10 @@ def decode(
         msg = f"level {level} is deeper than the bundle's {plan.levels} levels"
         raise InvalidParameter(msg)
     slices = None if region is None else region_slices(plan, int(level), region)
+    restore = parsed.header.get("restore")
     try:
+        if restore is not None and level == 0 and (keep is None or keep >= 1.0):
+            return _restored(parsed, plan, restore, slices, damaged)
         return _decode(parsed, plan, keep, int(level), slices, damaged)
     except BundleError:
         raise
@@ -230,6 +234,28 @@ def decode_region(
     True
     """
     return decode(bundle, region=region, level=level, damaged=damaged)
+
+
+def _restored(
+    parsed: Bundle,
+    plan: Plan,
+    restore: list[Any],
+    slices: tuple[slice, ...] | None,
+    damaged: str,
+) -> np.ndarray:
+    """The full-resolution decode with the header's restoration filter applied
+    (:mod:`wavecore.restoration`).  A region is decoded with ``APRON`` samples more on each
+    side (within the picture), filtered, and cropped: the same samples as the whole picture's."""
+    if slices is None:
+        return apply_restoration(_decode(parsed, plan, None, 0, None, damaged), restore)
+    wider, inner = [], []
+    for s, size in zip(slices, plan.shape, strict=False):
+        last = s.start + (s.stop - s.start - 1) // s.step * s.step
+        start, stop = max(0, s.start - APRON), min(size, last + 1 + APRON)
+        wider.append(slice(start, stop))
+        inner.append(slice(s.start - start, last + 1 - start, s.step))
+    decoded = _decode(parsed, plan, None, 0, tuple(wider), damaged)
+    return np.ascontiguousarray(apply_restoration(decoded, restore)[tuple(inner)])
 
 
 def _decode(

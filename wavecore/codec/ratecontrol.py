@@ -45,6 +45,7 @@ from numba import njit
 
 from .. import rdoq
 from .._kernels import largest_scaled, log_histogram_counts, top_octave
+from ..binheader import RESTORED_BASE
 from ..blockcoder import BLOCK_SIZE as DEFAULT_BLOCK
 from ..blockcoder import PARENT_VERSIONS, CodedBlocks, KnownBlocks, block_lengths, code_blocks
 from ..bundle import read_bundle, write_bundle
@@ -62,6 +63,11 @@ from ..quantize import (
     dequantize_bands,
     quantize_bands,
     reconstruction_offset,
+)
+from ..restoration import (
+    FILTERED_DTYPES,
+    apply_restoration,
+    fit_restoration,
 )
 from ..threshold import remove_smallest
 from ..transform import run_rows, run_slices
@@ -322,6 +328,8 @@ class _LossyEncoder:
         #: key: a caller that needs what its bundle decodes to (the grids' bpp target) then
         #: need not decode it.  Off by default: a picture's reconstruction is large.
         self.keep_output = False
+        #: With ``keep_output``: the latest bundle, with the header and chunks it was written from.
+        self.parts: tuple[bytes, dict[str, Any], list[bytes]] | None = None
         self.output: tuple[tuple[float, float, bool], np.ndarray] | None = None
         self.assembled: tuple[bytes, tuple[float, float, bool], dict[str, Any]] | None = None
         #: The bpp sample's least stride over the blocks of its sampled levels: 1 takes every
@@ -592,6 +600,7 @@ class _LossyEncoder:
         bundle = write_bundle(header, chunks)
         if self.keep_output:
             self.assembled = (bundle, (step, self.kept_fraction, self._closed(closed)), qparams)
+            self.parts = (bundle, header, chunks)
         return bundle
 
     def bundle(self, step: float, closed: bool = True) -> bytes:
@@ -849,7 +858,9 @@ def _encode_lossy(
     and the step it predicts is solved for the budget itself (``_GRID_BPP_AIM``): the grids'
     choice; images keep the sample and aim they were tuned with."""
     encoder = _LossyEncoder(plan, original, transformed)
-    encoder.keep_output = outputs is not None
+    # Only a bpp target gains from the filter: a quality target is met without it.
+    restores = bpp is not None and keep is None and tolerance is None and _restorable(plan)
+    encoder.keep_output = outputs is not None or restores
     if half_sample:
         encoder.least_sample_stride = _GRID_SAMPLE_STRIDE
         encoder.whole_level_blocks = _GRID_WHOLE_LEVEL_BLOCKS
@@ -863,11 +874,68 @@ def _encode_lossy(
         bundle = _encode_to_tolerance(encoder, tolerance, low, high)
     elif bpp is not None:
         bundle = _encode_to_bpp(encoder, bpp, low, high)
+        if restores:  # in the bytes the rate control left free under the budget, if they suffice
+            pixels = plan.shape[0] * plan.shape[1]
+            bundle = _with_restoration(encoder, bundle, math.floor(bpp * pixels / 8.0))
     else:
         target = DEFAULT_QUALITY if quality is None else quality
         bundle = _encode_to_quality(encoder, target, low, high)
     if outputs is not None:
         outputs.append(encoder.output_of(bundle))
+    return bundle
+
+
+def _restorable(plan: _Plan) -> bool:
+    """Whether the encoder fits a restoration filter (:mod:`wavecore.restoration`): lossy
+    ``uint8`` and ``uint16`` pictures coded with the context coder's version 8."""
+    return (
+        plan.kind == "image"
+        and plan.dtype in FILTERED_DTYPES
+        and plan.context_version == RESTORED_BASE
+        and plan.scale == 0
+    )
+
+
+def _with_restoration(encoder: _LossyEncoder, bundle: bytes, limit: int) -> bytes:
+    """``bundle`` with a restoration filter in its header, fitted to what it decodes to, if
+    that lowers the error and fits in ``limit`` bytes (the classes that gain least are left
+    out until it does); else ``bundle``.  The header's ``psnr`` and ``max_error`` are then
+    the filtered picture's."""
+    plan = encoder.plan
+    if encoder.parts is None or encoder.parts[0] is not bundle:
+        return bundle  # (every path ends with a bundle of _assemble's: see its parts)
+    decoded = encoder.output_of(bundle)
+    if decoded is None:
+        decoded = decode(bundle)
+    gains: list[tuple[float, int, int]] = []
+    restore = fit_restoration(decoded, encoder.original, gains)
+    _, header, chunks = encoder.parts
+    weakest = sorted(gains, reverse=True)  # the smallest drop of the error first
+    while restore is not None:
+        # The size with this header's numbers: the filtered picture's take as many bytes, or
+        # one more at most (a margin of two keeps the last check from failing).
+        size = len(write_bundle(dict(header, restore=restore), chunks))
+        if size + 2 <= limit:
+            psnr, largest = _errors(plan, encoder.original, apply_restoration(decoded, restore))
+            before = header.get("psnr")
+            if psnr is None or before is None or psnr <= before:
+                return bundle
+            errors = {"psnr": psnr, "max_error": _unscaled(largest, plan.scale)}
+            restored = write_bundle(dict(header, restore=restore, **errors), chunks)
+            if len(restored) <= limit:
+                return restored
+            size = limit + 1
+        # Leave out the weakest classes, about 5 bytes each, until the rest fit.
+        for _ in range(max(1, (size + 2 - limit + 4) // 5)):
+            if not weakest:
+                return bundle
+            _, channel, klass = weakest.pop(0)
+            item = restore[channel]
+            item["taps"][klass] = None
+            if all(t is None for t in item["taps"]):
+                restore[channel] = None
+        if all(item is None for item in restore):
+            return bundle
     return bundle
 
 
