@@ -112,12 +112,8 @@ def test_regions_equal_the_crop_of_the_whole(camera_bundle: bytes, region: tuple
 
 def test_coarse_levels_and_keep_decode_without_the_filter(camera_bundle: bytes) -> None:
     parsed, plan = _open(camera_bundle)
-    assert np.array_equal(
-        wavecore.decode(camera_bundle, level=1), _decode(parsed, plan, None, 1)
-    )
-    assert np.array_equal(
-        wavecore.decode(camera_bundle, keep=0.5), _decode(parsed, plan, 0.5, 0)
-    )
+    assert np.array_equal(wavecore.decode(camera_bundle, level=1), _decode(parsed, plan, None, 1))
+    assert np.array_equal(wavecore.decode(camera_bundle, keep=0.5), _decode(parsed, plan, 0.5, 0))
 
 
 def test_record_round_trips_and_is_bounded(camera_bundle: bytes) -> None:
@@ -152,9 +148,7 @@ def test_colour_and_sixteen_bit_pictures_round_trip() -> None:
         ({"edges": [1, 2]}, "edges"),
     ],
 )
-def test_bad_records_are_refused_by_name(
-    camera_bundle: bytes, change: dict, problem: str
-) -> None:
+def test_bad_records_are_refused_by_name(camera_bundle: bytes, change: dict, problem: str) -> None:
     header = dict(read_bundle(camera_bundle).header)
     header["restore"] = [dict(header["restore"][0], **change)]
     with pytest.raises(BundleError, match=f"'restore' {problem}"):

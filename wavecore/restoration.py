@@ -28,6 +28,7 @@ see docs/benchmarks.md.  The bytes: docs/bundle-format.md, "The restoration reco
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -207,11 +208,7 @@ def _filter_rows(padded, activity, edges, taps, on, high, out, lo, hi):  # pragm
                     + taps[c, 4] * (padded[r + 1, q + 1] + padded[r - 1, q - 1] - x2)
                     + taps[c, 5] * (padded[r + 2, q] + padded[r - 2, q] - x2)
                 )
-                x += delta >> 7
-                if x < 0:
-                    x = 0
-                elif x > high:
-                    x = high
+                x = min(max(x + (delta >> 7), np.int64(0)), high)
             out[i, j] = x
 
 
@@ -294,21 +291,6 @@ def _activity(padded: np.ndarray) -> np.ndarray:
     return out
 
 
-def _filter_plane(padded: np.ndarray, item: dict[str, Any], high: int) -> np.ndarray:
-    activity = _activity(padded)
-    edges = np.array(item["edges"], dtype=np.int64)
-    rows = item["taps"]
-    taps = np.array([r if r is not None else [0] * TAPS for r in rows], dtype=np.int64)
-    on = np.array([r is not None for r in rows])
-    out = np.empty(activity.shape, dtype=np.int32)
-    run_rows(
-        lambda lo, hi: _filter_rows(padded, activity, edges, taps, on, high, out, lo, hi),
-        out.shape[0],
-        out.size,
-    )
-    return out
-
-
 def _planes(picture: np.ndarray) -> list[np.ndarray]:
     """The colour channels (all but alpha)."""
     if picture.ndim == 2:
@@ -349,9 +331,7 @@ def apply_restoration(picture: np.ndarray, restore: list[Any]) -> np.ndarray:
         taps = np.array([t if t is not None else [0] * TAPS for t in item["taps"]], np.int64)
         on = np.array([t is not None for t in item["taps"]])
         run_rows(
-            lambda lo, hi, c=channel, e=edges, t=taps, o=on: _restore_rows(
-                source, target, c, e, t, o, high, lo, hi
-            ),
+            functools.partial(_restore_rows, source, target, channel, edges, taps, on, high),
             rows,
             rows * picture.shape[1],
             per_thread=4,

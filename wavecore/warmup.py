@@ -24,6 +24,14 @@ from .codec import decode, encode_curve, encode_image, encode_surface
 from .curvesets import encode_curves
 from .grids import decode_grid, encode_grid
 from .multilevel import wavedec, wavedec2, wavedecn, waverec, waverec2, waverecn
+from .restoration import (
+    CLASSES,
+    FILTERED_DTYPES,
+    TAPS,
+    apply_restoration,
+    colour_channels,
+    fit_restoration,
+)
 
 IMAGE_DTYPES = ("uint8", "uint16", "int16", "float32", "float64")
 IMAGE_WAVELETS = ("bspline2", "cdf97", "haar")
@@ -79,6 +87,10 @@ def _images(dtype: str) -> Callable[[], None]:
                 _decode_every_way(encode_image(image, lossless=True))
                 # The opt-in lossless coder (wavecore.losslesscoder) has kernels of its own.
                 _decode_every_way(encode_image(image, lossless=True, effort="max"))
+            if dtype in FILTERED_DTYPES:  # the restoration filter's passes, fit and apply
+                fit_restoration(image, image[::-1].copy())
+                item = {"edges": [0, 1, 2], "taps": [[1] * TAPS] * CLASSES}
+                apply_restoration(image, [item] * colour_channels(image.shape))
         _decode_every_way(encode_image(image))  # the default, 40 dB
         decode(encode_image(image[..., :3], bpp=8.0))
         if dtype == "uint8":
