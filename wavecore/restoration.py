@@ -65,10 +65,10 @@ APRON = 3
 FILTERED_DTYPES = {"uint8": 255, "uint16": 65535}
 #: A class fits its taps from at least this many samples, else it has none.
 LEAST_CLASS_SAMPLES = 8 * TAPS
-#: The fit reads every row of a plane of up to this many samples, else every ``k``-th row
-#: (a 2048² plane: every 16th), which fits the taps as well at a fraction of the time.
+#: The fit reads every row of a picture of up to this many samples a channel, else a
+#: sample of its row blocks (:func:`_sample_blocks`).
 FIT_SAMPLES = 1 << 18
-_ROW_PIECES = 16  # fixed, so that the fit's sums do not depend on the thread count
+_FIT_BLOCK = 16
 
 
 def colour_channels(shape: Any) -> int:
@@ -147,22 +147,22 @@ def check_restore(header: dict[str, Any]) -> None:
 # mirrored Laplacian, as the extension is symmetric about every edge.
 
 
+# The passes compute in floats: float32 for uint8 pictures (every value, up to 6 · 64 · 1 020
+# + 64 for a filtered sample and 25 · 2 040 for an activity, is an integer below 2**24, so
+# exact), float64 for uint16 ones (below 2**53).  Numba widens int32 arithmetic to int64,
+# whose multiplications AVX2 lacks; float32 runs eight lanes wide.
+
+
 @njit(nogil=True, cache=True)
 def _laplacian_rows(padded, out, lo, hi):  # pragma: no cover - compiled
     """``out[a, b]``: the absolute Laplacian at picture sample ``(a − 2, b − 2)``."""
     cols = out.shape[1]
     for a in range(lo, hi):
-        i = a + 1
+        up, row, down = padded[a], padded[a + 1], padded[a + 2]
+        target = out[a]
         for b in range(cols):
             j = b + 1
-            v = (
-                4 * padded[i, j]
-                - padded[i - 1, j]
-                - padded[i + 1, j]
-                - padded[i, j - 1]
-                - padded[i, j + 1]
-            )
-            out[a, b] = v if v >= 0 else -v
+            target[b] = abs(4 * row[j] - up[j] - down[j] - row[j - 1] - row[j + 1])
 
 
 @njit(nogil=True, cache=True)
@@ -170,57 +170,77 @@ def _box_rows(lap, out, lo, hi):  # pragma: no cover - compiled
     """``out[i, j]``: the sum of ``lap`` over the 5 × 5 samples around picture sample
     ``(i, j)``, for rows ``lo`` to ``hi``."""
     cols = out.shape[1]
-    sums = np.empty((hi - lo + 4, cols), dtype=np.int32)
+    sums = np.empty((hi - lo + 4, cols), dtype=out.dtype)
     for a in range(hi - lo + 4):
+        row = lap[lo + a]
+        target = sums[a]
         for j in range(cols):
-            r = lo + a
-            sums[a, j] = lap[r, j] + lap[r, j + 1] + lap[r, j + 2] + lap[r, j + 3] + lap[r, j + 4]
+            target[j] = row[j] + row[j + 1] + row[j + 2] + row[j + 3] + row[j + 4]
     for a in range(hi - lo):
+        s0, s1, s2, s3, s4 = sums[a], sums[a + 1], sums[a + 2], sums[a + 3], sums[a + 4]
+        target = out[lo + a]
         for j in range(cols):
-            out[lo + a, j] = (
-                sums[a, j] + sums[a + 1, j] + sums[a + 2, j] + sums[a + 3, j] + sums[a + 4, j]
-            )
+            target[j] = s0[j] + s1[j] + s2[j] + s3[j] + s4[j]
 
 
 @njit(nogil=True, cache=True)
-def _class_of(a, e0, e1, e2):  # pragma: no cover - compiled
-    return (a >= e0) + (a >= e1) + (a >= e2)
-
-
-@njit(nogil=True, cache=True)
-def _filter_rows(padded, activity, edges, taps, on, high, out, lo, hi):  # pragma: no cover
+def _filter_rows(padded, activity, edges, taps, constants, out, lo, hi):  # pragma: no cover
+    """The filter on rows ``lo`` to ``hi``: ``taps`` is (6, 4), a class's column zero where it
+    has none; ``constants`` is (0, 64, 1/128, the dtype's largest value); ``edges``, ``taps``
+    and ``constants`` of the planes' float type.  Each row takes one
+    pass per filtered class with that class's taps as constants, kept where the sample is of
+    the class: no branches, so the compiler vectorises it."""
     cols = out.shape[1]
     e0, e1, e2 = edges[0], edges[1], edges[2]
+    # Constants of the planes' float type: a float64 literal would widen float32 arithmetic.
+    zero, half, scale, high = constants[0], constants[1], constants[2], constants[3]
+    classes = np.empty(cols, dtype=np.int32)
     for i in range(lo, hi):
-        r = i + 3
+        up2, up, row, down, down2 = (
+            padded[i + 1],
+            padded[i + 2],
+            padded[i + 3],
+            padded[i + 4],
+            padded[i + 5],
+        )
+        level = activity[i]
+        target = out[i]
         for j in range(cols):
-            q = j + 3
-            x = np.int64(padded[r, q])
-            c = _class_of(activity[i, j], e0, e1, e2)
-            if on[c]:
-                x2 = 2 * x
+            a = level[j]
+            classes[j] = (a >= e0) + (a >= e1) + (a >= e2)
+            target[j] = row[j + 3]
+        for c in range(taps.shape[1]):
+            k0, k1, k2 = taps[0, c], taps[1, c], taps[2, c]
+            k3, k4, k5 = taps[3, c], taps[4, c], taps[5, c]
+            if k0 == 0 and k1 == 0 and k2 == 0 and k3 == 0 and k4 == 0 and k5 == 0:
+                continue
+            for j in range(cols):
+                q = j + 3
+                x = row[q]
+                x2 = x + x
                 delta = (
-                    64
-                    + taps[c, 0] * (padded[r, q + 1] + padded[r, q - 1] - x2)
-                    + taps[c, 1] * (padded[r, q + 2] + padded[r, q - 2] - x2)
-                    + taps[c, 2] * (padded[r + 1, q - 1] + padded[r - 1, q + 1] - x2)
-                    + taps[c, 3] * (padded[r + 1, q] + padded[r - 1, q] - x2)
-                    + taps[c, 4] * (padded[r + 1, q + 1] + padded[r - 1, q - 1] - x2)
-                    + taps[c, 5] * (padded[r + 2, q] + padded[r - 2, q] - x2)
+                    half
+                    + k0 * (row[q + 1] + row[q - 1] - x2)
+                    + k1 * (row[q + 2] + row[q - 2] - x2)
+                    + k2 * (down[q - 1] + up[q + 1] - x2)
+                    + k3 * (down[q] + up[q] - x2)
+                    + k4 * (down[q + 1] + up[q - 1] - x2)
+                    + k5 * (down2[q] + up2[q] - x2)
                 )
-                x = min(max(x + (delta >> 7), np.int64(0)), high)
-            out[i, j] = x
+                value = x + np.floor(delta * scale)
+                value = zero if value < zero else value
+                value = high if value > high else value
+                target[j] = value if classes[j] == c else target[j]
 
 
 @njit(nogil=True, cache=True)
-def _fit_sums(padded, target, activity, edges, sums, lo, hi, stride):  # pragma: no cover
+def _fit_sums(padded, target, activity, edges, sums, lo, hi):  # pragma: no cover - compiled
     """Per class ``c``, in ``sums[c]``: the upper triangle of the pair terms' Gram matrix (21),
-    their products with ``target − x`` (6), and the count; from the rows ``lo``, ``lo +
-    stride``, … below ``hi``."""
+    their products with ``target − x`` (6), and the count, over rows ``lo`` to ``hi``."""
     cols = target.shape[1]
     e0, e1, e2 = edges[0], edges[1], edges[2]
     t = np.empty(6)
-    for i in range(lo, hi, stride):
+    for i in range(lo, hi):
         r = i + 3
         for j in range(cols):
             q = j + 3
@@ -233,7 +253,8 @@ def _fit_sums(padded, target, activity, edges, sums, lo, hi, stride):  # pragma:
             t[4] = padded[r + 1, q + 1] + padded[r - 1, q - 1] - x2
             t[5] = padded[r + 2, q] + padded[r - 2, q] - x2
             error = target[i, j] - x
-            row = sums[_class_of(activity[i, j], e0, e1, e2)]
+            a = activity[i, j]
+            row = sums[(a >= e0) + (a >= e1) + (a >= e2)]
             n = 0
             for k in range(6):
                 tk = t[k]
@@ -253,54 +274,52 @@ def _mirror(k, n):  # pragma: no cover - compiled
 
 
 @njit(nogil=True, cache=True)
-def _restore_rows(picture, out, channel, edges, taps, on, high, lo, hi):  # pragma: no cover
-    """Rows ``lo`` to ``hi`` of one channel of ``picture`` (rows, cols, channels), filtered
-    into ``out``: the padded rows they need, their activity and the filter, in one block."""
+def _pad_block(picture, channel, lo, padded):  # pragma: no cover - compiled
+    """Rows ``lo − APRON`` on of one channel of ``picture`` (rows, cols, channels), mirrored
+    beyond its edges, into ``padded`` (``count + 2 · APRON`` rows, ``cols + 2 · APRON``)."""
     rows, cols = picture.shape[0], picture.shape[1]
-    count = hi - lo
-    padded = np.empty((count + 2 * APRON, cols + 2 * APRON), dtype=np.int32)
-    for a in range(count + 2 * APRON):
+    for a in range(padded.shape[0]):
         i = _mirror(lo - APRON + a, rows)
         for b in range(APRON):
             padded[a, b] = picture[i, _mirror(b - APRON, cols), channel]
             padded[a, cols + APRON + b] = picture[i, _mirror(cols + b, cols), channel]
         for j in range(cols):
             padded[a, APRON + j] = picture[i, j, channel]
-    lap = np.empty((count + 4, cols + 4), dtype=np.int32)
+
+
+@njit(nogil=True, cache=True)
+def _block(picture, channel, lo, hi, like):  # pragma: no cover - compiled
+    """Rows ``lo`` to ``hi`` of one channel, padded, and their activity, in ``like``'s
+    dtype (:func:`_work_dtype`)."""
+    cols = picture.shape[1]
+    count = hi - lo
+    padded = np.empty((count + 2 * APRON, cols + 2 * APRON), dtype=like.dtype)
+    _pad_block(picture, channel, lo, padded)
+    lap = np.empty((count + 4, cols + 4), dtype=like.dtype)
     _laplacian_rows(padded, lap, 0, count + 4)
-    activity = np.empty((count, cols), dtype=np.int32)
+    activity = np.empty((count, cols), dtype=like.dtype)
     _box_rows(lap, activity, 0, count)
-    filtered = np.empty((count, cols), dtype=np.int32)
-    _filter_rows(padded, activity, edges, taps, on, high, filtered, 0, count)
-    for a in range(count):
-        for j in range(cols):
+    return padded, activity
+
+
+@njit(nogil=True, cache=True)
+def _restore_rows(picture, out, channel, edges, taps, constants, lo, hi):  # pragma: no cover
+    """Rows ``lo`` to ``hi`` of one channel of ``picture`` (rows, cols, channels), filtered
+    into ``out``: the padded rows they need, their activity and the filter, in one block."""
+    padded, activity = _block(picture, channel, lo, hi, taps)
+    filtered = np.empty(activity.shape, dtype=taps.dtype)
+    _filter_rows(padded, activity, edges, taps, constants, filtered, 0, hi - lo)
+    for a in range(hi - lo):
+        for j in range(activity.shape[1]):
             out[lo + a, j, channel] = filtered[a, j]
 
 
-# --- the planes -------------------------------------------------------------------------
+# --- the pictures -----------------------------------------------------------------------
 
 
-def _activity(padded: np.ndarray) -> np.ndarray:
-    """Each sample's sum of absolute Laplacians over its 5 × 5 neighbourhood, from the plane
-    padded by :data:`APRON` (int32, the plane's shape)."""
-    rows, cols = padded.shape[0] - 2 * APRON, padded.shape[1] - 2 * APRON
-    lap = np.empty((rows + 4, cols + 4), dtype=np.int32)
-    run_rows(lambda lo, hi: _laplacian_rows(padded, lap, lo, hi), rows + 4, lap.size)
-    out = np.empty((rows, cols), dtype=np.int32)
-    run_rows(lambda lo, hi: _box_rows(lap, out, lo, hi), rows, out.size)
-    return out
-
-
-def _planes(picture: np.ndarray) -> list[np.ndarray]:
-    """The colour channels (all but alpha)."""
-    if picture.ndim == 2:
-        return [picture]
-    return [picture[..., c] for c in range(colour_channels(picture.shape))]
-
-
-def _padded(plane: np.ndarray) -> np.ndarray:
-    """``plane`` as int32, padded by :data:`APRON` mirrored samples on every side."""
-    return np.pad(plane.astype(np.int32), APRON, mode="symmetric")
+def _work_dtype(dtype: np.dtype[Any]) -> type[np.floating[Any]]:
+    """The float type the passes compute in for a picture of ``dtype`` (exact: see above)."""
+    return np.float32 if dtype == np.uint8 else np.float64
 
 
 def apply_restoration(picture: np.ndarray, restore: list[Any]) -> np.ndarray:
@@ -320,6 +339,7 @@ def apply_restoration(picture: np.ndarray, restore: list[Any]) -> np.ndarray:
         The filtered picture, of ``picture``'s shape and dtype.
     """
     high = int(np.iinfo(picture.dtype).max)
+    work = _work_dtype(picture.dtype)
     out = picture.copy()
     source = picture[..., np.newaxis] if picture.ndim == 2 else picture
     target = out[..., np.newaxis] if out.ndim == 2 else out
@@ -327,11 +347,11 @@ def apply_restoration(picture: np.ndarray, restore: list[Any]) -> np.ndarray:
     for channel, item in enumerate(restore):
         if item is None:
             continue
-        edges = np.array(item["edges"], dtype=np.int64)
-        taps = np.array([t if t is not None else [0] * TAPS for t in item["taps"]], np.int64)
-        on = np.array([t is not None for t in item["taps"]])
+        edges = np.array(item["edges"], dtype=work)
+        taps = _tap_table(item["taps"], work)
+        constants = _constants(work, high)
         run_rows(
-            functools.partial(_restore_rows, source, target, channel, edges, taps, on, high),
+            functools.partial(_restore_rows, source, target, channel, edges, taps, constants),
             rows,
             rows * picture.shape[1],
             per_thread=4,
@@ -345,64 +365,94 @@ def fit_restoration(
     """The ``restore`` filters that take ``decoded`` closer to ``original`` (both ``uint8`` or
     ``uint16``, the same shape), or None where no class of any channel gains.
 
-    Per colour channel: the activity's quartiles as the class edges, then per class the
-    least-squares taps, rounded to 1/128; a class keeps them only if they lower its squared
-    error (as the Gram matrix predicts it).  The caller measures the filtered picture.
+    Per colour channel, from a sample of its rows (:func:`_sample_blocks`): the activity's
+    quartiles as the class edges, then per class the least-squares taps, rounded to 1/128;
+    a class keeps them only if, applied as the decoder applies them (integers), they lower
+    its squared error on the sample.  The caller measures the whole filtered picture.
     ``gains``, if given, receives ``(change of squared error, channel, class)`` for each class
     kept (the change is negative), so that a caller short of bytes can drop the weakest.
     """
+    source = decoded[..., np.newaxis] if decoded.ndim == 2 else decoded
+    target = original[..., np.newaxis] if original.ndim == 2 else original
+    high = int(np.iinfo(decoded.dtype).max)
+    blocks = _sample_blocks(decoded.shape[0], decoded.shape[1])
     result: list[Any] = []
-    high = largest_activity(decoded.dtype.name)
-    for plane, target in zip(_planes(decoded), _planes(original), strict=True):
-        padded = _padded(plane)
-        activity = _activity(padded)
-        edges = np.quantile(activity[::2, ::2], (0.25, 0.5, 0.75), method="lower")
-        changes: list[float] = []
-        item = _fit_plane(padded, target, activity, [min(int(e), high) for e in edges], changes)
+    for channel in range(colour_channels(decoded.shape)):
+        item = _fit_channel(source, target, channel, blocks, high, gains)
         result.append(item)
-        if gains is not None and item is not None:
-            channel = len(result) - 1
-            gains.extend((changes[c], channel, c) for c in range(CLASSES) if item["taps"][c])
     return result if any(item is not None for item in result) else None
 
 
-def _fit_plane(
-    padded: np.ndarray,
+def _sample_blocks(rows: int, cols: int) -> list[tuple[int, int]]:
+    """The row blocks a fit reads: every block of :data:`_FIT_BLOCK` rows of a picture of up
+    to :data:`FIT_SAMPLES` samples a channel, else every ``k``-th (a 2048² picture: every
+    16th), which fits the taps as well at a fraction of the time."""
+    step = max(1, (rows * cols) // FIT_SAMPLES)
+    starts = range(0, rows, _FIT_BLOCK * step)
+    return [(lo, min(lo + _FIT_BLOCK, rows)) for lo in starts]
+
+
+def _fit_channel(
+    source: np.ndarray,
     target: np.ndarray,
-    activity: np.ndarray,
-    edges: list[int],
-    changes: list[float],
+    channel: int,
+    blocks: list[tuple[int, int]],
+    high: int,
+    gains: list[tuple[float, int, int]] | None,
 ) -> dict[str, Any] | None:
-    rows = target.shape[0]
-    bounds = np.linspace(0, rows, min(rows, _ROW_PIECES) + 1).astype(int)
-    pieces = len(bounds) - 1
-    sums = np.zeros((pieces, CLASSES, 28))
-    edge_array = np.array(edges, dtype=np.int64)
-
-    stride = max(1, target.size // FIT_SAMPLES)
-
-    def piece(lo: int, hi: int) -> None:
-        for p in range(lo, hi):
-            first = bounds[p] + (-bounds[p]) % stride  # the rows 0, stride, 2 · stride, …
-            _fit_sums(padded, target, activity, edge_array, sums[p], first, bounds[p + 1], stride)
-
-    run_rows(piece, pieces, target.size, pieces=pieces)
-    total = sums.sum(axis=0)
+    work = _work_dtype(source.dtype)
+    like = np.empty(0, dtype=work)
+    made = [_block(source, channel, lo, hi, like) for lo, hi in blocks]
+    sampled = np.concatenate([activity.ravel() for _, activity in made])
+    quartiles = np.quantile(sampled, (0.25, 0.5, 0.75), method="lower")
+    edges = [min(int(e), largest_activity(source.dtype.name)) for e in quartiles]
+    edge_array = np.array(edges, dtype=work)
+    sums = np.zeros((CLASSES, 28))
+    for (lo, hi), (padded, activity) in zip(blocks, made, strict=True):
+        _fit_sums(padded, target[lo:hi, :, channel], activity, edge_array, sums, 0, hi - lo)
     upper = np.triu_indices(TAPS)
     taps: list[list[int] | None] = []
     for c in range(CLASSES):
         gram = np.zeros((TAPS, TAPS))
-        gram[upper] = total[c, :21]
+        gram[upper] = sums[c, :21]
         gram = gram + np.triu(gram, 1).T
-        found = _class_taps(gram, total[c, 21:27], int(total[c, 27]))
-        taps.append(None if found is None else found[0])
-        changes.append(0.0 if found is None else found[1])
+        taps.append(_class_taps(gram, sums[c, 21:27], int(sums[c, 27])))
     if all(t is None for t in taps):
         return None
-    return {"edges": edges, "taps": taps}
+    # What the taps change, as the decoder applies them, on the sample.
+    table = _tap_table(taps, work)
+    constants = _constants(work, high)
+    changes = np.zeros(CLASSES)
+    for (lo, hi), (padded, activity) in zip(blocks, made, strict=True):
+        filtered = np.empty(activity.shape, dtype=work)
+        _filter_rows(padded, activity, edge_array, table, constants, filtered, 0, hi - lo)
+        wanted = target[lo:hi, :, channel].astype(np.int64)
+        before = padded[APRON:-APRON, APRON:-APRON].astype(np.int64) - wanted
+        after = filtered.astype(np.int64) - wanted
+        classes = np.searchsorted(edge_array, activity, side="right")
+        changes += np.bincount(
+            classes.ravel(), weights=(after * after - before * before).ravel(), minlength=CLASSES
+        )
+    kept = [t if t is not None and changes[c] < 0 else None for c, t in enumerate(taps)]
+    if all(t is None for t in kept):
+        return None
+    if gains is not None:
+        channel_gains = [(float(changes[c]), channel, c) for c in range(CLASSES) if kept[c]]
+        gains.extend(channel_gains)
+    return {"edges": edges, "taps": kept}
 
 
-def _class_taps(gram: np.ndarray, rhs: np.ndarray, count: int) -> tuple[list[int], float] | None:
+def _constants(work: type[np.floating[Any]], high: int) -> np.ndarray:
+    """:func:`_filter_rows`' constants."""
+    return np.array([0.0, 64.0, 1.0 / (1 << TAP_SHIFT), high], dtype=work)
+
+
+def _tap_table(taps: list[Any], work: type[np.floating[Any]]) -> np.ndarray:
+    """The kernels' (6, 4) table: column ``c`` holds class ``c``'s taps, or zeros."""
+    return np.array([t if t is not None else [0] * TAPS for t in taps], dtype=work).T.copy()
+
+
+def _class_taps(gram: np.ndarray, rhs: np.ndarray, count: int) -> list[int] | None:
     if count < LEAST_CLASS_SAMPLES:
         return None
     try:
@@ -411,10 +461,5 @@ def _class_taps(gram: np.ndarray, rhs: np.ndarray, count: int) -> tuple[list[int
         return None
     if not np.all(np.isfinite(solution)):
         return None
-    scale = 1 << TAP_SHIFT
-    taps = np.clip(np.rint(solution * scale), TAP_MIN, TAP_MAX)
-    # The change of the class's squared error with these taps, before the integer rounding.
-    change = float(taps @ gram @ taps) / scale**2 - 2.0 * float(taps @ rhs) / scale
-    if not change < 0.0 or not taps.any():
-        return None
-    return [int(t) for t in taps], change
+    taps = np.clip(np.rint(solution * (1 << TAP_SHIFT)), TAP_MIN, TAP_MAX)
+    return [int(t) for t in taps] if taps.any() else None
