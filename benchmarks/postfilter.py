@@ -4,6 +4,11 @@ An experiment harness, not part of the library (no test runs it).  Run with
 ``.venv/bin/python benchmarks/postfilter.py [capture|measure|cost]`` (``capture`` first, a
 few minutes: it keeps the decoded pictures in ``/tmp/postfilter_capture.npz``).
 
+Built since 2026-12-07, in the form ``dia5c4`` over the uint8 output (the ``u8`` column), as
+:mod:`wavecore.restoration`: the spec is docs/bundle-format.md's "The restoration record",
+what it gains docs/benchmarks.md's paragraph after the fair-peers table.  ``capture`` turns
+the library's filter off, so that this harness still measures a filter on plain bundles.
+
 ``capture`` codes the tuning pictures (camera, moon, coins, brick in grey, astronaut in
 colour) with ``wavecore.encode_image(image, wavelet="cdf97", bpp=r)`` at the peers' 7 exact
 rates (``peers.EXACT_RATES``, log-spaced over 0.25–2 bpp) and keeps each bundle, its size
@@ -147,6 +152,11 @@ SCALE, BITS = 128, 7
 
 
 def capture(images: tuple[str, ...] = IMAGES) -> None:
+    # The bundles without the library's own restoration filter (wavecore.restoration, built
+    # from this harness's ``dia5c4`` since 2026-12-07), so that the oracle measures as before.
+    from wavecore.codec import ratecontrol
+
+    ratecontrol._restorable = lambda plan: False  # type: ignore[assignment]
     arrays: dict[str, np.ndarray] = {}
     for name in images:
         image = getattr(data, name)()

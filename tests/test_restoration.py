@@ -91,6 +91,7 @@ def test_encoder_writes_a_filter_that_pays(camera_bundle: bytes) -> None:
 
     assert psnr(out) > psnr(plain)
     info = wavecore.inspect(camera_bundle)
+    assert info["restored"]
     assert info["psnr"] == np.floor(psnr(out) * 1e4) / 1e4
     assert info["max_error"] == np.max(np.abs(out.astype(int) - camera))
     assert len(camera_bundle) <= 0.5 * camera.size / 8
@@ -183,6 +184,7 @@ def test_no_filter_without_a_fitting_target() -> None:
         wavecore.encode_image(image, wavelet="cdf97", bpp=0.05),  # too small a budget
     ):
         assert "restore" not in read_bundle(bundle).header
+        assert not wavecore.inspect(bundle)["restored"]
 
 
 def test_thread_count_does_not_change_the_bytes(monkeypatch: pytest.MonkeyPatch) -> None:

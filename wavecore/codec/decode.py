@@ -339,8 +339,9 @@ def inspect(bundle: Any) -> dict[str, Any]:
         coded under, ``0`` for all but huge or tiny floats), ``bpp`` (images),
         ``level_shapes`` (the shape ``decode(level=k)`` returns, for each ``k``), ``chunks``
         (one entry per chunk, coarse to fine: its resolution ``level``, its subband
-        ``shapes``, its ``bytes`` and whether it is ``present``), and ``header`` (the raw
-        header).
+        ``shapes``, its ``bytes`` and whether it is ``present``), ``restored`` (whether a
+        full-resolution decode applies a restoration filter: :mod:`wavecore.restoration`),
+        and ``header`` (the raw header).
 
     Examples
     --------
@@ -397,6 +398,7 @@ def inspect(bundle: Any) -> dict[str, Any]:
         "header_bytes": total - payload,
         "chunks": chunks,
         "level_shapes": [level_shape(plan, k) for k in range(plan.levels + 1)],
+        "restored": header.get("restore") is not None,
         "header": header,
     }
     if plan.kind == "image":
