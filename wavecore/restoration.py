@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit
 
 from .errors import BundleError
-from .transform import run_rows
+from .transform import run_calls, run_rows
 
 __all__ = [
     "APRON",
@@ -267,6 +267,20 @@ def _fit_sums(padded, target, activity, edges, sums, lo, hi):  # pragma: no cove
 
 
 @njit(nogil=True, cache=True)
+def _change_sums(padded, filtered, target, activity, edges, changes):  # pragma: no cover
+    """Per class, into ``changes``: how much the squared error against ``target`` changes
+    from the unfiltered samples (``padded``'s inner part) to ``filtered``."""
+    e0, e1, e2 = edges[0], edges[1], edges[2]
+    for i in range(filtered.shape[0]):
+        for j in range(filtered.shape[1]):
+            wanted = np.float64(target[i, j])
+            before = np.float64(padded[i + 3, j + 3]) - wanted
+            after = np.float64(filtered[i, j]) - wanted
+            a = activity[i, j]
+            changes[(a >= e0) + (a >= e1) + (a >= e2)] += after * after - before * before
+
+
+@njit(nogil=True, cache=True)
 def _mirror(k, n):  # pragma: no cover - compiled
     """Index ``k`` of a line of ``n`` samples, half-sample symmetric beyond its ends."""
     k = k % (2 * n)
@@ -376,10 +390,16 @@ def fit_restoration(
     target = original[..., np.newaxis] if original.ndim == 2 else original
     high = int(np.iinfo(decoded.dtype).max)
     blocks = _sample_blocks(decoded.shape[0], decoded.shape[1])
-    result: list[Any] = []
-    for channel in range(colour_channels(decoded.shape)):
-        item = _fit_channel(source, target, channel, blocks, high, gains)
-        result.append(item)
+    channels = colour_channels(decoded.shape)
+    result: list[Any] = [None] * channels
+    found: list[list[tuple[float, int, int]]] = [[] for _ in range(channels)]
+
+    def fit(channel: int) -> None:
+        result[channel] = _fit_channel(source, target, channel, blocks, high, found[channel])
+
+    run_calls([functools.partial(fit, c) for c in range(channels)])  # a channel a thread
+    if gains is not None:
+        gains.extend(g for channel_gains in found for g in channel_gains)
     return result if any(item is not None for item in result) else None
 
 
@@ -398,12 +418,13 @@ def _fit_channel(
     channel: int,
     blocks: list[tuple[int, int]],
     high: int,
-    gains: list[tuple[float, int, int]] | None,
+    gains: list[tuple[float, int, int]],
 ) -> dict[str, Any] | None:
     work = _work_dtype(source.dtype)
     like = np.empty(0, dtype=work)
     made = [_block(source, channel, lo, hi, like) for lo, hi in blocks]
-    sampled = np.concatenate([activity.ravel() for _, activity in made])
+    # The quartiles from every other row and column of the sample: as good, and 4× cheaper.
+    sampled = np.concatenate([activity[::2, ::2].ravel() for _, activity in made])
     quartiles = np.quantile(sampled, (0.25, 0.5, 0.75), method="lower")
     edges = [min(int(e), largest_activity(source.dtype.name)) for e in quartiles]
     edge_array = np.array(edges, dtype=work)
@@ -426,19 +447,11 @@ def _fit_channel(
     for (lo, hi), (padded, activity) in zip(blocks, made, strict=True):
         filtered = np.empty(activity.shape, dtype=work)
         _filter_rows(padded, activity, edge_array, table, constants, filtered, 0, hi - lo)
-        wanted = target[lo:hi, :, channel].astype(np.int64)
-        before = padded[APRON:-APRON, APRON:-APRON].astype(np.int64) - wanted
-        after = filtered.astype(np.int64) - wanted
-        classes = np.searchsorted(edge_array, activity, side="right")
-        changes += np.bincount(
-            classes.ravel(), weights=(after * after - before * before).ravel(), minlength=CLASSES
-        )
+        _change_sums(padded, filtered, target[lo:hi, :, channel], activity, edge_array, changes)
     kept = [t if t is not None and changes[c] < 0 else None for c, t in enumerate(taps)]
     if all(t is None for t in kept):
         return None
-    if gains is not None:
-        channel_gains = [(float(changes[c]), channel, c) for c in range(CLASSES) if kept[c]]
-        gains.extend(channel_gains)
+    gains.extend((float(changes[c]), channel, c) for c in range(CLASSES) if kept[c])
     return {"edges": edges, "taps": kept}
 
 
