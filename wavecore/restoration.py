@@ -15,9 +15,11 @@ is, in integers::
 
 clipped to the dtype's range, with the taps ``c_k`` in −64 … 63 (multiples of 1/128).  Samples
 outside the picture are mirrored (half-sample symmetric, as ``numpy.pad(mode="symmetric")``).
-All of it is integer arithmetic, so every machine decodes the same samples.
+Every value is an integer, and the compiled passes compute them exactly (in floats wide
+enough to hold them), so every machine decodes the same samples.
 
-Where it applies: lossy ``uint8`` and ``uint16`` pictures at full resolution.  A coarse level
+Where it applies: lossy ``uint8`` and ``uint16`` pictures at full resolution (the encoder
+fits one for a ``bpp`` target, in the bytes the rate control left free).  A coarse level
 (``level > 0``) and a ``keep`` below 1 decode without it (the filter was fitted to the full
 reconstruction); a region decodes :data:`APRON` more samples around itself first, so that it
 equals the same crop of the whole picture.
@@ -67,7 +69,7 @@ FILTERED_DTYPES = {"uint8": 255, "uint16": 65535}
 LEAST_CLASS_SAMPLES = 8 * TAPS
 #: The fit reads every row of a picture of up to this many samples a channel, else a
 #: sample of its row blocks (:func:`_sample_blocks`).
-FIT_SAMPLES = 1 << 18
+FIT_SAMPLES = 1 << 17
 _FIT_BLOCK = 16
 
 
@@ -79,6 +81,8 @@ def colour_channels(shape: Any) -> int:
 
 
 def largest_activity(dtype: str) -> int:
+    """The largest activity a picture of ``dtype`` (``"uint8"`` or ``"uint16"``) can have:
+    25 absolute Laplacians of at most 4 × the dtype's largest value."""
     return 25 * 4 * FILTERED_DTYPES[dtype]
 
 
@@ -142,9 +146,9 @@ def check_restore(header: dict[str, Any]) -> None:
 
 
 # --- the compiled passes ------------------------------------------------------------------
-# They read a plane padded by APRON mirrored samples on every side (``numpy.pad(mode=
-# "symmetric")``), so that no index needs mirroring: the Laplacian of the padded plane is the
-# mirrored Laplacian, as the extension is symmetric about every edge.
+# They read a block of rows padded by APRON mirrored samples on every side (_pad_block), so
+# that no other index needs mirroring: the Laplacian of the padded plane is the mirrored
+# Laplacian, as the extension is symmetric about every edge.
 
 
 # The passes compute in floats: float32 for uint8 pictures (every value, up to 6 · 64 · 1 020
@@ -162,7 +166,8 @@ def _laplacian_rows(padded, out, lo, hi):  # pragma: no cover - compiled
         target = out[a]
         for b in range(cols):
             j = b + 1
-            target[b] = abs(4 * row[j] - up[j] - down[j] - row[j - 1] - row[j + 1])
+            x2 = row[j] + row[j]  # not 4 * x: an integer literal would widen float32 to float64
+            target[b] = abs(x2 + x2 - up[j] - down[j] - row[j - 1] - row[j + 1])
 
 
 @njit(nogil=True, cache=True)
