@@ -389,7 +389,8 @@ def fit_restoration(
     a class keeps them only if, applied as the decoder applies them (integers), they lower
     its squared error on the sample.  The caller measures the whole filtered picture.
     ``gains``, if given, receives ``(change of squared error, channel, class)`` for each class
-    kept (the change is negative), so that a caller short of bytes can drop the weakest.
+    kept (the change on the sample, scaled to the whole picture; negative), so that a caller
+    can tell what the filter is worth, and drop the weakest classes when short of bytes.
     """
     source = decoded[..., np.newaxis] if decoded.ndim == 2 else decoded
     target = original[..., np.newaxis] if original.ndim == 2 else original
@@ -456,7 +457,9 @@ def _fit_channel(
     kept = [t if t is not None and changes[c] < 0 else None for c, t in enumerate(taps)]
     if all(t is None for t in kept):
         return None
-    gains.extend((float(changes[c]), channel, c) for c in range(CLASSES) if kept[c])
+    # The sample's changes, scaled to the whole channel.
+    share = source.shape[0] / sum(hi - lo for lo, hi in blocks)
+    gains.extend((float(changes[c]) * share, channel, c) for c in range(CLASSES) if kept[c])
     return {"edges": edges, "taps": kept}
 
 
