@@ -265,7 +265,7 @@ def image_headers() -> int:
         head = info["header_bytes"] - record  # the 96-byte bound is the head without it
         parsed = read_bundle(bundle)
         older = write_bundle(parsed.header, coder_chunks(bundle), version=(3, 0))
-        inside = len(bundle) - head - sum(len(c) for c in coder_chunks(bundle))
+        inside = len(bundle) - info["header_bytes"] - sum(len(c) for c in coder_chunks(bundle))
         old_head = len(older) - sum(len(c) for c in parsed.chunks)
         # Each level adds a chunk length and a CRC-16 (in 3.0 also its weights): the
         # explicitly deeper pictures show what a level costs.
