@@ -310,7 +310,7 @@ def worst_case_heads() -> int:
     header = read_bundle(bundle).header
     assert head_of(header, pinned_weights(header)) == wavecore.inspect(bundle)["header_bytes"]
     # The worst cases are heads without a restoration record, which adds at most
-    # restoration.record_bound bytes (31 a channel for uint8, 34 for uint16).
+    # restoration.record_bound bytes (2 + 31 a channel for uint8, 2 + 34 for uint16).
     header = {k: v for k, v in header.items() if k != "restore"}
     print()
     print("| worst case (3.1, synthetic header) | levels | header | head |")

@@ -166,6 +166,18 @@ def test_restore_only_on_lossy_integer_pictures(camera_bundle: bytes) -> None:
         check_header(dict(header, restore=[None, None]))
 
 
+def test_a_record_without_its_guard_is_refused(camera_bundle: bytes) -> None:
+    header = read_bundle(camera_bundle).header
+    packed = binheader.pack(header)
+    plain = binheader.pack({k: v for k, v in header.items() if k != "restore"})
+    coder_byte = next(i for i, (a, b) in enumerate(zip(packed, plain, strict=False)) if a != b)
+    at = coder_byte + 1  # the version nibble 9, then the record
+    assert packed[at : at + 2] == restoration.RECORD_GUARD
+    damaged = packed[:at] + b"\x01\x1d" + packed[at + 2 :]
+    with pytest.raises(BundleError, match="'restore'.*guard"):
+        binheader.unpack(damaged)
+
+
 def test_cut_records_are_bundle_errors(camera_bundle: bytes) -> None:
     header = read_bundle(camera_bundle).header
     packed = binheader.pack(header)

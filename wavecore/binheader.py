@@ -59,6 +59,7 @@ from .errors import BundleError
 from .restoration import (
     CLASSES,
     FILTERED_DTYPES,
+    RECORD_GUARD,
     TAPS,
     check_restore,
     colour_channels,
@@ -111,7 +112,8 @@ IN_EXTENSION = 2
 DELIMITED_CONTEXT = 3
 #: The coder byte's version nibble 9: the context coder's version 8 (``RESTORED_BASE``) with a
 #: restoration record after the byte (the header's ``restore``: :mod:`wavecore.restoration`).
-#: A reader from before it names the coder version it does not know.
+#: A reader from before it refuses such a header by the record's guard bytes
+#: (:data:`restoration.RECORD_GUARD`), which it reads as a malformed PSNR.
 RESTORED_VERSION, RESTORED_BASE = 9, 8
 
 #: The rounding the codec uses today; a flag stands for it.
@@ -457,7 +459,7 @@ def _pack_restore(header: dict[str, Any], cparams: bytes) -> bytes | None:
         check_restore(header)
     except BundleError:
         return None
-    out = bytearray()
+    out = bytearray(RECORD_GUARD)
     for item in restore:
         if item is None:
             out.append(0)
@@ -479,6 +481,8 @@ def _unpack_restore(reader: _Reader, header: dict[str, Any]) -> list[Any]:
     shape, dtype = header["shape"], header.get("dtype")
     if len(shape) not in (2, 3) or dtype not in FILTERED_DTYPES:
         raise reader.fail("cparams", "a restoration record in a header that is not a picture's")
+    if reader.take(len(RECORD_GUARD), "restore") != RECORD_GUARD:
+        raise reader.fail("restore", "the record does not start with its guard bytes 01 1c")
     largest = largest_activity(dtype)
     restore: list[Any] = []
     for _ in range(colour_channels(shape)):

@@ -44,6 +44,7 @@ __all__ = [
     "CLASSES",
     "FILTERED_DTYPES",
     "OFFSETS",
+    "RECORD_GUARD",
     "TAPS",
     "TAP_MAX",
     "TAP_MIN",
@@ -65,6 +66,10 @@ TAP_SHIFT = 7
 APRON = 3
 #: The dtypes the filter applies to, and the largest activity each can give (25 · 4 · max).
 FILTERED_DTYPES = {"uint8": 255, "uint16": 65535}
+#: The restoration record's first bytes.  A reader from before the record reads them as the
+#: PSNR's head (1: a number follows) and a number of form 12 (null) with value bits, which it
+#: refuses by name ("binary header field 'psnr' … number form 12 takes no value bits").
+RECORD_GUARD = b"\x01\x1c"
 #: A class fits its taps from at least this many samples, else it has none.
 LEAST_CLASS_SAMPLES = 8 * TAPS
 #: The fit reads every row of a picture of up to this many samples a channel, else a
@@ -87,9 +92,11 @@ def largest_activity(dtype: str) -> int:
 
 
 def record_bound(dtype: str, channels: int) -> int:
-    """The most bytes the header's restoration record takes (see docs/bundle-format.md)."""
+    """The most bytes the header's restoration record takes (see docs/bundle-format.md): its
+    two guard bytes, then per channel a mask, three edges and the taps."""
     threshold_bytes = (largest_activity(dtype).bit_length() + 6) // 7
-    return channels * (1 + 3 * threshold_bytes + (TAPS * 7 * CLASSES + 7) // 8)
+    per_channel = 1 + 3 * threshold_bytes + (TAPS * 7 * CLASSES + 7) // 8
+    return len(RECORD_GUARD) + channels * per_channel
 
 
 def check_restore(header: dict[str, Any]) -> None:
