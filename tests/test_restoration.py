@@ -174,7 +174,7 @@ def test_a_record_without_its_guard_is_refused(camera_bundle: bytes) -> None:
     at = coder_byte + 1  # the version nibble 9, then the record
     assert packed[at : at + 2] == restoration.RECORD_GUARD
     damaged = packed[:at] + b"\x01\x1d" + packed[at + 2 :]
-    with pytest.raises(BundleError, match="'restore'.*guard"):
+    with pytest.raises(BundleError, match=r"'restore'.*guard"):
         binheader.unpack(damaged)
 
 
