@@ -205,3 +205,21 @@ def test_thread_count_does_not_change_the_bytes(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setenv("WAVECORE_THREADS", "1")
     assert wavecore.encode_image(image, wavelet="cdf97", bpp=0.75) == first
     assert read_bundle(first).header.get("restore") is not None
+
+
+def test_a_read_only_or_strided_original_needs_no_kernel_of_its_own() -> None:
+    # A picture from Pillow may be read-only; each array type would be a signature to compile
+    # at the first request after the warm-up.
+    rng = np.random.default_rng(7)
+    original = rng.integers(0, 256, (40, 50, 3)).astype(np.uint8)
+    decoded = np.clip(original.astype(int) + rng.integers(-3, 4, original.shape), 0, 255)
+    decoded = decoded.astype(np.uint8)
+    expected = restoration.fit_restoration(decoded, original.copy())
+    kernels = (restoration._fit_sums, restoration._change_sums)
+    before = [len(k.signatures) for k in kernels]
+    frozen = original.copy()
+    frozen.setflags(write=False)
+    strided = np.ascontiguousarray(original[:, :, ::-1])[:, :, ::-1]
+    assert restoration.fit_restoration(decoded, frozen) == expected
+    assert restoration.fit_restoration(decoded, strided) == expected
+    assert [len(k.signatures) for k in kernels] == before

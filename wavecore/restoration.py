@@ -436,14 +436,17 @@ def _fit_channel(
     work = _work_dtype(source.dtype)
     like = np.empty(0, dtype=work)
     made = [_block(source, channel, lo, hi, like) for lo, hi in blocks]
+    # The original's rows, copied: one array type for the kernels (the caller's original may
+    # be read-only or strided, each a signature of its own to compile).
+    wanted = [target[lo:hi, :, channel].copy() for lo, hi in blocks]
     # The quartiles from every other row and column of the sample: as good, and 4× cheaper.
     sampled = np.concatenate([activity[::2, ::2].ravel() for _, activity in made])
     quartiles = np.quantile(sampled, (0.25, 0.5, 0.75), method="lower")
     edges = [min(int(e), largest_activity(source.dtype.name)) for e in quartiles]
     edge_array = np.array(edges, dtype=work)
     sums = np.zeros((CLASSES, 28))
-    for (lo, hi), (padded, activity) in zip(blocks, made, strict=True):
-        _fit_sums(padded, target[lo:hi, :, channel], activity, edge_array, sums, 0, hi - lo)
+    for (lo, hi), (padded, activity), rows in zip(blocks, made, wanted, strict=True):
+        _fit_sums(padded, rows, activity, edge_array, sums, 0, hi - lo)
     upper = np.triu_indices(TAPS)
     taps: list[list[int] | None] = []
     for c in range(CLASSES):
@@ -457,10 +460,10 @@ def _fit_channel(
     table = _tap_table(taps, work)
     constants = _constants(work, high)
     changes = np.zeros(CLASSES)
-    for (lo, hi), (padded, activity) in zip(blocks, made, strict=True):
+    for (lo, hi), (padded, activity), rows in zip(blocks, made, wanted, strict=True):
         filtered = np.empty(activity.shape, dtype=work)
         _filter_rows(padded, activity, edge_array, table, constants, filtered, 0, hi - lo)
-        _change_sums(padded, filtered, target[lo:hi, :, channel], activity, edge_array, changes)
+        _change_sums(padded, filtered, rows, activity, edge_array, changes)
     kept = [t if t is not None and changes[c] < 0 else None for c, t in enumerate(taps)]
     if all(t is None for t in kept):
         return None
