@@ -434,6 +434,8 @@ def _compact_cparams(header: dict[str, Any]) -> bytes | None:
     version, two_d = cparams["version"], cparams["two_d"]
     if isinstance(version, bool) or not isinstance(version, int) or not 0 <= version <= 15:
         return None
+    if version == RESTORED_VERSION:  # that nibble says "version 8 and a restoration record"
+        return None
     if not isinstance(two_d, bool):
         return None
     block_code = 0
