@@ -2,7 +2,7 @@
 
 ::
 
-    wavecore encode IN OUT [--keep K | --quality Q | --bpp B] [--lossless [--effort max]]
+    wavecore encode IN OUT [--keep K | --quality Q | --bpp B] [--lossless [--effort fast]]
                            [--wavelet W] [--level L]
     wavecore decode BUNDLE OUT [--keep K] [--level L]
     wavecore inspect BUNDLE [--json]
@@ -765,8 +765,8 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument("--level", type=int, help="levels (default: automatic)")
     enc.add_argument(
         "--effort",
-        help="images with --lossless: default (faster than PNG) or max (a few %% smaller, "
-        "about 1.4x the CPU time)",
+        help="images with --lossless: default (the lossless coder, smallest; max is the same) "
+        "or fast (the block coder: a few %% bigger, quicker)",
     )
     enc.add_argument(
         "--kind",

@@ -72,7 +72,8 @@ BUNDLES = {
     "rgb lossy bspline2": wavecore.encode_image(
         _picture((600, 700, 3), 1), quality=38, wavelet="bspline2"
     ),
-    "grey lossless": wavecore.encode_image(_picture((600, 560), 2), lossless=True),
+    # the block coder's (effort="fast"): the default lossless coder's test is below
+    "grey lossless": wavecore.encode_image(_picture((600, 560), 2), lossless=True, effort="fast"),
 }
 
 
@@ -268,3 +269,27 @@ def _split_chunks(data: bytes, lengths: list[int]) -> list[bytes]:
         chunks.append(data[end - length : end])
         end -= length
     return list(reversed(chunks))
+
+
+def test_a_damaged_lossless_coder_bundle_loses_its_level_with_a_clear_error() -> None:
+    """The default lossless coder (version 5) checks a chunk whole: damage to a picture coded
+    without levels (one chunk) is refused by name, also with damaged="zero"; with one level,
+    damage to the details loses them (a lossy picture back)."""
+    image = _picture((420, 300), 3)
+    flat = wavecore.encode_image(image, lossless=True, level=0)
+    damaged = bytearray(flat)
+    damaged[len(flat) // 2] ^= 0x5A
+    with pytest.raises(BundleError, match="chunk 0"):
+        decode(bytes(damaged))
+    with pytest.raises(BundleError, match="chunk 0"):
+        decode(bytes(damaged), damaged="zero")
+    one = wavecore.encode_image(image, lossless=True, level=1)
+    parsed = read_bundle(one)
+    assert len(parsed.chunks) == 2 and parsed.header["cparams"]["version"] == 5
+    damaged = bytearray(one)
+    damaged[len(one) - len(parsed.chunks[-1]) // 2] ^= 0x5A
+    with pytest.raises(BundleError, match="chunk 1"):
+        decode(bytes(damaged))
+    out = decode(bytes(damaged), damaged="zero")
+    assert out.shape == image.shape and not np.array_equal(out, image)
+    assert float(np.abs(out.astype(float) - image).mean()) < 15

@@ -169,7 +169,7 @@ def render() -> str:
         "|---|---|---:|---:|",
     ]
     lossy = wavecore.encode_image(camera, bpp=1.0)
-    # Five levels, as the lossy bundle (without a level, lossless bundles keep 2 or 3).
+    # Five levels, as the lossy bundle (without a level, the lossless coder codes 0 or 1).
     exact = wavecore.encode_image(camera, lossless=True, level=5)
     lossy_info, exact_info = wavecore.inspect(lossy), wavecore.inspect(exact)
     for k in (0, 1, 2, 3, 5):

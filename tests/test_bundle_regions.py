@@ -45,8 +45,9 @@ def _bundles() -> dict[str, bytes]:
         for wavelet in ("cdf97", "bspline2", "haar")
     }
     out["cdf97 rgb"] = wavecore.encode_image(rgb, quality=40)
-    out["lossless rgb"] = wavecore.encode_image(rgb, lossless=True, level=4)
-    out["lossless grey"] = wavecore.encode_image(grey, lossless=True)
+    # the block coder's (the lossless coder's stripes: tests/test_lossless_coder.py)
+    out["lossless rgb"] = wavecore.encode_image(rgb, lossless=True, level=4, effort="fast")
+    out["lossless grey"] = wavecore.encode_image(grey, lossless=True, effort="fast")
     rng = np.random.default_rng(3)
     surface = np.cumsum(rng.normal(size=(150, 290, 3)), axis=1)
     out["surface closed"] = wavecore.encode_surface(surface, closed=(True, False), quality=45)

@@ -176,8 +176,8 @@ def test_lossless_coarse_levels_are_thumbnails() -> None:
     for k in range(4):
         assert np.array_equal(wavecore.decode(whole, level=k), lossless.coarser(image, k))
     assert wavecore.decode(whole, level=2, region=(slice(1, 4), slice(2, 9))).shape == (3, 7, 3)
-    # the default coder's bundles keep their levels' limit
-    plain = wavecore.encode_image(image, lossless=True, level=0)
+    # the block coder's bundles keep their levels' limit
+    plain = wavecore.encode_image(image, lossless=True, level=0, effort="fast")
     with pytest.raises(wavecore.InvalidParameter, match="deeper than the bundle's 0 levels"):
         wavecore.decode(plain, level=1)
 
@@ -305,8 +305,8 @@ def test_a_colour_weight_out_of_range_is_refused_by_name() -> None:
             wavecore.bundle.check_header(binheader.unpack(packed))
 
 
-@pytest.mark.parametrize("effort", ["default", "max"])
-def test_both_efforts_are_exact_whole_by_region_and_by_level(effort: str) -> None:
+@pytest.mark.parametrize("effort", ["default", "max", "fast"])
+def test_every_effort_is_exact_whole_by_region_and_by_level(effort: str) -> None:
     rng = np.random.default_rng(11)
     for image in (
         rng.integers(0, 256, (50, 37, 3), dtype=np.uint8),
@@ -320,17 +320,22 @@ def test_both_efforts_are_exact_whole_by_region_and_by_level(effort: str) -> Non
         assert wavecore.decode(bundle, level=1).shape == half + image.shape[2:]
 
 
-def test_max_effort_is_the_lossless_coder_and_default_the_block_coder() -> None:
+def test_default_and_max_are_the_lossless_coder_and_fast_the_block_coder() -> None:
     image = np.random.default_rng(12).integers(0, 256, (40, 44), dtype=np.uint8)
-    plain = wavecore.inspect(wavecore.encode_image(image, lossless=True))["header"]["cparams"]
-    most = wavecore.inspect(wavecore.encode_image(image, lossless=True, effort="max"))
-    assert plain.get("version") == 4 and "block" in plain
-    assert most["header"]["cparams"]["version"] == 5 and most["levels"] in (0, 1)
+    plain = wavecore.encode_image(image, lossless=True)
+    assert wavecore.encode_image(image, lossless=True, effort="max") == plain
+    assert wavecore.encode_image(image, lossless=True, effort="default") == plain
+    info = wavecore.inspect(plain)
+    assert info["header"]["cparams"]["version"] == 5 and info["levels"] in (0, 1)
+    fast = wavecore.inspect(wavecore.encode_image(image, lossless=True, effort="fast"))
+    assert fast["header"]["cparams"].get("version") == 4 and "block" in fast["header"]["cparams"]
 
 
-@pytest.mark.parametrize("effort", ["fast", "MAX", "", None, 2])
+@pytest.mark.parametrize("effort", ["hard", "MAX", "Fast", "", None, 2])
 def test_an_unknown_effort_is_refused_by_name(effort: object) -> None:
-    with pytest.raises(wavecore.InvalidParameter, match=r"effort must be one of 'default', 'max'"):
+    with pytest.raises(
+        wavecore.InvalidParameter, match=r"effort must be one of 'default', 'max', 'fast'"
+    ):
         wavecore.encode_image(np.zeros((8, 8), np.uint8), lossless=True, effort=effort)  # type: ignore[arg-type]
 
 
@@ -340,4 +345,8 @@ def test_max_effort_needs_lossless() -> None:
         wavecore.encode_image(image, effort="max")
     with pytest.raises(wavecore.InvalidParameter, match=r"effort='max' applies only with lossless"):
         wavecore.encode_image(image, quality=30, effort="max")
+    with pytest.raises(
+        wavecore.InvalidParameter, match=r"effort='fast' applies only with lossless"
+    ):
+        wavecore.encode_image(image, bpp=1.0, effort="fast")
     assert wavecore.decode(wavecore.encode_image(image, effort="default")).shape == (8, 8)

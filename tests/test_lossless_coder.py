@@ -149,3 +149,63 @@ def test_large_negative_parents_round_trip() -> None:
         assert kernels._parent_class(x, 15) == min(int(table[x + 4096]), 15)
     assert kernels._parent_class(-4097, 15) == kernels._parent_class(-(10**9), 15) == 15
     assert kernels._parent_class(37, 15) == kernels._qlog(37, 15)
+
+
+@pytest.mark.parametrize(
+    ("shape", "level"),
+    [((800, 96), 0), ((800, 64, 3), 1), ((1700, 40), 3), ((900, 70, 3), 2)],
+)
+def test_a_region_decodes_only_its_stripes_and_equals_the_whole(
+    shape: tuple[int, ...], level: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Tall pictures have several stripes per level; a region decodes those holding its rows
+    (and, from the third level entry on, the parent stripes their contexts read), and gives
+    exactly the whole decode's samples."""
+    image = _picture(shape, 11).astype(np.uint8)
+    bundle = wavecore.encode_image(image, lossless=True, level=level)
+    whole = wavecore.decode(bundle)
+    assert np.array_equal(whole, image)
+    from wavecore import losslesscoder
+
+    decoded: list[int] = []
+    real = losslesscoder.kernels.decode_level
+
+    def counting(values, mags, parent, table, stripe, stripes, part):  # type: ignore[no-untyped-def]
+        decoded.append(stripe)
+        return real(values, mags, parent, table, stripe, stripes, part)
+
+    monkeypatch.setattr(losslesscoder.kernels, "decode_level", counting)
+    rows = shape[0]
+    total_stripes = sum(
+        stripe_count(rows >> max(0, k - 1) if k else rows >> level) for k in range(level + 1)
+    )
+    for start, stop in ((0, 5), (rows // 2 - 7, rows // 2 + 9), (rows - 30, rows), (0, rows)):
+        for cols in (slice(0, shape[1]), slice(3, 17)):
+            decoded.clear()
+            region = (slice(start, stop), cols)
+            assert np.array_equal(wavecore.decode(bundle, region=region), whole[region])
+            if stop - start < rows // 4:
+                assert 0 < len(decoded) < total_stripes  # fewer than all: the point
+
+
+def test_stripes_needed_passes_a_childs_rows_on_to_its_parent() -> None:
+    from wavecore.losslesscoder import stripes_needed
+
+    # three entries: the coarse band, one detail level, and a finer one whose stripes' contexts
+    # read their parent rows r >> 1 and the row below
+    shapes = [(400, 8), ((400, 8),) * 3, ((800, 16),) * 3]
+    wanted_rows = np.zeros(800, dtype=bool)
+    wanted_rows[399:401] = True  # rows 399-400: the second of four stripes ends at row 400
+    none = np.zeros(400, dtype=bool)
+    cols = np.ones(16, dtype=bool)
+    masks = [
+        [(none, cols[:8])],
+        [(none, cols[:8])] * 3,
+        [(wanted_rows, cols)] * 3,
+    ]
+    marks = stripes_needed(shapes, masks)
+    assert [m.tolist() for m in marks[2:]] == [[False, True, True, False]]
+    # rows 200-399 of the finer level read parent rows 100-200: parent stripes 0 and 1 (of 2);
+    # rows 400-599 read 200-300: parent stripe 1
+    assert marks[1].tolist() == [True, True]
+    assert marks[0].tolist() == [False, False]

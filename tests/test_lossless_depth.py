@@ -1,5 +1,6 @@
-"""Lossless depth choice: the default (wavecore.lossless.best_depth, LOSSLESS_DEPTHS), and
-``effort="max"`` (wavecore.lossless.choose_depth: prediction alone, or one level)."""
+"""Lossless depth choice: the block coder's (``effort="fast"``: wavecore.lossless.best_depth,
+LOSSLESS_DEPTHS), and the default lossless coder's (wavecore.lossless.choose_depth: prediction
+alone, or one level, close calls decided by coding a sample both ways)."""
 
 from __future__ import annotations
 
@@ -22,16 +23,17 @@ def _texture(shape: tuple[int, ...], seed: int) -> np.ndarray:
 
 
 @pytest.mark.parametrize("shape", [(96, 80), (64, 72, 3)])
-def test_default_is_the_smallest_tried_depth_and_exact(shape: tuple[int, ...]) -> None:
+def test_fast_is_the_smallest_tried_depth_and_exact(shape: tuple[int, ...]) -> None:
     image = _texture(shape, 1)
-    bundle = wavecore.encode_image(image, lossless=True)
+    bundle = wavecore.encode_image(image, lossless=True, effort="fast")
     assert np.array_equal(wavecore.decode(bundle), image)
     depth = wavecore.inspect(bundle)["levels"]
     assert depth in lossless.LOSSLESS_DEPTHS
     # best_depth re-codes only the coarse part of a deeper depth: its bundle must be the very
     # bundle a whole coding at that depth gives, and no tried depth may code much smaller.
     direct = {
-        d: wavecore.encode_image(image, lossless=True, level=d) for d in lossless.LOSSLESS_DEPTHS
+        d: wavecore.encode_image(image, lossless=True, level=d, effort="fast")
+        for d in lossless.LOSSLESS_DEPTHS
     }
     assert bundle == direct[depth]
     # The choice compares the coded chunks; headers differ by a byte per level of the lifting.
@@ -90,11 +92,19 @@ def test_max_effort_takes_one_haar_level_of_a_pixel_repeated_picture() -> None:
     assert len(bundle) < len(alone)
 
 
-def test_max_effort_codes_noise_by_prediction_alone() -> None:
-    image = _texture((80, 96), 6)
+@pytest.mark.parametrize("seed", [6, 8])
+def test_a_close_call_takes_the_depth_that_codes_smaller(seed: int) -> None:
+    """Entropy alone says "no level" for this noisy texture, but the ratio is close enough
+    (under CHECK_BELOW) for the encoder to code it both ways: its bundle is the smaller of
+    the two explicit depths'."""
+    image = _texture((80, 96), seed)
+    _, ratio = lossless._one_level(image.astype(np.int64), lossless.CANDIDATE_SETS[0])
+    assert lossless.DEPTH_GAIN <= ratio < lossless.CHECK_BELOW
     assert lossless.choose_depth(image.astype(np.int64)) == []
-    bundle = wavecore.encode_image(image, lossless=True, effort="max")
-    assert wavecore.inspect(bundle)["levels"] == 0
+    bundle = wavecore.encode_image(image, lossless=True)
+    sizes = [len(wavecore.encode_image(image, lossless=True, level=d)) for d in (0, 1)]
+    assert wavecore.inspect(bundle)["levels"] == int(np.argmin(sizes))
+    assert len(bundle) == min(sizes)
 
 
 def test_max_effort_keeps_an_explicit_level() -> None:
@@ -145,6 +155,41 @@ def test_max_effort_depth_of_a_tall_picture_asks_a_sample_first(repeated: bool) 
     image = _texture((rows, 48), 7).astype(np.int64)
     if repeated:
         image = np.kron(image[: rows // 2, :24], np.ones((2, 2), dtype=np.int64))
-    whole = lossless._one_level_pays(image, lossless.CANDIDATE_SETS[0])
+    chosen, ratio = lossless._one_level(image, lossless.CANDIDATE_SETS[0])
+    whole = chosen if ratio < lossless.DEPTH_GAIN else []
     assert whole == (["haar"] if repeated else [])
     assert lossless.choose_depth(image) == whole
+
+
+def test_a_close_call_is_coded_on_the_sample_both_ways() -> None:
+    """Entropy ratios between DEPTH_GAIN and CHECK_BELOW are decided by ``confirm`` (the
+    encoder codes the sample both ways); outside that band ``confirm`` is never asked."""
+    rng = np.random.default_rng(5)
+    rows = 4 * lossless.SAMPLE_ROWS * lossless.SAMPLE_EVERY
+    # a smooth picture enlarged 4x with a little noise: one level's entropy is a little lower
+    small = _texture((rows // 4, 40), 9).astype(np.float64)
+    big = np.kron(small, np.ones((4, 4)))
+    image = np.clip(big + rng.normal(0, 3.0, big.shape), 0, 255).astype(np.int64)
+    chosen, ratio = lossless._one_level(image, lossless.CANDIDATE_SETS[0])
+    assert lossless.DEPTH_GAIN <= ratio < lossless.CHECK_BELOW, ratio
+    asked: list[tuple[int, ...]] = []
+
+    def says(answer: bool):  # type: ignore[no-untyped-def]
+        def confirm(sample: np.ndarray, filters: list[str]) -> bool:
+            asked.append(sample.shape)
+            assert filters == chosen
+            return answer
+
+        return confirm
+
+    assert lossless.choose_depth(image) == []  # no confirm: the entropy alone
+    assert lossless.choose_depth(image, confirm=says(False)) == []
+    assert lossless.choose_depth(image, confirm=says(True)) == chosen
+    # the sample is a quarter of the rows: blocks of SAMPLE_ROWS, one in SAMPLE_EVERY
+    assert asked == [(rows // lossless.SAMPLE_EVERY, 160)] * 2
+    from skimage import data
+
+    brick = data.brick()[:rows].astype(np.int64)  # far from a level paying (1.03): not asked
+    asked.clear()
+    assert lossless.choose_depth(brick, confirm=says(True)) == []
+    assert asked == []

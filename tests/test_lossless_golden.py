@@ -74,7 +74,8 @@ def test_frozen_predicted_colour_bundle_decodes_exactly() -> None:
 
 # sha256 and length of the default lossless bundles that branch ``integrate`` (commit 40c0b01,
 # before the opt-in ``effort="max"`` coder existed) wrote for the pictures below, in format 3.0:
-# the default path must keep writing these very chunks (since 2026-11-28 in 3.1, whose head
+# the block coder's path (the default until 2026-12-07, now ``effort="fast"``) must keep writing
+# these very chunks (since 2026-11-28 in 3.1, whose head
 # stores no chunk lengths: the test puts the same header and chunks back into 3.0's head).
 INTEGRATE_DEFAULT = {
     "u16": (6288, "c030bcf48f1e9149b134b64a4c6bf7bceb1d082be053fe3ba51880b1d3838097"),
@@ -87,14 +88,16 @@ def _u16_picture() -> np.ndarray:
     return ((i * j * 37 + (i * 7919 + j * 104729) % 251) * 13 % 65536).astype(np.uint16)
 
 
-def test_default_lossless_bundles_are_integrates_bytes() -> None:
+def test_fast_lossless_bundles_are_integrates_bytes() -> None:
     import hashlib
 
     from skimage import data
 
     bundles = {
-        "u16": wavecore.encode_image(_u16_picture(), lossless=True),
-        "camera_level1": wavecore.encode_image(data.camera(), lossless=True, level=1),
+        "u16": wavecore.encode_image(_u16_picture(), lossless=True, effort="fast"),
+        "camera_level1": wavecore.encode_image(
+            data.camera(), lossless=True, level=1, effort="fast"
+        ),
     }
     for name, bundle in bundles.items():
         parsed = read_bundle(bundle)
@@ -103,17 +106,19 @@ def test_default_lossless_bundles_are_integrates_bytes() -> None:
         three = assemble2(binheader.pack(parsed.header), chunks, (3, 0))
         assert (len(three), hashlib.sha256(three).hexdigest()) == INTEGRATE_DEFAULT[name], name
     # and the frozen colour bundle above (3.0) was written by that default path at level 2
-    again = read_bundle(wavecore.encode_image(_colour_image(), lossless=True, level=2))
+    again = read_bundle(
+        wavecore.encode_image(_colour_image(), lossless=True, level=2, effort="fast")
+    )
     frozen = read_bundle(COLOUR_BUNDLE)
     assert again.header == frozen.header
     assert [bytes(c or b"") for c in again.chunks] == [bytes(c or b"") for c in frozen.chunks]
 
 
-# Bundles of the lossless coder (``effort="max"``, the context coder's version 5), frozen as
-# commit 791a382 wrote them: later work on its kernels (speed, a new version) must keep
-# decoding them.  The grey one is the picture predicted without levels in two stripes (400
-# rows: the weighted predictor, the stripes' split); the colour one has two 5/3 levels (the
-# details' parent, sibling and first-channel contexts).
+# Bundles of the lossless coder (the default since 2026-12-07, before it ``effort="max"``; the
+# context coder's version 5), frozen as commit 791a382 wrote them: later work on its kernels
+# (speed, a new version) must keep decoding them.  The grey one is the picture predicted
+# without levels in two stripes (400 rows: the weighted predictor, the stripes' split); the
+# colour one has two 5/3 levels (the details' parent, sibling and first-channel contexts).
 MAX_GREY_BUNDLE = base64.b64decode(
     "iVdWQg0KGgoDAA4QMFQwAJADBgDoPxUACMIKk7FCTmiGoAWBhy+kN8BW60Bc226jOhpqUtZgbQT/DCJo5K70S7gU"
     "JJTMmdqdK3epDc63zcrdaFizZv6I/oqRMYoCbltlsIIoCxUMsuD8xHTVrlFeWzH+2ok68/+QT1I9BZ01AQkuGxYa"

@@ -36,7 +36,12 @@ from .layout import as_levels, is_band_group
 from .transform import run_rows
 from .varints import encode_varint
 
-__all__ = ["LOSSLESS_VERSION", "decode_lossless_levels", "encode_lossless_levels"]
+__all__ = [
+    "LOSSLESS_VERSION",
+    "decode_lossless_levels",
+    "encode_lossless_levels",
+    "stripes_needed",
+]
 
 #: The coder's version in the header: it is the context coder's version 5 (``coder:
 #: "context"``, ``cparams {"version": 5, "two_d": true}``), so that the binary header holds it
@@ -190,12 +195,72 @@ def _split(chunk: bytes, stripes: int, index: int) -> list[np.ndarray]:
     return parts
 
 
+def _stripe_rows(rows: int, stripes: int, stripe: int) -> tuple[int, int]:
+    """The ``[start, stop)`` rows of a band of ``rows`` rows in stripe ``stripe`` (as the
+    kernels cut them)."""
+    return rows * stripe // stripes, rows * (stripe + 1) // stripes
+
+
+def stripes_needed(shapes: Sequence[Any], masks: Sequence[Sequence[Any]]) -> list[np.ndarray]:
+    """Which stripes of each level a region needs: those holding a row of a band that the
+    region's ``masks`` (:func:`wavecore.regions.band_masks`, a ``(rows, cols)`` pair of masks
+    per band, in layout order) want, and, from the third entry on, the parent level's stripes
+    whose rows those stripes' contexts read (rows ``r >> 1`` and the one below).
+
+    Parameters
+    ----------
+    shapes : sequence
+        The layout's entries (a band's shape, or a tuple of three), coarse first.
+    masks : sequence
+        One list of mask pairs per entry decoded (at most ``len(shapes)``).
+
+    Returns
+    -------
+    list of numpy.ndarray
+        Per entry decoded, a boolean per stripe.
+    """
+    levels = []
+    for index, band_masks in enumerate(masks):
+        rows = [_as_2d(s)[0][0] for s in _level_shapes(shapes[index])]
+        stripes = stripe_count(rows[0])
+        wanted = np.zeros(stripes, dtype=bool)
+        for band_rows, mask in zip(rows, band_masks, strict=True):
+            want = np.asarray(mask[0], dtype=bool)
+            for s in range(stripes):
+                lo, hi = _stripe_rows(band_rows, stripes, s)
+                wanted[s] |= bool(want[lo:hi].any())
+        levels.append((rows, wanted))
+    # Finest first, so that a parent's stripes wanted by its child are passed on up.
+    for index in range(len(levels) - 1, 1, -1):
+        rows, wanted = levels[index]
+        parent_rows, parent_wanted = levels[index - 1]
+        for child in np.flatnonzero(wanted).tolist():
+            for band_rows, prows in zip(rows, parent_rows, strict=True):
+                lo, hi = _stripe_rows(band_rows, len(wanted), child)
+                if hi <= lo:
+                    continue
+                first, last = lo >> 1, min(((hi - 1) >> 1) + 1, prows - 1)
+                for p in range(len(parent_wanted)):
+                    plo, phi = _stripe_rows(prows, len(parent_wanted), p)
+                    if plo <= last and first < phi:
+                        parent_wanted[p] = True
+    return [wanted for _, wanted in levels]
+
+
 def _decode_stripes(
     levels: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]],
+    wanted: list[np.ndarray | None] | None = None,
 ) -> None:
-    """Decode every stripe of ``levels`` (``values, mags, ancestors, table, parts`` each, none
-    looking at another's values) into their ``values``, all at once on the thread pool."""
-    tasks = [(level, stripe) for level, job in enumerate(levels) for stripe in range(len(job[4]))]
+    """Decode the stripes of ``levels`` (``values, mags, ancestors, table, parts`` each, none
+    looking at another's values) into their ``values``, all at once on the thread pool: every
+    stripe, or those ``wanted`` marks (None: all of a level's)."""
+    marks = [None] * len(levels) if wanted is None else wanted
+    tasks = [
+        (level, stripe)
+        for level, job in enumerate(levels)
+        for stripe in range(len(job[4]))
+        if (mark := marks[level]) is None or mark[stripe]
+    ]
     damaged: list[int] = []
 
     def decode(lo: int, hi: int) -> None:
@@ -207,7 +272,10 @@ def _decode_stripes(
             if kernels.decode_level(values, mags, ancestors, table, stripe, stripes, part) < 0:
                 damaged.append(stripe)
 
-    work = WORK_PER_VALUE * sum(job[0].size for job in levels)
+    work = WORK_PER_VALUE * sum(
+        job[0].size * len([t for t in tasks if t[0] == level]) // max(1, len(job[4]))
+        for level, job in enumerate(levels)
+    )
     run_rows(decode, len(tasks), work, pieces=len(tasks))
     if damaged:
         msg = f"lossless-coded stripe(s) {sorted(damaged)} decode to values beyond int32"
@@ -234,10 +302,15 @@ def encode_lossless_levels(coeffs: Sequence[Any]) -> tuple[list[bytes], dict[str
 
 
 def decode_lossless_levels(
-    chunks: Sequence[bytes], shapes: Sequence[Any], params: dict[str, Any]
+    chunks: Sequence[bytes],
+    shapes: Sequence[Any],
+    params: dict[str, Any],
+    stripes: Sequence[np.ndarray] | None = None,
 ) -> list[Any]:
     """The inverse of :func:`encode_lossless_levels`: the first ``len(chunks)`` entries of the
-    layout ``shapes`` (``[shape, (shape, shape, shape), ...]``)."""
+    layout ``shapes`` (``[shape, (shape, shape, shape), ...]``).  With ``stripes``
+    (:func:`stripes_needed`), only the marked stripes of each level are decoded (a region's);
+    the other rows stay 0."""
     if params.get("version") != LOSSLESS_VERSION or params.get("two_d") is not True:
         msg = f"lossless coder parameters {params!r} are not of version {LOSSLESS_VERSION}"
         raise BundleError(msg)
@@ -267,10 +340,18 @@ def decode_lossless_levels(
         parent, parent_shapes = values, band_shapes
     # The coarse band and the coarsest details look at no other level: decode them together;
     # each finer level looks at the level before it (its parent), so it waits for it.
-    groups = [levels[:2]] + [[level] for level in levels[2:]]
-    for group in groups:
+    marks: list[np.ndarray | None] = [None] * len(levels)
+    if stripes is not None:
+        for index, mark in enumerate(stripes[: len(levels)]):
+            count = len(levels[index][4])
+            if len(mark) != count:
+                msg = f"lossless level {index}: {len(mark)} stripes asked for, not {count}"
+                raise BundleError(msg)
+            marks[index] = np.asarray(mark, dtype=bool)
+    groups = [(0, levels[:2])] + [(i, [level]) for i, level in enumerate(levels) if i >= 2]
+    for first, group in groups:
         if group:
-            _decode_stripes([level[:5] for level in group])
+            _decode_stripes([level[:5] for level in group], marks[first : first + len(group)])
     for values, _, _, _, _, full, band_shapes, channels in levels:
         total = values.size
         if total and (values.min() < -_MAX_VALUE - 1 or values.max() > _MAX_VALUE):

@@ -110,10 +110,11 @@ async def encode_image(
     ] = None,
     lossless: Annotated[bool, Form(description="Bit-exact (8/16-bit images)")] = False,
     effort: Annotated[
-        Literal["default", "max"],
+        Literal["default", "max", "fast"],
         Form(
-            description="With lossless: default (faster than PNG) or max (the lossless coder: "
-            "a few % smaller, about 1.4x the CPU time)"
+            description="With lossless: default (the lossless coder, smaller than JPEG XL e7; "
+            "max is the same) or fast (the block coder: a few % bigger, quicker, regions by "
+            "blocks)"
         ),
     ] = "default",
 ) -> Response:

@@ -748,6 +748,12 @@
     }
   }
 
+  // A lossless bundle's filters: the integer lifting's per level, or none (the picture predicted).
+  function losslessName(info) {
+    const lifting = (info.header && info.header.lifting) || [];
+    return lifting.length ? `lossless (${[...new Set(lifting)].join(", ")})` : "lossless (predicted)";
+  }
+
   function renderFigures(measured) {
     const info = state.info || {};
     const f = state.figures || {};
@@ -757,7 +763,7 @@
     $("fig-bytes").textContent = formatBytes(bytes);
     $("fig-ratio").textContent = ratio ? `${ratio.toFixed(ratio < 10 ? 2 : 1)} : 1` : "–";
     $("fig-bpp").textContent = info.bpp != null ? formatNumber(info.bpp, 3) : formatNumber(f.bpp, 3);
-    $("fig-wavelet").textContent = info.lossless ? "lossless 5/3" : info.wavelet || "–";
+    $("fig-wavelet").textContent = info.lossless ? losslessName(info) : info.wavelet || "–";
     const keep = sliderToKeep($("keep-slider").value);
     if (state.kind === "image") {
       let text;

@@ -69,13 +69,16 @@ def test_lossless_effort_max(
     assert main(["encode", str(source), str(bundle), "--lossless", "--effort", "max"]) == 0
     assert bundle.read_bytes() == wavecore.encode_image(original, lossless=True, effort="max")
     assert np.array_equal(wavecore.decode(bundle.read_bytes()), original)
+    fast = tmp_path / "fast.wcb"
+    assert main(["encode", str(source), str(fast), "--lossless", "--effort", "fast"]) == 0
+    assert fast.read_bytes() == wavecore.encode_image(original, lossless=True, effort="fast")
     capsys.readouterr()
     # a value the library refuses, and max without --lossless, are reported, not raised
     assert (
         main(["encode", str(source), str(tmp_path / "x.wcb"), "--lossless", "--effort", "hard"])
         == 1
     )
-    assert "effort must be one of 'default', 'max', not 'hard'" in capsys.readouterr().err
+    assert "effort must be one of 'default', 'max', 'fast', not 'hard'" in capsys.readouterr().err
     assert main(["encode", str(source), str(tmp_path / "y.wcb"), "--effort", "max"]) == 1
     assert "applies only with lossless" in capsys.readouterr().err
 

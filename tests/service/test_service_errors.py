@@ -67,7 +67,7 @@ CASES: list[tuple[str, str, Any, int, str]] = [
     ("two-targets", "/v1/images/encode", image(PNG, keep="0.5", quality="30"), 422, "invalid-parameter"),
     ("unknown-wavelet", "/v1/images/encode", image(PNG, wavelet="db4000"), 422, "invalid-parameter"),
     ("lossless-and-bpp", "/v1/images/encode", image(PNG, lossless="true", bpp="1"), 422, "invalid-parameter"),
-    ("effort-unknown", "/v1/images/encode", image(PNG, lossless="true", effort="fast"), 422, "validation-error"),
+    ("effort-unknown", "/v1/images/encode", image(PNG, lossless="true", effort="hard"), 422, "validation-error"),
     ("effort-max-lossy", "/v1/images/encode", image(PNG, effort="max"), 422, "invalid-parameter"),
     # curves
     ("curve-nan", "/v1/curves/encode", raw_json('{"points": [[0, 0], [NaN, 1], [2, 2]]}'), 422, "validation-error"),

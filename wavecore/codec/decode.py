@@ -15,7 +15,8 @@ from ..blockcoder import PRIOR_VERSION
 from ..bundle import Bundle, read_bundle
 from ..errors import BundleError, InvalidParameter
 from ..layout import band_names
-from ..losslesscoder import LOSSLESS_VERSION
+from ..losslesscoder import LOSSLESS_VERSION, decode_lossless_levels, stripes_needed
+from ..multilevel import default_level
 from ..regions import band_masks, windowed_inverse
 from ..restoration import APRON, apply_restoration
 from ..threshold import check_share
@@ -31,9 +32,9 @@ from .chunks import (
 # chunk_block_info's first home, where wavecore.bundle and older callers find it.
 from .chunks import chunk_block_info as chunk_block_info
 from .extents import level_shape, output_offsets, region_slices
-from .plan import Plan, plan_from_header
+from .plan import MAX_IMAGE_LEVELS, Plan, plan_from_header
 from .samples import finish, reconstruct_finished, unscaled
-from .stages import pipeline
+from .stages import ReversibleTransform, pipeline
 
 #: The values of ``decode``'s ``damaged`` argument.
 DAMAGED_MODES = ("strict", "zero")
@@ -171,7 +172,7 @@ def decode(
     parsed, plan = _open(bundle)
     if (
         plan.transform.lossless
-        and (parsed.header.get("cparams") or {}).get("version") == LOSSLESS_VERSION
+        and _lossless_coded(parsed.header)
         and len(plan.shape) >= 2  # only pictures: a curve's level is checked below
         and plan.levels <= 1
         and plan.levels < level <= _lossless.deepest(plan.shape)
@@ -236,6 +237,16 @@ def decode_region(
     True
     """
     return decode(bundle, region=region, level=level, damaged=damaged)
+
+
+def _lossless_coded(header: dict[str, Any]) -> bool:
+    """Whether a bundle's chunks are the lossless coder's (:mod:`wavecore.losslesscoder`)."""
+    cparams = header.get("cparams")
+    return (
+        header.get("coder") == "context"
+        and isinstance(cparams, dict)
+        and cparams.get("version") == LOSSLESS_VERSION
+    )
 
 
 def _restored(
@@ -305,13 +316,29 @@ def _decode(
             masks is not None or damaged != "strict" or parsed.block_checks or partial
         ):
             qcoeffs = decode_block_levels(parsed, band_entries(shapes), coder, masks, damaged)
+        elif masks is not None and _lossless_coded(parsed.header):
+            # The lossless coder's stripes are coded apart: a region decodes the ones it needs.
+            chunks = whole_chunks(parsed, count, damaged)
+            stripes = stripes_needed(shapes, masks[: len(chunks)])
+            qcoeffs = decode_lossless_levels(chunks, shapes, parsed.header["cparams"], stripes)
         else:
             qcoeffs = stages.coder.decode(whole_chunks(parsed, count, damaged), shapes)
         if len(qcoeffs) < count:  # damaged="zero" with an older coder: the finer levels lost
             qcoeffs = qcoeffs + zero_levels(shapes[len(qcoeffs) :], len(qcoeffs))
         coeffs = stages.quantizer.decode(qcoeffs, plan)
+        transform = stages.transform
+        if keep is not None and keep < 1.0 and level == 0 and _lossless_coded(parsed.header):
+            # The lossless coder codes 0 or 1 levels, which leave keep little or nothing to
+            # drop: rank the details of the block coder's depth of 5/3 levels instead.
+            depth = min(
+                default_level(plan.shape[:2], MAX_IMAGE_LEVELS), _lossless.deepest(plan.shape)
+            )
+            if plan.levels < depth:
+                samples = transform.inverse(coeffs, plan)
+                transform = ReversibleTransform(["legall53"] * depth)
+                coeffs = transform.forward(samples, depth)
         if keep is not None and keep < 1.0 and len(coeffs) > 1:
-            coeffs = stages.transform.keep(coeffs, keep, plan)
+            coeffs = transform.keep(coeffs, keep, plan)
         if masks is not None:
             # Synthesize the window only, then finish it as a picture of its own: nothing
             # left to crop, the colour and dtype steps work sample by sample.
@@ -322,7 +349,7 @@ def _decode(
             steps = tuple(slice(None, None, s.step) for s in slices)
             unpadded = dataclasses.replace(plan, pads=((0, 0),) * len(plan.axes))
             return np.ascontiguousarray(finish(unpadded, samples[steps], 0))
-        out = reconstruct_finished(plan, coeffs, level, stages.transform)
+        out = reconstruct_finished(plan, coeffs, level, transform)
     if slices is not None:
         out = np.ascontiguousarray(out[slices])
     return out

@@ -1,7 +1,7 @@
 """The lossless pipeline: the reversible colour transform, the integer lifting of
 :mod:`wavecore.lossless` (its filters and depth chosen by what codes smallest) and the context
-coder or, at ``effort="max"``, the lossless coder (:mod:`wavecore.losslesscoder`), written as a
-bundle whose header names the ``reversible`` transform and the ``none`` quantizer.
+coder (``effort="fast"``) or, by default, the lossless coder (:mod:`wavecore.losslesscoder`),
+written as a bundle whose header names the ``reversible`` transform and the ``none`` quantizer.
 
 :func:`wavecore.codec.encode.encode_image` checks the arguments and hands ``lossless=True``
 encodes here.
@@ -17,8 +17,9 @@ from .. import lossless as _lossless
 from ..bundle import write_bundle
 from ..entropy import encode_levels
 from ..errors import InvalidParameter
-from ..losslesscoder import encode_lossless_levels
+from ..losslesscoder import WORK_PER_VALUE, encode_lossless_levels
 from ..multilevel import default_level
+from ..transform import run_rows
 from .plan import DEFAULT_CODER, MAX_IMAGE_LEVELS, Plan, dtype_name
 from .samples import peak_of
 from .stages import LOSSLESS_WAVELET, NoQuantizer, get_coder, get_colour
@@ -33,9 +34,9 @@ def encode_lossless_image(arr: np.ndarray, level: int | None, effort: str = "def
         The image, ``(h, w)`` or ``(h, w, c)``, ``uint8`` or ``uint16``.
     level : int or None
         Levels of integer lifting; ``None`` picks the depth that codes smallest.
-    effort : {"default", "max"}
-        ``"max"`` codes with the lossless coder, a few per cent smaller at about 1.4× the
-        CPU time.
+    effort : {"default", "max", "fast"}
+        ``"default"`` and ``"max"`` code with the lossless coder; ``"fast"`` with the block
+        coder, a few per cent bigger in less time.
 
     Returns
     -------
@@ -47,8 +48,8 @@ def encode_lossless_image(arr: np.ndarray, level: int | None, effort: str = "def
     data = get_colour({"id": colour}).forward(arr).astype(np.int64, copy=False)
     # At most as many levels as leave every subband non-empty (5/3 fits any size unpadded).
     deepest = min(arr.shape[:2]).bit_length() - 1
-    if effort == "max":
-        return _encode_at_max_effort(arr, data, dtype, colour, level, deepest)
+    if effort != "fast":
+        return _encode_with_lossless_coder(arr, data, dtype, colour, level, deepest)
     search = level is None
     if level is None:  # the depths of LOSSLESS_DEPTHS that fit, tried by _coded_by_depth
         level = min(default_level(arr.shape[:2], MAX_IMAGE_LEVELS), deepest)
@@ -72,13 +73,13 @@ def encode_lossless_image(arr: np.ndarray, level: int | None, effort: str = "def
     return min(bundles, key=len)
 
 
-def _encode_at_max_effort(
+def _encode_with_lossless_coder(
     arr: np.ndarray, data: np.ndarray, dtype: str, colour: str, level: int | None, deepest: int
 ) -> bytes:
-    """``effort="max"``: the lossless coder (:mod:`wavecore.losslesscoder`), a few per cent
-    smaller than the default path at about 1.4× its encode + decode CPU time."""
-    if level is None:  # none (prediction) or one level, by entropy (wavecore.lossless)
-        lifting = _lossless.choose_depth(data)
+    """The default: the lossless coder (:mod:`wavecore.losslesscoder`), a few per cent smaller
+    than the block coder of ``effort="fast"`` at about 1.4× its encode + decode CPU time."""
+    if level is None:  # none (prediction) or one level, by entropy, or close calls by coding
+        lifting = _lossless.choose_depth(data, confirm=_one_level_codes_smaller)
     elif level > deepest:
         msg = (
             f"level {level} is too deep for a lossless {arr.shape[0]}×{arr.shape[1]} image: "
@@ -91,6 +92,24 @@ def _encode_at_max_effort(
     # The lossless coder (wavecore.losslesscoder: the context coder's version 5).
     chunks, cparams = encode_lossless_levels(_lossless.forward(data, level, (0, 1), lifting))
     return _lossless_bundle(arr, dtype, colour, level, lifting, cparams, chunks)
+
+
+def _one_level_codes_smaller(sample: np.ndarray, filters: list[str]) -> bool:
+    """Whether the lossless coder codes ``sample`` lifted one level by ``filters`` in fewer
+    bytes than the sample itself (``choose_depth``'s close calls)."""
+    sizes = [0, 0]
+    choices: list[list[str]] = [[], filters]
+
+    def code(lo: int, hi: int) -> None:
+        for slot in range(lo, hi):
+            lifting = choices[slot]
+            coeffs = _lossless.forward(sample, len(lifting), (0, 1), lifting)
+            sizes[slot] = sum(map(len, encode_lossless_levels(coeffs)[0]))
+
+    # The two codings side by side (a sample's level is often a single stripe, one thread);
+    # a small sample's on this thread (no pool started, say in the service's fork server).
+    run_rows(code, 2, WORK_PER_VALUE * sample.size, pieces=2)
+    return sizes[1] < sizes[0]
 
 
 def _coded_by_depth(
