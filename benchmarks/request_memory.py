@@ -125,10 +125,11 @@ def _cases() -> dict[str, Case]:
 
         return build
 
-    def reconstruct_case(h: int, w: int, c: int, keep: float | None) -> Any:
+    def reconstruct_case(h: int, w: int, c: int, keep: float | None, lossless: bool = False) -> Any:
         def build(small: bool) -> Any:
             shape = (16, 64) if small else (h, w)
-            bundle = wavecore.encode_image(_picture(*shape, c), quality=40)
+            target: dict[str, Any] = {"lossless": True} if lossless else {"quality": 40}
+            bundle = wavecore.encode_image(_picture(*shape, c), **target)
             return bundles.reconstruct_job, (bundle, keep, 0, "png", "", settings)
 
         return build
@@ -187,6 +188,16 @@ def _cases() -> dict[str, Case]:
             "bundles/reconstruct",
             reconstruct_case(1448, 1448, 3, 0.5),
             pad(1448) ** 2 * 3,
+        ),
+        "reconstruct 1448x1448 RGB lossless": (
+            "bundles/reconstruct",
+            reconstruct_case(1448, 1448, 3, None, lossless=True),
+            1448 * 1448 * 3,
+        ),
+        "reconstruct 1448x1448 RGB lossless keep 0.5": (
+            "bundles/reconstruct",
+            reconstruct_case(1448, 1448, 3, 0.5, lossless=True),
+            1448 * 1448 * 3,
         ),
     }
 
