@@ -116,10 +116,9 @@ def encode_image(
     level : int, optional
         Decomposition levels; ``None`` picks up to 5, keeping the coarsest band at least about
         4 pixels a side.  Any image size works: the image is edge-padded to a size that fits,
-        and the padding is recorded and cropped again.  Lossless: ``None`` codes 2 and 3
-        none or one level, by entropy (with
-        ``effort="fast"``: 2 and 3 levels, fewer if the image is small, keeping the smaller
-        bundle).
+        and the padding is recorded and cropped again.  Lossless: ``None`` codes none or one
+        level, by entropy, close calls by coding a sample both ways (with ``effort="fast"``: 2
+        and 3 levels, fewer if the image is small, keeping the smaller bundle).
     keep : float, optional
         Fraction of detail coefficients kept (the smallest ``1 - keep`` by their effect on the
         reconstruction are removed), quantized finely (about 60 dB).
@@ -133,18 +132,17 @@ def encode_image(
         filter where it pays and fits in the bytes left under the budget
         (:mod:`wavecore.restoration`: 0.3–2.6 % fewer bytes at the same PSNR on photographs).
     lossless : bool
-        Code bit-exactly (``uint8``/``uint16`` only) with the reversible LeGall 5/3 integer
-        lifting and the reversible colour transform; ``wavelet`` is then not used.
+        Code bit-exactly (``uint8``/``uint16`` only), after the reversible colour transform, by
+        prediction or integer lifting (see ``effort``); ``wavelet`` is then not used.
     effort : {"default", "max", "fast"}
         How a lossless encode codes (only ``lossless=True`` takes anything but ``"default"``).
         ``"default"`` (``"max"`` is the same): the lossless coder of
         :mod:`wavecore.losslesscoder` (JPEG XL's weighted predictor, three mixed models per
         bit), smaller than JPEG XL e7 on grey and WebP lossless on colour; a region decodes the
         stripes of rows it touches, a coarser level lifts the decoded picture, and damage loses
-        a whole level.  ``"fast"``: the block context coder, 3–7 % bigger at about 0.7× the
-        encode + decode wall time (0.55× the CPU), with regions, coarser levels and damage by
-        code-blocks.  Either decodes with
-        :func:`decode`.
+        a whole level.  ``"fast"``: the block context coder, 3–7 % bigger in 0.6–0.7× the
+        encode + decode wall time (0.55–0.57× the CPU), with regions, coarser levels and
+        damage by code-blocks.  Either decodes with :func:`decode`.
 
     With none of ``keep``/``quality``/``bpp`` the image is coded to ``quality=40`` dB.
 
