@@ -193,3 +193,24 @@ def test_a_close_call_is_coded_on_the_sample_both_ways() -> None:
     asked.clear()
     assert lossless.choose_depth(brick, confirm=says(True)) == []
     assert asked == []
+
+
+def test_a_close_call_on_a_short_wide_picture_codes_a_few_column_blocks() -> None:
+    """A picture too short for the row sample is its own sample; past CONFIRM_MOST pixels the
+    close call codes evenly spaced blocks of CONFIRM_COLUMNS columns, not the whole width."""
+    rng = np.random.default_rng(6)
+    small = _texture((4, 50_000), 3).astype(np.float64)
+    wide = np.kron(small, np.ones((4, 4)))[:, :180_000]
+    image = np.clip(wide + rng.normal(0, 3.0, wide.shape), 0, 255).astype(np.int64)
+    _, ratio = lossless._one_level(image, lossless.CANDIDATE_SETS[0])
+    assert lossless.DEPTH_GAIN <= ratio < lossless.CHECK_BELOW, ratio
+    asked: list[tuple[int, ...]] = []
+
+    def confirm(sample: np.ndarray, filters: list[str]) -> bool:
+        asked.append(sample.shape)
+        return False
+
+    assert lossless.choose_depth(image, confirm=confirm) == []
+    (shape,) = asked
+    assert shape[0] == 16 and shape[1] % lossless.CONFIRM_COLUMNS == 0
+    assert shape[0] * shape[1] <= lossless.CONFIRM_MOST < image.size

@@ -153,6 +153,11 @@ CHECK_BELOW = 0.98
 #: The blocks of the sample that a close call codes: one in this many (a 2048² picture's 4 of
 #: 16, 128 rows, which the lossless coder codes twice in about a quarter of its encode time).
 CONFIRM_EVERY = 4
+#: The most pixels a close call codes (twice): a wider sample keeps blocks of
+#: ``CONFIRM_COLUMNS`` columns, evenly spaced, so that a short, wide picture (a 2 × 2 097 152
+#: one, say) is not coded three times over.
+CONFIRM_MOST = 1 << 18
+CONFIRM_COLUMNS = 256
 
 
 #: The weights of :func:`predict_chroma`, in eighths: Cr is predicted from Cb as ``w / 8 · Cb``.
@@ -629,13 +634,25 @@ def choose_depth(
             # enlargement 1.1 % smaller than the sample's)
             if len(blocks) >= 2 * CONFIRM_EVERY:
                 sample = np.concatenate(blocks[::CONFIRM_EVERY])
+            sample = _narrowed(sample)
             return _choose(arr, 1, (0, 1), candidates, {}) if confirm(sample, chosen) else []
     chosen, ratio = _one_level(arr, candidates)
     if ratio < DEPTH_GAIN:
         return chosen
-    if confirm is not None and ratio < CHECK_BELOW and confirm(sample, chosen):
+    if confirm is not None and ratio < CHECK_BELOW and confirm(_narrowed(sample), chosen):
         return chosen
     return []
+
+
+def _narrowed(sample: np.ndarray) -> np.ndarray:
+    """At most about :data:`CONFIRM_MOST` pixels of ``sample``: blocks of
+    :data:`CONFIRM_COLUMNS` columns, one in every so many, side by side."""
+    rows, cols = sample.shape[:2]
+    every = -(-rows * cols // CONFIRM_MOST)
+    if every <= 1 or cols < 2 * CONFIRM_COLUMNS:
+        return sample
+    starts = range(0, cols - CONFIRM_COLUMNS + 1, CONFIRM_COLUMNS * every)
+    return np.concatenate([sample[:, c : c + CONFIRM_COLUMNS] for c in starts], axis=1)
 
 
 def _one_level(arr: np.ndarray, candidates: Sequence[str]) -> tuple[list[str], float]:
