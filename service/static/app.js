@@ -678,7 +678,7 @@
     $("inspect").hidden = false;
     renderInspect(info);
 
-    const levels = Math.max(1, Number(info.levels) || 1);
+    const levels = Math.max(1, Number(info.levels) || 1, liftedLevels(info));
     const levelSlider = $("level-slider");
     levelSlider.max = String(levels);
     // Curves start at the coarsest level: the control polygon, and every detail for figure 1.
@@ -746,6 +746,15 @@
     } catch (err) {
       if (!isAbort(err)) showError("keep-error", err);
     }
+  }
+
+  // The lossless coder (context coder version 5) codes 0 or 1 levels, and decode lifts deeper
+  // thumbnails from the decoded picture: offer up to 5, as a block-coded bundle has.
+  function liftedLevels(info) {
+    const cparams = (info.header && info.header.cparams) || {};
+    const shape = Array.isArray(info.shape) ? info.shape : [];
+    if (!info.lossless || cparams.version !== 5 || shape.length < 2) return 0;
+    return Math.min(5, Math.floor(Math.log2(Math.max(1, Math.min(shape[0], shape[1])))));
   }
 
   // A lossless bundle's filters: the integer lifting's per level, or none (the picture predicted).

@@ -452,3 +452,18 @@ def test_keyboard_only_sample_image_then_slider(page: Any):
         "[...document.querySelectorAll('img[src]')].filter((i) => !i.alt.trim()).length"
     )
     assert missing_alt == 0
+
+
+def test_lossless_upload_is_exact_and_offers_coarser_levels(page: Any, astronaut_png: Path):
+    """The default lossless coder codes no level (or one); the page still offers the coarser
+    previews that decode lifts from the decoded picture, and names how it was coded."""
+    page.check("input[name='target'][value='lossless']")
+    upload_image(page, astronaut_png)
+    assert figure(page, "wavelet").startswith("lossless (")
+    original = png_pixels(astronaut_png.read_bytes())
+    assert np.array_equal(png_pixels(image_bytes(page, "#img-recon")), original)
+    assert int(page.get_attribute("#level-slider", "max")) == 5
+    level = int(page.input_value("#level-slider"))
+    assert level == 3
+    coarse = png_pixels(image_bytes(page, "#img-coarse"))
+    assert coarse.shape[0] == -(-original.shape[0] // 2**level)
