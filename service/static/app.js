@@ -758,8 +758,9 @@
   }
 
   // A lossless bundle's filters: the integer lifting's per level, or none (the picture predicted).
+  const LIFTING_NAMES = { legall53: "5/3", "511c": "5/11-C", haar: "Haar", bspline2: "B-spline" };
   function losslessName(info) {
-    const lifting = (info.header && info.header.lifting) || [];
+    const lifting = ((info.header && info.header.lifting) || []).map((f) => LIFTING_NAMES[f] || f);
     return lifting.length ? `lossless (${[...new Set(lifting)].join(", ")})` : "lossless (predicted)";
   }
 
