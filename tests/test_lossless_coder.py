@@ -153,7 +153,7 @@ def test_large_negative_parents_round_trip() -> None:
 
 @pytest.mark.parametrize(
     ("shape", "level"),
-    [((800, 96), 0), ((800, 64, 3), 1), ((1700, 40), 3), ((900, 70, 3), 2)],
+    [((1600, 40), 0), ((1600, 48, 3), 1), ((3200, 24), 3), ((1800, 30, 3), 2)],
 )
 def test_a_region_decodes_only_its_stripes_and_equals_the_whole(
     shape: tuple[int, ...], level: int, monkeypatch: pytest.MonkeyPatch
@@ -176,15 +176,17 @@ def test_a_region_decodes_only_its_stripes_and_equals_the_whole(
 
     monkeypatch.setattr(losslesscoder.kernels, "decode_level", counting)
     rows = shape[0]
-    total_stripes = sum(
-        stripe_count(rows >> max(0, k - 1) if k else rows >> level) for k in range(level + 1)
-    )
+    chunks = wavecore.inspect(bundle)["chunks"]
+    total_stripes = sum(stripe_count(chunk["shapes"][0][0]) for chunk in chunks)
+    assert total_stripes > len(chunks)  # several stripes to skip
     for start, stop in ((0, 5), (rows // 2 - 7, rows // 2 + 9), (rows - 30, rows), (0, rows)):
         for cols in (slice(0, shape[1]), slice(3, 17)):
             decoded.clear()
             region = (slice(start, stop), cols)
             assert np.array_equal(wavecore.decode(bundle, region=region), whole[region])
             if stop - start < rows // 4:
+                # (the lifting's support wraps around: a window at one end also reads a few
+                # samples of the other, so those stripes too)
                 assert 0 < len(decoded) < total_stripes  # fewer than all: the point
 
 
