@@ -21,37 +21,26 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: One process's measurement: bytes and medians of 3, ours and PNG's, on the five pictures.
+#: One process's measurement: bytes and medians of ``lossless.RUNS``, ours and PNG's, on the
+#: five pictures.
 TIMING = r"""
-import io, statistics, time
 import numpy as np
 from PIL import Image
 from skimage import data
+import io
 import wavecore
-
-def median(run):
-    times, result = [], None
-    for _ in range(3):
-        start = time.perf_counter()
-        result = run()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), result
-
-def png(image):
-    buffer = io.BytesIO()
-    Image.fromarray(image).save(buffer, format="PNG", optimize=True)
-    return buffer.getvalue()
+from lossless import median_time, png_bytes  # benchmarks/lossless.py's, on this wavecore
 
 ours = theirs = 0.0
 size = 0
 for name in ["camera", "moon", "coins", "brick", "astronaut"]:
     image = getattr(data, name)()
     wavecore.decode(wavecore.encode_image(image, lossless=True))  # warm
-    encode, bundle = median(lambda: wavecore.encode_image(image, lossless=True))
-    decode, out = median(lambda: wavecore.decode(bundle))
+    encode, bundle = median_time(lambda: wavecore.encode_image(image, lossless=True))
+    decode, out = median_time(lambda: wavecore.decode(bundle))
     assert np.array_equal(out, image), name
-    png_encode, blob = median(lambda: png(image))
-    png_decode, _ = median(lambda: np.asarray(Image.open(io.BytesIO(blob))))
+    png_encode, blob = median_time(lambda: png_bytes(image))
+    png_decode, _ = median_time(lambda: np.asarray(Image.open(io.BytesIO(blob))))
     ours += encode + decode
     theirs += png_encode + png_decode
     size += len(bundle)
@@ -60,7 +49,8 @@ print(f"{size} {ours:.4f} {theirs:.4f}")
 
 
 def measure(source: Path) -> tuple[int, float, float]:
-    env = {**os.environ, "PYTHONPATH": str(source)}
+    # that checkout's wavecore first; this checkout's benchmarks/ for the timing helpers
+    env = {**os.environ, "PYTHONPATH": f"{source}{os.pathsep}{ROOT / 'benchmarks'}"}
     out = subprocess.run(
         [sys.executable, "-c", TIMING],
         env=env,
