@@ -1,7 +1,8 @@
 """Peak memory of one request per endpoint, per sample, at the worst shapes.
 
 Each case runs in a fresh Python process: it builds the request's body, runs a small request of
-the same kind once (so that the compiled kernels are loaded), notes its resident memory, resets
+the same kind once (so that the compiled kernels are loaded), gives the freed heap back
+(``malloc_trim``, as a worker does after a job), notes its resident memory, resets
 the kernel's peak mark (``/proc/self/clear_refs``), then runs the endpoint's job function (what
 the server runs on a worker: parse, cost check, decode, code, answer) and reads the peak
 (``VmHWM``).  It prints the growth in MiB, the samples the cost check counts for that request
@@ -17,6 +18,8 @@ levels), up to the service's default limits (pixels, points, grid points).  docs
 
 from __future__ import annotations
 
+import ctypes
+import gc
 import io
 import json
 import math
@@ -220,6 +223,11 @@ def run_case(name: str) -> dict[str, Any]:
     job, args = build(True)
     job(*args)  # load and compile everything once
     job, args = build(False)
+    # The freed heap of the set-up (the small request, the body's own making) back to the
+    # system first, as a worker trims after a job: the library keeps freed memory for reuse
+    # (wavecore._heap), and a job served from it would show no growth at all.
+    gc.collect()
+    ctypes.CDLL("libc.so.6").malloc_trim(0)
     Path("/proc/self/clear_refs").write_text("5")
     before = _status("VmRSS")
     start = time.perf_counter()
