@@ -272,9 +272,9 @@ def _decode_stripes(
             if kernels.decode_level(values, mags, ancestors, table, stripe, stripes, part) < 0:
                 damaged.append(stripe)
 
+    # a stripe's share of its level's values, for each stripe decoded
     work = WORK_PER_VALUE * sum(
-        job[0].size * len([t for t in tasks if t[0] == level]) // max(1, len(job[4]))
-        for level, job in enumerate(levels)
+        levels[level][0].size // len(levels[level][4]) for level, _ in tasks
     )
     run_rows(decode, len(tasks), work, pieces=len(tasks))
     if damaged:
