@@ -350,3 +350,11 @@ def test_max_effort_needs_lossless() -> None:
     ):
         wavecore.encode_image(image, bpp=1.0, effort="fast")
     assert wavecore.decode(wavecore.encode_image(image, effort="default")).shape == (8, 8)
+
+
+def test_a_level_too_deep_for_a_lossless_coder_bundle_names_the_deepest() -> None:
+    image = np.random.default_rng(13).integers(0, 256, (64, 48), dtype=np.uint8)
+    bundle = wavecore.encode_image(image, lossless=True)
+    assert wavecore.decode(bundle, level=5).shape == (2, 2)
+    with pytest.raises(wavecore.InvalidParameter, match=r"deeper than 5, the most this picture"):
+        wavecore.decode(bundle, level=6)

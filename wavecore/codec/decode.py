@@ -186,6 +186,11 @@ def decode(
         return thumbnail if slices is None else np.ascontiguousarray(thumbnail[slices])
     if level > plan.levels:
         msg = f"level {level} is deeper than the bundle's {plan.levels} levels"
+        lifted = plan.transform.lossless and _lossless_coded(parsed.header)
+        if lifted and len(plan.shape) >= 2 and plan.levels <= 1:
+            # coarser levels are lifted from the picture, as deep as its size allows
+            deepest = max(plan.levels, _lossless.deepest(plan.shape))
+            msg = f"level {level} is deeper than {deepest}, the most this picture's size allows"
         raise InvalidParameter(msg)
     slices = None if region is None else region_slices(plan, int(level), region)
     restore = parsed.header.get("restore")
