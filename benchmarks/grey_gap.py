@@ -1,0 +1,488 @@
+"""Probes of issue 12's remaining gap: cdf97 on grey pictures against AVIF speed 6.
+
+An experiment harness, not part of the library (no test runs it), for the question the last
+fair-peers run left: cdf97 is 8.0 % over AVIF on the grey tuning pictures (camera −2.8, moon
++11.0, coins +9.9, brick +13.9; docs/benchmarks.md), where every other target of the issue is
+met.  Each probe measures one kind of change on the tuning pictures (camera, moon, coins,
+brick; astronaut for colour where it applies) and prints BD-rates (``rate_distortion.bd_rate``
+over each curve's rates; negative: the change needs fewer bytes for the same PSNR):
+
+* ``coder``: the block coder's entropy model (context coder version 8).  Codes the integers
+  that ``coder_gain.py capture`` kept (run it first: the 7 exact rates of ``encode_image(...,
+  bpp=r)``) with a variant of ``_blockkernels.encode_span`` built from its source (encoder
+  only: sizes, nothing decodable), against version 8 on the same integers.  ``--configs``
+  are lists ``[lr, w1, w2, w3, bias, mix, signs, inherit, count]``:
+
+  - ``mix`` 1: each detail zero flag is coded at the logistic mix (floating point, as PAQ
+    mixes) of version 8's model and two more: (parent magnitude, sibling class, coarse local
+    class) and the nonzero pattern of the six causal neighbours and the parent; weights
+    ``w1..w3`` (and a bias input of size ``bias``) per orientation and local class, learnt
+    at rate ``lr``, reset at every block;
+  - ``signs`` 1, 2, 3: the sign under (W, N) and two more signs: (parent, first sibling),
+    (NW, NE), (parent, first channel);
+  - ``inherit`` n > 0: a block starts every context that its parent block saw at least ``n``
+    more times than version 8's prior from the parent block's final probability, with the
+    count ``count`` (the parent block is decoded first anyway).
+
+* ``lossless-coder``: the same integers (re-captured here through ``wavecore.decode``) coded
+  by context coder version 5, the lossless coder (one context-mixing stream per level), over
+  version 8's bytes, at 0.25, 0.5, 1 and 2 bpp.
+* ``steps``: the quantizer's per-band steps.  ``encode_image(..., bpp=r)`` with
+  ``quantize.band_weights`` scaled (the finest level, the next, the diagonal bands, the
+  approximation) against the library's weights (the inverse basis norms).
+* ``levels``: ``encode_image(..., level=L, bpp=r)`` for L = 3, 4, 6 against the default 5.
+* ``wavelets``: PyWavelets' biorthogonal filters (periodic, 5 levels; sides cut to multiples
+  of 32) through one plain quantizer (the library's dead zone, weights from each basis's
+  norms) and version 8's coder, against ``bior4.4`` (CDF 9/7) in the same setting.
+
+Run with ``.venv/bin/python benchmarks/grey_gap.py PROBE``.  What each gave: docs/benchmarks.md,
+"Issue 12's grey gap: what else was measured".
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import importlib.util
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from skimage import data
+
+import wavecore
+import wavecore._blockkernels as kernels
+import wavecore.blockcoder as blockcoder
+import wavecore.codec.chunks as codec_chunks
+import wavecore.codec.ratecontrol as ratecontrol
+import wavecore.entropy as entropy
+import wavecore.losslesscoder as losslesscoder
+import wavecore.quantize as quantize
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import coder_gain
+import peers
+from rate_distortion import bd_rate
+
+GREY = ("camera", "moon", "coins", "brick")
+NAMES = (*GREY, "astronaut")
+
+# ---------------------------------------------------------------------------------------------
+# coder: a variant of version 8's encoder
+
+
+def _swap(src: str, old: str, new: str, count: int = 1) -> str:
+    assert src.count(old) == count, (old[:60], src.count(old))
+    return src.replace(old, new)
+
+
+def _cut(src: str, start: str, stop: str) -> str:
+    i, j = src.index(start), src.index(stop)
+    return src[:i] + src[j:]
+
+
+_MIXED_FLAG = """                if approx or wts[WSETS * 4 + 2] == 0.0:
+                    low, rng, models[_u(coded)] = _code_bit(low, rng, models[_u(coded)], nonzero)
+                else:
+                    o = planes_orient
+                    P = abs(np.int64(flat[_u(pr + (j >> 1))])) if j < lp else np.int64(0)
+                    es = e - PARENT_WEIGHT * P
+                    vW = abs(np.int64(flat[at - 1])) if j > c0 else 0
+                    vN = abs(np.int64(flat[at - cols])) if i > r0 else 0
+                    vNW = abs(np.int64(flat[at - cols - 1])) if i > r0 and j > c0 else 0
+                    vNE = abs(np.int64(flat[at - cols + 1])) if i > r0 and j + 1 < c1 else 0
+                    vWW = abs(np.int64(flat[at - 2])) if j > c0 + 1 else 0
+                    vNN = abs(np.int64(flat[at - 2 * cols])) if i > r0 + 1 else 0
+                    ql = 0 if s == 0 else (1 if s < 4 else (2 if s < 12 else (3 if s < 32 else 4)))
+                    c2 = EXTRA_BASE + ((o * 4 + min(P, 3)) * 4 + _external_class(es)) * 5 + ql
+                    pat = ((vW > 0) * 1 + (vN > 0) * 2 + (vNW > 0) * 4 + (vNE > 0) * 8
+                           + (vWW > 0) * 16 + (vNN > 0) * 32 + (P > 0) * 64
+                           + (max(vW, vN) > 1) * 128)
+                    c3 = EXTRA_BASE + C2_SIZE + o * 256 + pat
+                    wset = (o * 14 + LOCAL_CLASS[min(s, 255)]) * 4
+                    p1 = (models[_u(coded)] >> 8) / 32768.0
+                    p2 = (models[_u(c2)] >> 8) / 32768.0
+                    p3 = (models[_u(c3)] >> 8) / 32768.0
+                    t1 = np.log(p1 / (1.0 - p1))
+                    t2 = np.log(p2 / (1.0 - p2))
+                    t3 = np.log(p3 / (1.0 - p3))
+                    dot = wts[wset] * t1 + wts[wset + 1] * t2 + wts[wset + 2] * t3 + wts[wset + 3]
+                    pm = 1.0 / (1.0 + np.exp(-dot))
+                    pi = min(32767, max(1, int(pm * 32768.0 + 0.5)))
+                    bound = (rng >> PROB_BITS) * pi
+                    if nonzero == 0:
+                        rng = bound
+                    else:
+                        low += bound
+                        rng -= bound
+                    err = (1.0 - nonzero) - pm
+                    lr = wts[WSETS * 4]
+                    wts[wset] += lr * err * t1
+                    wts[wset + 1] += lr * err * t2
+                    wts[wset + 2] += lr * err * t3
+                    wts[wset + 3] += lr * err * wts[WSETS * 4 + 1]
+                    m = models[_u(coded)]
+                    models[_u(coded)] = _adapted(m >> 8, m & 0xFF, nonzero)
+                    m = models[_u(c2)]
+                    models[_u(c2)] = _adapted(m >> 8, m & 0xFF, nonzero)
+                    m = models[_u(c3)]
+                    models[_u(c3)] = _adapted(m >> 8, m & 0xFF, nonzero)
+"""
+
+_SIGN = """                at_ctx = sign_base + (sw + 1) * 3 + sn + 1
+                mode = wts[WSETS * 4 + 3]
+                if not approx and mode > 0:
+                    sp = _sign_of(flat[_u(pr + (j >> 1))]) if j < lp else np.int64(0)
+                    sa = _sign_of(flat[_u(s1 + j)]) if j < l1 else np.int64(0)
+                    if mode == 2:
+                        sa = _sign_of(flat[_u(at - cols - 1)]) if i > r0 and j > c0 else 0
+                        sp = _sign_of(flat[_u(at - cols + 1)]) if i > r0 and j + 1 < c1 else 0
+                    if mode == 3:
+                        sa = _sign_of(flat[_u(y0 + j)]) if j < ly else np.int64(0)
+                    at_ctx = SIGN_X + (
+                        ((planes_orient * 3 + sw + 1) * 3 + sn + 1) * 3 + sp + 1
+                    ) * 3 + sa + 1
+"""
+
+_BLOCK_START = """            _fresh_models(models[:CONTEXTS], oriented, blocks[b])
+            models[CONTEXTS:] = 16384 << 8
+            for k in range(WSETS):
+                wts[4 * k] = cfg[1]
+                wts[4 * k + 1] = cfg[2]
+                wts[4 * k + 2] = cfg[3]
+                wts[4 * k + 3] = 0.0
+            wts[WSETS * 4] = cfg[0]
+            wts[WSETS * 4 + 1] = cfg[4]
+            wts[WSETS * 4 + 2] = cfg[5]
+            wts[WSETS * 4 + 3] = cfg[6]
+            q = pidx[b]
+            if cfg[7] > 0 and q >= 0:
+                for c in range(CONTEXTS):
+                    m = saved[q, c]
+                    if (m & 0xFF) - (models[c] & 0xFF) >= cfg[7]:
+                        models[c] = ((m >> 8) << 8) | min(m & 0xFF, np.int64(cfg[8]))
+            end = _encode_block(
+                flat, planes, parents, oriented, blocks[b], out, pos, models, wts, scratch, flags
+            )
+            saved[b, :] = models[:CONTEXTS]"""
+
+
+def variant_source() -> str:
+    """Version 8's encoder with the probes' switches (see the module text)."""
+    src = Path(kernels.__file__).read_text().replace("cache=True", "cache=False")
+    src = _swap(src, "from ._blockpriors import", "from wavecore._blockpriors import")
+    deco = '@njit(nogil=True, cache=False, inline="always")\n'
+    plain = "@njit(nogil=True, cache=False)\n"
+    src = _cut(src, deco + "def _decode_rows(", plain + "def _encode_block(")
+    src = _cut(src, plain + "def _decode_block(", plain + "def _block_is_empty(")
+    src = _cut(src, plain + "def decode_span(", plain + "def write_varints(")
+    # numba would not inline the rows' loop with the extra arguments: compiled as a call.
+    src = _swap(src, deco + "def _encode_rows(", plain + "def _encode_rows(")
+    src = _swap(src, "    models,\n    scratch,\n", "    models,\n    wts,\n    scratch,\n")
+    call = "                models,\n                scratch,\n"
+    src = _swap(src, call, call.replace("scratch", "wts,\n                scratch"), 3)
+    src = _swap(
+        src,
+        "    along,\n    directional,\n):\n",
+        "    along,\n    directional,\n    planes_orient,\n):\n",
+    )
+    src = _swap(
+        src,
+        "        kind = 0 if approx else 1\n",
+        "        kind = 0 if approx else 1\n        orient_here = min(planes[p, P_ORIENT], 2)\n",
+    )
+    for tail in ("0,\n                False,\n", "along,\n                True,\n"):
+        src = src.replace(
+            tail + "            )", tail + "                orient_here,\n            )"
+        )
+    src = _swap(src, "pos, models, scratch, flags):", "pos, models, wts, scratch, flags):")
+    src = _swap(
+        src,
+        "def encode_span(flat, planes, parents, oriented, blocks, lo, hi):",
+        "def encode_span(flat, planes, parents, oriented, blocks, lo, hi, cfg, pidx):",
+    )
+    src = _swap(
+        src,
+        "    models = np.empty(CONTEXTS, dtype=np.int32)\n    scratch",
+        "    models = np.empty(CONTEXTS + EXTRA, dtype=np.int32)\n"
+        "    wts = np.zeros(WSETS * 4 + 8, dtype=np.float64)\n"
+        "    saved = np.zeros((hi, CONTEXTS), dtype=np.int32)\n    scratch",
+    )
+    src = _swap(
+        src,
+        "            _fresh_models(models, oriented, blocks[b])\n            end = _encode_block(\n"
+        "                flat, planes, parents, oriented, blocks[b], out, pos, models, scratch, "
+        "flags\n            )",
+        _BLOCK_START,
+    )
+    flag = (
+        "                low, rng, models[_u(coded)] = "
+        "_code_bit(low, rng, models[_u(coded)], nonzero)\n"
+    )
+    src = _swap(src, flag, _MIXED_FLAG)
+    src = _swap(src, "                at_ctx = sign_base + (sw + 1) * 3 + sn + 1\n", _SIGN)
+    return _swap(
+        src,
+        "CONTEXTS = ZERO_DIR_BASE + ZERO_DIR_SIZE\n",
+        "CONTEXTS = ZERO_DIR_BASE + ZERO_DIR_SIZE\nEXTRA_BASE = CONTEXTS\nC2_SIZE = 3 * 4 * 4 * 5\n"
+        "SIGN_X = EXTRA_BASE + C2_SIZE + 3 * 256\nEXTRA = C2_SIZE + 3 * 256 + 3 * 81\n"
+        "WSETS = 3 * 14\n",
+    )
+
+
+def _load_variant() -> Any:
+    coder_gain.WORK.mkdir(parents=True, exist_ok=True)
+    path = coder_gain.WORK / "grey_gap_kernels.py"
+    path.write_text(variant_source())
+    spec = importlib.util.spec_from_file_location("grey_gap_kernels", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def parent_index(planes: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+    """Each block's parent block (version 6's), or -1 (the approximation and chunk 1)."""
+    starts = sorted({int(x) for x in blocks[:, kernels.B_PLANE_LO]})
+    side = blockcoder.BLOCK_SIZE
+    where = {
+        (int(r[kernels.B_PLANE_LO]), int(r[kernels.B_ROW0]), int(r[kernels.B_COL0])): b
+        for b, r in enumerate(blocks)
+    }
+    out = np.full(len(blocks), -1, dtype=np.int64)
+    for b, row in enumerate(blocks):
+        k = starts.index(int(row[kernels.B_PLANE_LO]))
+        if k < 2:
+            continue
+        r = (int(row[kernels.B_ROW0]) // 2) // side * side
+        c = (int(row[kernels.B_COL0]) // 2) // side * side
+        out[b] = where.get((starts[k - 1], r, c), -1)
+    return out
+
+
+def coder(configs: list[list[float]]) -> None:
+    captured = np.load(coder_gain.WORK / "capture_cdf97.npz")
+    variant = _load_variant()  # compiled at its first call (some 90 s)
+    for config in configs:
+        cfg = np.array(config, dtype=np.float64)
+        out = {}
+        for name in NAMES:
+            today, new, quality = [], [], []
+            for k in range(len(peers.EXACT_RATES)):
+                key = f"{name}_{k}"
+                flat, planes, parents, blocks = (
+                    captured[key + s] for s in ("_flat", "_planes", "_parents", "_blocks")
+                )
+                blocks = coder_gain.with_levels(planes, blocks)
+                span = (flat, planes, parents, 2, blocks, 0, len(blocks))
+                lengths = kernels.encode_span(*span)[1]
+                eight = int(lengths.sum()) + coder_gain.table_bytes(flat, planes, blocks, lengths)
+                lengths = variant.encode_span(*span, cfg, parent_index(planes, blocks))[1]
+                other = int(lengths.sum()) + coder_gain.table_bytes(flat, planes, blocks, lengths)
+                whole = int(captured[key + "_bytes"])
+                today.append(whole)
+                new.append(whole - eight + other)
+                quality.append(float(captured[key + "_psnr"]))
+            out[name] = bd_rate(today, quality, new, quality)
+        _report(str(config), out)
+
+
+# ---------------------------------------------------------------------------------------------
+# lossless-coder, steps, levels, wavelets
+
+
+def _report(label: str, out: dict[str, float]) -> None:
+    grey = [out[n] for n in GREY if n in out]
+    print(
+        f"{label:34s} "
+        + " ".join(f"{n} {v:+.2f}" for n, v in out.items())
+        + (f" | grey {np.mean(grey):+.2f} %" if grey else ""),
+        flush=True,
+    )
+
+
+def lossless_coder() -> None:
+    seen: dict[str, Any] = {}
+    original = codec_chunks.decode_blocks
+
+    def recording(*args: Any, **kwargs: Any) -> Any:
+        seen["levels"] = original(*args, **kwargs)
+        return seen["levels"]
+
+    codec_chunks.decode_blocks = recording  # type: ignore[assignment]
+    try:
+        for name in NAMES:
+            image = getattr(data, name)()
+            ratios = []
+            for rate in (0.25, 0.5, 1.0, 2.0):
+                wavecore.decode(wavecore.encode_image(image, wavelet="cdf97", bpp=rate))
+                q = seen.pop("levels")
+                levels = [q[0][0], *(tuple(x) for x in q[1:])]
+                eight = sum(map(len, entropy.encode_levels(levels, version=8)[0]))
+                five = sum(map(len, losslesscoder.encode_lossless_levels(levels)[0]))
+                ratios.append(f"{rate} bpp {five / eight:.3f}")
+            print(f"{name:10s} version 5 / version 8 bytes: " + ", ".join(ratios), flush=True)
+    finally:
+        codec_chunks.decode_blocks = original  # type: ignore[assignment]
+
+
+def _curve(image: np.ndarray, **options: Any) -> tuple[list[int], list[float]]:
+    rates, quality = [], []
+    for rate in peers.EXACT_RATES:
+        bundle = wavecore.encode_image(image, wavelet="cdf97", bpp=rate, **options)
+        rates.append(len(bundle))
+        quality.append(peers.psnr(image, wavecore.decode(bundle)))
+    return rates, quality
+
+
+def steps(trials: list[str]) -> None:
+    original = quantize.band_weights
+    scale: dict[str, Any] = {}
+
+    def scaled(coeffs: Any, **kwargs: Any) -> list[list[float]]:
+        weights = original(coeffs, **kwargs)
+        finest = len(weights) - 1
+        out = [[w * scale.get("approx", 1.0) for w in weights[0]]]
+        for index, level in enumerate(weights[1:], start=1):
+            factor = scale.get(f"level{finest - index}", 1.0)
+            level = [w * factor for w in level]
+            level[2] *= scale.get("diag", 1.0)
+            out.append([float(f"{w:.4g}") for w in level])
+        return out
+
+    quantize.band_weights = scaled  # type: ignore[assignment]
+    ratecontrol.band_weights = scaled  # type: ignore[attr-defined]
+    try:
+        base = {n: _curve(getattr(data, n)()) for n in GREY}
+        for trial in trials:
+            scale.clear()
+            scale.update(ast.literal_eval("{" + trial + "}"))
+            out = {n: bd_rate(*base[n], *_curve(getattr(data, n)())) for n in GREY}
+            _report(trial, out)
+    finally:
+        quantize.band_weights = original  # type: ignore[assignment]
+        ratecontrol.band_weights = original  # type: ignore[attr-defined]
+
+
+def levels() -> None:
+    for name in NAMES:
+        image = getattr(data, name)()
+        base = _curve(image)
+        out = {f"L{depth}": bd_rate(*base, *_curve(image, level=depth)) for depth in (3, 4, 6)}
+        print(f"{name:10s} " + " ".join(f"{k} {v:+.2f} %" for k, v in out.items()), flush=True)
+
+
+def _pywt_norms(pywt: Any, wavelet: str, shape: tuple[int, ...]) -> list[list[float]]:
+    zero = pywt.wavedec2(np.zeros(shape), wavelet, mode="periodization", level=5)
+    out = []
+    for index, entry in enumerate(zero):
+        bands = [entry] if index == 0 else list(entry)
+        row = []
+        for band in bands:
+            band[band.shape[0] // 2, band.shape[1] // 2] = 1.0
+            synthesis = pywt.waverec2(zero, wavelet, mode="periodization")
+            row.append(float(np.linalg.norm(synthesis)))
+            band[band.shape[0] // 2, band.shape[1] // 2] = 0.0
+        out.append(row)
+    return out
+
+
+def _pywt_point(
+    pywt: Any, image: np.ndarray, wavelet: str, step: float, norms: list[list[float]]
+) -> tuple[int, float]:
+    coeffs = pywt.wavedec2(image, wavelet, mode="periodization", level=5)
+    indices: list[Any] = []
+    values: list[Any] = []
+    for index, entry in enumerate(coeffs):
+        bands = [entry] if index == 0 else list(entry)
+        rounding = quantize.APPROX_ROUNDING if index == 0 else quantize.DEFAULT_ROUNDING
+        offset = 0.0 if index == 0 else 0.12  # towards the bin's centroid, as decoders do
+        ints, backs = [], []
+        for band, norm in zip(bands, norms[index], strict=True):
+            band_step = step / norm
+            k = np.sign(band) * np.floor(np.abs(band) / band_step + rounding)
+            ints.append(k.astype(np.int32))
+            backs.append(np.sign(k) * (np.abs(k) + offset * (k != 0)) * band_step)
+        indices.append(ints[0] if index == 0 else tuple(ints))
+        values.append(backs[0] if index == 0 else tuple(backs))
+    size = sum(map(len, entropy.encode_levels(indices, version=8)[0]))
+    back = np.clip(np.rint(pywt.waverec2(values, wavelet, mode="periodization")), 0, 255)
+    return size, peers.psnr(image.astype(np.uint8), back.astype(np.uint8))
+
+
+def wavelets(names: list[str]) -> None:
+    import pywt
+
+    out: dict[str, list[float]] = {w: [] for w in names}
+    for picture in GREY:
+        image = getattr(data, picture)().astype(np.float64)
+        image = image[: image.shape[0] // 32 * 32, : image.shape[1] // 32 * 32]
+        curves = {}
+        for wavelet in names:
+            norms = _pywt_norms(pywt, wavelet, image.shape)
+            points = [_pywt_point(pywt, image, wavelet, s, norms) for s in np.geomspace(3, 40, 8)]
+            curves[wavelet] = ([p[0] for p in points], [p[1] for p in points])
+        for wavelet in names:
+            out[wavelet].append(bd_rate(*curves[names[0]], *curves[wavelet]))
+        print(f"{picture:10s} " + " ".join(f"{w} {out[w][-1]:+.2f} %" for w in names), flush=True)
+    print("grey mean  " + " ".join(f"{w} {np.mean(out[w]):+.2f} %" for w in names))
+
+
+PROBES: dict[str, Callable[[argparse.Namespace], None]] = {
+    "coder": lambda o: coder([ast.literal_eval(c) for c in o.configs]),
+    "lossless-coder": lambda o: lossless_coder(),
+    "steps": lambda o: steps(o.trials),
+    "levels": lambda o: levels(),
+    "wavelets": lambda o: wavelets(o.wavelets),
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("probe", choices=tuple(PROBES))
+    parser.add_argument(
+        "--configs",
+        nargs="+",
+        default=[
+            "[0, 1, 0, 0, 0, 0, 0, 0, 0]",
+            "[0.003, 1, 0, 0, 0.5, 1, 0, 0, 0]",
+            "[0.003, 0.6, 0.2, 0.2, 0.5, 1, 0, 0, 0]",
+            "[0.003, 0.5, 0.3, 0.3, 0.5, 1, 0, 0, 0]",
+            "[0.02, 0.5, 0.3, 0.3, 0.5, 1, 0, 0, 0]",
+            "[0, 1, 0, 0, 0, 0, 1, 0, 0]",
+            "[0, 1, 0, 0, 0, 0, 2, 0, 0]",
+            "[0, 1, 0, 0, 0, 0, 3, 0, 0]",
+            "[0, 1, 0, 0, 0, 0, 0, 16, 8]",
+            "[0, 1, 0, 0, 0, 0, 0, 8, 4]",
+        ],
+        help="coder: [lr, w1, w2, w3, bias, mix, signs, inherit, count] lists",
+    )
+    parser.add_argument(
+        "--trials",
+        nargs="+",
+        default=[
+            "'level0': 1.1",
+            "'level0': 0.9",
+            "'level1': 1.1",
+            "'diag': 1.1",
+            "'diag': 0.9",
+            "'approx': 0.8",
+        ],
+        help="steps: band weight factors ('level0' the finest level, 'diag', 'approx')",
+    )
+    parser.add_argument("--wavelets", nargs="+", default=["bior4.4", "bior6.8", "bior2.2"])
+    options = parser.parse_args()
+    print(f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, load {_load()}", flush=True)
+    PROBES[options.probe](options)
+    print(f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, load {_load()}", flush=True)
+
+
+def _load() -> str:
+    return " ".join(Path("/proc/loadavg").read_text().split()[:3])
+
+
+if __name__ == "__main__":
+    sys.exit(main())
