@@ -202,6 +202,92 @@ def test_lossless_levels_leave_no_empty_subband() -> None:
     )
 
 
+def _fast_two_d(bundle: bytes) -> bool:
+    from wavecore.bundle import read_bundle
+
+    return bool(read_bundle(bundle).header["cparams"]["two_d"])
+
+
+@pytest.mark.parametrize("shape", [(1, 3000), (1, 3000, 3), (2, 1500), (40, 70), (3000, 1)])
+def test_fast_lossless_of_no_levels_codes_rows_and_columns(
+    shape: tuple[int, ...], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A picture the block coder codes with no levels (one row or column: no level fits; or
+    # level=0) is coded as 2-D.  Taken as 1-D, a 1 × N picture was N planes of one value each:
+    # some 8 µs a pixel to code, against some 0.1 µs, and bigger.  A single column keeps the
+    # 1-D layout (one plane: the column in long blocks), and the old bundles keep decoding.
+    rng = np.random.default_rng(7)
+    image = (rng.integers(0, 9, shape).cumsum(axis=1) % 256).astype(np.uint8)
+    level = 0 if min(shape[:2]) > 1 else None
+    bundle = wavecore.encode_image(image, lossless=True, level=level, effort="fast")
+    assert wavecore.inspect(bundle)["levels"] == 0
+    assert _fast_two_d(bundle) is (shape[1] > 1)
+    assert np.array_equal(wavecore.decode(bundle), image)
+    window = (slice(0, min(2, shape[0])), slice(shape[1] // 3, shape[1] // 3 + 40))
+    assert np.array_equal(wavecore.decode_region(bundle, window), image[window])
+    assert wavecore.decode(bundle, keep=0.5).shape == image.shape
+
+    import wavecore.codec.reversible as reversible
+
+    old_form = reversible.encode_levels
+
+    def as_before(coeffs: list, **kwargs: object) -> object:
+        kwargs.pop("two_d")  # the layout alone decides: 1-D for a decomposition of no levels
+        return old_form(coeffs, **kwargs)
+
+    monkeypatch.setattr(reversible, "encode_levels", as_before)
+    before = wavecore.encode_image(image, lossless=True, level=level, effort="fast")
+    assert _fast_two_d(before) is False
+    assert np.array_equal(wavecore.decode(before), image)
+    assert np.array_equal(wavecore.decode_region(before, window), image[window])
+    if shape[0] == 1:
+        assert len(bundle) < len(before)
+
+
+@pytest.mark.parametrize("shape", [(1, 3000), (40, 70, 3), (3000, 1)])
+@pytest.mark.parametrize("target", [{}, {"bpp": 2.0}])
+def test_lossy_pictures_of_no_levels_code_rows_and_columns(
+    shape: tuple[int, ...], target: dict[str, float], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The lossy encoder's bundles of level=0 follow the same rule as the block coder's lossless
+    # ones above (the plan's ``coded_two_d``), and code these pictures better than as 1-D.
+    from wavecore.codec.plan import Plan
+
+    rng = np.random.default_rng(8)
+    image = (rng.integers(0, 9, shape).cumsum(axis=1) % 256).astype(np.uint8)
+    bundle = wavecore.encode_image(image, level=0, **target)
+    assert _fast_two_d(bundle) is (shape[1] > 1)
+    whole = wavecore.decode(bundle)
+    assert whole.shape == image.shape and whole.dtype == np.uint8
+    window = (slice(0, min(3, shape[0])), slice(0, min(50, shape[1])))
+    assert np.array_equal(wavecore.decode_region(bundle, window), whole[window])
+
+    monkeypatch.setattr(Plan, "coded_two_d", property(lambda plan: plan.levels > 0))
+    before = wavecore.encode_image(image, level=0, **target)
+    assert _fast_two_d(before) is False
+    assert np.array_equal(wavecore.decode_region(before, window), wavecore.decode(before)[window])
+    if shape[1] > 1 and target:
+        assert wavecore.inspect(bundle)["psnr"] > wavecore.inspect(before)["psnr"]
+    elif shape[1] > 1:
+        assert len(bundle) < len(before)
+    else:
+        assert bundle == before
+
+
+def test_encode_levels_two_d_must_fit_the_layout() -> None:
+    from wavecore.entropy import decode_levels, encode_levels
+
+    picture = np.arange(60, dtype=np.int32).reshape(1, 60) % 7
+    chunks, params = encode_levels([picture], two_d=True)
+    assert params["two_d"] is True
+    assert np.array_equal(decode_levels(chunks, [(1, 60)], params)[0], picture)
+    curve = [np.zeros(8, np.int32), np.ones(8, np.int32)]
+    with pytest.raises(wavecore.InvalidParameter, match="does not fit a layout"):
+        encode_levels(curve, two_d=True)
+    with pytest.raises(wavecore.InvalidParameter, match="does not fit a layout"):
+        encode_levels([picture], two_d="yes")  # type: ignore[arg-type]
+
+
 def test_lossless_refuses_floats_and_rate_targets() -> None:
     with pytest.raises(wavecore.InvalidParameter, match="uint8, uint16"):
         wavecore.encode_image(np.zeros((8, 8)), lossless=True)

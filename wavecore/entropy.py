@@ -90,6 +90,7 @@ def encode_levels(
     coder: str = "context",
     version: int | None = None,
     known_blocks: KnownBlocks | None = None,
+    two_d: bool | None = None,
 ) -> tuple[list[bytes], dict[str, Any]]:
     """Entropy-code quantized coefficients, one chunk per resolution level.
 
@@ -109,6 +110,12 @@ def encode_levels(
         Code-blocks of these very coefficients that the context coder has coded already, with
         the same version (:func:`wavecore.blockcoder.code_blocks`): their bytes are taken,
         not coded again.
+    two_d : bool, optional
+        Whether the layout is ``wavedec2``'s (bands ``(rows, cols[, channels])``): by default,
+        whether entry 1 holds three bands.  A decomposition of no levels (``[cA]``) cannot
+        tell, and is taken as ``wavedec``'s (``cA`` as 1-D signals along its first axis, one
+        per column): a picture coded with no levels says ``True``, so that its coder sees
+        rows and columns (1-D, a 1 × N picture was N planes of one value each).
 
     Returns
     -------
@@ -131,7 +138,7 @@ def encode_levels(
     coder = _check_coder(coder)
     entries = _entries(qcoeffs)
     if coder == "context":
-        return _encode_context(entries, version, known_blocks)
+        return _encode_context(entries, version, known_blocks, two_d)
     chunks = []
     for bands in entries:
         raw = b"".join(band.astype("<i4", copy=False).tobytes() for band in bands)
@@ -1091,8 +1098,15 @@ def _encode_context(
     entries: list[list[np.ndarray]],
     version: int | None = None,
     known: KnownBlocks | None = None,
+    two_d: bool | None = None,
 ) -> tuple[list[bytes], dict[str, Any]]:
-    two_d = len(entries) > 1 and len(entries[1]) == 3
+    layout_two_d = len(entries) > 1 and len(entries[1]) == 3
+    if two_d is None:
+        two_d = layout_two_d
+    elif not isinstance(two_d, bool) or (len(entries) > 1 and two_d != layout_two_d):
+        form = "wavedec2's" if layout_two_d else "wavedec's"
+        msg = f"two_d={two_d!r} does not fit a layout of {len(entries)} entries in {form} form"
+        raise InvalidParameter(msg)
     if version is None:
         version = CONTEXT_VERSION if two_d else 4
     if version >= 4:

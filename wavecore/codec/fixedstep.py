@@ -118,7 +118,9 @@ def bundle_from_quantized(
     returns: the bundle and that output.  ``coded`` is the (scaled) samples the plan was made
     from; ``what`` names them in the error a bundle that cannot be stored raises.  ``output``,
     if given, is :func:`reconstructed_from_quantized` of the same bands (not made again)."""
-    chunks, cparams = encode_levels(quantized, coder=DEFAULT_CODER, version=plan.context_version)
+    chunks, cparams = encode_levels(
+        quantized, coder=DEFAULT_CODER, version=plan.context_version, two_d=plan.coded_two_d
+    )
     if output is None:
         output = reconstructed_from_quantized(plan, quantized, qparams)
     del quantized

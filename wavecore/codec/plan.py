@@ -118,6 +118,15 @@ class Plan:
         return (0,) if len(self.boundary) == 1 else (0, 1)
 
     @property
+    def coded_two_d(self) -> bool:
+        """Whether the block coder codes the bands as 2-D (rows and columns): every 2-D plan's,
+        also one of no levels, whose lone ``cA`` the coder cannot tell from a 1-D layout's,
+        except a single column's (its 1-D layout is that column, in long blocks).  As 1-D, a
+        1 × N picture of no levels was N planes of one value each, some 8 µs a pixel to code.
+        """
+        return len(self.boundary) == 2 and (self.levels > 0 or self.fitted[1] > 1)
+
+    @property
     def context_version(self) -> int | None:
         """The block coder's version for this plan's bands (None: the coder's default).
 

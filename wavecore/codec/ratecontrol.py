@@ -511,6 +511,7 @@ class _LossyEncoder:
                 coder=DEFAULT_CODER,
                 version=self.plan.context_version,
                 known_blocks=known,
+                two_d=self.plan.coded_two_d,
             )
             self.codings += 1
             coding_counts.full_codings += 1

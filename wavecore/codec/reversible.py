@@ -127,12 +127,15 @@ def _coded_by_depth(
     steps :func:`wavecore.lossless.filter_choices` kept."""
     coder = get_coder({"id": DEFAULT_CODER})
     coded: list[dict[str, Any]] = []
+    two_d = arr.shape[1] > 1
 
     def code(coeffs: list[Any]) -> list[bytes]:
         # Context coder version 4: each chunk is coded independently of the others, which
         # best_depth's re-coding of the coarse chunks alone needs (version 6 reads the
-        # parent chunk).
-        chunks, params = encode_levels(coeffs, coder=coder.codec_id, version=4)
+        # parent chunk).  A picture of no levels is coded as 2-D unless it is one column
+        # (whose 1-D layout is that column, in long blocks): as 1-D, a 1 × N picture was N
+        # planes of one value each, 30 times slower to code and 9 % bigger.
+        chunks, params = encode_levels(coeffs, coder=coder.codec_id, version=4, two_d=two_d)
         coded.append(params)
         return chunks
 
