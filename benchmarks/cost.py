@@ -40,6 +40,11 @@ def _image_column(n: int) -> np.ndarray:
     return RNG.integers(0, 256, (n, 1), dtype=np.uint8)
 
 
+def _faint_column(n: int) -> np.ndarray:
+    """Noise of amplitude 4: even the coarsest quantizer meets the default 40 dB."""
+    return RNG.integers(0, 5, (n, 1), dtype=np.uint8)
+
+
 def _image_square(n: int) -> np.ndarray:
     side = math.isqrt(n)
     y, x = np.mgrid[0:side, 0:side]
@@ -117,6 +122,37 @@ CASES = [
         _rows(1_048_576),
         _encoded_row,
         lambda b: wavecore.decode(b, keep=0.5),
+    ),
+    Case("encode_image N×1 faint", _rows(262_144), _faint_column, wavecore.encode_image),
+    Case(
+        "encode_image 1×N level=0",
+        _rows(4_194_304),
+        _image_row,
+        lambda a: wavecore.encode_image(a, level=0),
+    ),
+    Case(
+        "encode_image 1×N lossless",
+        _rows(4_194_304),
+        _image_row,
+        lambda a: wavecore.encode_image(a, lossless=True),
+    ),
+    Case(
+        "encode_image 1×N lossless fast",
+        _rows(4_194_304),
+        _image_row,
+        lambda a: wavecore.encode_image(a, lossless=True, effort="fast"),
+    ),
+    Case(
+        "encode_image N×1 lossless fast",
+        _rows(4_194_304),
+        _image_column,
+        lambda a: wavecore.encode_image(a, lossless=True, effort="fast"),
+    ),
+    Case(
+        "decode 1×N lossless fast",
+        _rows(4_194_304),
+        lambda n: wavecore.encode_image(_image_row(n), lossless=True, effort="fast"),
+        wavecore.decode,
     ),
     Case(
         "decompose_image 8×N + reconstruct",  # the library refuses sides below 8

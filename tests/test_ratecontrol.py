@@ -293,8 +293,9 @@ def test_quality_is_predicted_and_coded_once(calls: Calls, name: str, target: fl
         # jumps past the target at every verification, and the search falls back to one
         # closed loop after 20 open ones (the other 89 of 90 quality searches on 15 pictures
         # at 30-45 dB need at most 8 quantizations): a known weak spot of the quality search,
-        # held to where it is.
-        assert calls.closed_loops <= 1 and calls.open_loops <= 20
+        # held to where it is.  (One more since 7 Dec: a missed prediction first checks the
+        # largest step, test_a_quality_every_step_meets_stops_at_the_largest_step.)
+        assert calls.closed_loops <= 1 and calls.open_loops <= 21
     elif name not in ("ramp", "texture"):
         # Photographs: predicted from the coefficients, verified by a few open loops.  (On
         # the noisy ramp at 33 dB whole bands empty at once and the open loop's error jumps
@@ -302,6 +303,22 @@ def test_quality_is_predicted_and_coded_once(calls: Calls, name: str, target: fl
         # (RDOQ's error moves less smoothly with the step: up to two more where it runs.)
         most = 4 + (ratecontrol._QUALITY_RDOQ_VERIFIES if rdoq.ENABLED else 0)
         assert calls.closed_loops == 0 and 1 <= calls.open_loops <= most
+
+
+@pytest.mark.parametrize("wavelet", ["cdf97", "bspline2"])
+@pytest.mark.parametrize("shape", [(16384, 1), (4096, 2), (128, 128, 3)])
+def test_a_quality_every_step_meets_stops_at_the_largest_step(
+    calls: Calls, wavelet: str, shape: tuple[int, ...]
+) -> None:
+    # A faint picture (noise of amplitude 4) at the default 40 dB: even the coarsest quantizer
+    # meets the target, so no step has an error just under the bound, which the searches
+    # looked for.  They ran to their limits: some 1,400 syntheses, 10 s for the 16,384 × 1
+    # column (32 s at 65,536 × 1).  Now a missed prediction checks the largest step first.
+    image = np.random.default_rng(5).integers(0, 5, shape).astype(np.uint8)
+    bundle = encode_image(image, wavelet=wavelet)
+    assert psnr(decode(bundle), image) >= 40.0
+    assert calls.open_loops + calls.closed_loops <= 12
+    assert calls.syntheses <= 12
 
 
 @pytest.mark.parametrize("target", [32.0, 42.0])
