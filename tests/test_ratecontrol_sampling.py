@@ -67,21 +67,17 @@ def test_grid_coding_at_the_sample_step_takes_the_sampled_blocks(
     given: list[bool] = []
     encode_levels = ratecontrol.encode_levels
 
-    def counted(
-        qcoeffs: list, *, coder: str, version: int | None = None, known_blocks: object = None
-    ) -> object:
+    def counted(qcoeffs: list, *, known_blocks: object = None, **options: object) -> object:
         given.append(known_blocks is not None)
-        return encode_levels(qcoeffs, coder=coder, version=version, known_blocks=known_blocks)
+        return encode_levels(qcoeffs, known_blocks=known_blocks, **options)
 
     monkeypatch.setattr(ratecontrol, "encode_levels", counted)
     reused = wavecore.encode_grid(grid, bpp=2.0)
     assert given == [True]  # one full coding, from the sample
     assert 0.975 * 2.0 * grid.size / 8 <= len(reused) <= 2.0 * grid.size / 8
 
-    def every_block(
-        qcoeffs: list, *, coder: str, version: int | None = None, known_blocks: object = None
-    ) -> object:
-        return encode_levels(qcoeffs, coder=coder, version=version)
+    def every_block(qcoeffs: list, *, known_blocks: object = None, **options: object) -> object:
+        return encode_levels(qcoeffs, **options)
 
     monkeypatch.setattr(ratecontrol, "encode_levels", every_block)
     assert wavecore.encode_grid(grid, bpp=2.0) == reused
