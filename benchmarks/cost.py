@@ -125,6 +125,12 @@ CASES = [
     ),
     Case("encode_image N×1 faint", _rows(262_144), _faint_column, wavecore.encode_image),
     Case(
+        "encode_image N×1 faint quality=43",  # still slow: see docs/benchmarks.md
+        _rows(262_144),
+        _faint_column,
+        lambda a: wavecore.encode_image(a, quality=43.0),
+    ),
+    Case(
         "encode_image 1×N level=0",
         _rows(4_194_304),
         _image_row,
