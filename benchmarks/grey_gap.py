@@ -75,13 +75,7 @@ NAMES = (*GREY, "astronaut")
 
 
 def _swap(src: str, old: str, new: str, count: int = 1) -> str:
-    assert src.count(old) == count, (old[:60], src.count(old))
-    return src.replace(old, new)
-
-
-def _cut(src: str, start: str, stop: str) -> str:
-    i, j = src.index(start), src.index(stop)
-    return src[:i] + src[j:]
+    return coder_gain._swap(src, old, new, count)
 
 
 _MIXED_FLAG = """                if approx or wts[WSETS * 4 + 2] == 0.0:
@@ -176,9 +170,9 @@ def variant_source() -> str:
     src = _swap(src, "from ._blockpriors import", "from wavecore._blockpriors import")
     deco = '@njit(nogil=True, cache=False, inline="always")\n'
     plain = "@njit(nogil=True, cache=False)\n"
-    src = _cut(src, deco + "def _decode_rows(", plain + "def _encode_block(")
-    src = _cut(src, plain + "def _decode_block(", plain + "def _block_is_empty(")
-    src = _cut(src, plain + "def decode_span(", plain + "def write_varints(")
+    src = coder_gain._cut(src, deco + "def _decode_rows(", plain + "def _encode_block(")
+    src = coder_gain._cut(src, plain + "def _decode_block(", plain + "def _block_is_empty(")
+    src = coder_gain._cut(src, plain + "def decode_span(", plain + "def write_varints(")
     # numba would not inline the rows' loop with the extra arguments: compiled as a call.
     src = _swap(src, deco + "def _encode_rows(", plain + "def _encode_rows(")
     src = _swap(src, "    models,\n    scratch,\n", "    models,\n    wts,\n    scratch,\n")
