@@ -570,6 +570,14 @@ class _LossyEncoder:
             self._errors_at[key] = _errors(self.plan, self.original, decoded)
         return self._errors_at[key]
 
+    def all_measured_meet(self, target: float) -> bool:
+        """Whether every step measured so far (at the kept fraction) met ``target`` dB."""
+        return all(
+            psnr is None or psnr >= target
+            for key, (psnr, _) in self._errors_at.items()
+            if key[1] == self.kept_fraction
+        )
+
     def kept_output(self, key: tuple[float, float, bool], decoded: np.ndarray) -> None:
         """Keep ``decoded`` as the reconstruction at ``key`` if outputs are kept."""
         if self.keep_output:
@@ -998,12 +1006,16 @@ def _quality_step(encoder: _LossyEncoder, target: float, low: float, high: float
     first = min(max(math.sqrt(12.0 * bound), low), high)
     encoder.reuse_fit = True
     predicted = _predicted_quality_step(encoder, target, first, low, high)
-    if predicted is None and encoder.quality(high)[0] >= target:
-        # Every step meets the target (it is below what the coarsest quantizer gives, as on a
-        # faint picture at the default 40 dB), so the largest one is the answer.  The searches
-        # below look for an error just under the bound, which no step gives here: they ran to
-        # their limits, some 1,400 syntheses (10 s for a 16,384 × 1 column of noise of
-        # amplitude 4, 32 s for 65,536 × 1).
+    # Every step measured met the target: it may be below what the coarsest quantizer gives
+    # (a faint picture at the default 40 dB), and then the largest step is the answer.  The
+    # searches below look for an error just under the bound, which no step gives there: they
+    # ran to their limits, some 1,400 syntheses (10 s for a 16,384 × 1 column of noise of
+    # amplitude 4, 32 s for 65,536 × 1).
+    if (
+        predicted is None
+        and encoder.all_measured_meet(target)
+        and encoder.quality(high)[0] >= target
+    ):
         return high
     if predicted is None and encoder.allow_closed_loop(True):
         # The open loop's error jumps with the step here (whole bands emptying, as at low
