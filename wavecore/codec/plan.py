@@ -36,6 +36,15 @@ _PAD_ALLOWANCE = 64  # padded length <= 2 × length + this (the default levels s
 # --------------------------------------------------------------------------------------------
 
 
+def codes_two_d(levels: int, columns: int) -> bool:
+    """Whether the block coder codes a 2-D decomposition of ``levels`` levels of a picture
+    ``columns`` wide as 2-D (rows and columns): always, also with no levels, whose lone ``cA``
+    the coder cannot tell from a 1-D layout's, except a single column (its 1-D layout is that
+    column, in long blocks).  As 1-D, a 1 × N picture of no levels was N planes of one value
+    each, some 8 µs a pixel to code."""
+    return levels > 0 or columns > 1
+
+
 def positive(value: Any, name: str, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
         msg = f"{name} must be a positive number ({what}), not {value!r}"
@@ -119,12 +128,8 @@ class Plan:
 
     @property
     def coded_two_d(self) -> bool:
-        """Whether the block coder codes the bands as 2-D (rows and columns): every 2-D plan's,
-        also one of no levels, whose lone ``cA`` the coder cannot tell from a 1-D layout's,
-        except a single column's (its 1-D layout is that column, in long blocks).  As 1-D, a
-        1 × N picture of no levels was N planes of one value each, some 8 µs a pixel to code.
-        """
-        return len(self.boundary) == 2 and (self.levels > 0 or self.fitted[1] > 1)
+        """Whether the block coder codes the bands as 2-D: :func:`codes_two_d` of a 2-D plan."""
+        return len(self.boundary) == 2 and codes_two_d(self.levels, self.fitted[1])
 
     @property
     def context_version(self) -> int | None:

@@ -20,7 +20,7 @@ from ..errors import InvalidParameter
 from ..losslesscoder import WORK_PER_VALUE, encode_lossless_levels
 from ..multilevel import default_level
 from ..transform import run_rows
-from .plan import DEFAULT_CODER, MAX_IMAGE_LEVELS, Plan, dtype_name
+from .plan import DEFAULT_CODER, MAX_IMAGE_LEVELS, Plan, codes_two_d, dtype_name
 from .samples import peak_of
 from .stages import LOSSLESS_WAVELET, NoQuantizer, get_coder, get_colour
 
@@ -127,15 +127,13 @@ def _coded_by_depth(
     steps :func:`wavecore.lossless.filter_choices` kept."""
     coder = get_coder({"id": DEFAULT_CODER})
     coded: list[dict[str, Any]] = []
-    two_d = arr.shape[1] > 1
 
     def code(coeffs: list[Any]) -> list[bytes]:
         # Context coder version 4: each chunk is coded independently of the others, which
         # best_depth's re-coding of the coarse chunks alone needs (version 6 reads the
-        # parent chunk).  A picture of no levels is coded as 2-D unless it is one column
-        # (whose 1-D layout is that column, in long blocks): as 1-D, a 1 × N picture was N
-        # planes of one value each, a hundred times slower to code (1 × 262,144: 2 s) and
-        # bigger on real pictures (benchmarks/no_levels.py).
+        # parent chunk).  As 1-D, a 1 × N picture of no levels was a hundred times slower to
+        # code (1 × 262,144: 2 s) and bigger on real pictures (benchmarks/no_levels.py).
+        two_d = codes_two_d(len(coeffs) - 1, arr.shape[1])
         chunks, params = encode_levels(coeffs, coder=coder.codec_id, version=4, two_d=two_d)
         coded.append(params)
         return chunks
