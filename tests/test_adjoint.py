@@ -143,3 +143,27 @@ def test_long_steps_do_not_accumulate_in_the_cache() -> None:
             float(np.sum(waverec(c, "bspline2", "open") * y)), _inner(c, [coarse, detail])
         )
     assert 1 <= adjoint._transposed_long.cache_info().currsize <= 8
+
+
+@pytest.mark.parametrize(("wavelet", "boundary"), CASES)
+def test_the_compact_transposes_are_the_transposes(wavelet: str, boundary: str | None) -> None:
+    """The fused adjoint's form of ``P.T`` and ``Q.T`` (boundary rows compressed, one regular
+    interior run) holds exactly the matrices' entries, at every length up to 300."""
+    from wavecore import matrices
+    from wavecore.adjoint import _transposed_compact
+
+    bound = _boundary(wavelet, boundary)
+    lengths = sorted({valid_length(n, 1, bound, wavelet) for n in range(2, 300)})
+    for m in lengths:
+        _, _, P, Q = matrices(m, wavelet, bound)
+        for compact, dense in zip(_transposed_compact(wavelet, bound, m), (P.T, Q.T), strict=True):
+            ptr, idx, weights, (lo, blocks, col), pattern = compact
+            rebuilt = np.zeros_like(dense)
+            for r in range(dense.shape[0]):
+                if lo <= r < lo + blocks:
+                    start = col + 2 * (r - lo)
+                    rebuilt[r, start : start + pattern.shape[1]] = pattern[0]
+                else:
+                    k = r if r < lo else r - blocks
+                    rebuilt[r, idx[ptr[k] : ptr[k + 1]]] = weights[ptr[k] : ptr[k + 1]]
+            np.testing.assert_array_equal(rebuilt, dense)

@@ -78,6 +78,9 @@ from ._transformkernels import (
     analysis_2d as analysis_2d,
 )
 from ._transformkernels import (
+    analysis_columns as analysis_columns,
+)
+from ._transformkernels import (
     analysis_last as analysis_last,
 )
 from ._transformkernels import (
@@ -88,6 +91,9 @@ from ._transformkernels import (
 )
 from ._transformkernels import (
     synthesis_2d_integers as synthesis_2d_integers,
+)
+from ._transformkernels import (
+    synthesis_columns as synthesis_columns,
 )
 from ._transformkernels import (
     synthesis_last as synthesis_last,

@@ -23,7 +23,7 @@ from . import _kernels
 from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet, step_sparse
 from .multilevel import as_int, resolve_boundaries
-from .transform import fused_level_fits, normalize_axis, run_rows
+from .transform import fused_level_fits, many_short_rows, normalize_axis, run_rows
 
 __all__ = ["synthesis_adjoint", "synthesis_step_adjoint"]
 
@@ -79,40 +79,22 @@ def _transposed_compact(
     """
     out = []
     for indptr, indices, weights in _transposed(bank_name, boundary, m):
+        best_lo, best_len = _longest_regular_run(indptr, indices, weights)
         rows = len(indptr) - 1
-        signatures = []
-        for r in range(rows):
-            cols = indices[indptr[r] : indptr[r + 1]]
-            contiguous = cols.size > 0 and bool(np.all(np.diff(cols) == 1))
-            key = (
-                (int(cols[0]) - 2 * r, tuple(weights[indptr[r] : indptr[r + 1]].tolist()))
-                if contiguous
-                else None
-            )
-            signatures.append(key)
-        best_lo, best_len, start = 0, 0, 0
-        for r in range(1, rows + 1):
-            if r == rows or signatures[r] is None or signatures[r] != signatures[start]:
-                if signatures[start] is not None and r - start > best_len:
-                    best_lo, best_len = start, r - start
-                start = r
         if best_len >= 2:
-            shift, taps = signatures[best_lo]  # type: ignore[misc]
+            first, count = int(indptr[best_lo]), int(indptr[best_lo + 1] - indptr[best_lo])
+            shift = int(indices[first]) - 2 * best_lo
             interior = np.array([best_lo, best_len, shift + 2 * best_lo], dtype=np.intp)
-            pattern = np.array([taps], dtype=np.float64)
+            pattern = weights[first : first + count].astype(np.float64).reshape(1, -1)
             kept = np.r_[0:best_lo, best_lo + best_len : rows]
         else:
             interior = np.zeros(3, dtype=np.intp)
             pattern = np.zeros((1, 1), dtype=np.float64)
             kept = np.arange(rows)
         counts = np.diff(indptr)[kept]
-        starts = indptr[kept]
-        picks = (
-            np.concatenate([np.arange(a, a + c) for a, c in zip(starts, counts, strict=True)])
-            if kept.size
-            else np.zeros(0, dtype=np.intp)
-        ).astype(np.intp)
         ptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
+        # The kept rows' entries, in order: each row's run of positions from its start.
+        picks = (np.arange(ptr[-1]) + np.repeat(indptr[kept] - ptr[:-1], counts)).astype(np.intp)
         out.append(
             (
                 ptr,
@@ -123,6 +105,42 @@ def _transposed_compact(
             )
         )
     return out[0], out[1]
+
+
+def _longest_regular_run(
+    indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray
+) -> tuple[int, int]:
+    """``(first row, rows)`` of the longest run of rows with the same taps (the first such run
+    on a tie), each row's taps in consecutive columns starting two columns after the row
+    before's; ``(0, 0)`` without one.  Vectorised: a Python loop over the rows cost 7 us a row,
+    0.9 s for a picture 131 072 rows high."""
+    rows, entries = len(indptr) - 1, len(indices)
+    if rows == 0 or entries == 0:
+        return 0, 0
+    counts = np.diff(indptr)
+    starts = indptr[:-1]
+    # Breaks between consecutive entries that are not neighbouring columns, counted so far.
+    breaks = np.concatenate([[0], np.cumsum(np.diff(indices) != 1)])
+    first = np.minimum(starts, entries - 1)
+    last = np.clip(starts + counts - 1, 0, entries - 1)
+    contiguous = (counts > 0) & (breaks[last] == breaks[first])
+    shift = indices[first] - 2 * np.arange(rows)
+    table = np.zeros((rows, int(counts.max())), dtype=np.float64)
+    entry_rows = np.repeat(np.arange(rows), counts)
+    table[entry_rows, np.arange(len(indices)) - np.repeat(starts, counts)] = weights
+    link = np.zeros(rows, dtype=bool)  # row r continues row r - 1's run
+    link[1:] = (
+        contiguous[1:]
+        & contiguous[:-1]
+        & (counts[1:] == counts[:-1])
+        & (shift[1:] == shift[:-1])
+        & np.all(table[1:] == table[:-1], axis=1)
+    )
+    run_starts = np.flatnonzero(~link)
+    lengths = np.diff(np.append(run_starts, rows))
+    lengths = np.where(contiguous[run_starts], lengths, 0)
+    best = int(np.argmax(lengths))
+    return int(run_starts[best]), int(lengths[best])
 
 
 def _adjoint_2d(
@@ -139,6 +157,8 @@ def _adjoint_2d(
     m0, m1 = data.shape[0], data.shape[1]
     trail = data.shape[2:]
     inner = int(np.prod(trail, dtype=np.int64))
+    if many_short_rows(m0, m1, inner):
+        return None  # two steps, each along whole columns, are faster
     (p0, q0), (p1, q1) = (
         _transposed_compact(bank.name, bounds[0], m0),
         _transposed_compact(bank.name, bounds[1], m1),

@@ -46,6 +46,14 @@ __all__ = ["analysis_step", "as_float_array", "normalize_axis", "synthesis_step"
 # runs as contiguous rows, one per trailing value, through the vectorised row kernels.
 _FEW_TRAILING = 4
 
+# Rows up to this long, when there are at least _MANY_ROWS of them, run through the column
+# kernels on the transposed data (the row kernels' set-up per row costs more than such a row).
+_SHORT_ROW = 32
+_MANY_ROWS = 256
+# Rows transposed at a time (times up to _FEW_TRAILING values): 32 values a row of 8 bytes
+# make 1 MB.
+_COLUMN_BLOCK = 1024
+
 # Below this many elements a step runs on the calling thread: the hand-off costs more.  At
 # 1 << 18 a 512² grey picture's encode (its quality search synthesises 512² levels a few
 # hundred times) took 0.30 s on two threads against 0.22 s on one; at 1 << 19, 0.23 s.
@@ -395,7 +403,9 @@ def analysis_step(
     r, s = rule.coarse_length(m), rule.detail_length(m)
     c = np.empty((x.shape[0], r, x.shape[2]), dtype=arr.dtype)
     d = np.empty((x.shape[0], s, x.shape[2]), dtype=arr.dtype)
-    if x.shape[2] == 1:
+    if many_short_rows(x.shape[0], m, x.shape[2]):
+        _analysis_short_rows(x, mats["A+"], mats["B+"], c, d)
+    elif x.shape[2] == 1:
         args: tuple[Any, ...] = (x[:, :, 0], mats["A+"], mats["B+"], c[:, :, 0], d[:, :, 0])
         _run_blocks(_kernels.analysis_last, args, x.shape[0], m, x.size, outer_only=True)
     elif x.shape[2] <= _FEW_TRAILING:
@@ -485,7 +495,9 @@ def synthesis_step(
     cx = _view3(np.ascontiguousarray(c_arr, dtype=dtype), axis)
     dx = _view3(np.ascontiguousarray(d_arr, dtype=dtype), axis)
     f = np.empty((cx.shape[0], m, cx.shape[2]), dtype=dtype)
-    if f.shape[2] == 1:
+    if many_short_rows(f.shape[0], m, f.shape[2]):
+        _synthesis_short_rows(cx, dx, mats["P+"], mats["Q+"], f)
+    elif f.shape[2] == 1:
         args: tuple[Any, ...] = (cx[:, :, 0], dx[:, :, 0], mats["P+"], mats["Q+"], f[:, :, 0])
         _run_blocks(_kernels.synthesis_last, args, f.shape[0], m, f.size, outer_only=True)
     elif f.shape[2] <= _FEW_TRAILING:
@@ -499,6 +511,71 @@ def synthesis_step(
         args = (cx, dx, mats["P+"], mats["Q+"], f)
         _run_blocks(_kernels.synthesis_mid, args, f.shape[0], m, f.size)
     return f.reshape(c_arr.shape[:axis] + (m,) + c_arr.shape[axis + 1 :])
+
+
+def many_short_rows(rows: int, length: int, inner: int) -> bool:
+    """Whether a step along an axis of ``length`` samples, over ``rows`` positions of the axes
+    before it and ``inner`` values after, would run as many short rows through the row kernels
+    (which then cost more in set-up than in work).  The fused 2-D levels decline such levels:
+    one step per axis, through the column kernels, is several times faster."""
+    return inner <= _FEW_TRAILING and length <= _SHORT_ROW and rows * inner >= _MANY_ROWS
+
+
+def _rows_as_columns(x: np.ndarray) -> np.ndarray:
+    """``(outer, n, inner)`` as ``(n, outer * inner)``: each row the row kernels would take (one
+    per outer index and trailing value) as a column."""
+    return np.ascontiguousarray(x.transpose(1, 0, 2)).reshape(x.shape[1], -1)
+
+
+def _columns_to_rows(cols: np.ndarray, out: np.ndarray) -> None:
+    """Undo :func:`_rows_as_columns` into ``out`` (``(outer, n, inner)``)."""
+    out[...] = cols.reshape(out.shape[1], out.shape[0], out.shape[2]).transpose(1, 0, 2)
+
+
+def _by_column_blocks(outer: int, work: int, block: Callable[[int, int], None]) -> None:
+    """``block(lo, hi)`` over the outer indices in pieces of ``_COLUMN_BLOCK``, in threads if
+    the work is big: each piece's transposed copies stay small (in cache, and a few MB in all
+    where whole copies added 60 % to an encode's peak memory)."""
+
+    def run(lo: int, hi: int) -> None:
+        for start in range(lo, hi, _COLUMN_BLOCK):
+            block(start, min(start + _COLUMN_BLOCK, hi))
+
+    run_rows(run, outer, work)
+
+
+def _analysis_short_rows(
+    x: np.ndarray, a_mat: Any, b_mat: Any, c: np.ndarray, d: np.ndarray
+) -> None:
+    """An analysis step along the middle axis of ``x`` for many short rows: the same values as
+    the row kernels, from the column kernel over the transposed rows."""
+
+    def block(lo: int, hi: int) -> None:
+        src = _rows_as_columns(x[lo:hi])
+        count = src.shape[1]
+        c_cols = np.empty((c.shape[1], count), dtype=c.dtype)
+        d_cols = np.empty((d.shape[1], count), dtype=d.dtype)
+        _kernels.analysis_columns(src, a_mat, b_mat, c_cols, d_cols, 0, count)
+        _columns_to_rows(c_cols, c[lo:hi])
+        _columns_to_rows(d_cols, d[lo:hi])
+
+    _by_column_blocks(x.shape[0], x.size, block)
+
+
+def _synthesis_short_rows(
+    c: np.ndarray, d: np.ndarray, p_mat: Any, q_mat: Any, f: np.ndarray
+) -> None:
+    """The synthesis counterpart of :func:`_analysis_short_rows`."""
+
+    def block(lo: int, hi: int) -> None:
+        c_cols, d_cols = _rows_as_columns(c[lo:hi]), _rows_as_columns(d[lo:hi])
+        count = c_cols.shape[1]
+        f_cols = np.empty((f.shape[1], count), dtype=f.dtype)
+        scratch = np.empty(count, dtype=f.dtype)
+        _kernels.synthesis_columns(c_cols, d_cols, p_mat, q_mat, f_cols, scratch, 0, count)
+        _columns_to_rows(f_cols, f[lo:hi])
+
+    _by_column_blocks(f.shape[0], f.size, block)
 
 
 def fused_level_fits(shape: tuple[int, ...], axes: list[int], dtype: np.dtype[Any]) -> bool:
@@ -565,6 +642,8 @@ def analysis_2d(
     if not fused_level_fits(arr.shape, [axis, axis + 1], arr.dtype):
         return None
     outer, m0, m1, inner = _split_shape(arr.shape, axis)
+    if many_short_rows(outer * m0, m1, inner):
+        return None  # one step per axis is faster (and gives the same values)
     rule0, rule1 = bank.rule(boundaries[0]), bank.rule(boundaries[1])
     mats0 = _kernel_args(bank.name, boundaries[0], m0, arr.dtype)
     mats1 = _kernel_args(bank.name, boundaries[1], m1, arr.dtype)
@@ -599,6 +678,8 @@ def _fused_synthesis(
     outer, r0, r1, inner = _split_shape(aa.shape, axis)
     s0, s1 = dd.shape[axis : axis + 2] if dd.ndim == aa.ndim else (-1, -1)
     m0, m1 = rule0.fine_length(r0, s0), rule1.fine_length(r1, s1)
+    if many_short_rows(outer * m0, m1, inner):
+        return None  # one step per axis is faster (and gives the same values)
     lead, trail = aa.shape[:axis], aa.shape[axis + 2 :]
     fits = all(
         band.shape == lead + size + trail
