@@ -105,6 +105,12 @@ CASES = [
     Case("encode_image 1×N", _rows(4_194_304), _image_row, wavecore.encode_image),
     Case("encode_image N×1", _rows(262_144), _image_column, wavecore.encode_image),
     Case(
+        "encode_image N×2 bspline2",
+        _rows(4_194_304),
+        lambda n: RNG.integers(0, 256, (n // 2, 2), dtype=np.uint8),
+        lambda a: wavecore.encode_image(a, wavelet="bspline2"),
+    ),
+    Case(
         "encode_image 1×N bpp=2",
         [n for n in _rows(1_048_576) if n >= 4096],  # smaller ones cannot reach 2 bpp
         _image_row,
@@ -125,8 +131,8 @@ CASES = [
     ),
     Case("encode_image N×1 faint", _rows(262_144), _faint_column, wavecore.encode_image),
     Case(
-        "encode_image N×1 faint quality=43",  # still slow: see docs/benchmarks.md
-        _rows(262_144),
+        "encode_image N×1 faint quality=43",  # the searches' worst: see docs/benchmarks.md
+        _rows(1_048_576),
         _faint_column,
         lambda a: wavecore.encode_image(a, quality=43.0),
     ),
@@ -204,6 +210,12 @@ CASES = [
         _rows(1_048_576),
         lambda n: RNG.random((8, wavecore.valid_length(n // 8 + 8, 1))),
         wavecore.wavedec2,
+    ),
+    Case(
+        "wavedec2 N×8 + waverec2",  # many short rows: the column kernels
+        _rows(1_048_576),
+        lambda n: RNG.random((wavecore.valid_length(n // 8 + 8, 1), 8)),
+        lambda a: wavecore.waverec2(wavecore.wavedec2(a)),
     ),
     Case(
         "encode_surface square",
