@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 from typing import Any
 
 import numpy as np
@@ -12,6 +13,7 @@ from hypothesis import strategies as st
 
 import wavecore
 from wavecore import InvalidCoefficients, InvalidParameter
+from wavecore.threshold import kth_smallest
 
 
 def _detail_bands(coeffs: list[Any]) -> list[np.ndarray]:
@@ -209,3 +211,31 @@ def test_plain_ranking_takes_bands_of_any_lengths() -> None:
     coeffs = [np.arange(1.0, 6.0), np.arange(1.0, 5.0), np.arange(1.0, 10.0)]
     kept = wavecore.remove_smallest(coeffs, 0.5, weighted=False)
     assert sum(int(np.count_nonzero(d)) for d in kept[1:]) == 6
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    values=st.lists(
+        st.one_of(st.sampled_from([0.0, 1.0, 2.5, math.nan]), st.floats(0, 10)),
+        min_size=1,
+        max_size=80,
+    ),
+    data=st.data(),
+)
+def test_kth_smallest_is_the_sorted_value(values: list[float], data: st.DataObject) -> None:
+    array = np.array(values)
+    k = data.draw(st.integers(0, array.size - 1))
+    got, want = kth_smallest(array, k), np.sort(array)[k]
+    assert got == want or (math.isnan(got) and math.isnan(want))
+
+
+def test_kth_smallest_inside_a_run_of_zeros() -> None:
+    """Where NumPy's partition slows down (k inside a large run of equal values among
+    others): the run's value, and the values on either side, exactly."""
+    rng = np.random.default_rng(4)
+    values = np.abs(rng.standard_normal(100_000))
+    values[rng.random(values.size) < 0.6] = 0.0
+    ordered = np.sort(values)
+    zeros = int(np.count_nonzero(values == 0))
+    for k in (0, zeros // 2, zeros - 1, zeros, zeros + 1, values.size - 1):
+        assert kth_smallest(values, k) == ordered[k]

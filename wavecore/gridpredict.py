@@ -74,6 +74,7 @@ import numpy as np
 from numba import njit
 
 from .errors import BundleError
+from .threshold import kth_smallest
 
 __all__ = [
     "decode_predictive",
@@ -1595,11 +1596,7 @@ def _drop_smallest(groups: list[Any], keep: float) -> None:
     kept = math.ceil(keep * magnitudes.size)
     if kept >= magnitudes.size:
         return
-    threshold = (
-        np.partition(magnitudes, magnitudes.size - kept - 1)[magnitudes.size - kept - 1]
-        if kept
-        else magnitudes.max()
-    )
+    threshold = kth_smallest(magnitudes, magnitudes.size - kept - 1) if kept else magnitudes.max()
     for group in groups:
         multiples = group[3]
         multiples[np.abs(multiples) <= threshold] = 0

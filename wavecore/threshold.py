@@ -145,7 +145,7 @@ def remove_smallest(
     elif remove <= 0:
         drop = np.zeros(flat.size, dtype=bool)
     else:
-        cut = np.partition(flat, remove - 1)[remove - 1]
+        cut = kth_smallest(flat, remove - 1)
         drop = flat < cut
         ties = np.flatnonzero(flat == cut)[: remove - int(np.count_nonzero(drop))]
         drop[ties] = True
@@ -166,6 +166,35 @@ def remove_smallest(
             new_bands[key] = np.transpose(kept, inverse)
         out_levels.append(new_bands)
     return from_keyed(kind, np.array(coarse, copy=True), out_levels)
+
+
+def kth_smallest(values: np.ndarray, k: int) -> Any:
+    """``np.sort(values)[k]`` of a 1-D array, in linear time (NaN sorts last, as there).
+
+    NumPy's partition takes 10–20 times as long when position ``k`` falls inside a large run
+    of equal values among others (1.8 s against 0.09 s for 8 M values, half of them zero):
+    the zeros of a quantized or padded decomposition do that.  So the most common value of a
+    sample is tried first: when ``k`` falls in its run that value is the answer, and otherwise
+    only the values on ``k``'s side of it are partitioned.
+
+    >>> kth_smallest(np.array([3.0, 0.0, 0.0, 1.0, 0.0, np.nan, 2.0]), 4)
+    np.float64(2.0)
+    """
+    sample = values[:: max(1, values.size // 1024)]
+    if sample.size:
+        common, counts = np.unique(sample, return_counts=True)
+        most = int(np.argmax(counts))
+        value = common[most]
+        if counts[most] * 8 >= sample.size and value == value:  # a common value, not NaN
+            below = int(np.count_nonzero(values < value))
+            upto = below + int(np.count_nonzero(values == value))
+            if below <= k < upto:
+                return value
+            if k < below:
+                return np.partition(values[values < value], k)[k]
+            rest = values[~(values <= value)]  # the larger values, and NaN
+            return np.partition(rest, k - upto)[k - upto]
+    return np.partition(values, k)[k]
 
 
 def check_share(value: Any, name: str = "fraction", meaning: str = "details to remove") -> float:
