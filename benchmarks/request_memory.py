@@ -155,6 +155,11 @@ def _cases() -> dict[str, Case]:
             image_case(2, 1 << 21, 0),
             8 * (1 << 21),
         ),
+        "image 2097152x2 (tall, the pixel limit)": (
+            "images/encode",
+            image_case(1 << 21, 2, 0),
+            8 * (1 << 21),
+        ),
         "curve 10000x3": ("curves/encode", curve_case(10_000, 3), 4 * pad(10_000, 8) * 4),
         "curve 200000x3 (the point limit)": (
             "curves/encode",
