@@ -35,6 +35,13 @@ over each curve's rates; negative: the change needs fewer bytes for the same PSN
   of 32) through one plain quantizer (the library's dead zone, weights from each basis's
   norms) and version 8's coder, against ``bior4.4`` (CDF 9/7) in the same setting.
 
+* ``blocks``: ``encode_image(..., bpp=r)`` with the context coder's block side (``--sides``)
+  against the default 128.
+* ``dq``: dependent quantization (VVC's two quantizers, four states) against one scalar
+  quantizer, both decided by the same trellis (squared error + λ × a static rate model) at
+  each of ``--multipliers``; coded by version 8, and as ideal zeroth-order entropies per band
+  (and per quantizer for dependent quantization).
+
 Run with ``.venv/bin/python benchmarks/grey_gap.py PROBE``.  What each gave: docs/benchmarks.md,
 "Issue 12's grey gap: what else was measured".
 """
@@ -369,6 +376,194 @@ def levels() -> None:
         print(f"{name:10s} " + " ".join(f"{k} {v:+.2f} %" for k, v in out.items()), flush=True)
 
 
+def blocks(sides: list[int]) -> None:
+    """``encode_image(..., bpp=r)`` with the context coder's block side (where its models
+    restart; readers take 16-256) set to each of ``sides``, against the default 128."""
+    import wavecore.rdoq as rdoq
+
+    entropies = ratecontrol._block_entropies
+    saved = (entropy.BLOCK_SIZE, ratecontrol.DEFAULT_BLOCK, rdoq.BLOCK, entropies.__defaults__)
+    try:
+        base = {n: _curve(getattr(data, n)()) for n in NAMES}
+        for side in sides:
+            entropy.BLOCK_SIZE = ratecontrol.DEFAULT_BLOCK = rdoq.BLOCK = side  # type: ignore[misc]
+            entropies.__defaults__ = (side,)
+            out = {n: bd_rate(*base[n], *_curve(getattr(data, n)())) for n in NAMES}
+            _report(f"block {side}", out)
+    finally:
+        (
+            entropy.BLOCK_SIZE,  # type: ignore[misc]
+            ratecontrol.DEFAULT_BLOCK,
+            rdoq.BLOCK,
+            entropies.__defaults__,
+        ) = saved
+
+
+# ---------------------------------------------------------------------------------------------
+# dq: dependent (trellis-coded) quantization as VVC has it, against scalar quantization, both
+# decided by the same trellis and rate model, coded by version 8 (which does not see the state)
+
+#: VVC's four states: states 0 and 1 use Q0 (even multiples of the step), 2 and 3 use Q1 (odd
+#: multiples, and zero); the parity of each index moves the state.
+_DQ_NEXT = np.array([[0, 2], [2, 0], [1, 3], [3, 1]], dtype=np.int64)
+
+
+def _dq_value(k: int, quantizer: int) -> float:
+    if quantizer == 0 or k == 0:
+        return 2.0 * k if quantizer == 0 else 0.0
+    return 2.0 * k - (1.0 if k > 0 else -1.0)
+
+
+def _trellis_kernel() -> Callable[..., Any]:
+    from numba import njit
+
+    @njit(cache=False)
+    def trellis(v, r0, r1, lam, dependent):  # type: ignore[no-untyped-def]
+        """Indices minimising sum (v - value)^2 + lam * bits along the band (raster order).
+        ``dependent``: VVC's 4-state machine (values in units of the step); else one scalar
+        quantizer of the same step.  bits: r0 for a zero, r1 + 1 + 2 log2|k| otherwise."""
+        n = v.size
+        states = 4 if dependent else 1
+        big = 1e300
+        cost = np.full(states, big)
+        cost[0] = 0.0
+        back_state = np.zeros((n, states), dtype=np.int8)
+        back_k = np.zeros((n, states), dtype=np.int64)
+        nxt = np.array([[0, 2], [2, 0], [1, 3], [3, 1]])
+        for i in range(n):
+            x = v[i]
+            a = abs(x)
+            sg = 1 if x >= 0 else -1
+            new = np.full(states, big)
+            for s in range(states):
+                if cost[s] >= big:
+                    continue
+                q = 0 if (not dependent or s < 2) else 1
+                for c in range(3):
+                    if dependent and q == 0:
+                        fl = int(a / 2.0)
+                        k = 0 if c == 0 else sg * (fl + c - 1)
+                        value = 2.0 * k
+                    elif dependent:
+                        m = max(1, int((a + 1.0) / 2.0))
+                        k = 0 if c == 0 else sg * (m + c - 1)
+                        value = 0.0 if k == 0 else 2.0 * k - sg
+                    else:
+                        fl = int(a)
+                        k = 0 if c == 0 else sg * (fl + c - 1)
+                        value = float(k)
+                    if c > 0 and k == 0:
+                        continue
+                    bits = r0 if k == 0 else r1 + 1.0 + 2.0 * np.log2(abs(k))
+                    j = cost[s] + (x - value) ** 2 + lam * bits
+                    t = nxt[s, abs(k) & 1] if dependent else 0
+                    if j < new[t]:
+                        new[t] = j
+                        back_state[i, t] = s
+                        back_k[i, t] = k
+            cost = new
+        out = np.zeros(n, dtype=np.int64)
+        s = int(np.argmin(cost))
+        for i in range(n - 1, -1, -1):
+            out[i] = back_k[i, s]
+            s = back_state[i, s]
+        return out
+
+    return trellis  # type: ignore[no-any-return]
+
+
+def _dq_values(k: np.ndarray, dependent: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The decoder's values (units of the step) of a band's indices in raster order, and the
+    quantizer (0 or 1) each was read with."""
+    if not dependent:
+        return k.astype(float), np.zeros(k.size, dtype=np.int64)
+    out = np.empty(k.size)
+    quantizers = np.empty(k.size, dtype=np.int64)
+    state = 0
+    for i, index in enumerate(k.tolist()):
+        quantizers[i] = 0 if state < 2 else 1
+        out[i] = _dq_value(index, int(quantizers[i]))
+        state = int(_DQ_NEXT[state, abs(index) & 1])
+    return out, quantizers
+
+
+def _entropy_bits(k: np.ndarray, classes: np.ndarray) -> float:
+    """Zeroth-order entropy of the magnitudes (capped at 15, longer ones by an Exp-Golomb
+    tail) under each class, plus a bit per sign: what an ideal static model per band and
+    class would spend."""
+    magnitude = np.abs(k)
+    capped = np.minimum(magnitude, 15)
+    bits = float(np.count_nonzero(magnitude)) + float(
+        np.sum(2 * np.floor(np.log2(np.maximum(magnitude - 14, 1))))
+    )
+    for c in np.unique(classes):
+        counts = np.bincount(capped[classes == c], minlength=16).astype(float)
+        p = counts[counts > 0] / counts.sum()
+        bits += float(-(counts[counts > 0] * np.log2(p)).sum())
+    return bits
+
+
+def dq(multipliers: list[float]) -> None:
+    """BD-rate of dependent quantization against scalar quantization on the grey tuning
+    pictures (cut to sides of multiples of 32 for 5 cdf97 levels), each at its best trellis
+    multiplier of ``multipliers`` (lambda in units of the step squared per bit)."""
+    trellis = _trellis_kernel()
+    for name in GREY:
+        image = getattr(data, name)()
+        image = image[: image.shape[0] // 32 * 32, : image.shape[1] // 32 * 32]
+        coeffs = wavecore.wavedec2(image.astype(float), "cdf97", level=5)
+        weights = quantize.band_weights(coeffs, wavelet="cdf97", boundary="open")
+        curves: dict[str, tuple[list[float], list[float]]] = {}
+        for dependent in (False, True):
+            for lam in multipliers:
+                rates, quality, ideal = [], [], []
+                for step in np.geomspace(0.6, 40.0, 14):
+                    q_levels: list[Any] = []
+                    r_levels: list[Any] = []
+                    bits = 0.0
+                    for li, level in enumerate(coeffs):
+                        bands = [level] if li == 0 else list(level)
+                        qs, rs = [], []
+                        for band, weight in zip(bands, weights[li], strict=True):
+                            # Both place their values on multiples of this unit (dependent
+                            # quantization's two quantizers take every other one each).
+                            unit = step * weight
+                            v = (band / unit).ravel()
+                            if li == 0:
+                                k = np.rint(v).astype(np.int64)
+                                values = k.astype(float)
+                            else:
+                                p0 = min(max(float(np.mean(np.abs(v) < 0.6)), 1e-3), 1 - 1e-3)
+                                k = trellis(v, -np.log2(p0), -np.log2(1 - p0), lam, dependent)
+                                values, classes = _dq_values(k, dependent)
+                                bits += _entropy_bits(k, classes)
+                            qs.append(k.reshape(band.shape).astype(np.int32))
+                            rs.append((values * unit).reshape(band.shape))
+                        q_levels.append(qs[0] if li == 0 else tuple(qs))
+                        r_levels.append(rs[0] if li == 0 else tuple(rs))
+                    size = sum(map(len, entropy.encode_levels(q_levels, version=8)[0]))
+                    back = np.clip(np.rint(wavecore.waverec2(r_levels, "cdf97")), 0, 255)
+                    bpp = 8 * size / image.size
+                    if 0.15 <= bpp <= 2.6:
+                        rates.append(size)
+                        ideal.append(bits / 8)
+                        quality.append(peers.psnr(image, back.astype(np.uint8)))
+                label = f"{'dq' if dependent else 'scalar'} {lam}"
+                curves[label] = (rates, quality)
+                curves[label + " ideal"] = (ideal, quality)
+        for kind in ("", " ideal"):
+            base = curves[f"scalar {multipliers[0]}{kind}"]
+            out = {
+                key: bd_rate(*base, *curve)
+                for key, curve in curves.items()
+                if key.endswith(" ideal") == bool(kind)
+            }
+            print(
+                f"{name:8s}{kind or ' coded'} " + " ".join(f"{k} {v:+.2f}" for k, v in out.items()),
+                flush=True,
+            )
+
+
 def _pywt_norms(pywt: Any, wavelet: str, shape: tuple[int, ...]) -> list[list[float]]:
     zero = pywt.wavedec2(np.zeros(shape), wavelet, mode="periodization", level=5)
     out = []
@@ -431,6 +626,8 @@ PROBES: dict[str, Callable[[argparse.Namespace], None]] = {
     "steps": lambda o: steps(o.trials),
     "levels": lambda o: levels(),
     "wavelets": lambda o: wavelets(o.wavelets),
+    "blocks": lambda o: blocks(o.sides),
+    "dq": lambda o: dq(o.multipliers),
 }
 
 
@@ -468,6 +665,8 @@ def main() -> None:
         help="steps: band weight factors ('level0' the finest level, 'diag', 'approx')",
     )
     parser.add_argument("--wavelets", nargs="+", default=["bior4.4", "bior6.8", "bior2.2"])
+    parser.add_argument("--sides", nargs="+", type=int, default=[256, 64])
+    parser.add_argument("--multipliers", nargs="+", type=float, default=[0.05, 0.1, 0.2])
     options = parser.parse_args()
     print(f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, load {_load()}", flush=True)
     PROBES[options.probe](options)
