@@ -155,6 +155,11 @@ def _cases() -> dict[str, Case]:
             image_case(2, 1 << 21, 0),
             8 * (1 << 21),
         ),
+        "image 1x4194304 lossless (thin, the pixel limit)": (
+            "images/encode",
+            image_case(1, 1 << 22, 0, lossless=True),
+            1 << 22,
+        ),
         "image 2097152x2 (tall, the pixel limit)": (
             "images/encode",
             image_case(1 << 21, 2, 0),

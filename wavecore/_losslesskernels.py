@@ -431,8 +431,12 @@ def code_level(values, mags, parent, planes, stripe, stripes, out, data, decodin
             luma += r0 * cols
         approx = orient == APPROX
         if approx:
-            te = np.zeros(2 * cols, dtype=np.int64)  # two rows: this one and the one above
-            pe = np.zeros(2 * cols * WP_N, dtype=np.int64)  # position-major
+            # Two rows, this one and the one above (one for a plane of one row: 96 bytes a
+            # sample of its width, 384 MiB for a 1 × 4 194 304 picture, half of it unused).
+            # (int64: the coder takes any int32 value, whose errors in eighths need more.)
+            kept_rows = 2 if rows > 1 else 1
+            te = np.zeros(kept_rows * cols, dtype=np.int64)
+            pe = np.zeros(kept_rows * cols * WP_N, dtype=np.int64)  # position-major
         else:
             te = np.zeros(0, dtype=np.int64)
             pe = np.zeros(0, dtype=np.int64)
