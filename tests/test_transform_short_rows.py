@@ -29,7 +29,8 @@ STEPS = [
 
 
 def _bits(arr: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(arr, dtype=np.float64).view(np.int64)
+    arr = np.ascontiguousarray(arr)
+    return arr.view(np.int32 if arr.dtype == np.float32 else np.int64)
 
 
 def _steps(
@@ -41,25 +42,28 @@ def _steps(
 
 @pytest.mark.parametrize(("wavelet", "boundary", "m"), STEPS)
 @pytest.mark.parametrize(("shape", "axis"), [((300, "m"), 1), ((130, "m", 3), 1), ((260, "m"), -1)])
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_short_row_steps_give_the_row_kernels_bits(
     wavelet: str,
     boundary: str,
     m: int,
     shape: tuple[int | str, ...],
     axis: int,
+    dtype: type,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     rng = np.random.default_rng(m)
     full = tuple(m if n == "m" else n for n in shape)
     # Huge finite values too: the sums must round the same way, not only nearly.
-    data = rng.standard_normal(full) * 10.0 ** rng.integers(-3, 300, full)
+    largest = 300 if dtype == np.float64 else 30
+    data = (rng.standard_normal(full) * 10.0 ** rng.integers(-3, largest, full)).astype(dtype)
     inner = full[-1] if len(full) == 3 else 1
     assert transform.many_short_rows(full[0], m, inner)
     fast = _steps(data, wavelet, boundary, axis)
     monkeypatch.setattr(transform, "_MANY_ROWS", 1 << 62)
     slow = _steps(data, wavelet, boundary, axis)
     for got, want in zip(fast, slow, strict=True):
-        assert got.shape == want.shape
+        assert got.shape == want.shape and got.dtype == want.dtype == dtype
         np.testing.assert_array_equal(_bits(got), _bits(want))
 
 
