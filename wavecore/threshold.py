@@ -177,6 +177,20 @@ def kth_smallest(values: np.ndarray, k: int) -> Any:
     sample is tried first: when ``k`` falls in its run that value is the answer, and otherwise
     only the values on ``k``'s side of it are partitioned.
 
+    Parameters
+    ----------
+    values : numpy.ndarray
+        One-dimensional, real.
+    k : int
+        A position in ``[0, values.size)`` of the sorted values.
+
+    Returns
+    -------
+    scalar
+        The value at position ``k`` of ``np.sort(values)``, of ``values``' dtype.
+
+    Examples
+    --------
     >>> kth_smallest(np.array([3.0, 0.0, 0.0, 1.0, 0.0, np.nan, 2.0]), 4)
     np.float64(2.0)
     """
