@@ -78,9 +78,6 @@ from ._transformkernels import (
     analysis_2d as analysis_2d,
 )
 from ._transformkernels import (
-    analysis_columns as analysis_columns,
-)
-from ._transformkernels import (
     analysis_last as analysis_last,
 )
 from ._transformkernels import (

@@ -305,37 +305,10 @@ def synthesis_last(c, d, p_mat, q_mat, f, outer_lo, outer_hi):
 #
 # A tall, thin picture has a great many rows of a few samples, and the row kernels above pay
 # their set-up once per row: a 65 536 × 8 level took 20 times as long a sample as an 8 × 65 536
-# one.  These take the rows as the columns of a 2-D array ``(n, rows)`` (the caller transposes)
-# and loop over the rows innermost, each sum in the row kernels' order of additions, so the
-# values are the same bits.  ``[lo, hi)`` is the block of rows (columns here) to do.
-
-
-@njit(nogil=True, cache=True)
-def analysis_columns(x, a_mat, b_mat, c, d, lo, hi):
-    """:func:`_row_analysis` of the columns ``[lo, hi)`` of ``x`` into those of ``c`` and ``d``."""
-    for half in range(2):
-        ptr, idx, w, reg, pat = a_mat if half == 0 else b_mat
-        out_band = c if half == 0 else d
-        rlo = reg[0]
-        rhi = rlo + reg[1]
-        for r in range(out_band.shape[0]):
-            out = out_band[r]
-            for j in range(lo, hi):
-                out[j] = 0
-            if rlo <= r < rhi:
-                c0 = reg[2] + 2 * (r - rlo)
-                for t in range(pat.shape[1]):
-                    wt = pat[0, t]
-                    src = x[c0 + t]
-                    for j in range(lo, hi):
-                        out[j] += wt * src[j]
-            else:
-                k = r if r < rlo else r - (rhi - rlo)
-                for q in range(ptr[k], ptr[k + 1]):
-                    wt = w[q]
-                    src = x[idx[q]]
-                    for j in range(lo, hi):
-                        out[j] += wt * src[j]
+# one.  The caller transposes the rows into the columns of a 2-D array ``(n, rows)``; for the
+# analysis ``analysis_mid`` then adds in the row kernel's order already, but ``synthesis_mid``
+# groups the detail half's sums differently, hence this kernel.  ``[lo, hi)`` is the block of
+# rows (columns here) to do.
 
 
 @njit(nogil=True, cache=True)

@@ -548,16 +548,19 @@ def _analysis_short_rows(
     x: np.ndarray, a_mat: Any, b_mat: Any, c: np.ndarray, d: np.ndarray
 ) -> None:
     """An analysis step along the middle axis of ``x`` for many short rows: the same values as
-    the row kernels, from the column kernel over the transposed rows."""
+    the row kernels, from the middle-axis kernel over the transposed rows."""
 
     def block(lo: int, hi: int) -> None:
         src = _rows_as_columns(x[lo:hi])
         count = src.shape[1]
-        c_cols = np.empty((c.shape[1], count), dtype=c.dtype)
-        d_cols = np.empty((d.shape[1], count), dtype=d.dtype)
-        _kernels.analysis_columns(src, a_mat, b_mat, c_cols, d_cols, 0, count)
-        _columns_to_rows(c_cols, c[lo:hi])
-        _columns_to_rows(d_cols, d[lo:hi])
+        c_cols = np.empty((1, c.shape[1], count), dtype=c.dtype)
+        d_cols = np.empty((1, d.shape[1], count), dtype=d.dtype)
+        # The middle-axis kernel adds each row's taps from zero in column order, as the row
+        # kernel does (the banks' regular analysis rows have no zero taps, which it skips).
+        rows = max(c.shape[1], d.shape[1])
+        _kernels.analysis_mid(src[None], a_mat, b_mat, c_cols, d_cols, 0, 1, 0, rows)
+        _columns_to_rows(c_cols[0], c[lo:hi])
+        _columns_to_rows(d_cols[0], d[lo:hi])
 
     _by_column_blocks(x.shape[0], x.size, block)
 
