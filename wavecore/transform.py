@@ -534,8 +534,7 @@ def _columns_to_rows(cols: np.ndarray, out: np.ndarray) -> None:
 
 def _by_column_blocks(outer: int, work: int, block: Callable[[int, int], None]) -> None:
     """``block(lo, hi)`` over the outer indices in pieces of ``_COLUMN_BLOCK``, in threads if
-    the work is big: each piece's transposed copies stay small (in cache, and a few MB in all
-    where whole copies added 60 % to an encode's peak memory)."""
+    the work is big: each piece's transposed copies stay small, and in cache."""
 
     def run(lo: int, hi: int) -> None:
         for start in range(lo, hi, _COLUMN_BLOCK):
