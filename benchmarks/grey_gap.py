@@ -429,7 +429,6 @@ def _trellis_kernel() -> Callable[..., Any]:
         cost[0] = 0.0
         back_state = np.zeros((n, states), dtype=np.int8)
         back_k = np.zeros((n, states), dtype=np.int64)
-        nxt = np.array([[0, 2], [2, 0], [1, 3], [3, 1]])
         for i in range(n):
             x = v[i]
             a = abs(x)
@@ -456,7 +455,7 @@ def _trellis_kernel() -> Callable[..., Any]:
                         continue
                     bits = r0 if k == 0 else r1 + 1.0 + 2.0 * np.log2(abs(k))
                     j = cost[s] + (x - value) ** 2 + lam * bits
-                    t = nxt[s, abs(k) & 1] if dependent else 0
+                    t = _DQ_NEXT[s, abs(k) & 1] if dependent else 0
                     if j < new[t]:
                         new[t] = j
                         back_state[i, t] = s

@@ -307,16 +307,15 @@ def synthesis_last(c, d, p_mat, q_mat, f, outer_lo, outer_hi):
 # their set-up once per row: a 65 536 × 8 level took 20 times as long a sample as an 8 × 65 536
 # one.  The caller transposes the rows into the columns of a 2-D array ``(n, rows)``; for the
 # analysis ``analysis_mid`` then adds in the row kernel's order already, but ``synthesis_mid``
-# groups the detail half's sums differently, hence this kernel.  ``[lo, hi)`` is the block of
-# rows (columns here) to do.
+# groups the detail half's sums differently, hence this kernel.
 
 
 @njit(nogil=True, cache=True)
-def synthesis_columns(c, d, p_mat, q_mat, f, acc, lo, hi):
-    """:func:`_row_synthesis` of the columns ``[lo, hi)`` of ``c`` and ``d`` into those of
-    ``f``; ``acc`` is scratch of at least ``hi - lo`` values.  As there, the detail half's
-    boundary rows are summed apart and then added, and its two-tap rows add their pair."""
-    m = f.shape[0]
+def synthesis_columns(c, d, p_mat, q_mat, f, acc):
+    """:func:`_row_synthesis` of every column of ``c`` and ``d`` into the columns of ``f``;
+    ``acc`` is scratch of a row's size.  As there, the detail half's boundary rows are summed
+    apart and then added, and its two-tap rows add their pair."""
+    m, n = f.shape
     for part in range(2):
         src = c if part == 0 else d
         ptr, idx, w, reg, pat = p_mat if part == 0 else q_mat
@@ -328,36 +327,34 @@ def synthesis_columns(c, d, p_mat, q_mat, f, acc, lo, hi):
             out = f[r]
             if not (rlo <= r < rhi):
                 k = r if r < rlo else r - (rhi - rlo)
-                for j in range(lo, hi):
-                    acc[j - lo] = 0
+                acc[:n] = 0
                 for q in range(ptr[k], ptr[k + 1]):
                     wt = w[q]
                     s = src[idx[q]]
-                    for j in range(lo, hi):
-                        acc[j - lo] += wt * s[j]
+                    for j in range(n):
+                        acc[j] += wt * s[j]
                 if add:
-                    for j in range(lo, hi):
-                        out[j] += acc[j - lo]
+                    for j in range(n):
+                        out[j] += acc[j]
                 else:
-                    for j in range(lo, hi):
-                        out[j] = acc[j - lo]
+                    for j in range(n):
+                        out[j] = acc[j]
                 continue
             b = (r - rlo) >> 1
             i = r - rlo - 2 * b
             base = reg[2] + b
             if not add:
-                for j in range(lo, hi):
-                    out[j] = 0
+                out[:] = 0
             if taps == 2:
                 w0, w1 = pat[i, 0], pat[i, 1]
                 s0, s1 = src[base], src[base + 1]
-                for j in range(lo, hi):
+                for j in range(n):
                     out[j] += w0 * s0[j] + w1 * s1[j]
             else:  # the row kernel's other branches add one term at a time, from the left
                 for t in range(taps):
                     wt = pat[i, t]
                     s = src[base + t]
-                    for j in range(lo, hi):
+                    for j in range(n):
                         out[j] += wt * s[j]
 
 

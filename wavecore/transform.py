@@ -574,7 +574,7 @@ def _synthesis_short_rows(
         count = c_cols.shape[1]
         f_cols = np.empty((f.shape[1], count), dtype=f.dtype)
         scratch = np.empty(count, dtype=f.dtype)
-        _kernels.synthesis_columns(c_cols, d_cols, p_mat, q_mat, f_cols, scratch, 0, count)
+        _kernels.synthesis_columns(c_cols, d_cols, p_mat, q_mat, f_cols, scratch)
         _columns_to_rows(f_cols, f[lo:hi])
 
     _by_column_blocks(f.shape[0], f.size, block)
