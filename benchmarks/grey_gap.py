@@ -37,6 +37,9 @@ over each curve's rates; negative: the change needs fewer bytes for the same PSN
 
 * ``blocks``: ``encode_image(..., bpp=r)`` with the context coder's block side (``--sides``)
   against the default 128.
+* ``directional``: direction-adaptive lifting of CDF 9/7 (``--adl``: tuples ``(levels,
+  block, penalty)``), through the ``wavelets`` setting, against the same lifting with no
+  directions; the direction maps counted at their zeroth-order entropy.
 * ``dq``: dependent quantization (VVC's two quantizers, four states) against one scalar
   quantizer, both decided by the same trellis (squared error + λ × a static rate model) at
   each of ``--multipliers``; coded by version 8, and as ideal zeroth-order entropies per band
@@ -578,10 +581,16 @@ def _pywt_norms(pywt: Any, wavelet: str, shape: tuple[int, ...]) -> list[list[fl
     return out
 
 
-def _pywt_point(
-    pywt: Any, image: np.ndarray, wavelet: str, step: float, norms: list[list[float]]
-) -> tuple[int, float]:
-    coeffs = pywt.wavedec2(image, wavelet, mode="periodization", level=5)
+def _plain_point(
+    image: np.ndarray,
+    coeffs: list[Any],
+    step: float,
+    norms: list[list[float]],
+    synthesize: Callable[[list[Any]], np.ndarray],
+    extra_bytes: float = 0.0,
+) -> tuple[float, float]:
+    """Bytes and PSNR of ``wavedec2``-layout coefficients through the library's dead-zone
+    quantizer (weights from ``norms``) and version 8's coder, plus ``extra_bytes``."""
     indices: list[Any] = []
     values: list[Any] = []
     for index, entry in enumerate(coeffs):
@@ -596,9 +605,18 @@ def _pywt_point(
             backs.append(np.sign(k) * (np.abs(k) + offset * (k != 0)) * band_step)
         indices.append(ints[0] if index == 0 else tuple(ints))
         values.append(backs[0] if index == 0 else tuple(backs))
-    size = sum(map(len, entropy.encode_levels(indices, version=8)[0]))
-    back = np.clip(np.rint(pywt.waverec2(values, wavelet, mode="periodization")), 0, 255)
+    size = sum(map(len, entropy.encode_levels(indices, version=8)[0])) + extra_bytes
+    back = np.clip(np.rint(synthesize(values)), 0, 255)
     return size, peers.psnr(image.astype(np.uint8), back.astype(np.uint8))
+
+
+def _pywt_point(
+    pywt: Any, image: np.ndarray, wavelet: str, step: float, norms: list[list[float]]
+) -> tuple[float, float]:
+    coeffs = pywt.wavedec2(image, wavelet, mode="periodization", level=5)
+    return _plain_point(
+        image, coeffs, step, norms, lambda c: pywt.waverec2(c, wavelet, mode="periodization")
+    )
 
 
 def wavelets(names: list[str]) -> None:
@@ -619,6 +637,175 @@ def wavelets(names: list[str]) -> None:
     print("grey mean  " + " ".join(f"{w} {np.mean(out[w]):+.2f} %" for w in names))
 
 
+# ---------------------------------------------------------------------------------------------
+# directional: direction-adaptive lifting (ADL: Ding, Wu, Xu and Li, 2007) of CDF 9/7, against
+# the same lifting with no directions
+
+_CDF97_LIFTS = (-1.586134342059924, -0.052980118572961, 0.882911075530934, 0.443506852043971)
+_CDF97_SCALE = 1.230174104914001
+#: Column offsets per row of the directions tried: 0 is the separable transform.
+_ADL_SHIFTS = (0.0, 0.25, -0.25, 0.5, -0.5, 1.0, -1.0, 2.0, -2.0)
+
+
+def _shifted_columns(plane: np.ndarray, shift: float) -> np.ndarray:
+    """``plane[:, j + shift]``, mirrored at the ends (cubic splines between samples)."""
+    from scipy import ndimage
+
+    if shift == 0:
+        return plane
+    if float(shift).is_integer():
+        width = plane.shape[1]
+        j = np.abs(np.arange(width) + int(shift))
+        return plane[:, np.where(j >= width, 2 * (width - 1) - j, j)]
+    return ndimage.shift(plane, (0, -shift), order=3, mode="mirror")
+
+
+def _along(plane: np.ndarray, shifts: np.ndarray, sign: int) -> np.ndarray:
+    out = np.empty_like(plane)
+    for shift in np.unique(shifts):
+        where = shifts == shift
+        out[where] = _shifted_columns(plane, sign * shift)[where]
+    return out
+
+
+def _adl_lift(x: np.ndarray, shifts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One level along axis 0: each lifting step reads its neighbours above (at ``j + t``)
+    and below (at ``j - t``), ``t`` the direction of the row pair; any ``t`` inverts."""
+    even, odd = x[0::2].copy(), x[1::2].copy()
+    for index, weight in enumerate(_CDF97_LIFTS):
+        if index % 2 == 0:
+            odd += weight * (_along(even, shifts, 1) + _along(np.roll(even, -1, 0), shifts, -1))
+        else:
+            even += weight * (_along(np.roll(odd, 1, 0), shifts, 1) + _along(odd, shifts, -1))
+    return even / _CDF97_SCALE, odd * _CDF97_SCALE
+
+
+def _adl_unlift(low: np.ndarray, high: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    even, odd = low * _CDF97_SCALE, high / _CDF97_SCALE
+    for index in range(3, -1, -1):
+        weight = _CDF97_LIFTS[index]
+        if index % 2 == 0:
+            odd -= weight * (_along(even, shifts, 1) + _along(np.roll(even, -1, 0), shifts, -1))
+        else:
+            even -= weight * (_along(np.roll(odd, 1, 0), shifts, 1) + _along(odd, shifts, -1))
+    x = np.empty((2 * even.shape[0], even.shape[1]))
+    x[0::2], x[1::2] = even, odd
+    return x
+
+
+def _adl_directions(x: np.ndarray, block: int, penalty: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per block of ``block`` columns and ``block // 2`` row pairs, the direction whose whole
+    lifting leaves the least sum of ``|high|`` (times ``1 + penalty`` off the separable one):
+    the map per row pair, and the indices per block."""
+    height, width = x.shape[0] // 2, x.shape[1]
+    tall, wide = max(1, block // 2), block
+    rows, cols = -(-height // tall), -(-width // wide)
+    costs = []
+    for shift in _ADL_SHIFTS:
+        high = np.abs(_adl_lift(x, np.full((height, width), shift))[1])
+        padded = np.zeros((rows * tall, cols * wide))
+        padded[:height, :width] = high
+        cost = padded.reshape(rows, tall, cols, wide).sum(axis=(1, 3))
+        costs.append(cost * (1.0 + (penalty if shift else 0.0)))
+    picks = np.argmin(np.stack(costs), axis=0)
+    shifts = np.asarray(_ADL_SHIFTS)[picks]
+    return np.repeat(np.repeat(shifts, tall, 0), wide, 1)[:height, :width], picks
+
+
+def _adl_analysis(
+    image: np.ndarray, directional_levels: int, block: int, penalty: float
+) -> tuple[list[Any], list[tuple[np.ndarray, np.ndarray]], list[np.ndarray]]:
+    """Five levels in ``wavedec2`` layout; the finest ``directional_levels`` choose directions
+    for the vertical step and for the horizontal step of its low half.  Also the maps and the
+    chosen indices."""
+    approx = image
+    details, maps, picks = [], [], []
+    for level in range(5):
+        if level < directional_levels:
+            vertical, vertical_picks = _adl_directions(approx, block, penalty)
+            picks.append(vertical_picks)
+        else:
+            vertical = np.zeros((approx.shape[0] // 2, approx.shape[1]))
+        low, high = _adl_lift(approx, vertical)
+        if level < directional_levels:
+            horizontal, horizontal_picks = _adl_directions(low.T, block, penalty)
+            picks.append(horizontal_picks)
+        else:
+            horizontal = np.zeros((low.shape[1] // 2, low.shape[0]))
+        low_low, low_high = _adl_lift(low.T, horizontal)
+        high_low, high_high = _adl_lift(high.T, np.zeros_like(horizontal))
+        details.append((high_low.T, low_high.T, high_high.T))  # pywt's (cH, cV, cD)
+        maps.append((vertical, horizontal))
+        approx = low_low.T
+    return [approx, *details[::-1]], maps[::-1], picks
+
+
+def _adl_synthesis(coeffs: list[Any], maps: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    approx = coeffs[0]
+    for (horizontal_detail, vertical_detail, diagonal), (vertical, horizontal) in zip(
+        coeffs[1:], maps, strict=True
+    ):
+        low = _adl_unlift(approx.T, vertical_detail.T, horizontal).T
+        high = _adl_unlift(horizontal_detail.T, diagonal.T, np.zeros_like(horizontal)).T
+        approx = _adl_unlift(low, high, vertical)
+    return approx
+
+
+def _adl_side_bytes(picks: list[np.ndarray]) -> float:
+    """The direction maps at their zeroth-order entropy, per map (an ideal static model)."""
+    bits = 0.0
+    for chosen in picks:
+        counts = np.bincount(chosen.ravel(), minlength=len(_ADL_SHIFTS))
+        used = counts[counts > 0]
+        bits += -float(np.sum(used * np.log2(used / used.sum())))
+    return bits / 8
+
+
+def _adl_norms(shape: tuple[int, ...]) -> list[list[float]]:
+    """Each band's synthesis norm, for the separable lifting (directions keep it near)."""
+    zero, flat_maps, _ = _adl_analysis(np.zeros(shape), 0, 16, 0.0)
+    out = []
+    for index, entry in enumerate(zero):
+        row = []
+        for band in [entry] if index == 0 else list(entry):
+            band[band.shape[0] // 2, band.shape[1] // 2] = 1.0
+            row.append(float(np.linalg.norm(_adl_synthesis(zero, flat_maps))))
+            band[band.shape[0] // 2, band.shape[1] // 2] = 0.0
+        out.append(row)
+    return out
+
+
+def _adl_curve(
+    image: np.ndarray, coeffs: list[Any], maps: Any, norms: list[list[float]], side: float
+) -> tuple[list[float], list[float]]:
+    points = [
+        _plain_point(image, coeffs, s, norms, lambda c: _adl_synthesis(c, maps), side)
+        for s in np.geomspace(3, 40, 8)
+    ]
+    return [p[0] for p in points], [p[1] for p in points]
+
+
+def directional(configs: list[tuple[int, int, float]]) -> None:
+    """Each ``(levels, block, penalty)`` against the same lifting with no directions."""
+    out: dict[tuple[int, int, float], list[float]] = {c: [] for c in configs}
+    for picture in GREY:
+        image = getattr(data, picture)().astype(np.float64)
+        image = image[: image.shape[0] // 32 * 32, : image.shape[1] // 32 * 32]
+        norms = _adl_norms(image.shape)
+        base = _adl_curve(image, *_adl_analysis(image, 0, 16, 0.0)[:2], norms, 0.0)
+        line = []
+        for config in configs:
+            coeffs, maps, picks = _adl_analysis(image, *config)
+            assert np.allclose(_adl_synthesis(coeffs, maps), image)  # any direction inverts
+            side = _adl_side_bytes(picks)
+            rates, psnrs = _adl_curve(image, coeffs, maps, norms, side)
+            out[config].append(bd_rate(*base, rates, psnrs))
+            free = bd_rate(*base, [r - side for r in rates], psnrs)
+            line.append(f"{config} {out[config][-1]:+.2f} % ({side:.0f} B of maps; {free:+.2f} %)")
+        print(f"{picture:8s} " + " | ".join(line), flush=True)
+    print("grey mean " + " | ".join(f"{c} {np.mean(v):+.2f} %" for c, v in out.items()))
+
+
 PROBES: dict[str, Callable[[argparse.Namespace], None]] = {
     "coder": lambda o: coder([ast.literal_eval(c) for c in o.configs]),
     "lossless-coder": lambda o: lossless_coder(),
@@ -627,6 +814,7 @@ PROBES: dict[str, Callable[[argparse.Namespace], None]] = {
     "wavelets": lambda o: wavelets(o.wavelets),
     "blocks": lambda o: blocks(o.sides),
     "dq": lambda o: dq(o.multipliers),
+    "directional": lambda o: directional([ast.literal_eval(c) for c in o.adl]),
 }
 
 
@@ -666,6 +854,12 @@ def main() -> None:
     parser.add_argument("--wavelets", nargs="+", default=["bior4.4", "bior6.8", "bior2.2"])
     parser.add_argument("--sides", nargs="+", type=int, default=[256, 64])
     parser.add_argument("--multipliers", nargs="+", type=float, default=[0.05, 0.1, 0.2])
+    parser.add_argument(
+        "--adl",
+        nargs="+",
+        default=["(1, 32, 0.02)", "(1, 16, 0.02)", "(1, 8, 0.05)", "(2, 16, 0.1)", "(3, 16, 0.05)"],
+        help="directional: (levels, block, penalty) tuples",
+    )
     options = parser.parse_args()
     print(f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, load {_load()}", flush=True)
     PROBES[options.probe](options)
