@@ -502,3 +502,92 @@ def test_version_8_decodes_a_prefix_with_the_whole_layouts_level_classes() -> No
     except BundleError:
         return
     assert not all(np.array_equal(x, y) for x, y in zip(wrong[2], entries[2], strict=True))
+
+
+def _plane_rows_by_loop(layout: list[list[tuple[int, ...]]], two_d: bool) -> np.ndarray:
+    """The plane table as the coder defines it, one plane at a time: channel by channel, band
+    by band; fields offset, rows, cols, detail, first two siblings, luma plane, orientation."""
+    from wavecore.blockcoder import _plane_dims
+
+    rows_out: list[list[int]] = []
+    offset = 0
+    for index, band_shapes in enumerate(layout):
+        dims = [_plane_dims(shape, two_d) for shape in band_shapes]
+        first = len(rows_out)
+        for channel in range(max((d[2] for d in dims), default=0)):
+            for k, (rows, cols, count) in enumerate(dims):
+                if channel >= count:
+                    continue
+                me, detail = len(rows_out), index > 0
+                rows_out.append(
+                    [
+                        offset,
+                        rows,
+                        cols,
+                        int(detail),
+                        me - k if detail and k >= 1 else -1,
+                        me - k + 1 if detail and k >= 2 else -1,
+                        first + k if detail and channel > 0 else -1,
+                        min(k, 2),
+                    ]
+                )
+                offset += rows * cols
+    return np.array(rows_out, dtype=np.int64).reshape(-1, 8)
+
+
+@pytest.mark.parametrize(
+    "layout",
+    [
+        [[(9, 8)], [(9, 8), (9, 9), (8, 8)], [(17, 16), (16, 17), (16, 16)]],
+        [[(4, 4, 3)], [(4, 4, 3)] * 3, [(8, 8, 3)] * 3],
+        [[(1, 2, 40)], [(1, 2, 40)] * 3],
+        [[(4, 4, 3)], [(4, 4, 1), (4, 4, 3), (4, 4, 2)]],  # uneven channel counts
+        [[(5,)], [(5,)], [(9, 2)]],
+        [[(4, 4, 0)], [(4, 4, 0)] * 3],
+    ],
+)
+@pytest.mark.parametrize("two_d", [True, False])
+def test_plane_tables_are_those_of_the_plain_loop(
+    layout: list[list[tuple[int, ...]]], two_d: bool
+) -> None:
+    # The tables are built with array operations (a volume has a plane per slice and band).
+    from wavecore import blockcoder
+
+    key = tuple(tuple(tuple(shape) for shape in level) for level in layout)
+    planes, blocks, per_chunk, total = blockcoder._build_structure(key, two_d, 16)
+    expected = _plane_rows_by_loop(layout, two_d)
+    np.testing.assert_array_equal(planes, expected)
+    assert planes.dtype == np.int64 and total == int((expected[:, 1] * expected[:, 2]).sum())
+    assert len(blocks) == sum(per_chunk)
+
+
+@pytest.mark.parametrize("version", [PARENT_VERSION, PRIOR_VERSION])
+@pytest.mark.parametrize("channels", [16, 41])
+def test_chunks_of_many_channels_are_copied_a_band_at_a_time(
+    version: int, channels: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A volume's slices are the channels; a chunk of many is copied a band at a time, into the
+    # same places as the copies per plane: the same bytes, and the same bands back, whole or
+    # a window of them.
+    from wavecore import blockcoder
+
+    entries = _bands(channels, (37, 22), channels, 2)
+    layout = _layout(entries)
+    chunks = encode_blocks(entries, True, 16, version)
+    decoded = decode_blocks(chunks, layout, True, 16, version=version)
+    _assert_same(decoded, entries)
+    windows = [[(1, 3, 0, 2)] * len(bands) for bands in entries]
+    skip = np.zeros(sum(blockcoder._structure(layout, True, 16)[2]), dtype=bool)
+    parts, _ = blockcoder.decode_block_windows(
+        chunks, layout, True, 16, skip, windows, version=version
+    )
+    monkeypatch.setattr(blockcoder, "_MANY_CHANNELS", 10**9)  # one copy per plane
+    assert encode_blocks(entries, True, 16, version) == chunks
+    _assert_same(decode_blocks(chunks, layout, True, 16, version=version), decoded)
+    per_plane, _ = blockcoder.decode_block_windows(
+        chunks, layout, True, 16, skip, windows, version=version
+    )
+    for bands, plain, whole in zip(parts, per_plane, entries, strict=True):
+        for band, expected, source in zip(bands, plain, whole, strict=True):
+            np.testing.assert_array_equal(band, expected)
+            np.testing.assert_array_equal(band, source[1:3, 0:2])

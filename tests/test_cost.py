@@ -145,6 +145,14 @@ HOSTILE = [
     ("decompose_image", lambda n: wavecore.decompose_image(np.ones((n, 1))).reconstruct(0.2)),
     ("wavedec max", lambda n: wavecore.wavedec(np.ones(n))),
     ("wavedec2 thin", lambda n: wavecore.wavedec2(np.ones((n, 8)))),
+    ("grid of 1 × 1 slices bpp", lambda n: wavecore.encode_grid(np.ones((n, 1, 1)), bpp=2.0)),
+    (
+        "grid of 1 × 2 slices rmse",
+        lambda n: wavecore.decode(
+            wavecore.encode_grid(np.ones((n, 1, 2)), wavelet="cdf97", rmse=0.01),
+            region=(slice(0, n), slice(0, 1), slice(1, 2)),
+        ),
+    ),
 ]
 
 

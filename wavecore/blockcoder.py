@@ -204,56 +204,69 @@ def _cached_structure(
 def _build_structure(
     layout: _LayoutKey, two_d: bool, block: int
 ) -> tuple[np.ndarray, np.ndarray, list[int], int]:
-    planes: list[list[int]] = []
+    plane_tables: list[np.ndarray] = []
     blocks: list[np.ndarray] = []
     per_chunk: list[int] = []
     offset = 0
+    first = 0
     block_rows, block_cols = (block, block) if two_d else (1, block * block)
     for index, band_shapes in enumerate(layout):
-        dims = [_plane_dims(shape, two_d) for shape in band_shapes]
-        first = len(planes)
-        channels = max(d[2] for d in dims) if dims else 0
-        for channel in range(channels):
-            for k, (rows, cols, count) in enumerate(dims):
-                if channel >= count:
-                    continue
-                me = len(planes)
-                detail = index > 0
-                siblings = [me - k + s for s in range(k)] if detail else []
-                luma = first + k if detail and channel > 0 and dims[k][2] > 0 else -1
-                planes.append(
-                    [
-                        offset,
-                        rows,
-                        cols,
-                        1 if detail else 0,
-                        siblings[0] if siblings else -1,
-                        siblings[1] if len(siblings) > 1 else -1,
-                        luma,
-                        min(k, 2),
-                    ]
-                )
-                offset += rows * cols
-        height = max((d[0] for d in dims), default=0)
-        width = max((d[1] for d in dims), default=0)
+        dims = np.array(
+            [_plane_dims(shape, two_d) for shape in band_shapes], dtype=np.int64
+        ).reshape(-1, 3)
+        table, offset = _chunk_planes(dims, index > 0, first, offset)
+        plane_tables.append(table)
+        height = int(dims[:, 0].max(initial=0))
+        width = int(dims[:, 1].max(initial=0))
         grid_rows = -(-height // block_rows)
         grid_cols = -(-width // block_cols)
         rows0, cols0 = np.meshgrid(
             np.arange(grid_rows) * block_rows, np.arange(grid_cols) * block_cols, indexing="ij"
         )
-        table = np.empty((grid_rows * grid_cols, kernels.BLOCK_FIELDS), dtype=np.int64)
-        table[:, kernels.B_PLANE_LO] = first
-        table[:, kernels.B_PLANE_HI] = len(planes)
-        table[:, kernels.B_ROW0] = rows0.ravel()
-        table[:, kernels.B_COL0] = cols0.ravel()
-        table[:, kernels.B_ROW1] = rows0.ravel() + block_rows
-        table[:, kernels.B_COL1] = cols0.ravel() + block_cols
+        blocks_table = np.empty((grid_rows * grid_cols, kernels.BLOCK_FIELDS), dtype=np.int64)
+        blocks_table[:, kernels.B_PLANE_LO] = first
+        blocks_table[:, kernels.B_PLANE_HI] = first + len(table)
+        blocks_table[:, kernels.B_ROW0] = rows0.ravel()
+        blocks_table[:, kernels.B_COL0] = cols0.ravel()
+        blocks_table[:, kernels.B_ROW1] = rows0.ravel() + block_rows
+        blocks_table[:, kernels.B_COL1] = cols0.ravel() + block_cols
         # Version 8's level class: 0 for the finest level (the last chunk), 1 the next, 2 the rest.
-        table[:, kernels.B_LEVEL] = min(len(layout) - 1 - index, kernels.LEVEL_CLASSES - 1)
-        blocks.append(table)
-        per_chunk.append(len(table))
-    plane_table = np.array(planes, dtype=np.int64).reshape(-1, kernels.PLANE_FIELDS)
+        blocks_table[:, kernels.B_LEVEL] = min(len(layout) - 1 - index, kernels.LEVEL_CLASSES - 1)
+        blocks.append(blocks_table)
+        per_chunk.append(len(blocks_table))
+        first += len(table)
+    plane_table = np.concatenate(
+        [np.zeros((0, kernels.PLANE_FIELDS), dtype=np.int64), *plane_tables]
+    )
     return plane_table, np.concatenate(blocks), per_chunk, offset
+
+
+def _chunk_planes(
+    dims: np.ndarray, detail: bool, first: int, offset: int
+) -> tuple[np.ndarray, int]:
+    """The plane rows of one chunk whose bands are ``dims`` (rows, cols, channels each), its
+    first plane numbered ``first`` and its values starting at ``offset``: channel by
+    channel, band by band, a band missing from the channels past its count.  Built with
+    array operations: a volume of thin slices has a plane per slice and band (millions)."""
+    bands = len(dims)
+    channels = int(dims[:, 2].max(initial=0))
+    channel = np.repeat(np.arange(channels, dtype=np.int64), bands)
+    k = np.tile(np.arange(bands, dtype=np.int64), channels)
+    kept = channel < dims[k, 2]
+    channel, k = channel[kept], k[kept]
+    me = first + np.arange(len(k), dtype=np.int64)
+    sizes = dims[k, 0] * dims[k, 1]
+    table = np.empty((len(k), kernels.PLANE_FIELDS), dtype=np.int64)
+    table[:, kernels.P_OFFSET] = offset + np.cumsum(sizes) - sizes
+    table[:, kernels.P_ROWS] = dims[k, 0]
+    table[:, kernels.P_COLS] = dims[k, 1]
+    table[:, kernels.P_KIND] = 1 if detail else 0
+    # A detail plane's first two siblings: the planes of bands 0 and 1 of its channel.
+    table[:, kernels.P_SIB1] = np.where(detail & (k >= 1), me - k, -1)
+    table[:, kernels.P_SIB2] = np.where(detail & (k >= 2), me - k + 1, -1)
+    table[:, kernels.P_LUMA] = np.where(detail & (channel > 0), first + k, -1)
+    table[:, kernels.P_ORIENT] = np.minimum(k, 2)
+    return table, offset + int(sizes.sum())
 
 
 def _parents(
@@ -364,12 +377,7 @@ def encode_blocks(
         return _encode_blocks_knowing(entries, two_d, block, layout, parents, known, version)
     planes, blocks, per_chunk, total, sizes = _structure_sizes(layout, two_d, block)
     flat = np.empty(total, dtype=np.int32)
-    views = _plane_views(entries, two_d)
-    targets = [
-        flat[start : start + view.size].reshape(view.shape)
-        for start, view in zip(planes[:, kernels.P_OFFSET], views, strict=True)
-    ]
-    _copy_planes(views, targets, int(total))
+    _copy_planes(*_copies_into(flat, planes, entries, two_d), int(total))
     spans = _span_count(int(total))
     cuts = _cuts(sizes, spans)
     results: list[Any] = [None] * spans
@@ -726,6 +734,64 @@ def block_lengths(
     return _code_some(entries, two_d, planes, blocks, indices, parents, version)[1], regions
 
 
+#: A chunk whose bands have at least this many channels each (a volume's slices) is copied
+#: a band at a time, every channel at once: a volume of thin slices has a plane per slice and
+#: band, and a copy per plane cost some 10 µs of Python each.  Pictures (1 or 3 channels) keep
+#: the copies per plane, which the threads share out (see :func:`_copy_planes`).
+_MANY_CHANNELS = 16
+
+
+def _many_channels(dims: Sequence[tuple[int, int, int]]) -> bool:
+    """Whether a chunk of bands ``dims`` is copied a band at a time."""
+    return bool(dims) and all(d[2] == dims[0][2] for d in dims) and dims[0][2] >= _MANY_CHANNELS
+
+
+def _channels_first(
+    flat: np.ndarray, start: int, dims: Sequence[tuple[int, int, int]]
+) -> list[np.ndarray]:
+    """Each band's planes in ``flat`` as one ``(channels, rows, cols)`` view: a chunk whose
+    bands have equal channel counts holds them channel by channel, band by band from
+    ``start``."""
+    channels = dims[0][2]
+    stride = sum(rows * cols for rows, cols, _ in dims)
+    chunk = flat[start : start + channels * stride].reshape(channels, stride)
+    out, offset = [], 0
+    for rows, cols, _ in dims:
+        out.append(chunk[:, offset : offset + rows * cols].reshape(channels, rows, cols))
+        offset += rows * cols
+    return out
+
+
+def _copies_into(
+    flat: np.ndarray, planes: np.ndarray, entries: list[list[np.ndarray]], two_d: bool
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Sources and targets in ``flat`` (laid out by ``planes``) for :func:`_copy_planes`:
+    per plane, or per band where a chunk has many channels."""
+    sources: list[np.ndarray] = []
+    targets: list[np.ndarray] = []
+    p = 0
+    for bands in entries:
+        dims = [_plane_dims(band.shape, two_d) for band in bands]
+        views = [
+            np.asarray(band, dtype=np.int32).reshape(d) for band, d in zip(bands, dims, strict=True)
+        ]
+        if _many_channels(dims):
+            start = int(planes[p, kernels.P_OFFSET])
+            sources.extend(view.transpose(2, 0, 1) for view in views)
+            targets.extend(_channels_first(flat, start, dims))
+            p += dims[0][2] * len(dims)
+            continue
+        for channel in range(max((d[2] for d in dims), default=0)):
+            for view in views:
+                if channel < view.shape[2]:
+                    start = int(planes[p, kernels.P_OFFSET])
+                    plane = view[:, :, channel]
+                    sources.append(plane)
+                    targets.append(flat[start : start + plane.size].reshape(plane.shape))
+                    p += 1
+    return sources, targets
+
+
 def _plane_views(entries: list[list[np.ndarray]], two_d: bool) -> list[np.ndarray]:
     """The planes of every entry in ``_structure``'s order."""
     out = []
@@ -903,6 +969,15 @@ def _bands_out(
             for (r0, r1, c0, c1), (_, _, n) in zip(cuts, dims, strict=True)
         ]
         channels = max((d[2] for d in dims), default=0)
+        if _many_channels(dims):
+            start = int(planes[p, kernels.P_OFFSET])
+            for view, (r0, r1, c0, c1), array in zip(
+                _channels_first(flat, start, dims), cuts, arrays, strict=True
+            ):
+                sources.append(view[:, r0:r1, c0:c1])
+                targets.append(array.transpose(2, 0, 1))
+            p += channels * len(dims)
+            channels = 0  # copied
         for channel, k in itertools.product(range(channels), range(len(dims))):
             rows, cols, count = dims[k]
             if channel >= count:
@@ -966,20 +1041,21 @@ def decode_block_windows(
     p = 0
     for index, band_shapes in enumerate(layout):
         dims = [_plane_dims(shape, two_d) for shape in band_shapes]
+        if index not in totals_for:
+            p += sum(d[2] for d in dims)
+            continue
         channels = max((d[2] for d in dims), default=0)
         sums = [[0, 0] for _ in dims]
         for channel, k in itertools.product(range(channels), range(len(dims))):
             rows, cols, count = dims[k]
             if channel >= count:
                 continue
-            if index in totals_for:
-                start = planes[p, kernels.P_OFFSET]
-                ones, more = band_counts(flat[start : start + rows * cols])
-                sums[k][0] += ones
-                sums[k][1] += more
+            start = planes[p, kernels.P_OFFSET]
+            ones, more = band_counts(flat[start : start + rows * cols])
+            sums[k][0] += ones
+            sums[k][1] += more
             p += 1
-        if index in totals_for:
-            totals[index] = [(ones, more) for ones, more in sums]
+        totals[index] = [(ones, more) for ones, more in sums]
     return _bands_out(flat, planes, layout, two_d, total, windows), totals
 
 
@@ -990,7 +1066,8 @@ _COPY_PIECES = 16
 
 
 def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: int) -> None:
-    """``targets[k][...] = sources[k]`` for 2-D planes, in row slices over the thread pool.
+    """``targets[k][...] = sources[k]`` for 2-D planes (or 3-D bands, channels first), in
+    slices of the first axis over the thread pool.
 
     The planes of a colour picture are strided channel views; NumPy's strided copies release
     the GIL, so slices of rows copy on every core (the largest planes would not balance as
@@ -998,8 +1075,8 @@ def _copy_planes(sources: list[np.ndarray], targets: list[np.ndarray], total: in
     """
     tasks: list[tuple[int, int, int]] = []
     for k, source in enumerate(sources):
-        rows, cols = source.shape
-        step = max(1, _COPY_TASK // max(cols, 1))
+        rows = source.shape[0]
+        step = max(1, _COPY_TASK // max(source.size // max(rows, 1), 1))
         tasks.extend((k, lo, min(lo + step, rows)) for lo in range(0, rows, step))
 
     def run(lo: int, hi: int) -> None:
