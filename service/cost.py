@@ -42,6 +42,14 @@ TRANSFER_FACTOR = 4
 #: in 1-D, 909 B in 3-D), so a point of ``d`` coordinates counts ``4 (d + 1)`` samples.
 CURVE_FACTOR = 4
 
+#: Samples each plane of a bundle counts when its context coder is one of the legacy versions
+#: that still decode (2 and 3): they decode plane by plane in Python, some 35-65 µs a plane,
+#: the time a picture's decode takes for about a thousand samples (40-80 ns each).  A volume
+#: is a plane per slice and band, so a crafted bundle of 327,680 slices of 1 × 1, some 200 KB,
+#: would take over a minute to decode (0.25 ms a slice; later versions: 4 µs).
+LEGACY_PLANE_SAMPLES = 1024
+LEGACY_CODER_VERSIONS = (2, 3)
+
 #: The codec's deepest default levels (``most`` of ``wavecore.default_level``).
 DEFAULT_MOST_LEVELS = {"image": 5, "surface": 5, "curve": 8}
 
@@ -190,7 +198,24 @@ def check_bundle(info: dict[str, Any], settings: Settings) -> None:
         sizes = [int(s) for s in info.get("shape", [])]
     samples = math.prod(max(s, 0) for s in sizes)
     shape = " × ".join(str(s) for s in sizes)
-    check(samples, f"a bundle that decodes {shape} samples", settings)
+    what = f"a bundle that decodes {shape} samples"
+    cparams = header.get("cparams") or {}
+    if cparams.get("coder") == "context" and cparams.get("version") in LEGACY_CODER_VERSIONS:
+        planes = _planes(info.get("chunks") or [], bool(cparams.get("two_d", True)))
+        samples += LEGACY_PLANE_SAMPLES * planes
+        what += f" in {planes} planes of context coder version {cparams['version']}"
+    check(samples, what, settings)
+
+
+def _planes(chunks: Sequence[dict[str, Any]], two_d: bool) -> int:
+    """The planes the block coder codes for a bundle's chunks (from ``inspect``): one per band
+    and channel (a 2-D band's axes past its second, a 1-D band's past its first)."""
+    planes = 0
+    for chunk in chunks:
+        for shape in chunk.get("shapes") or []:
+            tail = shape[2:] if two_d and len(shape) >= 2 else shape[1:]
+            planes += math.prod(max(int(n), 0) for n in tail)
+    return planes
 
 
 def check_grid_data(shape: Sequence[int], level: int | None, settings: Settings) -> None:

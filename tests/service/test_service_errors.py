@@ -240,6 +240,29 @@ async def test_bundles_that_decode_beyond_the_limits_are_refused_before_decoding
         assert (await c.post("/v1/bundles/reconstruct", content=CURVE_BUNDLE)).status_code == 200
 
 
+async def test_a_bundle_of_a_legacy_coder_counts_its_planes(
+    make_client: Callable[..., httpx.AsyncClient], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Context coder versions 2 and 3 still decode, plane by plane in Python, and a volume is
+    a plane per slice and band: such a bundle's planes count as samples of its cost."""
+    import wavecore.codec.plan as plan
+
+    volume = np.random.default_rng(3).standard_normal((40, 1, 1))
+    modern = wavecore.encode_grid(volume, wavelet="cdf97", rmse=0.1)
+    with monkeypatch.context() as patch:
+        patch.setattr(plan.Plan, "context_version", property(lambda self: 3))
+        legacy = wavecore.encode_grid(volume, wavelet="cdf97", rmse=0.1)
+    assert wavecore.inspect(legacy)["header"]["cparams"]["version"] == 3
+    np.testing.assert_array_equal(wavecore.decode(legacy), wavecore.decode(modern))
+    async with make_client(max_pixels=2000) as c:  # 10 000 samples a request
+        r = await c.post("/v1/bundles/reconstruct", content=legacy)
+        detail = _check_problem(r, 413, "too-costly")["detail"]
+        assert "8 × 8 × 40 samples in 160 planes of context coder version 3" in detail
+        r = await c.post("/v1/bundles/reconstruct", content=modern, params={"format": "npy"})
+        assert r.status_code == 200, r.text
+        assert np.load(io.BytesIO(r.content)).shape == volume.shape
+
+
 async def test_point_and_grid_limits(make_client: Callable[..., httpx.AsyncClient]) -> None:
     async with make_client(max_points=50, max_grid_points=100) as c:
         r = await c.post("/v1/curves/encode", json={"points": [[0.0, 1.0]] * 51})
