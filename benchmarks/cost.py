@@ -90,6 +90,11 @@ def _encoded_row(n: int) -> bytes:
     return wavecore.encode_image(_image_row(n))
 
 
+def _volume_of_points(n: int) -> np.ndarray:
+    """A volume of ``n`` slices of 1 × 1: the 2-D core codes a plane per slice and band."""
+    return np.cumsum(RNG.standard_normal((n, 1, 1)), axis=0).astype(np.float32)
+
+
 def _fresh_norms() -> Callable[[int], Any]:
     """``basis_norms`` on a new length at every call: it caches by length, and a cached call
     would time nothing."""
@@ -234,6 +239,18 @@ CASES = [
         _rows(1_048_576),
         lambda n: RNG.random((max(n // 8, 8), 8)),
         lambda g: wavecore.decompose_surface(g).reconstruct(keep=0.5),
+    ),
+    Case(
+        "encode_grid N×1×1 volume, bpp=2",
+        [n for n in _rows(262_144) if n >= 1024],
+        _volume_of_points,
+        lambda g: wavecore.encode_grid(g, bpp=2.0),
+    ),
+    Case(
+        "decode N×1×1 volume (cdf97, rmse)",
+        [n for n in _rows(262_144) if n >= 1024],
+        lambda n: wavecore.encode_grid(_volume_of_points(n), wavelet="cdf97", rmse=0.05),
+        wavecore.decode,
     ),
     Case("basis_norms", _rows(4_194_304), lambda n: wavecore.valid_length(n, 1), _fresh_norms()),
 ]

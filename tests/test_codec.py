@@ -103,9 +103,23 @@ def test_bpp_is_not_exceeded_and_within_3_percent(coins: np.ndarray, bpp: float)
     assert inspect(bundle)["bpp"] == pytest.approx(actual)
 
 
-def test_bpp_too_low_is_a_clear_error() -> None:
-    with pytest.raises(InvalidParameter, match="smallest bundle is"):
-        encode_image(smooth_image((16, 16)), bpp=0.01)
+@pytest.mark.parametrize("shape", [(16, 16), (9, 13, 3), (1, 40)])
+def test_bpp_too_low_is_a_clear_error_that_names_a_budget_that_works(
+    shape: tuple[int, ...],
+) -> None:
+    from wavecore.errors import BitrateTooLow
+
+    image = smooth_image(shape)
+    pixels = shape[0] * shape[1]
+    with pytest.raises(InvalidParameter, match="its smallest bundle needs") as caught:
+        encode_image(image, bpp=0.01)
+    assert isinstance(caught.value, BitrateTooLow)
+    smallest = caught.value.smallest_bytes
+    assert f"{smallest} bytes" in str(caught.value)
+    # The figure is the budget the search needs: it codes, and one byte less does not.
+    assert len(encode_image(image, bpp=8 * smallest / pixels)) <= smallest
+    with pytest.raises(BitrateTooLow):
+        encode_image(image, bpp=8 * (smallest - 1) / pixels)
 
 
 def test_colour_bpp_counts_pixels_not_samples() -> None:

@@ -349,6 +349,23 @@ def test_bpp_target_is_never_exceeded(bpp: float) -> None:
     assert 8 * len(bundle) / data.size >= 0.8 * bpp
 
 
+@pytest.mark.parametrize("shape", [(300, 1, 1), (4, 6, 5)])
+def test_a_bpp_below_the_smallest_bundle_is_named_per_value_of_the_grid(
+    shape: tuple[int, ...],
+) -> None:
+    # The wavelet core's rate control counts bits per point of a slice; the error speaks of
+    # the grid's values, and its figure is a budget that codes.
+    from wavecore.errors import BitrateTooLow
+
+    data = np.cumsum(np.random.default_rng(8).standard_normal(shape), axis=0).astype(np.float32)
+    with pytest.raises(BitrateTooLow, match="this grid can be coded in: bpp") as caught:
+        wavecore.encode_grid(data, bpp=0.05)
+    smallest = caught.value.smallest_bytes
+    bpp = 8 * smallest / data.size
+    assert f"bpp {bpp:.4f} ({smallest} bytes" in str(caught.value)
+    assert len(wavecore.encode_grid(data, bpp=bpp)) <= smallest
+
+
 # --------------------------------------------------------------------------------------------
 # Levels and windows
 # --------------------------------------------------------------------------------------------

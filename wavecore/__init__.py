@@ -11,6 +11,7 @@ from .codec import decode, decode_region, encode_curve, encode_image, encode_sur
 from .curves import CurveDecomposition, decompose_curve, fitting_length, transfer_details
 from .curvesets import CurveSet, decode_curves, encode_curves
 from .errors import (
+    BitrateTooLow,
     BundleError,
     InvalidCoefficients,
     InvalidLength,
@@ -53,6 +54,7 @@ from .transform import analysis_step, synthesis_step
 __version__ = "0.1.0"
 
 __all__ = [
+    "BitrateTooLow",
     "BundleError",
     "CurveDecomposition",
     "CurveSet",

@@ -7,13 +7,17 @@ module::
     WavecoreError (Exception)
     ├── InvalidParameter (ValueError)      a bad argument: unknown name, level, fraction, dtype …
     │   ├── InvalidLength                  a length that does not fit the requested levels
-    │   └── InvalidCoefficients            a coefficient list whose shapes do not fit together
+    │   ├── InvalidCoefficients            a coefficient list whose shapes do not fit together
+    │   └── BitrateTooLow                  a bpp below the smallest bundle the input takes
     └── BundleError (ValueError)           anything wrong with an encoded bundle
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 __all__ = [
+    "BitrateTooLow",
     "BundleError",
     "InvalidCoefficients",
     "InvalidLength",
@@ -39,6 +43,20 @@ class InvalidLength(InvalidParameter):
 
 class InvalidCoefficients(InvalidParameter):
     """A coefficient list whose shapes do not belong to one decomposition."""
+
+
+class BitrateTooLow(InvalidParameter):
+    """A ``bpp`` target below the smallest bundle the input can be coded in.
+
+    ``smallest_bytes`` is the size of that smallest bundle (its header included).
+    """
+
+    def __init__(self, message: str, smallest_bytes: int) -> None:
+        super().__init__(message)
+        self.smallest_bytes = smallest_bytes
+
+    def __reduce__(self) -> tuple[Any, ...]:  # pickled across the service's worker processes
+        return (type(self), (str(self), self.smallest_bytes))
 
 
 class BundleError(WavecoreError, ValueError):

@@ -81,7 +81,7 @@ import numpy as np
 
 from .arguments import as_native
 from .bundle import MAX_ELEMENTS
-from .errors import BundleError, InvalidParameter
+from .errors import BitrateTooLow, BundleError, InvalidParameter
 from .gridpredict import (
     decode_predictive,
     decode_predictive_window,
@@ -910,7 +910,17 @@ def encode_layout(
         overhead = _TAIL.size + _HEAD.size + 4 * arr.ndim + _CRC.size + len(mask_bytes)
         budget_bits = bpp_target * arr.size - 8 * overhead
         rows, cols = core_values.shape[:2]
-        core_bytes, decoded = core.encode_to_bpp(core_values, max(budget_bits, 1.0) / (rows * cols))
+        try:
+            core_bytes, decoded = core.encode_to_bpp(
+                core_values, max(budget_bits, 1.0) / (rows * cols)
+            )
+        except BitrateTooLow as exc:  # restated per value of the grid, not per core point
+            smallest = exc.smallest_bytes + overhead
+            msg = (
+                f"bpp {bpp_target} is below what this grid can be coded in: bpp "
+                f"{8 * smallest / arr.size:.4f} ({smallest} bytes, header included) codes it"
+            )
+            raise BitrateTooLow(msg, smallest) from None
         if not has_mask and dtype.kind in "iu" and dtype.itemsize <= 4:
             # Measured as the RMSE search measures: one compiled pass that rounds and clips as
             # the cast does, with no array of the dtype made (the cast and NumPy's four passes

@@ -50,7 +50,7 @@ from ..blockcoder import BLOCK_SIZE as DEFAULT_BLOCK
 from ..blockcoder import PARENT_VERSIONS, CodedBlocks, KnownBlocks, block_lengths, code_blocks
 from ..bundle import read_bundle, write_bundle
 from ..entropy import CONTEXT_VERSION, encode_levels
-from ..errors import InvalidParameter
+from ..errors import BitrateTooLow, InvalidParameter
 from ..layout import as_levels, from_levels
 from ..quantize import (
     APPROX_ROUNDING,
@@ -1337,7 +1337,8 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         budget,
         max(math.ceil(0.97 * bpp * pixels / 8.0) + _PLACEHOLDER_EXCESS, math.ceil(0.975 * budget)),
     )
-    if budget < 64:  # not even a header fits: say what the smallest bundle would be
+    if budget < 64 and budget < encoder.size_bound(high):
+        # Not even the coarsest step's bundle fits: say what it needs.
         enough = budget = 0
     if budget > 0 and encoder.refines():
         predicted = _predicted_bpp(encoder, budget, enough, low, high)
@@ -1446,12 +1447,14 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
     if trimmed:
         return trimmed[0]
     if step is None:
-        smallest = len(encoder.bundle(high))
+        # The search holds a bundle to its budget by its size with the header's placeholders
+        # (up to _PLACEHOLDER_EXCESS bytes over what is written): that bound is what it needs.
+        smallest = math.ceil(encoder.size_bound(high))
         msg = (
-            f"bpp {bpp} is below what this image can be coded in: the smallest bundle is "
-            f"{smallest} bytes = {8 * smallest / pixels:.4f} bpp (header included)"
+            f"bpp {bpp} is below what this {encoder.plan.kind} can be coded in: its smallest "
+            f"bundle needs {smallest} bytes = {8 * smallest / pixels:.4f} bpp (header included)"
         )
-        raise InvalidParameter(msg)
+        raise BitrateTooLow(msg, smallest)
     return _last_bundle(encoder, step)
 
 
