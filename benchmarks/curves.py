@@ -28,6 +28,10 @@ and the script stops rather than clamp.
 
 Run ``python benchmarks/curves.py --write`` to redraw the figure ``docs/figures/curves_rate.png``;
 the table and summary lines it prints are what ``docs/benchmarks.md`` quotes.
+
+``--set-cost`` times :func:`wavecore.encode_curves` (the default ``method="auto"``) on random
+walks of 1, 2 and 3 dimensions, one long curve and many short ones, against what the service's
+cost check counts for them (``service.cost.curve_set_samples``).
 """
 
 from __future__ import annotations
@@ -524,6 +528,32 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def set_cost() -> None:
+    """Seconds of ``encode_curves`` per point and per curve, and per counted sample."""
+    sys.path.insert(0, str(ROOT))  # the service's package, beside the library's
+    from service.cost import curve_set_samples
+
+    rng = np.random.default_rng(0)
+    print(f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load {os.getloadavg()[0]:.2f}")
+    print("| dims | curves × points | seconds | µs a point | ms a curve | ns a counted sample |")
+    print("|---:|---:|---:|---:|---:|---:|")
+    for dims in (2, 1, 3):
+        for count, points in ((1, 20_000), (1_000, 2), (400, 5), (200, 30), (50, 100)):
+            curves = [np.cumsum(rng.standard_normal((points, dims)), axis=0) for _ in range(count)]
+            wavecore.encode_curves(curves[:2])  # compile
+            start = time.perf_counter()
+            wavecore.encode_curves(curves)
+            seconds = time.perf_counter() - start
+            counted = curve_set_samples(count * points, count)
+            print(
+                f"| {dims} | {count} × {points} | {seconds:.2f} | "
+                f"{seconds / (count * points) * 1e6:.1f} | {seconds / count * 1e3:.2f} | "
+                f"{seconds / counted * 1e9:.0f} |",
+                flush=True,
+            )
+    print(f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load {os.getloadavg()[0]:.2f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -543,7 +573,15 @@ def main() -> None:
         help="print version 5's prior table and version 6's copy models' (two lines), learnt on "
         "fonts and text the benchmark does not use",
     )
+    parser.add_argument(
+        "--set-cost",
+        action="store_true",
+        help="only the time of encode_curves per point and per curve (the service's cost model)",
+    )
     args = parser.parse_args()
+    if args.set_cost:
+        set_cost()
+        return
     if args.train_priors:
         print(train_priors())
         print(train_copy_priors())

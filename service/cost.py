@@ -32,6 +32,17 @@ from .settings import Settings
 #: for the padding of a large image to a length that fits its levels.
 SAMPLES_PER_PIXEL = 5
 
+#: A curve file (GeoJSON, SVG) is coded as one curve set, whose cost is its time, not its
+#: memory: both of its forms are searched curve by curve (the vertex form's optimal
+#: simplification, some 90 µs a 2-D point; the wavelet form's step search, in closed loop;
+#: 6 ms a curve of 2 points, 17-26 ms one of 30-100; benchmarks/curves.py ``--set-cost``).  A
+#: point counts this many samples and a curve this many more: at most about 1 µs a counted
+#: sample, so the largest set accepted takes some 20 s, as long as the slowest requests of the
+#: other endpoints.  Counted by memory alone, a GeoJSON of 20 000 lines of 2 points (some
+#: 500 kB) held a worker until the request timeout.
+CURVE_SET_POINT_SAMPLES = 100
+CURVE_SET_CURVE_SAMPLES = 16384
+
 #: Working values per coordinate of a detail transfer: the local frames (``d × d`` per point)
 #: and the three reconstructions per level hold about 4 times what a codec pass holds
 #: (benchmarks/request_memory.py: 284 B per coordinate against the codec's 47–63 B).
@@ -141,6 +152,12 @@ def check_grid(
     fitted, _ = padded_lengths(list(shape[:2]), level, boundaries, "bspline2", "surface")
     dims = shape[2] if len(shape) > 2 else 1
     check(fitted[0] * fitted[1] * dims, f"a {shape[0]} × {shape[1]} grid", settings)
+
+
+def curve_set_samples(points: int, curves: int) -> int:
+    """What a curve set of ``curves`` curves and ``points`` points in all counts (see
+    :data:`CURVE_SET_POINT_SAMPLES`)."""
+    return CURVE_SET_POINT_SAMPLES * points + CURVE_SET_CURVE_SAMPLES * curves
 
 
 def check_curve(

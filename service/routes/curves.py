@@ -125,8 +125,9 @@ def curve_file_job(
                     f"{settings.max_points}"
                 )
                 raise Problem("too-costly", msg)
-        samples = sum(cost.CURVE_FACTOR * len(c) * (c.shape[1] + 1) for c in data.curves)
+        memory = sum(cost.CURVE_FACTOR * len(c) * (c.shape[1] + 1) for c in data.curves)
         total = sum(len(c) for c in data.curves)
+        samples = max(memory, cost.curve_set_samples(total, len(data.curves)))
         cost.check(samples, f"{len(data.curves)} curves of {total} points", settings)
 
     try:

@@ -189,3 +189,24 @@ async def test_method_query_picks_the_form(client: httpx.AsyncClient, method: st
     back = await client.post("/v1/bundles/reconstruct", content=r.content)
     assert back.status_code == 200
     assert back.json()["features"][0]["properties"] == {"name": "field", "crop": "wheat"}
+
+
+async def test_a_file_of_many_curves_costs_its_search(make_client) -> None:  # type: ignore[no-untyped-def]
+    # A curve set is searched curve by curve (some 6 ms a short curve): a file of many short
+    # curves is refused by what that costs, before any is coded.  max_pixels 20 000: 100 000
+    # samples a request, 6 curves of 2 points (16 584 samples each), not 7.
+    def lines(count: int) -> bytes:
+        coordinates = [[[float(i), 0.0], [float(i), 1.0]] for i in range(count)]
+        return json.dumps({"type": "MultiLineString", "coordinates": coordinates}).encode()
+
+    async with make_client(max_pixels=20_000) as client:
+        r = await client.post(
+            "/v1/curves/encode", content=lines(7), headers={"content-type": GEOJSON}
+        )
+        assert r.status_code == 413, r.text
+        assert "7 curves of 14 points" in r.json()["detail"]
+        r = await client.post(
+            "/v1/curves/encode", content=lines(6), headers={"content-type": GEOJSON}
+        )
+        assert r.status_code == 200, r.text
+        assert r.headers["X-Wavecore-Curves"] == "6"
