@@ -22,6 +22,8 @@ from zarr_fields import smooth_field  # noqa: E402
 
 from wavecore.errors import BundleError, InvalidParameter  # noqa: E402
 from wavecore.zarr import (  # noqa: E402
+    MODE_GRID,
+    MODE_WAVELET,
     CodecConfig,
     WavecoreCodec,
     WavecoreZarrCodec,
@@ -352,3 +354,37 @@ def test_max_error_chunks_are_grid_bundles_and_infinities_keep_the_search() -> N
     out = decode_chunk(coded)
     finite = np.isfinite(field)
     assert out[5, 7] == np.inf and np.max(np.abs(out[finite] - field[finite])) <= 1e-3
+
+
+@pytest.mark.parametrize("shape", [(4096, 1, 1), (300, 3, 5), (17, 64, 64)])
+@pytest.mark.parametrize("dtype", [np.float32, np.int16])
+def test_a_chunk_of_small_slices_is_coded_whole_under_psnr_and_bpp(
+    shape: tuple[int, int, int], dtype: type
+) -> None:
+    # A bundle a slice cost 7-25 ms and some 50 bytes whatever its size: a chunk of small
+    # slices is one grid bundle (mode 3), its PSNR against the chunk's range, its bpp over it.
+    rng = np.random.default_rng(11)
+    chunk = (np.cumsum(rng.standard_normal(shape), axis=0) * 40).astype(dtype)
+    span = float(chunk.max()) - float(chunk.min())
+    for config in ({"psnr": 55}, {"bpp": 6.0}, {}):
+        data = encode_chunk(chunk, config)
+        assert data[4] == MODE_GRID, config
+        out = decode_chunk(data)
+        assert out.shape == chunk.shape and out.dtype == chunk.dtype
+        mse = float(np.mean((out.astype(np.float64) - chunk) ** 2))
+        if "bpp" in config:
+            assert 8 * len(data) <= config["bpp"] * chunk.size + 8 * 64  # the chunk's header
+        else:
+            assert 10 * np.log10(span**2 / max(mse, 1e-300)) >= config.get("psnr", 60) - 1e-9
+    # One slice, or larger ones, keep a bundle a slice.
+    one = np.arange(12, dtype=dtype).reshape(1, 3, 4)
+    assert encode_chunk(one, {"psnr": 55})[4] == MODE_WAVELET
+    large = np.arange(2 * 65 * 65, dtype=dtype).reshape(2, 65, 65)
+    assert encode_chunk(large, {"psnr": 55})[4] == MODE_WAVELET
+
+
+def test_nan_cells_of_small_slices_stay_nan() -> None:
+    chunk = np.cumsum(np.random.default_rng(12).standard_normal((500, 2, 2)), axis=0)
+    chunk[7, 1, 0] = np.nan
+    out = decode_chunk(encode_chunk(chunk, {"psnr": 50}))
+    assert np.isnan(out[7, 1, 0]) and np.isnan(out).sum() == 1

@@ -48,7 +48,8 @@ class InvalidCoefficients(InvalidParameter):
 class BitrateTooLow(InvalidParameter):
     """A ``bpp`` target below the smallest bundle the input can be coded in.
 
-    ``smallest_bytes`` is the size of that smallest bundle (its header included).
+    ``smallest_bytes`` is the fewest bytes a target must allow (header included): a ``bpp``
+    of ``8 * smallest_bytes`` over the pixels (a grid: its values) codes the input.
     """
 
     def __init__(self, message: str, smallest_bytes: int) -> None:
