@@ -388,3 +388,14 @@ def test_nan_cells_of_small_slices_stay_nan() -> None:
     chunk[7, 1, 0] = np.nan
     out = decode_chunk(encode_chunk(chunk, {"psnr": 50}))
     assert np.isnan(out[7, 1, 0]) and np.isnan(out).sum() == 1
+
+
+def test_a_bpp_below_a_slices_smallest_bundle_names_a_bpp_that_codes() -> None:
+    from wavecore.errors import BitrateTooLow
+
+    chunk = np.random.default_rng(13).standard_normal((8, 8))
+    with pytest.raises(BitrateTooLow, match="8 × 8 slice of this chunk") as caught:
+        encode_chunk(chunk, {"bpp": 4.0})
+    enough = 8 * caught.value.smallest_bytes / chunk.size
+    assert f"bpp {enough:.4f}" in str(caught.value)
+    assert decode_chunk(encode_chunk(chunk, {"bpp": enough})).shape == chunk.shape

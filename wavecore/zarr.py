@@ -59,7 +59,7 @@ from typing import Any
 import numpy as np
 
 from . import decode, encode_image, encode_surface
-from .errors import BundleError, InvalidParameter
+from .errors import BitrateTooLow, BundleError, InvalidParameter
 from .filters import get_wavelet
 from .grids import LAYOUT_FIELD, LAYOUT_VOLUME, any_infinite, checked_grid, encode_layout
 
@@ -350,7 +350,16 @@ def _code_slice(plane: np.ndarray, cfg: CodecConfig) -> bytes:
     """One 2-D slice (float64, finite) into a bundle of today's public API."""
     wavelet = cfg.wavelet or DEFAULT_WAVELET
     if cfg.bpp is not None:
-        return encode_image(plane, wavelet=wavelet, level=cfg.level, bpp=cfg.bpp)
+        try:
+            return encode_image(plane, wavelet=wavelet, level=cfg.level, bpp=cfg.bpp)
+        except BitrateTooLow as exc:  # said of the chunk's slice, not of an image
+            smallest = exc.smallest_bytes
+            msg = (
+                f"bpp {cfg.bpp} is below what a {plane.shape[0]} × {plane.shape[1]} slice of "
+                f"this chunk can be coded in: bpp {8 * smallest / plane.size:.4f} "
+                f"({smallest} bytes a slice) codes it"
+            )
+            raise BitrateTooLow(msg, smallest) from None
     if cfg.psnr is not None:
         psnr = cfg.psnr
     else:
