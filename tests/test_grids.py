@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from typing import Any
 
 import numpy as np
 import pytest
@@ -114,6 +115,18 @@ def test_huge_values_under_a_high_bpp_budget_raise_no_numpy_warning() -> None:
         bundle = wavecore.encode_grid(data, bpp=4.0)
     assert 8 * len(bundle) <= 4.0 * data.size
     assert wavecore.decode(bundle).shape == data.shape
+
+
+@pytest.mark.parametrize("shape", [(40, 2, 2), (48, 56)])
+@pytest.mark.parametrize("target", [{"psnr": 60}, {"wavelet": "cdf97", "psnr": 50}])
+def test_huge_values_under_a_psnr_target_meet_it(
+    shape: tuple[int, ...], target: dict[str, Any]
+) -> None:
+    # The RMSE aim of 1e297 was squared and overflowed (an OverflowError, not a library error).
+    data = np.cumsum(np.random.default_rng(14).standard_normal(shape), axis=0) * 1e300
+    out = wavecore.decode(wavecore.encode_grid(data, **target))
+    relative = np.sqrt(np.mean(((out - data) / np.ptp(data)) ** 2))
+    assert -20 * np.log10(relative) >= target["psnr"] - 1e-6
 
 
 def test_zero_bound_on_floats_is_exact() -> None:

@@ -1204,6 +1204,8 @@ def _encode_rmse_at_steps(
 
     def open_loop_aim(aim: float) -> float:
         """The open loop's RMSE whose rounded output is predicted at ``aim``."""
+        if aim > 1e150:  # only floats reach it (nothing rounds), and aim² would overflow
+            return aim
         return math.sqrt(max(aim * aim - rounding, (0.5 * aim) ** 2))
 
     step = stepped.step_for(open_loop_aim(rmse_target * _RMSE_AIM), rmse_target * _STEP_PER_RMSE)

@@ -22,8 +22,8 @@ chunk is coded as a stack of 2-D slices along its first axis (today's public API
 grids); OME-Zarr's ``(c, y, x)`` images are then coded one channel at a time.  A 3-D chunk of
 small slices (at most 64 × 64 values each, more than one) is coded whole by
 :func:`wavecore.encode_grid` (mode 3) under a ``psnr`` or ``bpp`` target too: a bundle per
-slice cost 7-25 ms and some 50 bytes whatever its size (a chunk of 65 536 slices of 1 × 1 took
-half an hour).
+slice cost 7-25 ms and some 50 bytes whatever its size (a chunk of 65 536 slices of 1 × 1 did
+not finish in 10 minutes).
 
 The chunk format (little-endian)::
 
