@@ -771,41 +771,38 @@ def _copies_into(
     targets: list[np.ndarray] = []
     p = 0
     for bands in entries:
-        dims = [_plane_dims(band.shape, two_d) for band in bands]
-        views = [
-            np.asarray(band, dtype=np.int32).reshape(d) for band, d in zip(bands, dims, strict=True)
-        ]
+        views = _band_views(bands, two_d)
+        dims = [view.shape for view in views]
         if _many_channels(dims):
             start = int(planes[p, kernels.P_OFFSET])
             sources.extend(view.transpose(2, 0, 1) for view in views)
             targets.extend(_channels_first(flat, start, dims))
             p += dims[0][2] * len(dims)
             continue
-        for channel in range(max((d[2] for d in dims), default=0)):
-            for view in views:
-                if channel < view.shape[2]:
-                    start = int(planes[p, kernels.P_OFFSET])
-                    plane = view[:, :, channel]
-                    sources.append(plane)
-                    targets.append(flat[start : start + plane.size].reshape(plane.shape))
-                    p += 1
+        for plane in _planes_of(views):
+            start = int(planes[p, kernels.P_OFFSET])
+            sources.append(plane)
+            targets.append(flat[start : start + plane.size].reshape(plane.shape))
+            p += 1
     return sources, targets
+
+
+def _band_views(bands: list[np.ndarray], two_d: bool) -> list[np.ndarray]:
+    """Each band as ``int32`` ``(rows, cols, channels)`` (see :func:`_plane_dims`)."""
+    return [
+        np.asarray(band, dtype=np.int32).reshape(_plane_dims(band.shape, two_d)) for band in bands
+    ]
+
+
+def _planes_of(views: list[np.ndarray]) -> list[np.ndarray]:
+    """The planes of one entry's :func:`_band_views`, channel by channel, band by band."""
+    channels = max((view.shape[2] for view in views), default=0)
+    return [view[:, :, c] for c in range(channels) for view in views if c < view.shape[2]]
 
 
 def _plane_views(entries: list[list[np.ndarray]], two_d: bool) -> list[np.ndarray]:
     """The planes of every entry in ``_structure``'s order."""
-    out = []
-    for bands in entries:
-        views = []
-        for band in bands:
-            rows, cols, channels = _plane_dims(band.shape, two_d)
-            views.append(np.asarray(band, dtype=np.int32).reshape(rows, cols, channels))
-        channels = max((v.shape[2] for v in views), default=0)
-        for channel in range(channels):
-            for view in views:
-                if channel < view.shape[2]:
-                    out.append(view[:, :, channel])
-    return out
+    return [plane for bands in entries for plane in _planes_of(_band_views(bands, two_d))]
 
 
 def decode_blocks(

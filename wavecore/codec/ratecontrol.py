@@ -1337,8 +1337,10 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
         budget,
         max(math.ceil(0.97 * bpp * pixels / 8.0) + _PLACEHOLDER_EXCESS, math.ceil(0.975 * budget)),
     )
-    if budget < 64 and budget < encoder.size_bound(high):
-        # Not even the coarsest step's bundle fits: say what it needs.
+    # The coarsest step's bundle, by its size with the header's placeholders (up to
+    # _PLACEHOLDER_EXCESS bytes over what is written): the least a budget needs.
+    coarsest = encoder.size_bound(high) if budget < 64 else None
+    if coarsest is not None and budget < coarsest:  # not even that fits: say what it needs
         enough = budget = 0
     if budget > 0 and encoder.refines():
         predicted = _predicted_bpp(encoder, budget, enough, low, high)
@@ -1447,9 +1449,7 @@ def _encode_to_bpp(encoder: _LossyEncoder, bpp: float, low: float, high: float) 
     if trimmed:
         return trimmed[0]
     if step is None:
-        # The search holds a bundle to its budget by its size with the header's placeholders
-        # (up to _PLACEHOLDER_EXCESS bytes over what is written): that bound is what it needs.
-        smallest = math.ceil(encoder.size_bound(high))
+        smallest = math.ceil(encoder.size_bound(high) if coarsest is None else coarsest)
         msg = (
             f"bpp {bpp} is below what this {encoder.plan.kind} can be coded in: its smallest "
             f"bundle needs {smallest} bytes = {8 * smallest / pixels:.4f} bpp (header included)"
