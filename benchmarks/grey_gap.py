@@ -44,6 +44,18 @@ over each curve's rates; negative: the change needs fewer bytes for the same PSN
   quantizer, both decided by the same trellis (squared error + λ × a static rate model) at
   each of ``--multipliers``; coded by version 8, and as ideal zeroth-order entropies per band
   (and per quantizer for dependent quantization).
+* ``alignment``: where the gap comes from.  Each grey picture cut to (H − 8) × (W − 8) at
+  several offsets (``--offsets``), cdf97 (``encode_image(..., bpp=r)``) against AVIF speed 6
+  on each cut: BD-rate and the PSNR difference per rate; and each cut's *JPEG lattice
+  score*: for the 8 × 8 DCT coefficients of the cut's aligned blocks at 14 low-frequency AC
+  positions, the largest ``mean cos(2π x / q)`` over steps q = 3 … 40 of the coefficients
+  at least q / 2 from zero (near 1 when they lie on a quantizer's lattice, as a decoded
+  JPEG's do; near 0 for a smooth density; the median over the positions is printed), and
+  the share of its aligned 2 × 2 blocks that are flat (1 where a picture enlarged by pixel
+  replication is cut at an even offset); then the same on moon's 256² source (every other
+  pixel).
+* ``edges``: cdf97's and AVIF's squared error on one picture (``--picture``, brick) at one
+  rate (``--rate``, 0.25 bpp) by distance to the nearest edge.
 
 Run with ``.venv/bin/python benchmarks/grey_gap.py PROBE``.  What each gave: docs/benchmarks.md,
 "Issue 12's grey gap: what else was measured".
@@ -806,6 +818,102 @@ def directional(configs: list[tuple[int, int, float]]) -> None:
     print("grey mean " + " | ".join(f"{c} {np.mean(v):+.2f} %" for c, v in out.items()))
 
 
+# ---------------------------------------------------------------------------------------------
+# alignment: the gap per cut of each picture, against how well the cut lines up with 8 × 8 blocks
+
+
+def _lattice_score(image: np.ndarray) -> float:
+    """The median over 14 low-frequency AC positions of the 8 × 8 DCT of ``image``'s aligned
+    blocks of the largest ``mean cos(2π x / q)`` over steps q = 3 … 40, the mean over the
+    coefficients x at least q / 2 from zero (and at least 100 of them): near 1 if they lie on
+    a quantizer's lattice (a decoded JPEG), near 0 if their density is smooth."""
+    from scipy.fft import dctn
+
+    rows, cols = image.shape[0] // 8 * 8, image.shape[1] // 8 * 8
+    blocks = image[:rows, :cols].astype(np.float64).reshape(rows // 8, 8, cols // 8, 8)
+    dct = dctn(blocks.transpose(0, 2, 1, 3) - 128.0, axes=(2, 3), norm="ortho")
+    scores = []
+    for u in range(5):
+        for v in range(5):
+            if 0 < u + v <= 4:
+                x = dct[:, :, u, v].ravel()
+                best = 0.0
+                for step in np.arange(3.0, 40.5, 0.25):
+                    away = x[np.abs(x) >= step / 2]
+                    if away.size >= 100:
+                        best = max(best, float(np.cos(2 * np.pi * away / step).mean()))
+                scores.append(best)
+    return float(np.median(scores))
+
+
+def _flat_pairs(image: np.ndarray) -> float:
+    """The share of ``image``'s aligned 2 × 2 blocks whose four pixels are equal (1 for a
+    picture enlarged by pixel replication, cut at an even offset)."""
+    rows, cols = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2
+    blocks = image[:rows, :cols].reshape(rows // 2, 2, cols // 2, 2)
+    return float((blocks == blocks[:, :1, :, :1]).all(axis=(1, 3)).mean())
+
+
+def _against_avif(image: np.ndarray) -> str:
+    """cdf97's BD-rate against AVIF speed 6 on ``image``, and the PSNR difference per rate."""
+    theirs = [p for p, _ in peers.at_rates(peers.sweep(image, peers.lossy_peers(False)["AVIF s6"]))]
+    points = []
+    for rate in peers.EXACT_RATES:
+        bundle = wavecore.encode_image(image, wavelet="cdf97", bpp=rate)
+        back = wavecore.decode(bundle)
+        points.append((8 * len(bundle) / image.size, peers.psnr(image, back), 0.0))
+    ours = [p for p, _ in peers.at_rates(points)]
+    differences = " ".join(f"{a - b:+.2f}" for a, b in zip(ours, theirs, strict=True))
+    gap = peers.bd_rate(peers.EXACT_RATES, theirs, ours)
+    return f"BD-rate {gap:+.2f} %, dB per rate {differences}"
+
+
+def alignment(offsets: list[tuple[int, int]]) -> None:
+    for picture in GREY:
+        full = getattr(data, picture)()
+        for dy, dx in offsets:
+            cut = np.ascontiguousarray(
+                full[dy : full.shape[0] - 8 + dy, dx : full.shape[1] - 8 + dx]
+            )
+            print(
+                f"{picture:8s} offset {dy},{dx}: lattice {_lattice_score(cut):.2f}, "
+                f"flat 2 × 2 {_flat_pairs(cut):.2f}, {_against_avif(cut)}",
+                flush=True,
+            )
+    source = np.ascontiguousarray(data.moon()[::2, ::2])  # moon before its pixel replication
+    print(f"moon's 256² source: {_against_avif(source)}")
+
+
+def edges(picture: str, rate: float) -> None:
+    """Squared error of cdf97 and of AVIF speed 6 (its largest file within ``rate``) on
+    ``picture`` by distance to the nearest edge (Gaussian gradient magnitude, σ 1.5, above 8)."""
+    from scipy import ndimage
+
+    image = getattr(data, picture)()
+    bundle = wavecore.encode_image(image, wavelet="cdf97", bpp=rate)
+    ours = wavecore.decode(bundle).astype(np.float64)
+    blob = b""
+    for quality in range(2, 99):
+        candidate = peers._pillow(image, "AVIF", quality=quality, speed=6, subsampling="4:0:0")
+        if 8 * len(candidate) <= rate * image.size * 1.01:
+            blob = candidate
+    theirs = peers._decode(blob, image).astype(np.float64)
+    print(
+        f"{picture} cdf97 {8 * len(bundle) / image.size:.3f} bpp {peers.psnr(image, ours):.2f} dB, "
+        f"AVIF {8 * len(blob) / image.size:.3f} bpp {peers.psnr(image, theirs):.2f} dB"
+    )
+    original = image.astype(np.float64)
+    edge = ndimage.gaussian_gradient_magnitude(original, 1.5) > 8
+    distance = ndimage.distance_transform_edt(~edge)
+    for low, high in ((0, 1), (1, 2), (2, 3), (3, 5), (5, 8), (8, 12), (12, np.inf)):
+        where = (distance >= low) & (distance < high)
+        print(
+            f"  distance {low}–{high}: {where.mean():.3f} of the pixels, squared error "
+            f"cdf97 {((ours - original)[where] ** 2).mean():.2f}, "
+            f"AVIF {((theirs - original)[where] ** 2).mean():.2f}"
+        )
+
+
 PROBES: dict[str, Callable[[argparse.Namespace], None]] = {
     "coder": lambda o: coder([ast.literal_eval(c) for c in o.configs]),
     "lossless-coder": lambda o: lossless_coder(),
@@ -815,6 +923,8 @@ PROBES: dict[str, Callable[[argparse.Namespace], None]] = {
     "blocks": lambda o: blocks(o.sides),
     "dq": lambda o: dq(o.multipliers),
     "directional": lambda o: directional([ast.literal_eval(c) for c in o.adl]),
+    "alignment": lambda o: alignment([ast.literal_eval(c) for c in o.offsets]),
+    "edges": lambda o: edges(o.picture, o.rate),
 }
 
 
@@ -860,6 +970,14 @@ def main() -> None:
         default=["(1, 32, 0.02)", "(1, 16, 0.02)", "(1, 8, 0.05)", "(2, 16, 0.1)", "(3, 16, 0.05)"],
         help="directional: (levels, block, penalty) tuples",
     )
+    parser.add_argument(
+        "--offsets",
+        nargs="+",
+        default=["(0, 0)", "(8, 8)", "(2, 2)", "(4, 4)", "(1, 1)", "(3, 3)"],
+        help="alignment: (rows, columns) offsets of the cuts",
+    )
+    parser.add_argument("--picture", default="brick", help="edges: the picture")
+    parser.add_argument("--rate", type=float, default=0.25, help="edges: the rate, bpp")
     options = parser.parse_args()
     print(f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, load {_load()}", flush=True)
     PROBES[options.probe](options)
