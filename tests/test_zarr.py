@@ -399,3 +399,51 @@ def test_a_bpp_below_a_slices_smallest_bundle_names_a_bpp_that_codes() -> None:
     enough = 8 * caught.value.smallest_bytes / chunk.size
     assert f"bpp {enough:.4f}" in str(caught.value)
     assert decode_chunk(encode_chunk(chunk, {"bpp": enough})).shape == chunk.shape
+
+
+def _header(mode: int, dtype: str, shape: tuple[int, ...]) -> bytes:
+    import struct
+
+    return (
+        b"WZC1"
+        + bytes([mode, len(dtype)])
+        + dtype.encode()
+        + struct.pack(f"<B{len(shape)}I", len(shape), *shape)
+    )
+
+
+def test_a_chunk_declaring_more_than_a_decoder_takes_is_refused_before_it_is_made() -> None:
+    # 26 bytes asking for 2**29 float64 values (4 GiB) as a constant
+    bomb = _header(2, "<f8", (2**28, 2)) + bytes(8)
+    with pytest.raises(BundleError, match="more than 134217728"):
+        decode_chunk(bomb)
+
+
+def test_raw_values_are_inflated_no_further_than_the_shape_needs() -> None:
+    import zlib
+
+    # 1 value declared, 16 MiB of zeros compressed into 16 kB
+    bomb = _header(1, "<u1", (1, 1)) + zlib.compress(bytes(2**24))
+    with pytest.raises(BundleError, match="inflate to other than 1 bytes"):
+        decode_chunk(bomb)
+    short = _header(1, "<u2", (3, 4)) + zlib.compress(bytes(10))
+    with pytest.raises(BundleError, match="inflate to other than 24 bytes"):
+        decode_chunk(short)
+
+
+def test_a_slice_bundle_of_another_shape_is_refused() -> None:
+    data = smooth_field((2, 80, 70), seed=4).astype(np.float32)
+    coded = encode_chunk(data, {"psnr": 50})
+    assert coded[4] == MODE_WAVELET  # a bundle a slice
+    # the same chunk relabelled as 2 slices of 70 × 80 (the same number of values)
+    head = len(_header(0, "<f4", data.shape))
+    relabelled = _header(MODE_WAVELET, "<f4", (2, 70, 80)) + coded[head:]
+    with pytest.raises(BundleError, match="a slice's bundle has shape"):
+        decode_chunk(relabelled)
+    assert np.array_equal(decode_chunk(coded).shape, data.shape)
+
+
+def test_chunks_beyond_what_a_decoder_takes_are_refused_on_encoding() -> None:
+    too_big = np.broadcast_to(np.float32(1), (2**14, 2**13 + 1))  # 134 225 920 values
+    with pytest.raises(InvalidParameter, match="use smaller chunks"):
+        encode_chunk(too_big, {"lossless": True})

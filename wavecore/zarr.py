@@ -58,7 +58,8 @@ from typing import Any
 
 import numpy as np
 
-from . import decode, encode_image, encode_surface
+from . import decode, encode_image, encode_surface, inspect
+from .bundle import MAX_ELEMENTS
 from .errors import BitrateTooLow, BundleError, InvalidParameter
 from .filters import get_wavelet
 from .grids import LAYOUT_FIELD, LAYOUT_VOLUME, any_infinite, checked_grid, encode_layout
@@ -283,7 +284,7 @@ def encode_chunk(array: Any, config: CodecConfig | Mapping[str, Any]) -> bytes:
         # NaN and infinities are stored exactly below; the wavelet sees the finite mean there.
         values = np.where(finite, values, np.mean(values[finite]) if finite.any() else 0.0)
     bundles = [_code_slice(plane, cfg) for plane in values]
-    decoded = np.stack([_decode_slice(bundle) for bundle in bundles])
+    decoded = np.stack([_decode_slice(bundle, values.shape[1:]) for bundle in bundles])
     step, q, exact = _corrections(slices, decoded, finite, cfg.max_error)
     out = [head(MODE_WAVELET), struct.pack("<dI", 0.0, len(bundles))]
     out += [struct.pack("<I", len(b)) + b for b in bundles]
@@ -373,8 +374,29 @@ def _code_slice(plane: np.ndarray, cfg: CodecConfig) -> bytes:
     return encode_surface(plane, wavelet=wavelet, level=cfg.level, quality=psnr)
 
 
-def _decode_slice(bundle: bytes) -> np.ndarray:
+def _decode_slice(bundle: bytes, shape: tuple[int, ...]) -> np.ndarray:
+    """A slice's bundle decoded, once its header says it has the chunk's slice ``shape``."""
+    declared = tuple(inspect(bundle).get("shape") or ())
+    if declared != tuple(shape):
+        msg = f"wavecore chunk: a slice's bundle has shape {declared}, the chunk's slices {shape}"
+        raise BundleError(msg)
     return np.asarray(decode(bundle), dtype=np.float64)
+
+
+def _check_count(count: int, size: int, what: str) -> None:
+    if count > size:
+        msg = f"wavecore chunk: {count} {what} for {size} values"
+        raise BundleError(msg)
+
+
+def _inflate(data: bytes, expected: int, what: str) -> bytes:
+    """``data`` decompressed, which must give ``expected`` bytes: no more is ever inflated."""
+    inflater = zlib.decompressobj()
+    raw = inflater.decompress(data, expected + 1)
+    if len(raw) != expected or not inflater.eof:
+        msg = f"wavecore chunk: its {what} inflate to other than {expected} bytes"
+        raise BundleError(msg)
+    return raw
 
 
 # --------------------------------------------------------------------------------------------
@@ -485,13 +507,17 @@ def _decode_chunk(buf: bytes) -> np.ndarray:
     shape = struct.unpack_from(f"<{ndim}I", buf, pos)
     pos += 4 * ndim
     size = math.prod(shape)
+    if size > MAX_ELEMENTS:  # before anything of that size is made: 26 bytes could ask 4 GB
+        msg = f"wavecore chunk of shape {shape}: {size} values, more than {MAX_ELEMENTS}"
+        raise BundleError(msg)
     if mode == MODE_CONSTANT:
         if size == 0:
             return np.zeros(shape, dtype=dtype)
         value = np.frombuffer(buf, dtype=dtype, count=1, offset=pos)
         return np.full(shape, value[0], dtype=dtype)
     if mode == MODE_RAW:
-        return np.frombuffer(zlib.decompress(buf[pos:]), dtype=dtype, count=size).reshape(shape)
+        raw = _inflate(buf[pos:], size * dtype.itemsize, "values")
+        return np.frombuffer(raw, dtype=dtype).reshape(shape)
     if mode == MODE_GRID:
         grid = np.asarray(decode(buf[pos:]))
         if grid.shape != shape:
@@ -504,10 +530,11 @@ def _decode_chunk(buf: bytes) -> np.ndarray:
     offset, n_slices = struct.unpack_from("<dI", buf, pos)
     pos += 12
     planes = []
+    slice_shape = shape[1:] if ndim == 3 else shape
     for _ in range(n_slices):
         (length,) = struct.unpack_from("<I", buf, pos)
         pos += 4
-        planes.append(_decode_slice(buf[pos : pos + length]))
+        planes.append(_decode_slice(buf[pos : pos + length], slice_shape))
         pos += length
     decoded = np.stack(planes) + offset if planes else np.zeros((0, 0, 0))
     if decoded.size != size:
@@ -515,14 +542,16 @@ def _decode_chunk(buf: bytes) -> np.ndarray:
         raise BundleError(msg)
     step, n_q, length = struct.unpack_from("<dII", buf, pos)
     pos += 16
-    raw = zlib.decompress(buf[pos : pos + length])
+    _check_count(n_q, size, "corrections")
+    raw = _inflate(buf[pos : pos + length], 12 * n_q, "corrections")
     pos += length
     index = _unpack_indices(raw, n_q)
     q = np.frombuffer(raw, dtype="<i8", count=n_q, offset=4 * n_q)
     out = _reconstructed(decoded, step, index, q, dtype).reshape(-1)
     n_exact, length = struct.unpack_from("<II", buf, pos)
     pos += 8
-    raw = zlib.decompress(buf[pos : pos + length])
+    _check_count(n_exact, size, "exact values")
+    raw = _inflate(buf[pos : pos + length], (4 + dtype.itemsize) * n_exact, "exact values")
     exact = _unpack_indices(raw, n_exact)
     out[exact] = np.frombuffer(
         raw, dtype=dtype.newbyteorder("<"), count=n_exact, offset=4 * n_exact
@@ -557,8 +586,11 @@ def _checked_chunk(array: Any) -> np.ndarray:
             "a Zarr format 2 array passes its chunks' shape only without filters"
         )
         raise InvalidParameter(msg)
-    if arr.size >= 2**32:
-        msg = f"chunk shape {arr.shape} holds 2**32 values or more; use smaller chunks"
+    if arr.size > MAX_ELEMENTS:
+        msg = (
+            f"chunk shape {arr.shape} holds {arr.size} values, more than {MAX_ELEMENTS} "
+            "(what a decoder accepts); use smaller chunks"
+        )
         raise InvalidParameter(msg)
     return np.ascontiguousarray(arr, dtype=arr.dtype.newbyteorder("="))
 
