@@ -122,3 +122,47 @@ def test_high_bpp_beats_the_wavelet_core_at_the_same_budget() -> None:
     default = wavecore.encode_grid(data, bpp=6.0)
     wavelet = wavecore.encode_grid(data, bpp=6.0, wavelet="cdf97")
     assert rmse(wavecore.decode(default), data) < rmse(wavecore.decode(wavelet), data)
+
+
+_NOISE = np.random.default_rng(0).standard_normal((64, 64))
+
+
+@pytest.mark.parametrize(
+    ("data", "target"),
+    [
+        (np.where(_NOISE > 0, 65504, -65504).astype(np.float16), {"psnr": 1000}),
+        (_NOISE.astype(np.float16), {"rmse": 1e300}),
+        (_NOISE.astype(np.float16), {"psnr": 30}),
+        (_NOISE.astype(np.float16), {"rmse": 0.01, "wavelet": "bspline2"}),
+        (_NOISE * 1e-300, {"psnr": 1e-9}),
+        (_NOISE * 1e-300, {"rmse": 1e-300}),
+        (_NOISE * 1e-300, {"psnr": 1000}),
+        (_NOISE * 1e-300, {"psnr": 60, "wavelet": "cdf97"}),
+        (_NOISE * 5e-324, {"psnr": 1000}),
+        (_NOISE * 5e-324, {}),
+        (_NOISE * 5e-324, {"rmse": 1e300}),
+        (_NOISE * 1e-300, {"rmse": 1e300}),
+        (_NOISE * 1e200, {"rmse": 0.01, "wavelet": "bspline2"}),
+        (np.zeros((64, 64)), {"rmse": 5e-324}),
+        (np.full((64, 64), 3.0), {"rmse": 5e-324}),
+        (np.full((64, 64), 65504, np.float16), {"rmse": 5e-324}),
+        (np.full((64, 64), 3, np.float16), {"psnr": 1000}),
+    ],
+    ids=lambda value: (
+        str(value) if isinstance(value, dict) else f"{value.dtype}×{np.max(np.abs(value)):.0e}"
+    ),
+)
+def test_extreme_targets_on_extreme_values_are_met(data: np.ndarray, target: dict) -> None:
+    """Float16 grids, values near 1e-300 or subnormal, targets of 1000 dB or 1e300: each is
+    coded to its target (psnr=1000 or a subnormal rmse exactly), never a crash."""
+    bundle = wavecore.encode_grid(data, **target)
+    back = wavecore.decode(bundle)
+    assert back.dtype == data.dtype and back.shape == data.shape
+    error = rmse(back, data)
+    if "rmse" in target:
+        assert error <= target["rmse"]
+    elif "psnr" in target:
+        span = float(np.ptp(data.astype(np.float64))) or 1.0
+        assert error <= span * 10 ** (-target["psnr"] / 20)
+    else:  # the default: 1e-3 of the range as a bound
+        assert np.max(np.abs(back - data)) <= 1e-3 * np.ptp(data)

@@ -23,6 +23,7 @@ same step; only the work around it differs.
 from __future__ import annotations
 
 import math
+import sys
 from typing import Any
 
 import numpy as np
@@ -91,9 +92,14 @@ class SteppedCore:
                 axes=self.plan.axes,
                 rounding=DEFAULT_ROUNDING,
             )
-        coded_step = math.ldexp(step, -self.scale)
-        squared = self._distortion(coded_step) / self._fitted_size
-        predicted = math.ldexp(math.sqrt(max(squared, 0.0)), self.scale)
+        try:
+            coded_step = math.ldexp(step, -self.scale)
+            if not coded_step >= sys.float_info.min:  # a step the quantizer refuses
+                return 0.0
+            squared = self._distortion(coded_step) / self._fitted_size
+            predicted = math.ldexp(math.sqrt(max(squared, 0.0)), self.scale)
+        except OverflowError:  # tiny data (scaled up) at a huge step
+            predicted = math.inf
         self._predicted[step] = predicted
         return predicted
 
@@ -160,6 +166,8 @@ class SteppedCore:
 def squared_and_largest(final: np.ndarray, original: np.ndarray) -> tuple[float, float]:
     """(sum of squared errors, largest error) of ``final`` (any float or integer dtype)
     against ``original`` (float64, the same shape), in one compiled pass."""
+    if final.dtype == np.float16:  # the compiled pass has no float16; float32 holds it exactly
+        final = final.astype(np.float32)
     total, largest = squared_and_largest_error(
         np.ascontiguousarray(final).reshape(-1), np.ascontiguousarray(original).reshape(-1)
     )

@@ -72,6 +72,7 @@ from __future__ import annotations
 
 import math
 import struct
+import sys
 import zlib
 from collections.abc import Sequence
 from typing import Any
@@ -820,6 +821,20 @@ def encode_layout(
         bound = DEFAULT_RELATIVE_MAX_ERROR * data_range
     if psnr_target is not None:
         rmse_target = (data_range if data_range > 0 else 1.0) * 10.0 ** (-psnr_target / 20.0)
+    if rmse_target is not None and dtype.kind == "f" and bound is None:
+        finite_values = values[~missing] if has_mask else values
+        largest = float(np.max(np.abs(finite_values))) if finite_values.size else 0.0
+        unresolved = math.ldexp(largest, -_UNRESOLVED_BITS)
+        if not rmse_target >= max(unresolved, sys.float_info.min):
+            # Far below what float64 resolves (psnr=1000), subnormal or 0: coded to a bound that
+            # float64 does not resolve either (or exactly, on subnormal data), where the
+            # searches would divide by the target, or step to 0.
+            bound = unresolved if unresolved >= sys.float_info.min else 0.0
+            rmse_target = None
+        elif largest > 0:
+            # Zeros everywhere would meet any larger target; the searches' steps would
+            # overflow with it (an rmse of 1e300 on values near 1e-300).
+            rmse_target = min(rmse_target, largest)
     if dtype.kind in "iu" and bound is not None and bound < 1.0:
         lossless = True  # no error below one unit is possible but none
     # An integer grid under rmse (or psnr), no wavelet named: the coder is chosen from the
@@ -1017,6 +1032,9 @@ def _encode_rmse_predictive(
 #: at an RMSE of 0.4, 1.13-1.35x at 0.3; 0.90-1.05x at 0.45).  It is 0.93-1.06x the bytes of
 #: the reversible lossless code, and three times as fast.
 _EXACT_BELOW_RMSE = 0.4
+#: A float grid's RMSE (or PSNR) target below its largest magnitude × 2**-100 (some 600 dB;
+#: float64 resolves 2**-52) is met by a bound of that size instead.
+_UNRESOLVED_BITS = 100
 #: The interpolation coder's RMSE on an integer grid at a bound of one unit (errors -1, 0 and 1,
 #: about equally likely): its first rung above exact.
 _RUNG_RMSE = math.sqrt(2.0 / 3.0)
@@ -1204,8 +1222,10 @@ def _encode_rmse_at_steps(
 
     def open_loop_aim(aim: float) -> float:
         """The open loop's RMSE whose rounded output is predicted at ``aim``."""
-        if aim > 1e150:  # only floats reach it (nothing rounds), and aim² would overflow
-            return aim
+        if rounding == 0.0 or aim > 1e150:  # floats (nothing rounds): aim², which may
+            return aim  # overflow or underflow, would give aim back
+        if aim < 1e-150:  # (0.5 aim)² is the larger, and it would underflow
+            return 0.5 * aim
         return math.sqrt(max(aim * aim - rounding, (0.5 * aim) ** 2))
 
     step = stepped.step_for(open_loop_aim(rmse_target * _RMSE_AIM), rmse_target * _STEP_PER_RMSE)
@@ -1302,8 +1322,9 @@ def _encode_bounded(
     peak = _peak(core_values)
     # Integer samples are rounded on decoding, which absorbs errors below half a unit.
     step = (allowed + 0.5) * _STEP_PER_INTEGER_BOUND if integer else bound * _STEP_PER_BOUND
-    # A bound of 0 on floats: a fine core, and every sample it misses stored exactly.
-    step = max(step, peak * 2.0**-20)
+    # A bound of 0 on floats: a fine core, and every sample it misses stored exactly (on
+    # subnormal data, where the peak's share underflows, a core of zeros).
+    step = max(step, peak * 2.0**-20, sys.float_info.min)
     core_bytes, decoded = core.at_step(core_values, step)
     finite_count = max(int(np.count_nonzero(~missing)), 1)
     outliers, final = _outliers(decoded, original, missing, dtype, allowed, unit)
