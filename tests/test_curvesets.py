@@ -236,3 +236,18 @@ def test_decode_refuses_options_a_curve_set_cannot_honour(option: dict[str, floa
     bundle = wavecore.encode_curves([square, square[::-1] * 2], tolerance=1e-3)
     with pytest.raises(wavecore.InvalidParameter, match="curve set decodes whole"):
         wavecore.decode(bundle, **option)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("scale", [1e-200, 1e-310, 5e-324])
+@pytest.mark.parametrize("method", ["auto", "vertex", "wavelet"])
+def test_tolerances_too_small_to_measure_store_the_curves_as_they_are(
+    scale: float, method: str
+) -> None:
+    """Below 2**-400 the bound cannot be measured (squared distances underflow): the curves are
+    stored exactly rather than simplified to what looks like no distance at all."""
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    ring = np.stack([np.cos(t), np.sin(t)], axis=1) * scale
+    line = np.stack([t, np.sin(t)], axis=1) * scale
+    bundle = wavecore.encode_curves([ring, line], closed=[True, False], method=method)
+    back = wavecore.decode_curves(bundle).curves
+    assert [c.tolist() for c in back] == [ring.tolist(), line.tolist()]

@@ -250,6 +250,9 @@ _RESAMPLE_SHARE = 0.7
 MAX_POINTS = 1 << 27
 _MODE_RESAMPLED, _MODE_PADDED, _MODE_RAW, _MODE_VERTEX = 0, 1, 2, 3
 _INDEX_LIMIT = 1 << 29  # quantized integers beyond this would not fit the coder's int32
+#: Below this tolerance (3.9e-121) every curve is stored as it is: the bound is measured
+#: through squared distances, which underflow to 0 below about 1e-154.
+SMALLEST_TOLERANCE = 2.0**-400
 
 
 @dataclass(frozen=True)
@@ -535,9 +538,17 @@ class _CurveCoder:
     def _try(self, coeffs, exponent, closed, mode, count):
         boundary = "closed" if closed else "open"
         step = self.step(exponent)
-        q, _ = quantize_bands(
-            coeffs, step, wavelet=self.wavelet, boundary=boundary, axes=(0,), rounding=self.rounding
-        )
+        try:
+            q, _ = quantize_bands(
+                coeffs,
+                step,
+                wavelet=self.wavelet,
+                boundary=boundary,
+                axes=(0,),
+                rounding=self.rounding,
+            )
+        except InvalidParameter:  # a subnormal step (a tolerance near 1e-308): the raw form
+            return None, None
         q = [np.asarray(band, dtype=np.int32) for band in q]
         if max(int(np.max(np.abs(band))) for band in q) >= _INDEX_LIMIT:
             return None, None
@@ -551,7 +562,10 @@ class _CurveCoder:
         original = points.astype(np.float64)
         boundary = "closed" if closed else "open"
         span = float(np.max(np.abs(original))) if n else 0.0
-        if not span / self.tolerance < _INDEX_LIMIT / 4:  # integers too large for the coder
+        if not (
+            span / self.tolerance < _INDEX_LIMIT / 4  # integers too large for the coder
+            and self.tolerance >= SMALLEST_TOLERANCE
+        ):
             raw = _finish(original, self.dtype)
             return _Coded(_MODE_RAW, n, raw=raw), raw
         for mode, count in self._plans(original, closed):
@@ -676,6 +690,26 @@ def _group_arrays(coded: list[_Coded]) -> list[np.ndarray]:
     return [np.concatenate(parts).astype(np.int64) for parts in groups]
 
 
+#: The deepest metadata a curve set takes (lists and dicts within each other): deeper would
+#: need the decoder's JSON parser to recurse near Python's limit.
+MAX_METADATA_DEPTH = 200
+
+
+def _nesting(value: Any) -> int:
+    """How deep lists and dicts sit within each other in ``value`` (0 for a scalar)."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, dict):
+            stack.extend((v, depth + 1) for v in item.values())
+        elif isinstance(item, list | tuple):
+            stack.extend((v, depth + 1) for v in item)
+        else:
+            continue
+        deepest = max(deepest, depth + 1)
+    return deepest
+
+
 def encode_curves(
     curves: Any,
     *,
@@ -758,10 +792,17 @@ def encode_curves(
     if tolerance is None:
         if arrays and all(a.shape[1] == arrays[0].shape[1] for a in arrays):
             stacked = np.concatenate([a.astype(np.float64) for a in arrays])
-            diagonal = float(np.linalg.norm(np.ptp(stacked, axis=0)))
+            extent = np.ptp(stacked, axis=0)
+            diagonal = float(np.linalg.norm(extent))
+            top = float(np.max(extent))
+            if top > 0 and not 1e-150 < diagonal < 1e150:  # the squares under- or overflowed
+                diagonal = top * float(np.linalg.norm(extent / top))
         else:
             diagonal = max((float(np.ptp(a.astype(np.float64))) for a in arrays), default=1.0)
-        tolerance = DEFAULT_RELATIVE_TOLERANCE * (diagonal if diagonal > 0 else 1.0)
+        # (at least the smallest float: on subnormal curves the product underflows to 0)
+        tolerance = max(
+            DEFAULT_RELATIVE_TOLERANCE * (diagonal if diagonal > 0 else 1.0), math.ulp(0.0)
+        )
     if (
         isinstance(tolerance, bool)
         or not isinstance(tolerance, int | float | np.integer | np.floating)
@@ -775,9 +816,13 @@ def encode_curves(
             meta_bytes = zlib.compress(
                 json.dumps(metadata, separators=(",", ":"), allow_nan=False).encode(), 9
             )
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, RecursionError) as exc:
             msg = f"metadata must be JSON-serialisable: {exc}"
             raise InvalidParameter(msg) from exc
+        depth = _nesting(metadata)
+        if depth > MAX_METADATA_DEPTH:  # it would not decode: json.loads recurses
+            msg = f"metadata is nested {depth} levels deep, more than {MAX_METADATA_DEPTH}"
+            raise InvalidParameter(msg)
     if method is None:
         method = "auto"
     if method not in METHODS:
@@ -1176,7 +1221,7 @@ def _encode_vertex(
     The bound is then measured on the decoded values; a lattice step that misses it anywhere
     is not used, and the next finer one is tried.
     """
-    if not arrays or len({a.shape[1] for a in arrays}) != 1:
+    if not arrays or len({a.shape[1] for a in arrays}) != 1 or tolerance < SMALLEST_TOLERANCE:
         return None
     d = arrays[0].shape[1]
     tolerance, tolerance_bytes = _pack_tolerance(tolerance)

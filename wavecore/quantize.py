@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 from collections.abc import Sequence
 from decimal import ROUND_FLOOR, Decimal, localcontext
 from typing import Any
@@ -275,7 +276,11 @@ def quantize_bands(
         for band, weight in zip(bands, level_weights, strict=True):
             values = np.ascontiguousarray(band, dtype=np.float64)
             q = np.empty(values.shape, dtype=np.int32)
-            jobs.append((values.reshape(-1), 1.0 / (step * weight), band_rounding, q.reshape(-1)))
+            band_step = step * weight
+            if not band_step >= sys.float_info.min:  # subnormal: its inverse overflows
+                msg = f"step {step!r} is too small: a band's step, {band_step!r}, is subnormal"
+                raise InvalidParameter(msg)
+            jobs.append((values.reshape(-1), 1.0 / band_step, band_rounding, q.reshape(-1)))
             level_q.append(q)
         out_levels.append(level_q)
     _quantize_all(jobs)
