@@ -236,3 +236,120 @@ def test_cli_encodes_and_decodes_curve_files_by_suffix(tmp_path) -> None:  # typ
     one.write_text(json.dumps({"points": [[0, 0], [1, 1], [2, 0], [3, 1]]}))
     assert cli.main(["encode", str(one), str(tmp_path / "one.wcb"), "-q"]) == 0
     assert wavecore.inspect((tmp_path / "one.wcb").read_bytes())["kind"] == "curve"
+
+
+# --- hostile documents: what reading costs is known before the parser runs -----------------
+
+_SVG = '<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink">'
+
+
+def _use_bomb(depth: int) -> str:
+    """``depth`` levels of groups of ten ``<use>`` of the level below: 10**depth paths."""
+    parts = [_SVG, '<defs><path id="g0" d="M0 0 l1 1"/>']
+    for level in range(1, depth + 1):
+        uses = "".join(f'<use xlink:href="#g{level - 1}" x="{j}"/>' for j in range(10))
+        parts.append(f'<g id="g{level}">{uses}</g>')
+    parts.append(f'</defs><use xlink:href="#g{depth}"/></svg>')
+    return "".join(parts)
+
+
+@pytest.mark.parametrize(
+    "document",
+    [
+        _SVG + '<path d="M0 0 l1 1 2 2 h3 v4 z m5 5 c1 1 2 2 3 3 s4 4 5 5"/></svg>',
+        _SVG + '<path d="M0 0 q1 1 2 2 t3 3 4 4 a5 5 0 1 1 6 6 5 5 0 113 3"/></svg>',
+        _SVG + '<path d="M0 0 1 1 2 0 3 1"/><polyline points="0 0 1 1 2 0"/></svg>',
+        _SVG + '<rect width="3" height="2"/><rect width="3" height="2" rx="1"/></svg>',
+        _SVG + '<circle r="2"/><ellipse rx="3" ry="1"/><line x2="4" y2="1"/></svg>',
+        _use_bomb(2),
+    ],
+)
+def test_the_scan_bounds_what_reading_gives(document: str) -> None:
+    work = wio.svg.scan_svg(document)
+    read = wio.read_curves(document, "svg")
+    assert work.points <= sum(len(c) for c in read.curves)
+    assert work.curves <= len(read.curves)
+    assert work.microseconds >= 100 * (1 + work.curves)  # an element, a path or shape each
+
+
+def test_a_use_bomb_is_refused_before_it_is_parsed() -> None:
+    document = _use_bomb(7)  # 2 KB that draw 10**7 paths
+    assert len(document) < 3000
+    work = wio.svg.scan_svg(document)
+    assert work.points == 10**7 and work.curves == 10**7
+    assert work.microseconds > 10**9  # over a thousand seconds of parsing
+    with pytest.raises(wavecore.InvalidParameter, match="10000000 points or more"):
+        wio.read_curves(document, "svg", max_points=1_000_000)
+
+
+@pytest.mark.parametrize(
+    ("document", "words"),
+    [
+        (
+            _SVG + '<g id="a"><use xlink:href="#b"/></g><g id="b"><use xlink:href="#a"/></g></svg>',
+            "cycle",
+        ),
+        (_SVG + "<g>" * 3000 + "</g>" * 3000 + "</svg>", "nested too deeply"),
+        ("<svg><path d='M0 0 L1 1'></svg>", "could not be parsed"),
+    ],
+)
+def test_bad_documents_are_named_by_the_scan(document: str, words: str) -> None:
+    with pytest.raises(wavecore.InvalidParameter, match=words):
+        wio.svg.scan_svg(document)
+
+
+def test_arcs_are_counted_at_their_cost() -> None:
+    arcs = _SVG + '<path d="M0 0 ' + "a5 5 0 1 1 3 3 " * 1000 + '"/></svg>'
+    lines = _SVG + '<path d="M0 0 ' + "l1 1 " * 1000 + '"/></svg>'
+    arc_work, line_work = wio.svg.scan_svg(arcs), wio.svg.scan_svg(lines)
+    assert arc_work.points == line_work.points == 1000
+    assert arc_work.microseconds > 15 * line_work.microseconds
+
+
+@pytest.mark.parametrize(
+    ("document", "words"),
+    [
+        (_SVG + '<path d="M0 0 a1e300 1e300 0 1 1 1e300 1e-300"/></svg>', "cannot be sampled"),
+    ],
+)
+def test_segments_that_cannot_be_sampled_are_named(document: str, words: str) -> None:
+    with pytest.raises(wavecore.InvalidParameter, match=words):
+        wavecore.encode_curve_file(document.encode(), "svg")
+
+
+def test_a_subnormal_drawing_is_kept_exactly() -> None:
+    document = _SVG + '<circle r="1e-320" cx="0" cy="0"/></svg>'
+    bundle = wavecore.encode_curve_file(document.encode(), "svg")
+    data = wavecore.decode_curves(bundle)
+    read = wio.read_curves(document, "svg")
+    assert [c.tolist() for c in data.curves] == [c.tolist() for c in read.curves]
+
+
+@pytest.mark.parametrize(
+    "document",
+    [
+        '{"type": "LineString", "coordinates": ' + "[" * 1000 + "0" + "]" * 1000 + "}",
+        '{"type": "Feature", "properties": {}, "geometry": '
+        + '{"type": "GeometryCollection", "geometries": [' * 950
+        + '{"type": "LineString", "coordinates": [[0, 0], [1, 1]]}'
+        + "]}" * 950
+        + "}",
+    ],
+)
+def test_geojson_nested_too_deeply_is_named(document: str) -> None:
+    with pytest.raises(wavecore.InvalidParameter, match="nested too deeply"):
+        wio.read_curves(document, "geojson")
+
+
+def test_metadata_too_deep_to_decode_is_refused() -> None:
+    document = (
+        '{"type": "Feature", "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 1]]},'
+        ' "properties": ' + '{"a": ' * 300 + "1" + "}" * 300 + "}"
+    )
+    with pytest.raises(wavecore.InvalidParameter, match="nested 302 levels deep"):
+        wavecore.encode_curve_file(document.encode(), "geojson")
+    shallow = document.replace('{"a": ' * 300, '{"a": ' * 150).replace("}" * 300, "}" * 150)
+    back = json.loads(
+        wavecore.decode_curve_file(wavecore.encode_curve_file(shallow.encode(), "geojson"))
+    )
+    assert back["type"] == "Feature"

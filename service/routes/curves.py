@@ -17,6 +17,7 @@ from fastapi import APIRouter, Depends, Query, Request
 from fastapi.responses import Response
 
 import wavecore
+from wavecore.io import svg as svg_io
 
 from .. import cost
 from ..deps import (
@@ -115,7 +116,27 @@ def curve_file_job(
     settings: Settings,
     method: str | None = None,
 ) -> tuple[bytes, dict[str, str]]:
-    """Read a GeoJSON or SVG body, check its cost, code it as one curve set."""
+    """Read a GeoJSON or SVG body, check its cost, code it as one curve set.
+
+    An SVG's cost is checked twice: before it is parsed (its parse time, estimated by
+    ``scan_svg`` with every ``<use>`` expanded, and the fewest points and curves it gives),
+    then with the points and curves it gave.  Its parse time counts in both, a microsecond
+    a sample (the scale of ``cost.CURVE_SET_POINT_SAMPLES``)."""
+    parse = 0
+    if fmt == "svg":
+        try:
+            work = svg_io.scan_svg(body, limit=cost.sample_limit(settings))
+        except wavecore.InvalidParameter as exc:
+            raise Problem("invalid-parameter", f"{fmt}: {exc}"[:600]) from None
+        parse = work.microseconds
+        seconds = f"{work.microseconds / 1e6:.1f} s"
+        cost.check(
+            parse + cost.curve_set_samples(work.points, work.curves),
+            f"an SVG of {work.curves} curves of {work.points} points or more, {seconds} to parse,"
+            if work.points
+            else f"an SVG that takes over {seconds} to parse",
+            settings,
+        )
 
     def check(data: Any) -> None:
         for index, points in enumerate(data.curves):
@@ -127,7 +148,7 @@ def curve_file_job(
                 raise Problem("too-costly", msg)
         memory = sum(cost.CURVE_FACTOR * len(c) * (c.shape[1] + 1) for c in data.curves)
         total = sum(len(c) for c in data.curves)
-        samples = max(memory, cost.curve_set_samples(total, len(data.curves)))
+        samples = max(memory, parse + cost.curve_set_samples(total, len(data.curves)))
         cost.check(samples, f"{len(data.curves)} curves of {total} points", settings)
 
     try:

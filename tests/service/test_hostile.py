@@ -233,6 +233,26 @@ def nested(depth: int) -> Kwargs:
     return raw_json('{"points": ' + "[" * depth + "1" + "]" * depth + "}")
 
 
+def curve_file(text: str, media_type: str) -> Kwargs:
+    return {"content": text.encode(), "headers": {"content-type": media_type}}
+
+
+_SVG = '<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink">'
+
+
+def svg(body: str) -> Kwargs:
+    return curve_file(_SVG + body + "</svg>", "image/svg+xml")
+
+
+def use_bomb(depth: int) -> Kwargs:
+    """2 KB whose nested ``<use>`` elements draw 10**depth paths once expanded."""
+    parts = ['<defs><path id="g0" d="M0 0 l1 1"/>']
+    for level in range(1, depth + 1):
+        uses = "".join(f'<use xlink:href="#g{level - 1}" x="{j}"/>' for j in range(10))
+        parts.append(f'<g id="g{level}">{uses}</g>')
+    return svg("".join(parts) + f'</defs><use xlink:href="#g{depth}"/>')
+
+
 def _keeps_16_bits(r: httpx.Response) -> None:
     if r.status_code == 200:
         assert r.headers["x-wavecore-dtype"] == "uint16", r.headers
@@ -304,6 +324,23 @@ ROWS: list[Row] = [
     Row("curve-body-empty", "/v1/curves/encode", raw_json(""), (422,), "validation-error"),
     Row("curve-body-not-utf8", "/v1/curves/encode", raw_json(b'{"points": [[0, 1]], "wavelet": "\xff\xfe"}'), (422,), "validation-error"),
     Row("curve-text-plain", "/v1/curves/encode", {"content": b'{"points": [[0, 1]]}', "headers": {"content-type": "text/plain"}}, (415,), "unsupported-media-type"),
+    # ---- curve files: what parsing costs is checked before the parser runs
+    Row("svg-use-bomb", "/v1/curves/encode", lambda: use_bomb(7), (413,), "too-costly", 2.0),
+    Row("svg-arcs-2mb", "/v1/curves/encode", lambda: svg('<path d="M0 0 ' + "a5 5 0 1 1 3 3 " * 150_000 + '"/>'), (413,), "too-costly", 3.0),
+    Row("svg-lines-15mb", "/v1/curves/encode", lambda: svg('<path d="M0 0 ' + "l1 1 " * 3_000_000 + '"/>'), (413,), "too-costly", 6.0),
+    Row("svg-paths-10mb", "/v1/curves/encode", lambda: svg("".join(f'<path d="M{i} 0 l1 1"/>' for i in range(400_000))), (413,), "too-costly", 6.0),
+    Row("svg-use-cycle", "/v1/curves/encode", lambda: svg('<g id="a"><use xlink:href="#b"/></g><g id="b"><use xlink:href="#a"/></g>'), (422,), "invalid-parameter"),
+    Row("svg-arc-radius-1e300", "/v1/curves/encode", svg('<path d="M0 0 a1e300 1e300 0 1 1 1e300 1e-300"/>'), (422,), "invalid-parameter"),
+    Row("svg-circle-subnormal", "/v1/curves/encode", svg('<circle r="1e-320" cx="0" cy="0"/>'), (200,)),
+    Row("geojson-nested-1000", "/v1/curves/encode", curve_file('{"type": "LineString", "coordinates": ' + "[" * 1000 + "0" + "]" * 1000 + "}", "application/geo+json"), (422,), "invalid-parameter"),
+    Row("geojson-properties-300-deep", "/v1/curves/encode", curve_file('{"type": "Feature", "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 1]]}, "properties": ' + '{"a": ' * 300 + "1" + "}" * 300 + "}", "application/geo+json"), (422,), "invalid-parameter"),
+    # ---- grids: extreme targets on extreme values
+    Row("grid-f16-psnr-1000", "/v1/grids/encode", npy(np.where(rng.random((64, 64)) > 0.5, 65504, -65504).astype(np.float16), psnr="1000"), (200,), None, 5.0),
+    Row("grid-f16-rmse-1e300", "/v1/grids/encode", npy(rng.standard_normal((64, 64)).astype(np.float16), rmse="1e300"), (200,), None, 5.0),
+    Row("grid-1e-300-psnr-1e-9", "/v1/grids/encode", npy(rng.standard_normal((64, 64)) * 1e-300, psnr="1e-9"), (200,), None, 5.0),
+    Row("grid-subnormal-psnr-1000", "/v1/grids/encode", npy(rng.standard_normal((64, 64)) * 5e-324, psnr="1000"), (200,), None, 5.0),
+    Row("grid-1e-300-rmse-1e300", "/v1/grids/encode", npy(rng.standard_normal((64, 64)) * 1e-300, rmse="1e300"), (200,), None, 5.0),
+    Row("grid-zeros-rmse-5e-324", "/v1/grids/encode", npy(np.zeros((64, 64)), rmse="5e-324"), (200,), None, 5.0),
     # ---- surfaces
     Row("surface-1e155", "/v1/surfaces/encode", {"json": {"grid": (rng.random((12, 10)) * 1e155).tolist()}}, (200, 422), None, 5.0),
     Row("surface-1e300", "/v1/surfaces/encode", {"json": {"grid": (rng.random((12, 10)) * 1e300).tolist()}}, (200, 422), None, 5.0),

@@ -30,6 +30,9 @@ def read_curve_json(data: bytes | str) -> CurveData:
     except json.JSONDecodeError as exc:
         msg = f"curve JSON is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
         raise InvalidParameter(msg) from None
+    except RecursionError:
+        msg = "curve JSON is nested too deeply"
+        raise InvalidParameter(msg) from None
     if isinstance(doc, dict) and "curves" in doc and isinstance(doc["curves"], list):
         curves, closed = [], []
         for i, entry in enumerate(doc["curves"]):

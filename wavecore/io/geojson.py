@@ -90,8 +90,16 @@ def read_geojson(data: bytes | str) -> CurveData:
     ------
     InvalidParameter
         Naming the place in the document (``features[3].geometry.coordinates[0]``) and what is
-        wrong there.
+        wrong there, or for a document nested too deeply to read.
     """
+    try:
+        return _read_geojson(data)
+    except RecursionError:  # the JSON parser's or the reader's (nested collections)
+        msg = "GeoJSON is nested too deeply"
+        raise InvalidParameter(msg) from None
+
+
+def _read_geojson(data: bytes | str) -> CurveData:
     try:
         doc = json.loads(as_text(data, "GeoJSON"))
     except json.JSONDecodeError as exc:

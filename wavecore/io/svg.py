@@ -16,6 +16,9 @@ from __future__ import annotations
 
 import io
 import math
+import re
+import xml.etree.ElementTree as ElementTree
+from dataclasses import dataclass
 from typing import Any
 from xml.sax.saxutils import quoteattr
 
@@ -24,7 +27,7 @@ import numpy as np
 from ..errors import InvalidParameter
 from .common import CurveData, as_text
 
-__all__ = ["read_svg", "write_svg"]
+__all__ = ["SvgWork", "read_svg", "scan_svg", "write_svg"]
 
 _PAINT = ("fill", "stroke", "stroke-width", "fill-rule", "opacity")
 #: Share of the tolerance the sampling of curved segments may use.
@@ -39,6 +42,201 @@ def _parser() -> Any:
         msg = 'reading SVG needs svgelements: pip install "wavecore[svg]"'
         raise InvalidParameter(msg) from exc
     return svgelements
+
+
+# --- the cost of reading a document, known before svgelements parses it ------------------------
+
+_COMMANDS = "MmLlHhVvCcSsQqTtAaZz"
+_DRAWING = "LlHhVvCcSsQqTtAa"
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+#: Path commands by kind: letters, the fewest and the most numbers a segment is written with
+#: (an arc's two flags may be packed against the next number), and what svgelements takes to
+#: parse, measure and sample one segment, in microseconds (svgelements 1.9.6 on a 2-core
+#: machine, 2026-12-07, 20,000 segments: lines 17-29 µs, quadratics 62, cubics 124-133,
+#: arcs 570-680; ``benchmarks/svg_scan.py`` compares the estimates with the reads).
+_KINDS = (
+    ("Ll", 2, 2, 30),
+    ("HhVv", 1, 1, 30),
+    ("Qq", 4, 4, 75),
+    ("Tt", 2, 2, 75),
+    ("Cc", 6, 6, 150),
+    ("Ss", 4, 4, 150),
+    ("Aa", 5, 7, 700),
+)
+_LINE_MICROSECONDS = 30
+#: One regular expression per kind that blanks every other kind's commands.
+_OTHER_COMMANDS = tuple(
+    re.compile("[" + "".join(c for c in _COMMANDS if c not in letters) + f"][^{_COMMANDS}]*")
+    for letters, *_ in _KINDS
+)
+_NOT_MOVES = re.compile(f"[{_COMMANDS.replace('Mm', '')}][^{_COMMANDS}]*")
+#: A move that starts a curve: a drawing command, or a pair of numbers more (lines), follows.
+_CURVE_START = re.compile(
+    f"[Mm](?:[^{_COMMANDS}]*(?=[{_DRAWING}])"
+    f"|\\s*{_NUMBER.pattern}[\\s,]*{_NUMBER.pattern}[\\s,]*(?=[-+.\\d]))"
+)
+#: Microseconds an element takes whatever its content (98.5 µs for a path of one segment).
+_ELEMENT_MICROSECONDS = 110
+#: And a polyline's or polygon's point (13.6-19.7 µs).
+_POINT_MICROSECONDS = 20
+#: A quarter of a circle or ellipse, or a rounded corner (a circle took 1.27-1.29 ms).
+_QUARTER_MICROSECONDS = 300
+#: Basic shapes, which svgelements turns into paths: (segments, microseconds of those).
+_SHAPES = {
+    "rect": (4, 4 * _LINE_MICROSECONDS),  # four arcs more with rounded corners (``rx``, ``ry``)
+    "circle": (4, 4 * _QUARTER_MICROSECONDS),
+    "ellipse": (4, 4 * _QUARTER_MICROSECONDS),
+    "line": (1, _LINE_MICROSECONDS),
+}
+#: Containers whose shapes are parsed but not drawn (unless a ``<use>`` draws them).
+_HIDDEN = frozenset({"defs", "clipPath", "pattern"})
+
+
+@dataclass(frozen=True)
+class SvgWork:
+    """What reading an SVG document takes, from a scan that does not parse its path data.
+
+    Attributes
+    ----------
+    microseconds : int
+        An estimate, on the high side, of the time :func:`read_svg` takes to parse the
+        document (every ``<use>`` expanded, as the parser expands it) before it samples it.
+    points : int
+        At least this many points come out (a drawn segment gives one or more).
+    curves : int
+        At least this many curves (each drawn subpath or shape with a segment).
+    """
+
+    microseconds: int
+    points: int
+    curves: int
+
+
+def _path_work(data: str) -> tuple[int, int, int]:
+    """(microseconds, fewest points, fewest curves) of one ``d`` attribute."""
+    microseconds = points = 0
+    for (letters, fewest, most, cost), others in zip(_KINDS, _OTHER_COMMANDS, strict=True):
+        if not any(c in data for c in letters):
+            continue
+        runs = others.sub(" ", data)  # this kind's commands and their numbers only
+        commands = sum(runs.count(c) for c in letters)
+        numbers = _NUMBER.subn("", runs)[1]
+        microseconds += cost * max(commands, numbers // fewest)
+        points += max(commands, numbers // most)
+    moves = _NOT_MOVES.sub(" ", data)
+    lines_after_moves = max(
+        0, _NUMBER.subn("", moves)[1] // 2 - moves.count("M") - moves.count("m")
+    )
+    microseconds += _LINE_MICROSECONDS * lines_after_moves
+    points += lines_after_moves
+    curves = max(len(_CURVE_START.findall(data)), 1 if points else 0)
+    return microseconds, points, curves
+
+
+class _OverLimit(Exception):
+    pass
+
+
+def scan_svg(data: bytes | str, *, limit: int | None = None) -> SvgWork:
+    """Estimate what reading an SVG document takes, before anything parses its path data.
+
+    svgelements, which :func:`read_svg` uses, parses the whole document, with every
+    ``<use>`` expanded, before the first point is known; a few kilobytes of nested ``<use>``
+    elements expand to millions of shapes, and a few megabytes of arcs take minutes.  This
+    scan reads the XML with the standard library's parser and counts, per element, the path
+    commands and their numbers by regular expressions, each ``<use>`` counted with what it
+    draws (once per reference, in linear time).
+
+    Parameters
+    ----------
+    data : bytes or str
+        The SVG document.
+    limit : int, optional, keyword-only
+        Stop once the estimate passes this many microseconds (a caller that refuses such
+        documents need not scan the rest): the work returned then has that estimate so far,
+        and no points or curves.
+
+    Returns
+    -------
+    SvgWork
+        The estimated parse time and the fewest points and curves reading it gives.
+
+    Raises
+    ------
+    InvalidParameter
+        For text that is not XML, or ``<use>`` references that form a cycle.
+
+    Examples
+    --------
+    >>> svg = '<svg xmlns="http://www.w3.org/2000/svg"><path d="M0 0 L1 1 2 0 Z"/></svg>'
+    >>> work = scan_svg(svg)
+    >>> work.points, work.curves
+    (2, 1)
+    """
+    text = as_text(data, "SVG")
+    try:
+        root = ElementTree.fromstring(text)
+    except ElementTree.ParseError as exc:
+        msg = f"SVG could not be parsed: {exc}"[:300]
+        raise InvalidParameter(msg) from None
+    ids = {e.get("id"): e for e in root.iter() if e.get("id") is not None}
+    done: dict[tuple[int, bool], tuple[int, int, int]] = {}
+    visiting: set[int] = set()
+    spent = 0  # the estimate so far, for the limit
+
+    def work_of(element: ElementTree.Element, drawn: bool) -> tuple[int, int, int]:
+        nonlocal spent
+        key = (id(element), drawn)
+        if key in done:
+            return done[key]
+        if id(element) in visiting:
+            msg = "SVG <use> references form a cycle"
+            raise InvalidParameter(msg)
+        visiting.add(id(element))
+        tag = element.tag.rsplit("}", 1)[-1]
+        drawn = drawn and tag not in _HIDDEN
+        microseconds, points, curves = _ELEMENT_MICROSECONDS, 0, 0
+        if tag == "path":
+            microseconds_d, points, curves = _path_work(element.get("d") or "")
+            microseconds += microseconds_d
+        elif tag in ("polyline", "polygon"):
+            count = _NUMBER.subn("", element.get("points") or "")[1] // 2
+            microseconds += _POINT_MICROSECONDS * count
+            points, curves = max(0, count - 1), 1 if count > 1 else 0
+        elif tag in _SHAPES:
+            points, cost = _SHAPES[tag]
+            rounded = tag == "rect" and (element.get("rx") or element.get("ry"))
+            microseconds += cost + (4 * _QUARTER_MICROSECONDS if rounded else 0)
+            curves = 1
+        elif tag == "use":
+            href = element.get("href") or element.get("{http://www.w3.org/1999/xlink}href")
+            target = ids.get(href[1:]) if href and href.startswith("#") else None
+            if target is not None:
+                used = work_of(target, True)
+                microseconds += used[0]
+                points, curves = used[1], used[2]
+        if not drawn:
+            points = curves = 0
+        spent += microseconds
+        if limit is not None and spent > limit:
+            raise _OverLimit
+        for child in element:
+            child_work = work_of(child, drawn)
+            microseconds += child_work[0]
+            points += child_work[1]
+            curves += child_work[2]
+        visiting.discard(id(element))
+        done[key] = (microseconds, points, curves)
+        return done[key]
+
+    try:
+        microseconds, points, curves = work_of(root, True)
+    except RecursionError:
+        msg = "SVG is nested too deeply"
+        raise InvalidParameter(msg) from None
+    except _OverLimit:
+        return SvgWork(spent, 0, 0)
+    return SvgWork(microseconds, points, curves)
 
 
 def _samples(segment: Any, tolerance: float, se: Any) -> np.ndarray:
@@ -91,7 +289,8 @@ def read_svg(
         Curved segments are sampled so that the polyline is within ``SAMPLING_SHARE`` (a
         quarter) of it.  Default: ``1e-3`` × the drawing's diagonal.
     max_points : int, optional
-        Refuse (``InvalidParameter``) once the samples pass this many points.
+        Refuse (``InvalidParameter``) once the samples pass this many points, or before
+        parsing when :func:`scan_svg` finds that they will.
 
     Raises
     ------
@@ -100,6 +299,12 @@ def read_svg(
     """
     se = _parser()
     text = as_text(data, "SVG")
+    if max_points is not None:
+        # before the parser expands every <use>: a few kilobytes may draw millions of shapes
+        fewest = scan_svg(text).points
+        if fewest > max_points:
+            msg = f"SVG draws {fewest} points or more, more than {max_points}"
+            raise InvalidParameter(msg)
     try:
         svg = se.SVG.parse(io.StringIO(text))
         shapes = [e for e in svg.elements() if isinstance(e, se.Shape)]
@@ -108,7 +313,7 @@ def read_svg(
         msg = f"SVG could not be parsed: {type(exc).__name__}: {exc}"[:300]
         raise InvalidParameter(msg) from None
     if tolerance is None:
-        boxes = [p.bbox() for p in paths if p.bbox() is not None]
+        boxes = [box for box in (p.bbox() for p in paths) if box is not None]
         if boxes:
             box = np.array(boxes, dtype=np.float64)
             size = math.hypot(box[:, 2].max() - box[:, 0].min(), box[:, 3].max() - box[:, 1].min())
@@ -136,7 +341,12 @@ def read_svg(
                 if isinstance(segment, se.Close):
                     is_closed = True
                     continue
-                pieces.append(_samples(segment, sampling, se))
+                try:
+                    pieces.append(_samples(segment, sampling, se))
+                except (ValueError, ArithmeticError) as exc:  # svgelements on extreme values
+                    name = shape.id or type(shape).__name__
+                    msg = f"SVG element {name} has a segment that cannot be sampled: {exc}"
+                    raise InvalidParameter(msg[:300]) from None
                 total += len(pieces[-1])
                 if max_points is not None and total > max_points:
                     msg = (
