@@ -262,6 +262,8 @@ def _use_bomb(depth: int) -> str:
         _SVG + '<rect width="3" height="2"/><rect width="3" height="2" rx="1"/></svg>',
         _SVG + '<circle r="2"/><ellipse rx="3" ry="1"/><line x2="4" y2="1"/></svg>',
         _use_bomb(2),
+        _use_bomb(2).replace('href="#', 'href="X'),  # svgelements drops any first character
+        _SVG + '<o:path xmlns:o="urn:o" d="M0 0 l1 1 2 2"/><path d="M0 0 l1 1"/></svg>',
     ],
 )
 def test_the_scan_bounds_what_reading_gives(document: str) -> None:
@@ -280,6 +282,8 @@ def test_a_use_bomb_is_refused_before_it_is_parsed() -> None:
     assert work.microseconds > 10**9  # over a thousand seconds of parsing
     with pytest.raises(wavecore.InvalidParameter, match="10000000 points or more"):
         wio.read_curves(document, "svg", max_points=1_000_000)
+    without_hashes = document.replace('href="#', 'href="X')
+    assert wio.svg.scan_svg(without_hashes) == work
 
 
 @pytest.mark.parametrize(

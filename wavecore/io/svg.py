@@ -88,6 +88,7 @@ _SHAPES = {
     "ellipse": (4, 4 * _QUARTER_MICROSECONDS),
     "line": (1, _LINE_MICROSECONDS),
 }
+_SVG_NAMESPACE = "{http://www.w3.org/2000/svg}"
 #: Containers whose shapes are parsed but not drawn (unless a ``<use>`` draws them).
 _HIDDEN = frozenset({"defs", "clipPath", "pattern"})
 
@@ -193,7 +194,9 @@ def scan_svg(data: bytes | str, *, limit: int | None = None) -> SvgWork:
             msg = "SVG <use> references form a cycle"
             raise InvalidParameter(msg)
         visiting.add(id(element))
-        tag = element.tag.rsplit("}", 1)[-1]
+        tag = element.tag
+        if tag.startswith(_SVG_NAMESPACE):
+            tag = tag[len(_SVG_NAMESPACE) :]
         drawn = drawn and tag not in _HIDDEN
         microseconds, points, curves = _ELEMENT_MICROSECONDS, 0, 0
         if tag == "path":
@@ -209,8 +212,10 @@ def scan_svg(data: bytes | str, *, limit: int | None = None) -> SvgWork:
             microseconds += cost + (4 * _QUARTER_MICROSECONDS if rounded else 0)
             curves = 1
         elif tag == "use":
+            # as svgelements resolves it: ``href`` before ``xlink:href``, its first character
+            # dropped whatever it is
             href = element.get("href") or element.get("{http://www.w3.org/1999/xlink}href")
-            target = ids.get(href[1:]) if href and href.startswith("#") else None
+            target = ids.get(href[1:]) if href else None
             if target is not None:
                 used = work_of(target, True)
                 microseconds += used[0]
