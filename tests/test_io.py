@@ -357,3 +357,93 @@ def test_metadata_too_deep_to_decode_is_refused() -> None:
         wavecore.decode_curve_file(wavecore.encode_curve_file(shallow.encode(), "geojson"))
     )
     assert back["type"] == "Feature"
+
+
+# --- what svgelements is given: values its regular expressions would take quadratic time on ---
+
+_PATH = '<path d="M0 0 L1 1"/>'
+
+
+@pytest.mark.parametrize(
+    ("document", "words"),
+    [
+        (_SVG + '<g fill="rgb(' + "1" * 3000 + '">' + _PATH * 100 + "</g></svg>", "fill is 3004"),
+        (_SVG + '<path transform="' + "rotate(" * 3000 + '" d="M0 0 L1 1"/></svg>', "transform"),
+        (
+            _SVG + '<g transform="' + "rotate(1) " * 200 + '">' + _PATH + "</g></svg>",
+            "more than 1024",
+        ),
+        (_SVG + '<path style="fill:' + "9" * 40 + '" d="M0 0 L1 1"/></svg>', "more than 32"),
+        (_SVG + "<style>.a{stroke:" + "x" * 100 + "}</style>" + _PATH + "</svg>", "stroke is 100"),
+    ],
+)
+def test_overlong_or_malformed_values_are_refused(document: str, words: str) -> None:
+    with pytest.raises(wavecore.InvalidParameter, match=words):
+        wio.svg.sanitized_svg(document)
+    with pytest.raises(wavecore.InvalidParameter, match=words):
+        wio.read_curves(document, "svg")
+
+
+@pytest.mark.parametrize(
+    "document",
+    [
+        # each took svgelements 4-45 s before it was given the sanitized copy
+        _SVG + '<g font="' + "1" * 3000 + ' x;x">' + "<text>a</text>" * 200 + _PATH + "</g></svg>",
+        _SVG + "<style>" + "a" * 80_000 + "</style>" + _PATH + "</svg>",
+        _SVG + '<path clip-path="' + "url(" * 20_000 + '" d="M0 0 L1 1"/></svg>',
+        _SVG
+        + "<style>*{"
+        + ";".join(f"a{i}:1" for i in range(20_000))
+        + "}</style>"
+        + "<g/>" * 1000
+        + _PATH
+        + "</svg>",
+        _SVG
+        + "<g "
+        + " ".join(f'a{i}=""' for i in range(20_000))
+        + ">"
+        + "<g/>" * 2000
+        + _PATH
+        + "</g></svg>",
+        _SVG + "<style>" + "*{fill:red}" * 20_000 + "</style>" + _PATH * 100 + "</svg>",
+    ],
+)
+def test_what_reading_ignores_costs_nothing(document: str) -> None:
+    import time
+
+    start = time.perf_counter()
+    data = wio.read_curves(document, "svg")
+    assert time.perf_counter() - start < 2.0
+    assert len(data.curves) >= 1
+
+
+def test_the_sanitized_copy_keeps_geometry_paint_and_links() -> None:
+    document = (
+        _SVG + "<defs><style>/* a comment */ .a, path.b { fill: #ff0000; font: 12px x; "
+        "stroke-linecap: round } #c{stroke:blue}</style>"
+        '<path id="p" class="a" d="M0 0 l10 0 0 10 z"/></defs>'
+        '<g transform="translate(5 5) rotate(30)" opacity="0.5" inkscape:label="x" '
+        'xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape">'
+        '<use xlink:href="#p" x="3"/><rect id="c" x="1" y="2" width="3" height="4" rx="1" '
+        'style="stroke-width:2;stroke-dasharray:1 2"/><text>label</text>'
+        '<polygon points="0 0 5 0 5 5" fill="rgb(1, 2, 3)"/></g></svg>'
+    )
+    clean = wio.svg.sanitized_svg(document)
+    for kept in (
+        "translate(5 5) rotate(30)",
+        'href="#p"',
+        "stroke-width:2",
+        ".a{fill:#ff0000}",
+        "path.b{fill:#ff0000}",
+        "#c{stroke:blue}",
+        'points="0 0 5 0 5 5"',
+        'rx="1"',
+    ):
+        assert kept in clean
+    for dropped in ("comment", "font", "linecap", "dasharray", "label", "inkscape"):
+        assert dropped not in clean
+    before = wio.read_curves(document, "svg")
+    assert len(before.curves) == 3
+    paints = [e["attributes"] for e in before.metadata["elements"]]
+    assert {"fill": "#ff0000", "opacity": "0.5"}.items() <= paints[0].items()
+    assert paints[1]["stroke"] == "blue" and paints[1]["stroke-width"] == "2"

@@ -4,7 +4,9 @@ transforms applied, curved segments sampled to the tolerance.
 Parsed by svgelements (pure Python, no dependencies of its own, the whole document: groups,
 transforms, ``viewBox``, units, ``<use>``, every basic shape converted to a path); svgpathtools
 parses path data just as well but needs SciPy and handles less of the document.  It is the
-``svg`` extra (``pip install "wavecore[svg]"``), loaded only here.
+``svg`` extra (``pip install "wavecore[svg]"``), loaded only here.  It is given a sanitized
+copy of the document (:func:`sanitized_svg`), whose parse :func:`scan_svg` estimates first:
+its regular expressions take quadratic time on some values, and it expands every ``<use>``.
 
 Each subpath becomes one curve, closed when it ends with ``Z``.  The written SVG has one
 ``<path>`` per element, with its ``id`` and paint (``fill``, ``stroke``, ``stroke-width``,
@@ -27,7 +29,7 @@ import numpy as np
 from ..errors import InvalidParameter
 from .common import CurveData, as_text
 
-__all__ = ["SvgWork", "read_svg", "scan_svg", "write_svg"]
+__all__ = ["SvgWork", "read_svg", "sanitized_svg", "scan_svg", "write_svg"]
 
 _PAINT = ("fill", "stroke", "stroke-width", "fill-rule", "opacity")
 #: Share of the tolerance the sampling of curved segments may use.
@@ -52,18 +54,18 @@ _NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 #: Path commands by kind: letters, the fewest and the most numbers a segment is written with
 #: (an arc's two flags may be packed against the next number), and what svgelements takes to
 #: parse, measure and sample one segment, in microseconds (svgelements 1.9.6 on a 2-core
-#: machine, 2026-12-07, 20,000 segments: lines 17-29 µs, quadratics 62, cubics 124-133,
-#: arcs 570-680; ``benchmarks/svg_scan.py`` compares the estimates with the reads).
+#: machine, 2026-12-07, 20,000 segments: lines 17-29 µs, quadratics 62-98, cubics 124-163,
+#: arcs 570-770; ``benchmarks/svg_scan.py`` compares the estimates with the reads).
 _KINDS = (
-    ("Ll", 2, 2, 30),
-    ("HhVv", 1, 1, 30),
-    ("Qq", 4, 4, 75),
-    ("Tt", 2, 2, 75),
-    ("Cc", 6, 6, 150),
-    ("Ss", 4, 4, 150),
-    ("Aa", 5, 7, 700),
+    ("Ll", 2, 2, 40),
+    ("HhVv", 1, 1, 40),
+    ("Qq", 4, 4, 100),
+    ("Tt", 2, 2, 100),
+    ("Cc", 6, 6, 200),
+    ("Ss", 4, 4, 200),
+    ("Aa", 5, 7, 800),
 )
-_LINE_MICROSECONDS = 30
+_LINE_MICROSECONDS = 40
 #: One regular expression per kind that blanks every other kind's commands.
 _OTHER_COMMANDS = tuple(
     re.compile("[" + "".join(c for c in _COMMANDS if c not in letters) + f"][^{_COMMANDS}]*")
@@ -76,11 +78,11 @@ _CURVE_START = re.compile(
     f"|\\s*{_NUMBER.pattern}[\\s,]*{_NUMBER.pattern}[\\s,]*(?=[-+.\\d]))"
 )
 #: Microseconds an element takes whatever its content (98.5 µs for a path of one segment).
-_ELEMENT_MICROSECONDS = 110
+_ELEMENT_MICROSECONDS = 120
 #: And a polyline's or polygon's point (13.6-19.7 µs).
-_POINT_MICROSECONDS = 20
-#: A quarter of a circle or ellipse, or a rounded corner (a circle took 1.27-1.29 ms).
-_QUARTER_MICROSECONDS = 300
+_POINT_MICROSECONDS = 25
+#: A quarter of a circle or ellipse, or a rounded corner (a circle took 1.27-2.13 ms).
+_QUARTER_MICROSECONDS = 600
 #: Basic shapes, which svgelements turns into paths: (segments, microseconds of those).
 _SHAPES = {
     "rect": (4, 4 * _LINE_MICROSECONDS),  # four arcs more with rounded corners (``rx``, ``ry``)
@@ -91,6 +93,185 @@ _SHAPES = {
 _SVG_NAMESPACE = "{http://www.w3.org/2000/svg}"
 #: Containers whose shapes are parsed but not drawn (unless a ``<use>`` draws them).
 _HIDDEN = frozenset({"defs", "clipPath", "pattern"})
+
+
+# --- what svgelements is given: the document's geometry and paint, each value bounded ------------
+#
+# svgelements runs backtracking regular expressions on attribute values and ``<style>`` text
+# (colours, fonts, transforms, CSS), some quadratic in a value's length, and copies every
+# inherited property into every element.  It is given a copy of the document rebuilt from what
+# reading uses: the elements that can draw (text, images and other namespaces dropped), the
+# attributes of geometry, paint, transforms and links, each value checked in linear time and
+# bounded, and the CSS rebuilt from its rules' properties of paint, display and transform.
+
+_XLINK_HREF = "{http://www.w3.org/1999/xlink}href"
+#: Elements that draw nothing, dropped with their content (svgelements makes no shape of them).
+_DROPPED = frozenset(
+    {"text", "tspan", "textPath", "image", "title", "desc", "metadata", "foreignObject", "script"}
+)
+#: Properties kept, as attributes, in ``style`` attributes and in CSS rules, and their longest
+#: value (a longer one is refused).
+_PROPERTIES = {
+    **{name: 64 for name in ("fill", "stroke", "stroke-width", "fill-rule", "opacity")},
+    "display": 32,
+    "visibility": 32,
+    "transform": 1024,
+}
+#: Geometry attributes, their longest value (``d`` and ``points`` are costed, not bounded).
+_GEOMETRY = {
+    **{name: 64 for name in ("x", "y", "width", "height", "rx", "ry", "cx", "cy", "r")},
+    **{name: 64 for name in ("x1", "y1", "x2", "y2")},
+    "viewBox": 128,
+    "preserveAspectRatio": 64,
+    "id": 256,
+    "class": 256,
+    "href": 256,
+}
+#: No number in a kept value may be longer: the parser's number patterns backtrack on long runs.
+_LONGEST_NUMBER = re.compile(r"[0-9.]{33}")
+_TRANSFORM_PIECE = re.compile(r"\s*,?\s*[A-Za-z]+\s*\([-+0-9.eE,\s]*")
+#: CSS rules kept (selectors), and properties a rule's body may hold before the rest is cut.
+_MOST_SELECTORS = 10_000
+
+
+def _checked_value(name: str, value: str, longest: int, where: str) -> str:
+    if len(value) > longest:
+        msg = f"SVG {where}: {name} is {len(value)} characters long, more than {longest}"
+        raise InvalidParameter(msg)
+    if _LONGEST_NUMBER.search(value):
+        msg = f"SVG {where}: {name} has a number of more than 32 characters"
+        raise InvalidParameter(msg)
+    if name == "transform":
+        pieces = value.split(")")
+        if pieces[-1].strip(" \t\r\n,") or not all(
+            _TRANSFORM_PIECE.fullmatch(piece) for piece in pieces[:-1]
+        ):
+            msg = f"SVG {where}: transform {value[:40]!r} is not a list of transforms"
+            raise InvalidParameter(msg)
+    return value
+
+
+def _style_properties(text: str, where: str) -> dict[str, str]:
+    """The kept properties of a ``style`` attribute or a CSS rule's body, the last one of a
+    name winning (as the parser takes them)."""
+    kept: dict[str, str] = {}
+    for declaration in text.split(";"):
+        name, colon, value = declaration.partition(":")
+        name, value = name.strip(), value.strip()
+        if colon and name in _PROPERTIES:
+            kept[name] = _checked_value(name, value, _PROPERTIES[name], where)
+    return kept
+
+
+def _css(text: str) -> str:
+    """``<style>`` text rebuilt from its rules (comments dropped; one rule per selector, its
+    kept properties merged in order), in linear time."""
+    rules: dict[str, dict[str, str]] = {}
+    pieces = []
+    position = 0
+    while True:  # comments out, in one pass
+        start = text.find("/*", position)
+        if start < 0:
+            pieces.append(text[position:])
+            break
+        pieces.append(text[position:start])
+        end = text.find("*/", start + 2)
+        position = len(text) if end < 0 else end + 2
+    for rule in "".join(pieces).split("}"):
+        selectors, brace, body = rule.partition("{")
+        if not brace or "{" in body:
+            continue
+        properties = _style_properties(body, "<style>")
+        properties.pop("transform", None)  # kept in attributes and style attributes only
+        for selector in selectors.split(","):
+            selector = selector.strip()
+            if selector and properties:
+                if len(selector) > 256:
+                    msg = f"SVG <style>: a selector of {len(selector)} characters"
+                    raise InvalidParameter(msg)
+                rules.setdefault(selector, {}).update(properties)
+                if len(rules) > _MOST_SELECTORS:
+                    msg = f"SVG <style> has more than {_MOST_SELECTORS} selectors"
+                    raise InvalidParameter(msg)
+    return "\n".join(
+        f"{selector}{{{';'.join(f'{k}:{v}' for k, v in properties.items())}}}"
+        for selector, properties in rules.items()
+    )
+
+
+def _sanitized(root: ElementTree.Element) -> ElementTree.Element:
+    """A copy of the document with only what reading uses, every value checked (above)."""
+
+    def copy(element: ElementTree.Element) -> ElementTree.Element | None:
+        tag = element.tag
+        if not isinstance(tag, str):
+            return None  # a comment or an instruction
+        if tag.startswith(_SVG_NAMESPACE):
+            tag = tag[len(_SVG_NAMESPACE) :]
+        elif tag.startswith("{"):
+            return None  # another namespace (an editor's)
+        if tag in _DROPPED:
+            return None
+        where = f"<{tag}>" + (f" {element.get('id')!r}"[:60] if element.get("id") else "")
+        attributes: dict[str, str] = {}
+        for name, value in element.attrib.items():
+            if name == _XLINK_HREF:
+                name = "href" if "href" not in element.attrib else ""  # href wins, as it does
+            if name in ("d", "points"):  # only where they draw: a group's would be inherited
+                if (name == "d") == (tag == "path") and (name == "points") == (
+                    tag in ("polyline", "polygon")
+                ):
+                    attributes[name] = value
+            elif name in _GEOMETRY:
+                attributes[name] = _checked_value(name, value, _GEOMETRY[name], where)
+            elif name in _PROPERTIES:
+                attributes[name] = _checked_value(name, value, _PROPERTIES[name], where)
+            elif name == "style":
+                style = _style_properties(value, where)
+                if style:
+                    attributes["style"] = ";".join(f"{k}:{v}" for k, v in style.items())
+        out = ElementTree.Element(tag, attributes)
+        if tag == "style":
+            out.text = _css(element.text or "")
+        for child in element:
+            kept = copy(child)
+            if kept is not None:
+                out.append(kept)
+        return out
+
+    try:
+        clean = copy(root)
+    except RecursionError:
+        msg = "SVG is nested too deeply"
+        raise InvalidParameter(msg) from None
+    if clean is None:
+        msg = "SVG's root is not an SVG element"
+        raise InvalidParameter(msg)
+    clean.set("xmlns", _SVG_NAMESPACE[1:-1])
+    return clean
+
+
+def _parsed(text: str) -> ElementTree.Element:
+    try:
+        return ElementTree.fromstring(text)
+    except ElementTree.ParseError as exc:
+        msg = f"SVG could not be parsed: {exc}"[:300]
+        raise InvalidParameter(msg) from None
+
+
+def sanitized_svg(data: bytes | str) -> str:
+    """The SVG document as :func:`read_svg` hands it to svgelements: only the elements that
+    can draw (text, images and other namespaces dropped) and the attributes of geometry,
+    paint (``fill``, ``stroke``, ``stroke-width``, ``fill-rule``, ``opacity``), display,
+    transforms and links, in attributes, ``style`` attributes and ``<style>`` rules.
+
+    Raises
+    ------
+    InvalidParameter
+        For text that is not XML, or a kept value longer than its bound (64 characters for
+        paint and lengths, 1024 for a transform) or not of its form.
+    """
+    return ElementTree.tostring(_sanitized(_parsed(as_text(data, "SVG"))), encoding="unicode")
 
 
 @dataclass(frozen=True)
@@ -174,18 +355,23 @@ def scan_svg(data: bytes | str, *, limit: int | None = None) -> SvgWork:
     >>> work.points, work.curves
     (2, 1)
     """
-    text = as_text(data, "SVG")
-    try:
-        root = ElementTree.fromstring(text)
-    except ElementTree.ParseError as exc:
-        msg = f"SVG could not be parsed: {exc}"[:300]
-        raise InvalidParameter(msg) from None
+    return _scan(_sanitized(_parsed(as_text(data, "SVG"))), limit)
+
+
+#: What parsing a transform takes a character, for every element that inherits it (svgelements
+#: parses each element's transform with all its ancestors': 4.5 µs for ``rotate(1) ``).
+_TRANSFORM_MICROSECONDS_PER_CHARACTER = 1
+
+
+def _scan(root: ElementTree.Element, limit: int | None) -> SvgWork:
+    """:func:`scan_svg` of a sanitized document."""
     ids = {e.get("id"): e for e in root.iter() if e.get("id") is not None}
-    done: dict[tuple[int, bool], tuple[int, int, int]] = {}
+    # per (element, drawn): microseconds, points, curves, elements drawn or parsed below it
+    done: dict[tuple[int, bool], tuple[int, int, int, int]] = {}
     visiting: set[int] = set()
     spent = 0  # the estimate so far, for the limit
 
-    def work_of(element: ElementTree.Element, drawn: bool) -> tuple[int, int, int]:
+    def work_of(element: ElementTree.Element, drawn: bool) -> tuple[int, int, int, int]:
         nonlocal spent
         key = (id(element), drawn)
         if key in done:
@@ -195,10 +381,8 @@ def scan_svg(data: bytes | str, *, limit: int | None = None) -> SvgWork:
             raise InvalidParameter(msg)
         visiting.add(id(element))
         tag = element.tag
-        if tag.startswith(_SVG_NAMESPACE):
-            tag = tag[len(_SVG_NAMESPACE) :]
         drawn = drawn and tag not in _HIDDEN
-        microseconds, points, curves = _ELEMENT_MICROSECONDS, 0, 0
+        microseconds, points, curves, elements = _ELEMENT_MICROSECONDS, 0, 0, 1
         if tag == "path":
             microseconds_d, points, curves = _path_work(element.get("d") or "")
             microseconds += microseconds_d
@@ -212,14 +396,14 @@ def scan_svg(data: bytes | str, *, limit: int | None = None) -> SvgWork:
             microseconds += cost + (4 * _QUARTER_MICROSECONDS if rounded else 0)
             curves = 1
         elif tag == "use":
-            # as svgelements resolves it: ``href`` before ``xlink:href``, its first character
-            # dropped whatever it is
-            href = element.get("href") or element.get("{http://www.w3.org/1999/xlink}href")
+            # as svgelements resolves it: ``href`` before ``xlink:href`` (sanitized into one),
+            # its first character dropped whatever it is
+            href = element.get("href")
             target = ids.get(href[1:]) if href else None
             if target is not None:
                 used = work_of(target, True)
                 microseconds += used[0]
-                points, curves = used[1], used[2]
+                points, curves, elements = used[1], used[2], 1 + used[3]
         if not drawn:
             points = curves = 0
         spent += microseconds
@@ -230,12 +414,16 @@ def scan_svg(data: bytes | str, *, limit: int | None = None) -> SvgWork:
             microseconds += child_work[0]
             points += child_work[1]
             curves += child_work[2]
+            elements += child_work[3]
+        # every element below parses this one's transform again, with its own
+        transform = len(element.get("transform") or "") + len(element.get("style") or "")
+        microseconds += _TRANSFORM_MICROSECONDS_PER_CHARACTER * transform * elements
         visiting.discard(id(element))
-        done[key] = (microseconds, points, curves)
+        done[key] = (microseconds, points, curves, elements)
         return done[key]
 
     try:
-        microseconds, points, curves = work_of(root, True)
+        microseconds, points, curves, _ = work_of(root, True)
     except RecursionError:
         msg = "SVG is nested too deeply"
         raise InvalidParameter(msg) from None
@@ -303,15 +491,15 @@ def read_svg(
         For text that is not an SVG document, or one without any shape.
     """
     se = _parser()
-    text = as_text(data, "SVG")
+    clean = _sanitized(_parsed(as_text(data, "SVG")))
     if max_points is not None:
         # before the parser expands every <use>: a few kilobytes may draw millions of shapes
-        fewest = scan_svg(text).points
+        fewest = _scan(clean, None).points
         if fewest > max_points:
             msg = f"SVG draws {fewest} points or more, more than {max_points}"
             raise InvalidParameter(msg)
     try:
-        svg = se.SVG.parse(io.StringIO(text))
+        svg = se.SVG.parse(io.StringIO(ElementTree.tostring(clean, encoding="unicode")))
         shapes = [e for e in svg.elements() if isinstance(e, se.Shape)]
         paths = [abs(se.Path(shape)) for shape in shapes]
     except Exception as exc:  # svgelements raises the XML parser's and its own errors
