@@ -526,3 +526,25 @@ def test_encode_surface_rmse_psnr_bpp() -> None:
     assert 20 * np.log10(1000.0) - 10 * np.log10(np.mean((out - heights) ** 2)) >= 45
     bundle = wavecore.encode_surface(heights, bpp=1.0)
     assert 8 * len(bundle) / heights.size <= 1.0
+
+
+def test_a_bundle_declaring_a_huge_grid_is_refused_without_making_it() -> None:
+    """A grid bundle's shape is checked against its core's without an array of that shape
+    (a 1 KB bundle declaring 2**27 values cost 128 MB and 0.7 s before its error)."""
+    import struct
+    import tracemalloc
+    import zlib
+
+    volume = terrain((64, 80), seed=5)[None].repeat(4, axis=0)
+    bundle = bytearray(wavecore.encode_grid(volume, bpp=2.0))
+    assert bundle[8] == 3  # the dimensions, then the shape at byte 9
+    struct.pack_into("<3I", bundle, 9, 2**27 // (64 * 80), 64, 80)
+    crafted = bytes(bundle[:-4]) + struct.pack("<I", zlib.crc32(bytes(bundle[:-4])))
+    tracemalloc.start()
+    try:
+        with pytest.raises(wavecore.BundleError):
+            wavecore.decode(crafted)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20

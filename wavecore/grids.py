@@ -599,6 +599,18 @@ def _from_core(values: np.ndarray, layout: int) -> np.ndarray:
     return values
 
 
+def _core_shape(shape: tuple[int, ...], layout: int) -> tuple[int, ...]:
+    """:func:`_to_core`'s shape, with no array made (a bundle's declared shape may be large)."""
+    return (*shape[1:], shape[0]) if layout == LAYOUT_VOLUME else tuple(shape)
+
+
+def _grid_shape(core_shape: tuple[int, ...], layout: int) -> tuple[int, ...]:
+    """:func:`_from_core`'s shape, with no array made."""
+    if layout == LAYOUT_VOLUME:
+        return (core_shape[-1], *core_shape[:-1])
+    return tuple(core_shape)
+
+
 def _spatial_shape(shape: tuple[int, ...], layout: int) -> tuple[int, int]:
     """(rows, columns) of the 2-D transform."""
     return (shape[1], shape[2]) if layout == LAYOUT_VOLUME else (shape[0], shape[1])
@@ -1771,7 +1783,7 @@ def _decode_window(
     dtype, shape, layout = parsed.dtype, tuple(parsed.shape), parsed.layout
     if not spatial:  # only a depth range: the whole spatial extent
         spatial = (slice(None),)
-    expected = shape if parsed.lossless else _to_core(np.empty(shape, dtype=np.bool_), layout).shape
+    expected = shape if parsed.lossless else _core_shape(shape, layout)
     core_shape = tuple(_inspect_core(parsed.core)["shape"])
     if core_shape != tuple(expected):
         msg = f"grid core holds {list(core_shape)}, not the grid's {list(expected)}"
@@ -1823,9 +1835,7 @@ def _decode_window(
     if parsed.mask:
         mask = decode_mask(parsed.mask, shape)
         if level:
-            coarse_shape = _from_core(
-                np.empty(_decode_core_shape(parsed.core, level), dtype=np.bool_), layout
-            ).shape
+            coarse_shape = _grid_shape(_decode_core_shape(parsed.core, level), layout)
             mask = _coarse_mask(mask, level, layout, coarse_shape)
         out[mask[tuple(_full(window, len(shape)))]] = np.nan
     return np.ascontiguousarray(out)
@@ -1861,7 +1871,7 @@ def _decode(parsed: _Parsed, level: int, keep: float | None) -> np.ndarray:
             core = core.reshape(shape)
         return _to_dtype(core.astype(np.float64), dtype)
     smoothed = keep is not None and keep < 1.0
-    expected = _to_core(np.empty(shape, dtype=np.bool_), layout).shape
+    expected = _core_shape(shape, layout)
     core_shape = tuple(_inspect_core(parsed.core)["shape"])
     if core_shape != expected:  # checked before anything of the grid's size is allocated
         msg = f"grid core holds {list(core_shape)}, not the grid's {list(expected)}"
