@@ -251,3 +251,72 @@ def test_tolerances_too_small_to_measure_store_the_curves_as_they_are(
     bundle = wavecore.encode_curves([ring, line], closed=[True, False], method=method)
     back = wavecore.decode_curves(bundle).curves
     assert [c.tolist() for c in back] == [ring.tolist(), line.tolist()]
+
+
+def _vertex_bomb(count: int, stream: int) -> bytes:
+    """A version-2 vertex-form set declaring ``count`` curves over ``stream`` zero bytes."""
+    import struct
+    import zlib
+
+    from wavecore.varints import encode_varint as varint
+
+    body = (
+        b"\x89WVC\x02" + varint(0) + b"\x00" + varint(1) + varint(2) + varint(1) + b"\x00"
+        + varint(count) + bytes(stream)
+    )  # fmt: skip
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+def test_a_set_declaring_more_curves_than_a_set_holds_is_refused_at_once() -> None:
+    """2 KB of zeros declared 8 M one-point curves (10 s and 2.3 GB to decode or inspect)."""
+    import time
+
+    bomb = _vertex_bomb(4096 * 2016, 2000)
+    for read in (wavecore.decode_curves, wavecore.inspect, wavecore.decode):
+        start = time.perf_counter()
+        with pytest.raises(wavecore.BundleError, match="more than the limit 1048576"):
+            read(bomb)
+        assert time.perf_counter() - start < 0.5
+    with pytest.raises(wavecore.InvalidParameter, match="at most 1048576 curves"):
+        wavecore.encode_curves([np.zeros((1, 2))] * (curvesets.MAX_CURVES + 1))
+
+
+def test_inspect_of_a_crafted_set_raises_only_bundle_errors() -> None:
+    import struct
+    import zlib
+
+    from wavecore.varints import encode_varint as varint
+
+    # 20 bytes declaring 65 536 curves of dimension 65 536: numpy's MemoryError (64 GiB)
+    body = b"\x89WVC\x02" + varint(0) + b"\x00" + varint(65536) + varint(2) + varint(1)
+    body += b"\x00" + varint(65536)
+    bundle = body + struct.pack("<I", zlib.crc32(body))
+    with pytest.raises(wavecore.BundleError, match="corrupt curve set"):
+        wavecore.inspect(bundle)
+
+
+def test_metadata_inflating_past_its_bound_is_refused() -> None:
+    import struct
+    import zlib
+
+    t = np.linspace(0, 2 * np.pi, 20, endpoint=False)
+    ring = np.stack([np.cos(t), np.sin(t)], axis=1)
+    bundle = wavecore.encode_curves([ring], metadata={"note": "x"})
+    small = zlib.compress(b'{"note":"x"}', 9)
+    assert bundle.count(small) == 1
+    huge = zlib.compress(b'{"a":"' + b"x" * (curvesets.MAX_METADATA_BYTES + 10) + b'"}', 9)
+    at = bundle.index(small)
+    # the metadata's length varint sits just before it: 1 byte for the small one
+    assert bundle[at - 1] == len(small)
+    body = bundle[: at - 1] + varint_bytes(len(huge)) + huge + bundle[at + len(small) : -4]
+    crafted = body + struct.pack("<I", zlib.crc32(body))
+    with pytest.raises(wavecore.BundleError, match="inflates past"):
+        wavecore.decode_curves(crafted)
+    with pytest.raises(wavecore.InvalidParameter, match="bytes of JSON"):
+        wavecore.encode_curves([ring], metadata={"a": "x" * (curvesets.MAX_METADATA_BYTES + 10)})
+
+
+def varint_bytes(value: int) -> bytes:
+    from wavecore.varints import encode_varint
+
+    return bytes(encode_varint(value))

@@ -176,3 +176,22 @@ def test_long_norms_repeat_the_interior_and_cost_little() -> None:
     retained, _ = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     assert retained < 1 << 20
+
+
+def test_default_level_refuses_what_would_loop_without_end() -> None:
+    """``coarsest=0`` made every level fit, so the loop ran to ``most`` (10**9: 49 s)."""
+    with pytest.raises(wavecore.InvalidParameter, match="coarsest must be at least 1"):
+        wavecore.default_level([100], 10**9, 0)
+    with pytest.raises(wavecore.InvalidParameter, match="at least one axis"):
+        wavecore.default_level([])
+    assert 90 < wavecore.default_level([10**30], 10**9) < 100  # as deep as 2**100 allows
+
+
+def test_coarse_extent_takes_no_memory_of_the_length() -> None:
+    """It counted coarse positions in an array of them: 10**9 passed 3 GB."""
+    import time
+
+    start = time.perf_counter()
+    assert wavecore.coarse_extent(10**9, (0, 2), 1) == 500_000_001
+    assert wavecore.coarse_extent(10**9 + 1, (0, 1), 1, boundary="closed") == 500_000_001
+    assert time.perf_counter() - start < 0.1

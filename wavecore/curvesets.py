@@ -248,6 +248,11 @@ _MIN_POINTS = 8
 _RESAMPLE_SHARE = 0.7
 #: The most points a bundle may declare in all (the decoder's bound on hostile counts).
 MAX_POINTS = 1 << 27
+#: The most curves in one set: each decoded curve is a few hundred bytes of Python objects,
+#: and a vertex-form stream may code thousands of them in a byte.
+MAX_CURVES = 1 << 20
+#: The most bytes a set's metadata inflates to (its JSON), written or read.
+MAX_METADATA_BYTES = 32 << 20
 _MODE_RESAMPLED, _MODE_PADDED, _MODE_RAW, _MODE_VERTEX = 0, 1, 2, 3
 _INDEX_LIMIT = 1 << 29  # quantized integers beyond this would not fit the coder's int32
 #: Below this tolerance (3.9e-121) every curve is stored as it is: the bound is measured
@@ -771,7 +776,13 @@ def encode_curves(
     >>> [c.shape[1] for c in decode_curves(bundle).curves]
     [2, 2]
     """
+    if isinstance(curves, Sequence) and len(curves) > MAX_CURVES:  # before any is converted
+        msg = f"a curve set holds at most {MAX_CURVES} curves, not {len(curves)}"
+        raise InvalidParameter(msg)
     arrays = _as_curves(curves)
+    if len(arrays) > MAX_CURVES:
+        msg = f"a curve set holds at most {MAX_CURVES} curves, not {len(arrays)}"
+        raise InvalidParameter(msg)
     flags = _closed_list(closed, len(arrays))
     name = _wavelet_name(wavelet)
     if level is None:
@@ -813,12 +824,14 @@ def encode_curves(
     tolerance = float(tolerance)
     if metadata is not None:
         try:
-            meta_bytes = zlib.compress(
-                json.dumps(metadata, separators=(",", ":"), allow_nan=False).encode(), 9
-            )
+            text = json.dumps(metadata, separators=(",", ":"), allow_nan=False).encode()
+            meta_bytes = zlib.compress(text, 9)
         except (TypeError, ValueError, RecursionError) as exc:
             msg = f"metadata must be JSON-serialisable: {exc}"
             raise InvalidParameter(msg) from exc
+        if len(text) > MAX_METADATA_BYTES:
+            msg = f"metadata is {len(text)} bytes of JSON, more than {MAX_METADATA_BYTES}"
+            raise InvalidParameter(msg)
         depth = _nesting(metadata)
         if depth > MAX_METADATA_DEPTH:  # it would not decode: json.loads recurses
             msg = f"metadata is nested {depth} levels deep, more than {MAX_METADATA_DEPTH}"
@@ -1670,12 +1683,12 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         msg = f"curve set lattice step {step_index} is unknown"
         raise BundleError(msg)
     step = tolerance * VERTEX_STEPS[step_index]
-    count = packed_count - 1 if packed_count else reader.varint("count", MAX_POINTS)
+    count = packed_count - 1 if packed_count else reader.varint("count", MAX_CURVES)
     metadata = None
     if metadata_given:
         size = reader.varint("metadata length", len(data))
         try:
-            metadata = json.loads(zlib.decompress(reader.take(size, "metadata")))
+            metadata = _inflated_metadata(reader.take(size, "metadata"))
         except (zlib.error, ValueError) as exc:
             msg = f"curve set metadata is not deflated JSON: {exc}"
             raise BundleError(msg) from exc
@@ -1793,6 +1806,16 @@ class _Record:
     closed: bool
 
 
+def _inflated_metadata(deflated: bytes) -> Any:
+    """A set's metadata: at most ``MAX_METADATA_BYTES`` of JSON is inflated."""
+    inflater = zlib.decompressobj()
+    text = inflater.decompress(deflated, MAX_METADATA_BYTES + 1)
+    if len(text) > MAX_METADATA_BYTES:
+        msg = f"curve set metadata inflates past {MAX_METADATA_BYTES} bytes"
+        raise BundleError(msg)
+    return json.loads(text)
+
+
 def _checked(data: Any) -> bytes:
     """The bundle's bytes, once its magic, length and CRC-32 are checked."""
     if not isinstance(data, bytes | bytearray | memoryview):
@@ -1875,7 +1898,7 @@ def _parse(data: Any) -> tuple[dict[str, Any], list[_Record], list[bytes], _Read
         raise BundleError(msg)
     d = 0 if mixed else reader.varint("d", 1 << 16)
     cap = reader.varint("level", _MAX_LEVEL) if flags & 16 else _MAX_LEVEL
-    count = reader.varint("count", MAX_POINTS)
+    count = reader.varint("count", MAX_CURVES)
     coder_version = reader.varint("coder version", 255)
     block = reader.varint("block size", 1 << 16)
     records: list[_Record] = []
@@ -2006,7 +2029,7 @@ def _decode(bundle: Any) -> CurveSet:
     if info["has_metadata"]:
         size = reader.varint("metadata length", len(reader.data))
         try:
-            metadata = json.loads(zlib.decompress(reader.take(size, "metadata")))
+            metadata = _inflated_metadata(reader.take(size, "metadata"))
         except (zlib.error, ValueError) as exc:
             msg = f"curve set metadata is not deflated JSON: {exc}"
             raise BundleError(msg) from exc
@@ -2032,6 +2055,16 @@ def inspect_curves(bundle: Any) -> dict[str, Any]:
     A vertex-coded set (format version 2) keeps its records in the coded stream: it is
     decoded to describe it (``payload_bytes`` is then the stream, records included).
     """
+    try:
+        return _inspect_curves(bundle)
+    except BundleError:
+        raise
+    except Exception as exc:  # a crafted bundle with a valid CRC (as decode_curves says)
+        msg = f"corrupt curve set: {type(exc).__name__}: {exc}"
+        raise BundleError(msg[:300]) from exc
+
+
+def _inspect_curves(bundle: Any) -> dict[str, Any]:
     data = _checked(bundle)
     if _is_vertex_form(data):
         return _inspect_vertex(data)

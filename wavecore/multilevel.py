@@ -149,7 +149,14 @@ def default_level(
     >>> default_level([512, 512]), default_level([40, 30]), default_level([1000], most=8)
     (5, 2, 7)
     """
+    if not len(sizes):
+        msg = "sizes must name at least one axis"
+        raise InvalidParameter(msg)
     smallest = min(int(n) for n in sizes)
+    coarsest = int(coarsest)
+    if coarsest < 1:  # (with 0 the loop below would run to ``most``, whatever it is)
+        msg = f"coarsest must be at least 1, not {coarsest}"
+        raise InvalidParameter(msg)
     level = 1
     while level < most and smallest >= coarsest << (level + 1):
         level += 1

@@ -285,13 +285,28 @@ def coarse_extent(
     if rule.periodic:
         # Chaikin: fine sample i sits at coarse position (i - 1/2) / 2**level + 1/2.
         end = (n - 1.5) / step + 0.5
-        positions = np.arange(coarse, dtype=np.float64)
+
+        def position(k: int) -> float:
+            return float(k)
+
     else:
         # Endpoint interpolating: Greville abscissae 0, 1/2, 3/2, …, K - 1/2, K (coarse units).
         end = max(0.0, (n - 1.5) / step)
-        positions = np.clip(np.arange(coarse) - 0.5, 0.0, coarse - 2.0)
-    inside = int(np.count_nonzero(positions <= end + 1e-12))
-    if positions[inside - 1] < end - 1e-12:
+
+        def position(k: int) -> float:
+            return min(max(k - 0.5, 0.0), coarse - 2.0)
+
+    # The positions rise with k: the count at or below the end by bisection, not an array of
+    # ``coarse`` of them (n may be 10**9).
+    low, high = 0, coarse
+    while low < high:
+        middle = (low + high) // 2
+        if position(middle) <= end + 1e-12:
+            low = middle + 1
+        else:
+            high = middle
+    inside = low
+    if position(inside - 1) < end - 1e-12:
         inside += 1
     return min(coarse, inside)
 

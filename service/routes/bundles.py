@@ -123,6 +123,7 @@ def _reconstruct_curves(
     samples = sum(
         cost.CURVE_FACTOR * n * (d + 1) for n, d in zip(info["points"], info["dims"], strict=True)
     )
+    samples += cost.CURVE_DECODE_CURVE_SAMPLES * int(info["count"])
     cost.check(samples, f"a bundle of {info['count']} curves", settings)
     curveset = wavecore.decode_curves(bundle)
     own = (curveset.metadata or {}).get("format", "json")
