@@ -102,7 +102,7 @@ _HIDDEN = frozenset({"defs", "clipPath", "pattern"})
 # inherited property into every element.  It is given a copy of the document rebuilt from what
 # reading uses: the elements that can draw (text, images and other namespaces dropped), the
 # attributes of geometry, paint, transforms and links, each value checked in linear time and
-# bounded, and the CSS rebuilt from its rules' properties of paint, display and transform.
+# bounded, and the CSS rebuilt from its rules' properties of paint and display.
 
 _XLINK_HREF = "{http://www.w3.org/1999/xlink}href"
 #: Elements that draw nothing, dropped with their content (svgelements makes no shape of them).
@@ -129,8 +129,10 @@ _GEOMETRY = {
 }
 #: No number in a kept value may be longer: the parser's number patterns backtrack on long runs.
 _LONGEST_NUMBER = re.compile(r"[0-9.]{33}")
-_TRANSFORM_PIECE = re.compile(r"\s*,?\s*[A-Za-z]+\s*\([-+0-9.eE,\s]*")
-#: CSS rules kept (selectors), and properties a rule's body may hold before the rest is cut.
+#: One transform function up to its ``)``: neighbouring parts share no character, so a match
+#: never backtracks (``\s*,?\s*`` did, quadratically, on a long run of spaces).
+_TRANSFORM_PIECE = re.compile(r"[\s,]*[A-Za-z]+\s*\([-+0-9.eE,\s]*")
+#: The most CSS selectors a document's ``<style>`` rules may name.
 _MOST_SELECTORS = 10_000
 
 
