@@ -825,13 +825,13 @@ def encode_curves(
     if metadata is not None:
         try:
             text = json.dumps(metadata, separators=(",", ":"), allow_nan=False).encode()
-            meta_bytes = zlib.compress(text, 9)
         except (TypeError, ValueError, RecursionError) as exc:
             msg = f"metadata must be JSON-serialisable: {exc}"
             raise InvalidParameter(msg) from exc
         if len(text) > MAX_METADATA_BYTES:
             msg = f"metadata is {len(text)} bytes of JSON, more than {MAX_METADATA_BYTES}"
             raise InvalidParameter(msg)
+        meta_bytes = zlib.compress(text, 9)
         depth = _nesting(metadata)
         if depth > MAX_METADATA_DEPTH:  # it would not decode: json.loads recurses
             msg = f"metadata is nested {depth} levels deep, more than {MAX_METADATA_DEPTH}"
@@ -2054,6 +2054,11 @@ def inspect_curves(bundle: Any) -> dict[str, Any]:
     ``payload_bytes`` (the entropy-coded coefficients; the rest is header and records).
     A vertex-coded set (format version 2) keeps its records in the coded stream: it is
     decoded to describe it (``payload_bytes`` is then the stream, records included).
+
+    Raises
+    ------
+    BundleError
+        For anything wrong with the bytes (never another exception).
     """
     try:
         return _inspect_curves(bundle)
