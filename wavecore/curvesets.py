@@ -73,11 +73,11 @@ import json
 import math
 import struct
 import zlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from decimal import Decimal
 from functools import lru_cache
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -1958,11 +1958,20 @@ def decode_curves(bundle: Any) -> CurveSet:
     BundleError
         For anything wrong with the bytes (never another exception).
     """
+    return _bundle_errors(_decode, bundle)
+
+
+_T = TypeVar("_T")
+
+
+def _bundle_errors(read: Callable[[Any], _T], bundle: Any) -> _T:
+    """``read(bundle)``, any error but a ``BundleError`` raised as one: a crafted bundle with
+    a valid CRC is still the bundle's fault."""
     try:
-        return _decode(bundle)
+        return read(bundle)
     except BundleError:
         raise
-    except Exception as exc:  # a crafted bundle with a valid CRC: still the bundle's fault
+    except Exception as exc:
         msg = f"corrupt curve set: {type(exc).__name__}: {exc}"
         raise BundleError(msg[:300]) from exc
 
@@ -2060,13 +2069,7 @@ def inspect_curves(bundle: Any) -> dict[str, Any]:
     BundleError
         For anything wrong with the bytes (never another exception).
     """
-    try:
-        return _inspect_curves(bundle)
-    except BundleError:
-        raise
-    except Exception as exc:  # a crafted bundle with a valid CRC (as decode_curves says)
-        msg = f"corrupt curve set: {type(exc).__name__}: {exc}"
-        raise BundleError(msg[:300]) from exc
+    return _bundle_errors(_inspect_curves, bundle)
 
 
 def _inspect_curves(bundle: Any) -> dict[str, Any]:
