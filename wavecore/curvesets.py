@@ -86,6 +86,7 @@ from .blockcoder import BLOCK_SIZE
 from .entropy import decode_levels, encode_levels
 from .errors import BundleError, InvalidParameter
 from .filters import get_wavelet
+from .inflate import inflate
 from .multilevel import max_level, valid_length, wavedec, waverec
 from .quantize import DEFAULT_ROUNDING, band_weights, dequantize_bands, quantize_bands
 from .resample import pad_to_fit, resample_curve
@@ -1808,12 +1809,7 @@ class _Record:
 
 def _inflated_metadata(deflated: bytes) -> Any:
     """A set's metadata: at most ``MAX_METADATA_BYTES`` of JSON is inflated."""
-    inflater = zlib.decompressobj()
-    text = inflater.decompress(deflated, MAX_METADATA_BYTES + 1)
-    if len(text) > MAX_METADATA_BYTES:
-        msg = f"curve set metadata inflates past {MAX_METADATA_BYTES} bytes"
-        raise BundleError(msg)
-    return json.loads(text)
+    return json.loads(inflate(deflated, MAX_METADATA_BYTES, "curve set metadata"))
 
 
 def _checked(data: Any) -> bytes:

@@ -74,6 +74,7 @@ import numpy as np
 from numba import njit
 
 from .errors import BundleError
+from .inflate import inflate
 from .threshold import kth_smallest
 
 __all__ = [
@@ -1603,13 +1604,4 @@ def _drop_smallest(groups: list[Any], keep: float) -> None:
 
 
 def _inflate(data: bytes, limit: int) -> bytes:
-    inflater = zlib.decompressobj()
-    try:
-        text = inflater.decompress(data, limit + 1)
-    except zlib.error as exc:
-        msg = f"grid interpolation stream is not valid deflate data: {exc}"
-        raise BundleError(msg) from None
-    if len(text) > limit or not inflater.eof:
-        msg = "grid interpolation stream inflates past its size limit or is truncated"
-        raise BundleError(msg)
-    return text
+    return inflate(data, limit, "grid interpolation stream")

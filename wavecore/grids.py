@@ -90,6 +90,7 @@ from .gridpredict import (
     fixed_bytes,
     is_tiled_stream,
 )
+from .inflate import inflate
 
 __all__ = ["decode_grid", "encode_grid", "inspect_grid", "is_grid_bundle"]
 
@@ -353,16 +354,7 @@ def decode_mask(data: bytes, shape: tuple[int, ...]) -> np.ndarray:
 
 
 def _inflate(data: bytes, limit: int, what: str) -> bytes:
-    inflater = zlib.decompressobj()
-    try:
-        text = inflater.decompress(data, limit + 1)
-    except zlib.error as exc:
-        msg = f"grid {what} is not valid deflate data: {exc}"
-        raise BundleError(msg) from None
-    if len(text) > limit or not inflater.eof:
-        msg = f"grid {what} inflates past its size limit or is truncated"
-        raise BundleError(msg)
-    return text
+    return inflate(data, limit, f"grid {what}")
 
 
 # --------------------------------------------------------------------------------------------

@@ -63,6 +63,7 @@ from .bundle import MAX_ELEMENTS
 from .errors import BitrateTooLow, BundleError, InvalidParameter
 from .filters import get_wavelet
 from .grids import LAYOUT_FIELD, LAYOUT_VOLUME, any_infinite, checked_grid, encode_layout
+from .inflate import inflate
 
 try:
     import numcodecs
@@ -391,9 +392,8 @@ def _check_count(count: int, size: int, what: str) -> None:
 
 def _inflate(data: bytes, expected: int, what: str) -> bytes:
     """``data`` decompressed, which must give ``expected`` bytes: no more is ever inflated."""
-    inflater = zlib.decompressobj()
-    raw = inflater.decompress(data, expected + 1)
-    if len(raw) != expected or not inflater.eof:
+    raw = inflate(data, expected, f"wavecore chunk's {what}")
+    if len(raw) != expected:
         msg = f"wavecore chunk: its {what} inflate to other than {expected} bytes"
         raise BundleError(msg)
     return raw
