@@ -221,3 +221,53 @@ def test_a_3_0_golden_region_equals_its_committed_decode(name: str) -> None:
     assert read_bundle(bundle).version == (3, 0)
     for region in [(slice(0, 17), slice(250, 300)), (slice(190, 260), slice(3, 9))]:
         assert _same(decode(bundle, region=region), expected[region])
+
+
+@pytest.mark.parametrize("wavelet", ["bspline2", "haar", "cdf97"])
+@pytest.mark.parametrize("boundary", ["open", "closed"])
+def test_supports_from_the_compact_form_equal_those_of_every_row(
+    wavelet: str, boundary: str
+) -> None:
+    """The columns a region reads come from the compact form's pattern, not from every row
+    written out; they are the same columns."""
+    from wavecore.filters import get_wavelet, step_compact, step_sparse
+    from wavecore.regions import _rows_columns, compact_rows_columns
+
+    rule = get_wavelet(wavelet).rule(boundary)
+    rng = np.random.default_rng(3)
+    for m in [*range(max(2, rule.min_length), 40, 2), 1000, 4098]:
+        full = step_sparse(wavelet, boundary, m)
+        compact = step_compact(wavelet, boundary, m)
+        for which in (2, 3):  # P and Q
+            for rows in [np.arange(m), rng.integers(0, m, 9), np.array([0, m - 1])]:
+                expected = _rows_columns(full[which].indptr, full[which].indices, rows)
+                got = compact_rows_columns(*compact[which], rows)
+                assert np.array_equal(np.unique(got), np.unique(expected)), (m, which)
+
+
+def test_a_crafted_long_axis_is_refused_before_its_supports_cost_memory() -> None:
+    """A 390-byte curve bundle whose header declares 4 million points: a region decode once
+    wrote out every row of each level's synthesis matrices (1.3 GB, 3.4 s, then kept in a
+    cache) before a chunk was read; now its error comes first, at the sides' cost."""
+    import json
+    import sys
+    import tracemalloc
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    import fuzz_decoder
+
+    t = np.linspace(0, 6, 64)
+    curve = np.stack([np.cos(t), np.sin(t)], 1)
+    header, chunks = fuzz_decoder.split(wavecore.encode_curve(curve, level=3, tolerance=0.01))
+    n = 4_000_000
+    fitted = wavecore.valid_length(n, header["levels"], "open", "bspline2")
+    header.update(shape=[n, 2], fitted=[fitted, 2], pads=[[0, fitted - n]])
+    crafted = fuzz_decoder.assemble(json.dumps(header).encode(), chunks)
+    tracemalloc.start()
+    try:
+        with pytest.raises(BundleError):
+            decode_region(crafted, (slice(0, 10),))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 64 * 2**20  # the masks: a few bytes a declared sample

@@ -481,15 +481,33 @@ def _rows_and_columns(rule: BoundaryRule, m: int) -> dict[str, tuple[int, int]]:
     return {"A": (r, m), "B": (s, m), "P": (m, r), "Q": (m, s)}
 
 
-@lru_cache(maxsize=8)
+#: The longest fine length whose :func:`step_sparse` is cached (about 400 bytes a sample).
+SPARSE_CACHED_LENGTH = 1 << 16
+
+
 def step_sparse(bank_name: str, boundary: str, m: int) -> tuple[Sparse, Sparse, Sparse, Sparse]:
-    """The four step matrices for fine length ``m`` in compressed-row form (cached).
+    """The four step matrices for fine length ``m`` in compressed-row form (cached up to
+    :data:`SPARSE_CACHED_LENGTH`).
 
     Built from the compact form (:func:`step_compact`) by writing the regular interior out,
     without a dense matrix and without sorting, so that large lengths cost memory and time in
-    proportion to ``m``.  It stores every row, so only a few are kept; the transform itself
-    reads :func:`step_compact`.
+    proportion to ``m``.  It stores every row, so only a few short ones are kept, and long
+    ones are built anew (a cache of eight 1M-sample lengths would hold 3 GB); the transform
+    itself reads :func:`step_compact`.
     """
+    if m > SPARSE_CACHED_LENGTH:
+        return _step_sparse(bank_name, boundary, m)
+    return _step_sparse_cached(bank_name, boundary, m)
+
+
+@lru_cache(maxsize=8)
+def _step_sparse_cached(
+    bank_name: str, boundary: str, m: int
+) -> tuple[Sparse, Sparse, Sparse, Sparse]:
+    return _step_sparse(bank_name, boundary, m)
+
+
+def _step_sparse(bank_name: str, boundary: str, m: int) -> tuple[Sparse, Sparse, Sparse, Sparse]:
     compact = step_compact(bank_name, boundary, m)
     return tuple(_full_rows(sparse, regular) for sparse, regular in compact)  # type: ignore[return-value]
 
@@ -640,7 +658,7 @@ def _as_length(m: object) -> int:
 CACHE_CLEARERS.extend(
     [
         _step_matrices.cache_clear,
-        step_sparse.cache_clear,
+        _step_sparse_cached.cache_clear,
         step_regular.cache_clear,
         step_compact.cache_clear,
     ]

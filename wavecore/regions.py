@@ -10,7 +10,7 @@ their value.
 The support is worked out one transformed axis and one level at a time, finest first:
 
 * the lossy filter banks (``bspline2``, ``haar``, ``cdf97``; open, closed or symmetric) from
-  their synthesis matrices ``P`` and ``Q`` themselves (:func:`wavecore.filters.step_sparse`):
+  their synthesis matrices ``P`` and ``Q`` themselves (:func:`wavecore.filters.step_compact`):
   the coarse and detail coefficients a fine sample needs are the columns of its rows, boundary
   rows and periodic wrap-around included, so no filter length is written down here;
 * the reversible lifting (LeGall 5/3, integer Haar, closed integer B-spline) from its lifting
@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InvalidParameter
-from .filters import get_wavelet, step_sparse
+from .filters import Regular, Sparse, get_wavelet, step_compact
 from .lossless import unlift
 from .transform import synthesis_step
 
@@ -136,12 +136,36 @@ def _step_support(
     bank = get_wavelet(transform.wavelet)
     boundary = transform.boundary[axis]
     rule = bank.rule(boundary)
-    _, _, P, Q = step_sparse(bank.name, boundary, m)
+    _, _, P, Q = step_compact(bank.name, boundary, m)
     coarse = np.zeros(rule.coarse_length(m), dtype=bool)
     detail = np.zeros(rule.detail_length(m), dtype=bool)
-    coarse[_rows_columns(P.indptr, P.indices, fine)] = True
-    detail[_rows_columns(Q.indptr, Q.indices, fine)] = True
+    coarse[compact_rows_columns(*P, fine)] = True
+    detail[compact_rows_columns(*Q, fine)] = True
     return coarse, detail
+
+
+def compact_rows_columns(sparse: Sparse, regular: Regular, rows: np.ndarray) -> np.ndarray:
+    """The column indices of ``rows`` of a matrix in compact form (boundary rows in
+    ``sparse``, the interior as ``regular``'s pattern), in no particular order.
+
+    Read from the pattern rather than from every row written out, so a region of a long axis
+    costs memory in proportion to the rows it asks about (a crafted header can declare an axis
+    of millions of samples).
+    """
+    rows = np.asarray(rows, dtype=np.intp)
+    if not regular.blocks:
+        return _rows_columns(sparse.indptr, sparse.indices, rows)
+    inside = (rows >= regular.lo) & (rows < regular.hi)
+    outside = rows[~inside]
+    # Rows after the interior sit that many places earlier in the compressed rows.
+    outside = np.where(outside >= regular.hi, outside - regular.blocks * regular.p, outside)
+    parts = [_rows_columns(sparse.indptr, sparse.indices, outside)]
+    block, phase = np.divmod(rows[inside] - regular.lo, regular.p)
+    for which in range(regular.p):
+        taps = np.flatnonzero(regular.pattern[which])
+        starts = regular.col + regular.step * block[phase == which]
+        parts.append((starts[:, None] + taps[None, :]).ravel())
+    return np.concatenate(parts).astype(np.intp, copy=False)
 
 
 def band_masks(
