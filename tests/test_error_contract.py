@@ -263,3 +263,67 @@ def test_odd_inputs_encode_or_raise_invalid_parameter(index: int) -> None:
         assert out.shape == data.shape and out.dtype == data.dtype
         if data.dtype.kind == "f":
             assert np.all(np.isfinite(out))
+
+
+# --- the transform API: hostile arguments are InvalidParameter, named, and cost nothing -------
+
+RAGGED = [[1.0, 2.0], [3.0]]
+API_CASES: list[tuple[str, Callable[[], Any], str]] = [
+    ("basis_norms_nd of no axes", lambda: wavecore.basis_norms_nd(()), "at least one axis"),
+    ("basis_norms_nd of a number", lambda: wavecore.basis_norms_nd(5), "sequence of lengths"),
+    ("basis_norms_nd of 2**40 × 8", lambda: wavecore.basis_norms_nd((2**40, 8)), "values"),
+    ("basis_norms of 10**12", lambda: wavecore.basis_norms(10**12), "values"),
+    ("basis_norms of a word", lambda: wavecore.basis_norms("many"), "n must be a length"),
+    (
+        "resample_curve to 2**63 points",
+        lambda: wavecore.resample_curve(np.zeros((5, 2)), 2**63),
+        "values",
+    ),
+    (
+        "resample_grid to 10**12 samples",
+        lambda: wavecore.resample_grid(np.zeros(5), (10**12,), axes=0),
+        "values",
+    ),
+    (
+        "resample_grid of an empty axis",
+        lambda: wavecore.resample_grid(np.zeros((0, 5)), (5,), axes=0),
+        "no samples",
+    ),
+    ("synthesis_adjoint of words", lambda: wavecore.synthesis_adjoint(["a", "b"]), "numeric"),
+    ("synthesis_adjoint of ragged", lambda: wavecore.synthesis_adjoint(RAGGED), "numeric"),
+    (
+        "synthesis_step_adjoint of objects",
+        lambda: wavecore.synthesis_step_adjoint(np.array([object()] * 8)),
+        "numeric",
+    ),
+    ("pad_to_fit of ragged", lambda: wavecore.pad_to_fit(RAGGED, 1, axes=(0, 1)), "numeric"),
+    ("fit_grid of ragged", lambda: wavecore.fit_grid(RAGGED, 1, axes=(0, 1)), "numeric"),
+    ("decompose_image of ragged", lambda: wavecore.decompose_image(RAGGED), "the image"),
+    (
+        "subband_mosaic of words",
+        lambda: wavecore.subband_mosaic(["a", ("b", "c", "d")]),
+        "coarse band",
+    ),
+    ("wavedec2 with axes=None", lambda: wavecore.wavedec2(np.zeros((16, 16)), axes=None), "two"),
+    ("wavedec2 with axes=0", lambda: wavecore.wavedec2(np.zeros((16, 16)), axes=0), "two axes"),
+    (
+        "waverec2 with axes=0",
+        lambda: wavecore.waverec2(wavecore.wavedec2(np.zeros((16, 16))), axes=0),
+        "two axes",
+    ),
+    (
+        "synthesis_adjoint with axes=None",
+        lambda: wavecore.synthesis_adjoint(np.zeros(16), axes=None),
+        "axes",
+    ),
+]
+
+
+@pytest.mark.parametrize(("name", "call", "message"), API_CASES, ids=[c[0] for c in API_CASES])
+def test_hostile_transform_arguments_are_named_invalid_parameters(
+    name: str, call: Callable[[], Any], message: str
+) -> None:
+    """Each of these raised a raw ValueError, TypeError, IndexError, OverflowError or
+    MemoryError (terabytes asked for), or tried to allocate them."""
+    with pytest.raises(InvalidParameter, match=message):
+        call()

@@ -13,13 +13,14 @@ coefficient list out, in the layout those functions read (:mod:`wavecore.layout`
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
 from . import _kernels
+from .arguments import as_array
 from .errors import InvalidParameter
 from .filters import FilterBank, get_wavelet, step_sparse
 from .multilevel import as_int, resolve_boundaries
@@ -223,7 +224,7 @@ def synthesis_step_adjoint(
     """
     bank = get_wavelet(wavelet)
     (bound,) = resolve_boundaries(boundary, 1, bank)
-    arr = np.asarray(data, dtype=np.float64)
+    arr = as_array(data, np.float64)
     ax = normalize_axis(axis, arr.ndim)
     # The axis goes to the front first, so that the kernel's inner loop runs along whole rows
     # (contiguous and long) whatever the axis: the same sums in the same order, several times
@@ -287,10 +288,14 @@ def synthesis_adjoint(
     True
     """
     bank = get_wavelet(wavelet)
-    arr = np.asarray(data, dtype=np.float64)
-    ax = [normalize_axis(a, arr.ndim) for a in axes]
+    arr = as_array(data, np.float64)
+    named: Any = (axes,) if isinstance(axes, int | np.integer) else axes
+    if isinstance(named, str | bytes) or not isinstance(named, Iterable):
+        msg = f"axes must name one or two distinct axes, not {axes!r}"
+        raise InvalidParameter(msg[:200])
+    ax = [normalize_axis(a, arr.ndim) for a in named]
     if len(ax) not in (1, 2) or len(set(ax)) != len(ax):
-        msg = f"axes must name one or two distinct axes, not {tuple(axes)}"
+        msg = f"axes must name one or two distinct axes, not {tuple(named)}"
         raise InvalidParameter(msg)
     bounds = resolve_boundaries(boundary, len(ax), bank)
     count = as_int(level, "level")

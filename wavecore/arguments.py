@@ -18,7 +18,7 @@ import numpy as np
 
 from .errors import InvalidParameter
 
-__all__ = ["as_native", "closed_flags"]
+__all__ = ["as_array", "as_native", "closed_flags"]
 
 _SPELLINGS = ("open", "closed")
 
@@ -43,6 +43,31 @@ def as_native(data: Any) -> Any:
     if isinstance(data, np.ndarray) and not data.dtype.isnative:
         return data.astype(data.dtype.newbyteorder("="))
     return data
+
+
+def as_array(data: Any, dtype: Any = None, what: str = "the input") -> np.ndarray:
+    """``data`` as an array (of ``dtype`` if given) in native byte order, or
+    :class:`InvalidParameter` for what NumPy cannot turn into one (ragged lists, strings,
+    objects), naming ``what``.
+
+    Examples
+    --------
+    >>> as_array([[1, 2], [3, 4]], np.float64).dtype
+    dtype('float64')
+    >>> as_array([[1, 2], [3]])
+    Traceback (most recent call last):
+    ...
+    wavecore.errors.InvalidParameter: cannot turn the input into a numeric array: ...
+    """
+    try:
+        arr = np.asarray(data, dtype=dtype)
+    except (TypeError, ValueError, OverflowError) as exc:
+        msg = f"cannot turn {what} into a numeric array: {exc}"
+        raise InvalidParameter(msg[:300]) from None
+    if arr.dtype.kind in "OUSV" and dtype is None:
+        msg = f"cannot turn {what} into a numeric array: it holds {arr.dtype} values"
+        raise InvalidParameter(msg)
+    return as_native(arr)
 
 
 def closed_flags(closed: Any, boundary: Any, count: int, *, name: str = "closed") -> list[bool]:

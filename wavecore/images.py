@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .arguments import as_native
+from .arguments import as_array
 from .errors import InvalidCoefficients, InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import as_int, default_level, wavedec2, waverec2
@@ -210,7 +210,7 @@ level of the open boundary of 'bspline2' needs at least 8 samples per axis
     if fit not in ("pad", "resample"):
         msg = f"fit must be 'pad' (exact) or 'resample' (section 4.5), not {fit!r}"
         raise InvalidParameter(msg)
-    arr = as_native(np.asarray(image))
+    arr = as_array(image, what="the image")
     _check_dtype(arr.dtype)
     bank = get_wavelet(wavelet)
     if channel_axis is None:
@@ -282,12 +282,12 @@ def subband_mosaic(coeffs: Sequence[Any]) -> np.ndarray:
     if isinstance(coeffs, np.ndarray) or not len(coeffs):
         msg = "coeffs must be a non-empty list [cA_L, (cH_L, cV_L, cD_L), ...]"
         raise InvalidCoefficients(msg)
-    picture = _view_coarse(np.asarray(coeffs[0], dtype=np.float64))
+    picture = _view_coarse(as_array(coeffs[0], np.float64, "the coarse band"))
     for bands in coeffs[1:]:
         if not isinstance(bands, tuple | list) or len(bands) != 3:
             msg = "each level's details must be a tuple (cH, cV, cD)"
             raise InvalidCoefficients(msg)
-        ch, cv, cd = (_view_detail(np.asarray(b, dtype=np.float64)) for b in bands)
+        ch, cv, cd = (_view_detail(as_array(b, np.float64, "a detail band")) for b in bands)
         top = np.concatenate([picture, cv], axis=1)
         bottom = np.concatenate([ch, cd], axis=1)
         picture = np.concatenate([top, bottom], axis=0)

@@ -19,7 +19,7 @@ The closed boundary and Haar take ``m`` to ``m / 2`` and ``m / 2`` and need ``m 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -75,6 +75,19 @@ def _level_count(rule: BoundaryRule, n: int) -> int:
 
 #: No length beyond this is ever accepted: 2**40 float64 samples are 8 TiB.
 MAX_LENGTH = 1 << 40
+#: The most values a function whose result is sized by an argument makes (32 GiB of float64):
+#: beyond it the request is an error, not an attempt to allocate.
+MAX_RESULT_VALUES = 1 << 32
+
+
+def check_result_values(count: int, what: str) -> None:
+    """Raise :class:`InvalidParameter` if ``what`` would hold more than
+    :data:`MAX_RESULT_VALUES` values."""
+    if count > MAX_RESULT_VALUES:
+        msg = f"{what} would hold {count} values, more than the {MAX_RESULT_VALUES} allowed"
+        raise InvalidParameter(msg[:300])
+
+
 #: Padding or re-sampling to fit a level may make an axis at most this long (as in the codec).
 _GROWTH, _GROWTH_ALLOWANCE = 2, 64
 _FIT_ANY_SIZE = (
@@ -312,6 +325,9 @@ def resolve_axes(axes: Sequence[int] | None, ndim: int) -> list[int]:
         return list(range(ndim))
     if isinstance(axes, int | np.integer):
         axes = [int(axes)]
+    if isinstance(axes, str | bytes) or not isinstance(axes, Iterable):
+        msg = f"axes must be None, an axis or a sequence of axes, not {axes!r}"
+        raise InvalidParameter(msg[:200])
     result = [normalize_axis(a, ndim) for a in axes]
     if len(set(result)) != len(result):
         msg = f"axes {tuple(axes)} repeat an axis"
@@ -320,6 +336,18 @@ def resolve_axes(axes: Sequence[int] | None, ndim: int) -> list[int]:
         msg = "axes must name at least one axis"
         raise InvalidParameter(msg)
     return result
+
+
+def _axis_pair(axes: Any, name: str) -> tuple[Any, ...]:
+    """``axes`` as a tuple of two, or :class:`InvalidParameter` naming ``name``."""
+    if isinstance(axes, str | bytes) or not isinstance(axes, Iterable):
+        msg = f"{name} needs exactly two axes, such as (0, 1), not {axes!r}"
+        raise InvalidParameter(msg[:200])
+    pair = tuple(axes)
+    if len(pair) != 2:
+        msg = f"{name} needs exactly two axes, not {pair}"
+        raise InvalidParameter(msg[:200])
+    return pair
 
 
 def wavedec(
@@ -610,10 +638,7 @@ def wavedec2(
     >>> bool(np.allclose(waverec2(coeffs), image))
     True
     """
-    axes = tuple(axes)
-    if len(axes) != 2:
-        msg = f"wavedec2 needs exactly two axes, not {axes}"
-        raise InvalidParameter(msg)
+    axes = _axis_pair(axes, "wavedec2")
     coeffs = wavedecn(data, wavelet, boundary, level, axes)
     return [coeffs[0], *((d["da"], d["ad"], d["dd"]) for d in coeffs[1:])]
 
@@ -628,10 +653,7 @@ def waverec2(
 
     A detail band may be ``None``, meaning zeros.
     """
-    axes = tuple(axes)
-    if len(axes) != 2:
-        msg = f"waverec2 needs exactly two axes, not {axes}"
-        raise InvalidParameter(msg)
+    axes = _axis_pair(axes, "waverec2")
     if isinstance(coeffs, np.ndarray) or not len(coeffs):
         msg = "coeffs must be a non-empty list [cA_L, (cH_L, cV_L, cD_L), ...]"
         raise InvalidCoefficients(msg)

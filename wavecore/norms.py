@@ -26,15 +26,18 @@ How they are computed, in time and memory independent of the length
 from __future__ import annotations
 
 import itertools
+import math
 import threading
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
+from .errors import InvalidParameter
 from .filters import CACHE_CLEARERS, BoundaryRule, FilterBank, get_wavelet
-from .multilevel import resolve_axes, resolve_boundaries, resolve_level
+from .multilevel import check_result_values, resolve_axes, resolve_boundaries, resolve_level
 
 __all__ = ["basis_norms", "basis_norms_nd"]
 
@@ -325,8 +328,19 @@ def basis_norms(
     """
     bank = get_wavelet(wavelet)
     (b,) = resolve_boundaries(boundary, 1, bank)
-    lvl = resolve_level(level, bank, [b], [int(n)], [0])
-    return list(_norms(int(n), bank.name, b, lvl))
+    length = _length(n, "n")
+    check_result_values(length, f"the basis norms of {length} samples")
+    lvl = resolve_level(level, bank, [b], [length], [0])
+    return list(_norms(length, bank.name, b, lvl))
+
+
+def _length(value: Any, name: str) -> int:
+    """A length argument as an ``int``, or :class:`InvalidParameter` naming ``name``."""
+    try:
+        return int(value)
+    except (TypeError, ValueError, OverflowError):
+        msg = f"{name} must be a length (an integer), not {value!r}"
+        raise InvalidParameter(msg[:200]) from None
 
 
 def basis_norms_nd(
@@ -350,7 +364,14 @@ def basis_norms_nd(
     ((10, 8), (8, 8))
     """
     bank = get_wavelet(wavelet)
-    shape = tuple(int(s) for s in shape)
+    if isinstance(shape, str | bytes) or not isinstance(shape, Iterable):
+        msg = f"shape must be a sequence of lengths, not {shape!r}"
+        raise InvalidParameter(msg[:200])
+    shape = tuple(_length(s, "each length of shape") for s in shape)
+    if not shape:
+        msg = "shape must have at least one axis"
+        raise InvalidParameter(msg)
+    check_result_values(math.prod(shape), f"the basis norms of shape {shape}")
     axes = resolve_axes(None, len(shape))
     bounds = resolve_boundaries(boundary, len(shape), bank)
     lvl = resolve_level(level, bank, bounds, shape, axes)

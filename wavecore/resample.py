@@ -26,19 +26,21 @@ How the extension looks
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .arguments import closed_flags
+from .arguments import as_array, closed_flags
 from .errors import InvalidLength, InvalidParameter
 from .filters import FilterBank, get_wavelet
 from .multilevel import (
     MAX_LENGTH,
     as_int,
     check_level_bound,
+    check_result_values,
     growth_limit,
     max_level,
     resolve_axes,
@@ -104,7 +106,7 @@ def pad_to_fit(
     >>> bool(np.array_equal(crop_padding(padded, pads, axes=(0, 1)), image))
     True
     """
-    arr = np.asarray(data)
+    arr = as_array(data)
     pads, extensions = _fit_extensions(arr.shape, level, axes, boundary, wavelet)
     if any(after for _, after, _ in extensions):
         arr = _padded(arr, extensions, arr.dtype, None)
@@ -351,7 +353,7 @@ def crop_padding(
     >>> padded.shape, coarse.shape, crop_padding(coarse, pads, axes=(0, 1), level=3).shape
     ((42, 66), (7, 10), (6, 9))
     """
-    arr = np.asarray(data)
+    arr = as_array(data)
     ax = resolve_axes(axes if not isinstance(axes, int | np.integer) else [int(axes)], arr.ndim)
     if len(pads) != len(ax):
         msg = f"got {len(pads)} pads for {len(ax)} axes; give one (before, after) per axis"
@@ -431,6 +433,7 @@ def resample_curve(
         msg = f"points must have shape (m, d) or (m,), not {arr.shape}"
         raise InvalidParameter(msg)
     n = as_int(n, "n", minimum=2)
+    check_result_values(n * arr.shape[1], f"a curve of {n} points")
     if not np.all(np.isfinite(arr)):
         msg = "points must be finite (no NaN or infinity)"
         raise InvalidParameter(msg)
@@ -505,10 +508,15 @@ def resample_grid(
         msg = f"got {len(lengths)} lengths for {len(ax)} axes; give one per axis"
         raise InvalidParameter(msg)
     bounds = resolve_boundaries(boundary, len(ax), get_wavelet("bspline2"))
+    result = dict(enumerate(arr.shape)) | dict(zip(ax, lengths, strict=True))
+    check_result_values(math.prod(result.values()), f"a grid of shape {tuple(result.values())}")
     for a, b, n_out in zip(ax, bounds, lengths, strict=True):
         n_in = arr.shape[a]
         if n_in == n_out:
             continue
+        if not n_in:
+            msg = f"axis {a} has no samples to re-sample"
+            raise InvalidParameter(msg)
         if b == "closed":
             position = np.arange(n_out) * (n_in / n_out)
         elif n_out == 1:
@@ -636,7 +644,7 @@ def fit_grid(
     if method not in ("pad", "resample"):
         msg = f"method must be 'pad' (exact) or 'resample' (section 4.5), not {method!r}"
         raise InvalidParameter(msg)
-    arr = np.asarray(data)
+    arr = as_array(data)
     bank = get_wavelet(wavelet)
     ax = tuple(resolve_axes(axes, arr.ndim))
     bounds = tuple(resolve_boundaries(boundary, len(ax), bank))
