@@ -223,3 +223,36 @@ def test_dequantize_into_given_arrays() -> None:
     for got, expected in zip(as_levels(out), as_levels(fresh), strict=True):
         for a, b in zip(got, expected, strict=True):
             assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("wavelet", ["bspline2", "haar", "cdf97"])
+@pytest.mark.parametrize("boundary", ["open", "closed"])
+def test_short_curves_close_the_loop_on_a_dense_matrix_with_the_same_integers(
+    wavelet: str, boundary: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A short 1-D layout's closed loop multiplies by its synthesis as one dense matrix; the
+    integers are those of the level-by-level synthesis and adjoint."""
+    from wavecore import quantize as quantize_module
+    from wavecore.filters import get_wavelet
+
+    rng = np.random.default_rng(11)
+    length = 66 if (wavelet, boundary) == ("bspline2", "open") else 64  # fits 3 levels
+    points = np.cumsum(rng.normal(size=(length, 2)), axis=0)
+    coeffs = wavedec(points, wavelet, boundary, 3)
+    lengths = tuple(len(band) for band in coeffs)
+    name = get_wavelet(wavelet).name
+    assert quantize_module._dense_synthesis(lengths, name, boundary) is not None
+
+    def integers() -> list[np.ndarray]:
+        quantize_module._dense_synthesis.cache_clear()
+        q, _ = quantize_module.quantize_bands(
+            coeffs, 0.3, wavelet=wavelet, boundary=boundary, axes=(0,)
+        )
+        return [np.asarray(band) for band in q]
+
+    dense = integers()
+    monkeypatch.setattr(quantize_module, "_DENSE_LOOP_LENGTH", 0)
+    banded = integers()
+    quantize_module._dense_synthesis.cache_clear()
+    assert all(np.array_equal(a, b) for a, b in zip(dense, banded, strict=True))
+    assert any(np.count_nonzero(band) for band in dense[1:])
