@@ -693,6 +693,13 @@ def cmd_serve(args: argparse.Namespace) -> int:
     host = defaults.host if args.host is None else args.host
     port = defaults.port if args.port is None else args.port
     workers = defaults.workers if args.workers is None else args.workers
+    # Checked before the warm-up: uvicorn would fail only after it (port) or take 0 as 1.
+    if not 0 <= port <= 65535:
+        msg = f"port must be from 0 to 65535, not {port}"
+        raise CLIError(msg)
+    if workers < 1:
+        msg = f"workers must be a whole number of processes >= 1, not {workers}"
+        raise CLIError(msg)
     if not args.no_warm_up:
         # Before uvicorn says it is ready: the first requests then never wait for numba to
         # compile (or load from its cache) a kernel. With one worker the kernels stay loaded in

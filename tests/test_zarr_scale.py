@@ -136,3 +136,21 @@ def test_cli_zarr_errors_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixt
     assert "_r<row>_c<col>" in capsys.readouterr().err
     assert main(["decode", str(tmp_path / "nothing.zarr"), str(tmp_path / "o.npy")]) == 1
     assert "does not exist" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        (["--tile", "0"], "tile must be an even number"),  # was a ZeroDivisionError in Dask
+        (["--tile", "-64"], "tile must be an even number"),
+        (["--workers", "0"], "workers must be a whole number"),  # was a wait for ever
+        (["--workers", "-2"], "workers must be a whole number"),
+    ],
+)
+def test_cli_bad_tiles_and_worker_counts_are_one_line_errors(
+    option: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    picture = tmp_path / "small.npy"
+    np.save(picture, np.zeros((40, 40), dtype=np.uint8))
+    assert main(["encode", str(picture), str(tmp_path / "o.zarr"), "-q", *option]) == 1
+    assert message in capsys.readouterr().err

@@ -180,6 +180,22 @@ def test_a_bad_setting_is_one_line_naming_the_variable(
     assert len(err.splitlines()) == 1 and "WAVECORE_PORT" in err
 
 
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        (["--workers", "0"], "workers must be a whole number"),  # uvicorn took it as 1
+        (["--port", "70000"], "port must be from 0 to 65535"),  # refused after the warm-up
+        (["--port", "-1"], "port must be from 0 to 65535"),
+    ],
+)
+def test_serve_refuses_bad_ports_and_worker_counts_before_it_warms_up(
+    option: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["serve", *option]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err and "warm-up" not in err
+
+
 def test_bundles_are_written_as_wcb_and_wvb_is_read_too(
     tmp_path: Path, images: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -19,6 +19,8 @@ from typing import Any
 
 import dask
 
+from ..errors import InvalidParameter
+
 #: The Dask configuration the workers are spawned under (``distributed.nanny.pre-spawn-environ``;
 #: ``None`` would unset a variable that the nanny sets otherwise).  ``MALLOC_ARENA_MAX``: a
 #: worker's threads (Dask's executor, Zarr's event loop, its file threads) share one glibc
@@ -68,6 +70,10 @@ def local_cluster(
     """
     from dask.distributed import LocalCluster
 
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        # LocalCluster takes 0 or fewer and waits for ever for a worker to take the tasks
+        msg = f"workers must be a whole number of processes >= 1, not {workers!r}"
+        raise InvalidParameter(msg)
     settings: dict[str, Any] = {"threads_per_worker": 1, "dashboard_address": None}
     settings.update(options)
     config = dict(WORKER_CONFIG)

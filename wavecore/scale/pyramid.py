@@ -138,9 +138,7 @@ def write_pyramid(
     """
     from ..zarr import CodecConfig
 
-    if isinstance(tile, bool) or not isinstance(tile, int) or tile < 16 or tile % 2:
-        msg = f"tile must be an even number of pixels >= 16, not {tile!r}"
-        raise InvalidParameter(msg)
+    _check_tile(tile)
     codec = CodecConfig.from_mapping(config or DEFAULT_IMAGE_CODEC).to_dict()
     image = source if isinstance(source, da.Array) else da.from_array(np.asarray(source))
     if image.ndim == 2:
@@ -254,6 +252,12 @@ def read_region(
     return out[:, :, 0] if out.shape[2] == 1 else out
 
 
+def _check_tile(tile: Any) -> None:
+    if isinstance(tile, bool) or not isinstance(tile, int) or tile < 16 or tile % 2:
+        msg = f"tile must be an even number of pixels >= 16, not {tile!r}"
+        raise InvalidParameter(msg)
+
+
 # --------------------------------------------------------------------------------------------
 # Sources: a big TIFF read tile by tile, a folder of tiles, a synthesised image
 # --------------------------------------------------------------------------------------------
@@ -272,6 +276,7 @@ def open_image_source(path: str | Path, *, tile: int = DEFAULT_TILE) -> Any:
     tile : int
         The Dask chunks' side.
     """
+    _check_tile(tile)  # before a graph of one task per tile is built
     path = Path(path)
     if path.is_dir():
         return _tile_folder(path)
