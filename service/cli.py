@@ -711,6 +711,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
             "loaded from numba's cache in seconds afterwards)"
         )
         _warm_up()  # its last line says how long it took
+    protocol = _service_module("protocol", "running the service")
+    _, most_connections = protocol.connection_limits()
     uvicorn.run(
         f"{__package__}.app:create_app",
         factory=True,
@@ -718,6 +720,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
         port=port,
         workers=workers,
         log_level=args.log_level,
+        http=protocol.GuardedH11Protocol,  # deadlines for headers, a cap on connections
+        # asyncio accepts up to this many sockets before any is refused: kept under the cap
+        backlog=protocol.accept_backlog(most_connections),
     )
     return 0
 

@@ -69,6 +69,19 @@ class Settings(BaseSettings):
         description="Seconds a request's whole body may take to arrive before it gets a 408.",
     )
 
+    header_timeout: float = Field(
+        default=10.0,
+        gt=0,
+        description="Seconds a request's headers may take to arrive (from the connection, or "
+        "from its first byte after the previous response) before the connection is closed.",
+    )
+    max_connections: int = Field(
+        default=1000,
+        ge=1,
+        description="Open connections per server process (at most half its file-descriptor "
+        "limit); past it a new connection gets a 503 and is closed.",
+    )
+
     # Work
     concurrency: int = Field(
         default_factory=_default_concurrency,

@@ -9,6 +9,7 @@ is printed if it fails to start.
 from __future__ import annotations
 
 import os
+import resource
 import socket
 import subprocess
 import sys
@@ -41,20 +42,30 @@ def free_port() -> int:
 
 
 def start_server(
-    log: Path, env: dict[str, str] | None = None, timeout: float = 60.0
+    log: Path,
+    env: dict[str, str] | None = None,
+    timeout: float = 60.0,
+    descriptors: int | None = None,
 ) -> tuple[subprocess.Popen[bytes], str]:
-    """Start ``uvicorn --factory service.app:create_app`` and wait for ``/healthz``."""
+    """Start the service as ``wavecore serve`` runs it (uvicorn with the service's connection
+    guards, ``service.protocol``; no warm-up) and wait for ``/healthz``."""
     import httpx
 
     port = free_port()
+
+    def limit_descriptors() -> None:  # in the child, before it runs the server
+        if descriptors is not None:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (descriptors, descriptors))
+
     with log.open("wb") as out:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "service.app:create_app", "--factory"]
+            [sys.executable, "-m", "service.cli", "serve", "--no-warm-up"]
             + ["--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"],
             cwd=ROOT,
             stdout=out,
             stderr=subprocess.STDOUT,
             env={**os.environ, **(env or {})},
+            preexec_fn=limit_descriptors,
         )
     url = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + timeout
@@ -94,6 +105,23 @@ def live_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         pytest.fail(str(exc))
     try:
         yield url
+    finally:
+        stop_server(proc)
+
+
+@pytest.fixture(scope="session")
+def guarded_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
+    """A server with a small connection cap (40), a 3 s header deadline and 128 descriptors
+    (tests/service/test_connection_guards.py); its URL and its log."""
+    pytest.importorskip("service.app", reason="the service extra is not installed")
+    log = tmp_path_factory.mktemp("guarded-server") / "uvicorn.log"
+    env = {"WAVECORE_MAX_CONNECTIONS": "40", "WAVECORE_HEADER_TIMEOUT": "3"}
+    try:
+        proc, url = start_server(log, env=env, descriptors=128)
+    except RuntimeError as exc:
+        pytest.fail(str(exc))
+    try:
+        yield url, log
     finally:
         stop_server(proc)
 

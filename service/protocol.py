@@ -1,0 +1,106 @@
+"""uvicorn's HTTP/1.1 protocol (h11) with guards against idle and slow connections.
+
+uvicorn closes a kept-alive connection that stays idle, but not one that never finishes a
+request's headers: a connection that sends nothing, or a byte now and then (slowloris), is
+kept for ever.  A client that opens a few thousand of them uses up the worker's file
+descriptors; then no one else is accepted, and asyncio logs every failed ``accept`` (measured:
+1 100 idle sockets against a limit of 1 024 descriptors stopped ``/healthz``, and the log grew
+by 2.5 million lines in 30 s).  ``wavecore serve`` runs uvicorn with :class:`GuardedH11Protocol`:
+
+- **header deadline**: each request's headers must be in within ``header_timeout`` seconds
+  (``WAVECORE_HEADER_TIMEOUT``, default 10) of the connection being opened, or of its first
+  byte after the previous response; else the connection is closed.  The body has its own
+  deadline (``body_timeout``, :mod:`service.intake`);
+- **connection cap**: past ``max_connections`` open connections (``WAVECORE_MAX_CONNECTIONS``,
+  default 1 000; at most half the process's descriptor limit), a new connection gets a
+  ``503`` with ``Retry-After`` and is closed at once, and the listen backlog (how many sockets
+  asyncio accepts at once) is a quarter of the cap, so the descriptors do not run out.
+
+A reverse proxy in front (an ingress) usually does the same; these hold without one.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import resource
+from functools import lru_cache
+
+from uvicorn.protocols.http.h11_impl import H11Protocol
+
+from .settings import Settings
+
+__all__ = ["GuardedH11Protocol", "accept_backlog", "connection_limits"]
+
+
+@lru_cache(maxsize=1)
+def connection_limits() -> tuple[float, int]:
+    """``(header_timeout, max_connections)`` from the settings, the cap at most half the
+    descriptor limit (each connection is one; the rest is for files, pipes and workers)."""
+    settings = Settings.from_env()
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    cap = settings.max_connections
+    if soft != resource.RLIM_INFINITY:
+        cap = max(1, min(cap, soft // 2))
+    return settings.header_timeout, cap
+
+
+def accept_backlog(cap: int) -> int:
+    """The listen backlog for a cap of ``cap`` connections.  asyncio accepts up to the backlog
+    in one go before any connection is refused, so it must leave room under the descriptor
+    limit (uvicorn's default, 2 048, let 1 100 idle sockets exhaust 1 024 descriptors)."""
+    return max(8, min(2048, cap // 4))
+
+
+def _busy_response(retry_after: int) -> bytes:
+    body = b'{"type":"urn:wavecore:problem:overloaded","title":"Too many connections","status":503}'
+    return (
+        b"HTTP/1.1 503 Service Unavailable\r\n"
+        b"Content-Type: application/problem+json\r\n"
+        + f"Retry-After: {retry_after}\r\nContent-Length: {len(body)}\r\n".encode()
+        + b"Connection: close\r\n\r\n"
+        + body
+    )
+
+
+class GuardedH11Protocol(H11Protocol):
+    """:class:`uvicorn.protocols.http.h11_impl.H11Protocol` with a deadline for each request's
+    headers and a cap on open connections (see the module's docstring)."""
+
+    _header_deadline: asyncio.TimerHandle | None = None
+    _waiting_cycle: object = None
+
+    def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
+        super().connection_made(transport)
+        timeout, cap = connection_limits()
+        if len(self.connections) > cap:
+            transport.write(_busy_response(Settings.from_env().retry_after))
+            transport.close()
+            return
+        self._arm_header_deadline(timeout)
+
+    def data_received(self, data: bytes) -> None:
+        if self._header_deadline is None and (
+            self.cycle is None or self.cycle.response_complete
+        ):  # the first bytes of the next request on a kept-alive connection
+            self._arm_header_deadline(connection_limits()[0])
+        super().data_received(data)
+        if self.cycle is not self._waiting_cycle:  # the headers are in: a new request began
+            self._disarm_header_deadline()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._disarm_header_deadline()
+        super().connection_lost(exc)
+
+    def _arm_header_deadline(self, timeout: float) -> None:
+        self._waiting_cycle = self.cycle
+        self._header_deadline = self.loop.call_later(timeout, self._headers_too_slow)
+
+    def _disarm_header_deadline(self) -> None:
+        if self._header_deadline is not None:
+            self._header_deadline.cancel()
+            self._header_deadline = None
+
+    def _headers_too_slow(self) -> None:
+        self._header_deadline = None
+        if self.cycle is self._waiting_cycle and not self.transport.is_closing():
+            self.transport.close()
