@@ -76,6 +76,10 @@ def _check(shape: tuple[int, ...], dtype: np.dtype, name: str, max_elements: int
         raise GridFileError("invalid-parameter", msg)
 
 
+#: The most axes a ``.npy`` upload may declare.
+NPY_MOST_AXES = 8
+
+
 def read_npy_header(data: bytes, name: str) -> tuple[tuple[int, ...], bool, np.dtype, int]:
     """A ``.npy`` file's shape, Fortran order, dtype and data offset, read from its header only.
 
@@ -94,9 +98,14 @@ def read_npy_header(data: bytes, name: str) -> tuple[tuple[int, ...], bool, np.d
         else:
             msg = f".npy version {version} is not supported (1.0 and 2.0 are)"
             raise ValueError(msg)
-    except ValueError as exc:
+    except Exception as exc:  # numpy's header parser raises ValueError, TokenError, ...
         msg = f"{name} is not a readable .npy file: {exc}"
         raise GridFileError("unsupported-media-type", msg[:500]) from None
+    # No array we take has more axes or longer ones; numpy's own limits (64 axes, an index
+    # of 2**63) would be errors of their own after this check.
+    if len(shape) > NPY_MOST_AXES or any(n >= 2**31 for n in shape):
+        msg = f"{name} declares shape {shape}: more than {NPY_MOST_AXES} axes or one of 2**31"
+        raise GridFileError("unsupported-media-type", msg[:500])
     return shape, fortran, dtype, f.tell()
 
 

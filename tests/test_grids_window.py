@@ -138,3 +138,15 @@ def test_window_decode_rejects_a_box_outside_the_grid() -> None:
     stream = gridpredict.encode_predictive(data, missing, data.dtype, 0.5, (0, 1))[0]
     with pytest.raises(BundleError, match="does not fit"):
         gridpredict.decode_predictive_window(stream, data.shape, data.dtype, ((0, 41), (0, 5)))
+
+
+def test_interpolation_levels_past_the_lattice_and_zero_steps_are_refused_at_once() -> None:
+    """A 304-byte bundle with level=2**63 computed 2**level and padded a mask to it (3 GB)."""
+    bundle = wavecore.encode_grid(np.full((1024, 1024), np.nan), max_error=0.01)
+    assert wavecore.decode(bundle, level=10).shape == (1, 1)
+    for level in (11, 16, 2**63):
+        with pytest.raises(wavecore.InvalidParameter, match="deeper than 10"):
+            wavecore.decode(bundle, level=level)
+    for region in [(slice(0, 1, 0),), (slice(0.5, 3),)]:
+        with pytest.raises(wavecore.InvalidParameter, match="window slice"):
+            wavecore.decode(bundle, region=region)

@@ -1672,6 +1672,16 @@ def decode_grid(
         msg = f"level must be an integer >= 0, not {level!r}"
         raise InvalidParameter(msg)
     parsed = _Parsed(bundle)
+    if parsed.predictive and level:
+        # its coarse levels are lattices of stride 2**level: one sample a side at the deepest
+        sides = parsed.shape[-2:] if parsed.layout == LAYOUT_VOLUME else parsed.shape[:2]
+        deepest = max(1, (max(int(n) for n in sides) - 1).bit_length())
+        if level > deepest:
+            msg = (
+                f"level {level} is deeper than {deepest}, where this grid's lattice is one "
+                "sample a side"
+            )
+            raise InvalidParameter(msg[:300])
     if window is not None:
         _window_items(window, len(parsed.shape))  # checked before anything is decoded
     split = _split_window(window, parsed) if window is not None else None
@@ -1739,6 +1749,13 @@ def _window_items(window: Any, ndim: int) -> list[slice]:
         if not isinstance(item, slice):
             msg = f"window must hold slices (e.g. slice(0, 100)), not {item!r}"
             raise InvalidParameter(msg)
+        parts = (item.start, item.stop, item.step)
+        if not all(v is None or isinstance(v, int | np.integer) for v in parts):
+            msg = f"window slices take integers or None, not {item!r}"
+            raise InvalidParameter(msg[:200])
+        if item.step == 0:
+            msg = f"window slice {item!r} has a step of 0"
+            raise InvalidParameter(msg[:200])
     return list(window)
 
 

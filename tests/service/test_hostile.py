@@ -213,6 +213,8 @@ rng = np.random.default_rng(2026)
 CURVE = np.cumsum(rng.normal(size=(40, 2)), axis=0)
 CURVE_LIST = CURVE.tolist()
 IMAGE_BUNDLE = wavecore.encode_image(test_image((40, 52)), quality=35)
+# 304 bytes: a 1024² interpolation-coded grid of NaN; ?level=2**63 once held a worker past 3 GB
+NAN_GRID = wavecore.encode_grid(np.full((1024, 1024), np.nan), max_error=0.01)
 LOSSLESS_BUNDLE = wavecore.encode_image(test_image((40, 52)), lossless=True)
 CURVE_BUNDLE = wavecore.encode_curve(CURVE)
 SURFACE_BUNDLE = wavecore.encode_surface(rng.random((12, 10)), quality=40)
@@ -350,6 +352,13 @@ ROWS: list[Row] = [
     Row("svg-circle-subnormal", "/v1/curves/encode", svg('<circle r="1e-320" cx="0" cy="0"/>'), (200,), None, 60.0),
     Row("geojson-nested-1000", "/v1/curves/encode", curve_file('{"type": "LineString", "coordinates": ' + "[" * 1000 + "0" + "]" * 1000 + "}", "application/geo+json"), (422,), "invalid-parameter"),
     Row("geojson-properties-300-deep", "/v1/curves/encode", curve_file('{"type": "Feature", "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 1]]}, "properties": ' + '{"a": ' * 300 + "1" + "}" * 300 + "}", "application/geo+json"), (422,), "invalid-parameter"),
+    # ---- grid bundles: levels past the lattice, zero steps; .npy headers numpy cannot load
+    Row("grid-level-2**63", "/v1/bundles/reconstruct", lambda: bundle_body(NAN_GRID, level=2**63, format="npy"), (422,), "invalid-parameter"),
+    Row("grid-level-16", "/v1/bundles/reconstruct", lambda: bundle_body(NAN_GRID, level=16, format="npy"), (422,), "invalid-parameter"),
+    Row("grid-region-step-0", "/v1/bundles/reconstruct", lambda: bundle_body(NAN_GRID, region="0:1:0", format="npy"), (422,), "invalid-parameter"),
+    Row("npy-65-axes", "/v1/grids/encode", npy_with_header("{'descr': '<f8', 'fortran_order': False, 'shape': (" + "1, " * 65 + "), }", b"\0" * 8), (415,), "unsupported-media-type"),
+    Row("npy-2**62-long-empty", "/v1/surfaces/encode", npy_with_header("{'descr': '<f8', 'fortran_order': False, 'shape': (0, 4611686018427387904), }"), (415,), "unsupported-media-type"),
+    Row("npy-unterminated-header", "/v1/grids/encode", {"files": {"file": ("s.npy", b"\x93NUMPY\x01\x00" + struct.pack("<H", 20) + b"{'descr': ('<f8',   \n", "application/x-npy")}, "data": {}}, (415,), "unsupported-media-type"),
     # ---- grids: extreme targets on extreme values
     Row("grid-f16-psnr-1000", "/v1/grids/encode", npy(np.where(rng.random((64, 64)) > 0.5, 65504, -65504).astype(np.float16), psnr="1000"), (200,), None, 5.0),
     Row("grid-f16-rmse-1e300", "/v1/grids/encode", npy(rng.standard_normal((64, 64)).astype(np.float16), rmse="1e300"), (200,), None, 5.0),
