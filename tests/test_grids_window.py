@@ -150,3 +150,18 @@ def test_interpolation_levels_past_the_lattice_and_zero_steps_are_refused_at_onc
     for region in [(slice(0, 1, 0),), (slice(0.5, 3),)]:
         with pytest.raises(wavecore.InvalidParameter, match="window slice"):
             wavecore.decode(bundle, region=region)
+
+
+def test_a_nan_mask_inflates_no_further_than_an_honest_one_can_be() -> None:
+    """Each run of L >= 1 cells takes at most L bytes: a checkerboard of NaN (every run 1 cell,
+    the most bytes a mask can take) decodes; one byte more per cell is refused unread."""
+    import zlib
+
+    from wavecore.grids import decode_mask, encode_mask
+
+    shape = (3, 40, 50)
+    checkerboard = np.indices(shape).sum(axis=0) % 2 == 1
+    assert np.array_equal(decode_mask(encode_mask(checkerboard), shape), checkerboard)
+    bomb = zlib.compress(b"\x01" * (2 * checkerboard.size), 9)
+    with pytest.raises(BundleError, match="size limit"):
+        decode_mask(bomb, shape)

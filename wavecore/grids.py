@@ -343,7 +343,9 @@ def encode_mask(mask: np.ndarray) -> bytes:
 def decode_mask(data: bytes, shape: tuple[int, ...]) -> np.ndarray:
     """The mask that :func:`encode_mask` wrote, or ``BundleError``."""
     size = math.prod(shape)
-    text = _inflate(data, 10 * size + 16, "NaN mask")
+    # A run of L >= 1 cells takes at most L bytes as a varint (and the first run may be 0):
+    # an honest mask's varints are at most size + 1 bytes.
+    text = _inflate(data, size + 16, "NaN mask")
     raw = np.frombuffer(text, dtype=np.uint8)
     runs = _read_varints(text, int(np.count_nonzero(raw < 0x80)))
     if runs.size == 0 or int(runs.sum()) != size or (runs.size > 1 and runs[1:].min() == 0):
