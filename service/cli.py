@@ -712,7 +712,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         )
         _warm_up()  # its last line says how long it took
     protocol = _service_module("protocol", "running the service")
-    _, most_connections = protocol.connection_limits()
+    _, _, backlog = protocol.connection_limits()
     uvicorn.run(
         f"{__package__}.app:create_app",
         factory=True,
@@ -722,7 +722,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         log_level=args.log_level,
         http=protocol.GuardedH11Protocol,  # deadlines for headers, a cap on connections
         # asyncio accepts up to this many sockets before any is refused: kept under the cap
-        backlog=protocol.accept_backlog(most_connections),
+        backlog=backlog,
     )
     return 0
 

@@ -10,11 +10,12 @@ by 2.5 million lines in 30 s).  ``wavecore serve`` runs uvicorn with :class:`Gua
 - **header deadline**: each request's headers must be in within ``header_timeout`` seconds
   (``WAVECORE_HEADER_TIMEOUT``, default 10) of the connection being opened, or of its first
   byte after the previous response; else the connection is closed.  The body has its own
-  deadline (``body_timeout``, :mod:`service.intake`);
+  deadline (``body_timeout``) and so does reading a large answer (``send_timeout``), both
+  in :mod:`service.work`;
 - **connection cap**: past ``max_connections`` open connections (``WAVECORE_MAX_CONNECTIONS``,
-  default 1 000; at most half the process's descriptor limit), a new connection gets a
-  ``503`` with ``Retry-After`` and is closed at once, and the listen backlog (how many sockets
-  asyncio accepts at once) is a quarter of the cap, so the descriptors do not run out.
+  default 1 000), a new connection gets a ``503`` with ``Retry-After`` and is closed at once.
+  The cap and the listen backlog (how many sockets asyncio accepts at once, a quarter of the
+  setting) together take at most half the process's descriptor limit, so they do not run out.
 
 A reverse proxy in front (an ingress) usually does the same; these hold without one.
 """
@@ -29,26 +30,23 @@ from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from .settings import Settings
 
-__all__ = ["GuardedH11Protocol", "accept_backlog", "connection_limits"]
+__all__ = ["GuardedH11Protocol", "connection_limits"]
 
 
 @lru_cache(maxsize=1)
-def connection_limits() -> tuple[float, int]:
-    """``(header_timeout, max_connections)`` from the settings, the cap at most half the
-    descriptor limit (each connection is one; the rest is for files, pipes and workers)."""
+def connection_limits() -> tuple[float, int, int]:
+    """``(header_timeout, max_connections, backlog)``: the settings' deadline; the listen
+    backlog, a quarter of the settings' cap (at least 64: a shorter queue drops connections
+    that a burst of clients opens at once); and the cap, lowered so that it and the backlog
+    take at most half the descriptor limit (asyncio accepts a backlog's worth before any is
+    refused; the other half is for files, pipes and workers)."""
     settings = Settings.from_env()
-    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    backlog = max(64, min(2048, settings.max_connections // 4))
     cap = settings.max_connections
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
     if soft != resource.RLIM_INFINITY:
-        cap = max(1, min(cap, soft // 2))
-    return settings.header_timeout, cap
-
-
-def accept_backlog(cap: int) -> int:
-    """The listen backlog for a cap of ``cap`` connections.  asyncio accepts up to the backlog
-    in one go before any connection is refused, so it must leave room under the descriptor
-    limit (uvicorn's default, 2 048, let 1 100 idle sockets exhaust 1 024 descriptors)."""
-    return max(8, min(2048, cap // 4))
+        cap = max(1, min(cap, soft // 2 - backlog))
+    return settings.header_timeout, cap, backlog
 
 
 def _busy_response(retry_after: int) -> bytes:
@@ -71,7 +69,7 @@ class GuardedH11Protocol(H11Protocol):
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
-        timeout, cap = connection_limits()
+        timeout, cap, _ = connection_limits()
         if len(self.connections) > cap:
             transport.write(_busy_response(Settings.from_env().retry_after))
             transport.close()

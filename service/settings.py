@@ -69,6 +69,12 @@ class Settings(BaseSettings):
         description="Seconds a request's whole body may take to arrive before it gets a 408.",
     )
 
+    send_timeout: float = Field(
+        default=30.0,
+        gt=0,
+        description="Seconds a client may take to read an answer of more than 1 MiB (the "
+        "request keeps its slot meanwhile) before its connection is closed.",
+    )
     header_timeout: float = Field(
         default=10.0,
         gt=0,

@@ -433,6 +433,42 @@ async def run_work(request: Request, fn: Callable[..., T], *args: Any, **kwargs:
     return await pool.run(slot, fn, *args, **kwargs)
 
 
+class ClientNotReading(Exception):
+    """A client took longer than ``send_timeout`` to read its answer (its connection is closed)."""
+
+
+def _paced(send: Send, timeout: float) -> Send:
+    """``send`` that hands a large body over in pieces of ``SPOOL_BYTES``.
+
+    uvicorn buffers whatever one ``send`` gives it and waits for the client only before the
+    next ``send``: a whole body in one message left the request's slot, and the next request's
+    memory, free while the body sat in the connection's buffer (35 clients that never read a
+    67 MB answer held 2.2 GB of the server).  In pieces, the request keeps its slot until its
+    client has taken the body, or ``timeout`` seconds pass (then :class:`ClientNotReading`, and
+    uvicorn closes the connection)."""
+
+    async def paced(message: Message) -> None:
+        body = message.get("body", b"")
+        if message["type"] != "http.response.body" or len(body) <= SPOOL_BYTES:
+            await send(message)
+            return
+        more = message.get("more_body", False)
+        view = memoryview(body)
+        try:
+            async with asyncio.timeout(timeout):
+                for start in range(0, len(view), SPOOL_BYTES):
+                    piece = bytes(view[start : start + SPOOL_BYTES])
+                    last = start + SPOOL_BYTES >= len(view)
+                    await send(
+                        {"type": "http.response.body", "body": piece, "more_body": more or not last}
+                    )
+        except TimeoutError:
+            msg = f"the client did not read its {len(body)}-byte answer within {timeout:g} s"
+            raise ClientNotReading(msg) from None
+
+    return paced
+
+
 class _ClientGone(Exception):
     pass
 
@@ -499,7 +535,7 @@ class AdmissionMiddleware:
                     return await receive()  # after the body: only the disconnect is left
 
                 try:
-                    await self.app(scope, replay, send)
+                    await self.app(scope, replay, _paced(send, settings.send_timeout))
                 finally:
                     slot.release()
             finally:

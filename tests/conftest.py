@@ -111,13 +111,18 @@ def live_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
 
 @pytest.fixture(scope="session")
 def guarded_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
-    """A server with a small connection cap (40), a 3 s header deadline and 128 descriptors
+    """A server with a small connection cap (40), 3 s deadlines for headers and for reading an
+    answer, and 256 descriptors
     (tests/service/test_connection_guards.py); its URL and its log."""
     pytest.importorskip("service.app", reason="the service extra is not installed")
     log = tmp_path_factory.mktemp("guarded-server") / "uvicorn.log"
-    env = {"WAVECORE_MAX_CONNECTIONS": "40", "WAVECORE_HEADER_TIMEOUT": "3"}
+    env = {
+        "WAVECORE_MAX_CONNECTIONS": "40",
+        "WAVECORE_HEADER_TIMEOUT": "3",
+        "WAVECORE_SEND_TIMEOUT": "3",
+    }
     try:
-        proc, url = start_server(log, env=env, descriptors=128)
+        proc, url = start_server(log, env=env, descriptors=256)
     except RuntimeError as exc:
         pytest.fail(str(exc))
     try:

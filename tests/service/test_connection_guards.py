@@ -4,7 +4,7 @@ uvicorn alone keeps a connection that never finishes its headers for ever: 1 100
 against a process limited to 1 024 descriptors stopped ``/healthz`` and filled the log with
 failed accepts.  ``service.protocol`` closes such connections after ``header_timeout`` and
 answers connections past ``max_connections`` with a 503 at once.  This server has a small cap
-(40), a 3 s deadline and a limit of 128 descriptors, so the same attack is small and quick.
+(40), a 3 s deadline and a limit of 256 descriptors, so the same attack is small and quick.
 """
 
 from __future__ import annotations
@@ -58,23 +58,32 @@ def test_idle_and_slow_headers_are_closed_after_the_deadline(
 
 def test_past_the_cap_a_connection_gets_a_503_at_once(guarded_server: tuple[str, Path]) -> None:
     url, _ = guarded_server
-    idle = _open(url, CAP)
+    sockets = _open(url, CAP + 10)
     try:
-        refused = httpx.get(url + "/healthz", timeout=5)
-        assert refused.status_code == 503 and refused.headers["retry-after"]
-        assert refused.json()["type"] == "urn:wavecore:problem:overloaded"
+        answers = []
+        for sock in sockets:  # the held ones time out here; the refused ones have their answer
+            sock.settimeout(0.2)
+            try:
+                answers.append(sock.recv(4096))
+            except TimeoutError:
+                answers.append(b"")
+        refused = [a for a in answers if a]
+        assert len(refused) >= 10
+        for answer in refused:
+            assert answer.startswith(b"HTTP/1.1 503") and b"Retry-After: " in answer
+            assert b"urn:wavecore:problem:overloaded" in answer
     finally:
-        for sock in idle:
+        for sock in sockets:
             sock.close()
 
 
 def test_more_sockets_than_descriptors_do_not_stop_the_server(
     guarded_server: tuple[str, Path],
 ) -> None:
-    """150 idle sockets against 128 descriptors: without the guards the server stops accepting
+    """300 idle sockets against 256 descriptors: without the guards the server stops accepting
     and logs every failed accept; with them it answers once the idle ones reach their deadline."""
     url, log = guarded_server
-    idle = _open(url, 150)
+    idle = _open(url, 300)
     try:
         time.sleep(DEADLINE + 1.0)
         assert httpx.get(url + "/healthz", timeout=5).status_code == 200
@@ -96,3 +105,51 @@ def test_a_kept_alive_client_is_not_cut_between_requests(
             "/v1/curves/encode", json={"points": [[0, 0], [1, 1], [2, 0], [3, 1]]}
         )
         assert response.status_code == 200
+
+
+def _big_answer_request(url: str) -> tuple[bytes, int]:
+    """A 353-byte bundle whose npy answer is 67 MB (a constant 2048² RGBA float32 picture)."""
+    import numpy as np
+
+    import wavecore
+
+    bundle = wavecore.encode_image(np.full((2048, 2048, 4), 0.5, np.float32))
+    return bundle, 2048 * 2048 * 4 * 4
+
+
+def test_a_large_answer_arrives_whole_in_pieces(guarded_server: tuple[str, Path]) -> None:
+    url, _ = guarded_server
+    bundle, size = _big_answer_request(url)
+    response = httpx.post(
+        url + "/v1/bundles/reconstruct",
+        params={"format": "npy"},
+        content=bundle,
+        headers={"content-type": "application/vnd.wavecore.bundle"},
+        timeout=60,
+    )
+    assert response.status_code == 200 and len(response.content) > size
+
+
+def test_a_client_that_does_not_read_its_answer_is_cut_and_frees_its_slot(
+    guarded_server: tuple[str, Path],
+) -> None:
+    """The answer goes out in pieces while the request keeps its slot; a client that does not
+    read is cut after the send deadline (35 such clients held 2.2 GB of the server for good)."""
+    url, log = guarded_server
+    bundle, _ = _big_answer_request(url)
+    host, port = url.removeprefix("http://").split(":")
+    sock = socket.create_connection((host, int(port)), timeout=30)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    head = (
+        "POST /v1/bundles/reconstruct?format=npy HTTP/1.1\r\nHost: x\r\n"
+        "Content-Type: application/vnd.wavecore.bundle\r\n"
+        f"Content-Length: {len(bundle)}\r\n\r\n"
+    )
+    sock.sendall(head.encode() + bundle)
+    try:
+        time.sleep(DEADLINE + 6.0)  # decode, then the send deadline
+        metrics = httpx.get(url + "/metrics", timeout=5).text
+        assert "wavecore_requests_in_flight 0.0" in metrics
+        assert "did not read its" in log.read_text()  # ClientNotReading: the answer was cut
+    finally:
+        sock.close()
