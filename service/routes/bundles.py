@@ -200,6 +200,12 @@ def reconstruct_job(
 ) -> tuple[bytes, str, dict[str, str]]:
     info = wavecore.inspect(bundle)
     if info["kind"] == "curves":
+        if (keep is not None and keep < 1.0) or level or region is not None:
+            msg = (
+                "a curve set decodes whole, at its guaranteed tolerance: keep, level and region "
+                "do not apply to it"
+            )
+            raise Problem("invalid-parameter", msg)
         return _reconstruct_curves(bundle, info, requested, accept, settings)
     _check_declared_size(info, settings)
     cost.check_bundle(info, settings)

@@ -213,6 +213,7 @@ rng = np.random.default_rng(2026)
 CURVE = np.cumsum(rng.normal(size=(40, 2)), axis=0)
 CURVE_LIST = CURVE.tolist()
 IMAGE_BUNDLE = wavecore.encode_image(test_image((40, 52)), quality=35)
+CURVE_SET = wavecore.encode_curves([CURVE, CURVE[::-1] + 5])  # keep and level once passed unread
 # 304 bytes: a 1024² interpolation-coded grid of NaN; ?level=2**63 once held a worker past 3 GB
 NAN_GRID = wavecore.encode_grid(np.full((1024, 1024), np.nan), max_error=0.01)
 LOSSLESS_BUNDLE = wavecore.encode_image(test_image((40, 52)), lossless=True)
@@ -399,6 +400,8 @@ ROWS: list[Row] = [
     Row("bundle-format-gif", "/v1/bundles/reconstruct", bundle_body(IMAGE_BUNDLE, format="gif"), (422,), "validation-error"),
     Row("bundle-surface-as-png", "/v1/bundles/reconstruct", bundle_body(SURFACE_BUNDLE, format="png"), (406,), "not-acceptable"),
     Row("bundle-empty", "/v1/bundles/reconstruct", bundle_body(b""), (400,), "invalid-bundle"),
+    Row("curve-set-with-keep", "/v1/bundles/reconstruct", lambda: bundle_body(CURVE_SET, keep=0.5), (422,), "invalid-parameter"),
+    Row("curve-set-with-level", "/v1/bundles/reconstruct", lambda: bundle_body(CURVE_SET, level=1), (422,), "invalid-parameter"),
     Row("bundle-a-million-curves", "/v1/bundles/reconstruct", lambda: bundle_body(vertex_bomb(4096 * 256, 240), format="svg"), (413,), "too-costly", 5.0),
     Row("bundle-8m-curves", "/v1/bundles/inspect", lambda: bundle_body(vertex_bomb(4096 * 2016, 2000)), (400,), "invalid-bundle"),
     # ---- the HTTP layer
