@@ -72,8 +72,9 @@ class Settings(BaseSettings):
     send_timeout: float = Field(
         default=30.0,
         gt=0,
-        description="Seconds a client may take to read an answer of more than 1 MiB (the "
-        "request keeps its slot meanwhile) before its connection is closed.",
+        description="Seconds a client may go without reading any of an answer of more than "
+        "1 MiB (the request keeps its slot meanwhile; the whole answer within the request "
+        "timeout) before its connection is closed.",
     )
     header_timeout: float = Field(
         default=10.0,

@@ -434,18 +434,19 @@ async def run_work(request: Request, fn: Callable[..., T], *args: Any, **kwargs:
 
 
 class ClientNotReading(Exception):
-    """A client took longer than ``send_timeout`` to read its answer (its connection is closed)."""
+    """A client stopped reading its answer (its connection is closed)."""
 
 
-def _paced(send: Send, timeout: float) -> Send:
+def _paced(send: Send, stall: float, whole: float) -> Send:
     """``send`` that hands a large body over in pieces of ``SPOOL_BYTES``.
 
     uvicorn buffers whatever one ``send`` gives it and waits for the client only before the
     next ``send``: a whole body in one message left the request's slot, and the next request's
     memory, free while the body sat in the connection's buffer (35 clients that never read a
     67 MB answer held 2.2 GB of the server).  In pieces, the request keeps its slot until its
-    client has taken the body, or ``timeout`` seconds pass (then :class:`ClientNotReading`, and
-    uvicorn closes the connection)."""
+    client has taken the body.  A client that takes no piece for ``stall`` seconds, or not the
+    whole body within ``whole``, gets :class:`ClientNotReading`, and uvicorn closes the
+    connection."""
 
     async def paced(message: Message) -> None:
         body = message.get("body", b"")
@@ -455,15 +456,23 @@ def _paced(send: Send, timeout: float) -> Send:
         more = message.get("more_body", False)
         view = memoryview(body)
         try:
-            async with asyncio.timeout(timeout):
+            async with asyncio.timeout(whole):
                 for start in range(0, len(view), SPOOL_BYTES):
                     piece = bytes(view[start : start + SPOOL_BYTES])
                     last = start + SPOOL_BYTES >= len(view)
-                    await send(
-                        {"type": "http.response.body", "body": piece, "more_body": more or not last}
-                    )
+                    async with asyncio.timeout(stall):
+                        await send(
+                            {
+                                "type": "http.response.body",
+                                "body": piece,
+                                "more_body": more or not last,
+                            }
+                        )
         except TimeoutError:
-            msg = f"the client did not read its {len(body)}-byte answer within {timeout:g} s"
+            msg = (
+                f"the client did not read its {len(body)}-byte answer (no piece taken in "
+                f"{stall:g} s, or not all in {whole:g} s)"
+            )
             raise ClientNotReading(msg) from None
 
     return paced
@@ -535,7 +544,8 @@ class AdmissionMiddleware:
                     return await receive()  # after the body: only the disconnect is left
 
                 try:
-                    await self.app(scope, replay, _paced(send, settings.send_timeout))
+                    paced = _paced(send, settings.send_timeout, settings.request_timeout)
+                    await self.app(scope, replay, paced)
                 finally:
                     slot.release()
             finally:
