@@ -49,7 +49,10 @@ def connection_limits() -> tuple[float, int, int]:
     return settings.header_timeout, cap, backlog
 
 
-def _busy_response(retry_after: int) -> bytes:
+@lru_cache(maxsize=1)
+def _busy_response() -> bytes:
+    """The 503 a connection past the cap gets (made once: a flood of them must cost little)."""
+    retry_after = Settings.from_env().retry_after
     body = b'{"type":"urn:wavecore:problem:overloaded","title":"Too many connections","status":503}'
     return (
         b"HTTP/1.1 503 Service Unavailable\r\n"
@@ -71,7 +74,7 @@ class GuardedH11Protocol(H11Protocol):
         super().connection_made(transport)
         timeout, cap, _ = connection_limits()
         if len(self.connections) > cap:
-            transport.write(_busy_response(Settings.from_env().retry_after))
+            transport.write(_busy_response())
             transport.close()
             return
         self._arm_header_deadline(timeout)
