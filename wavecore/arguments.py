@@ -47,8 +47,9 @@ def as_native(data: Any) -> Any:
 
 def as_array(data: Any, dtype: Any = None, what: str = "the input") -> np.ndarray:
     """``data`` as an array (of ``dtype`` if given) in native byte order, or
-    :class:`InvalidParameter` for what NumPy cannot turn into one (ragged lists, strings,
-    objects), naming ``what``.
+    :class:`InvalidParameter` for what NumPy cannot turn into one (ragged lists; strings or
+    objects where ``dtype`` is numeric), naming ``what``.  The dtype itself is the caller's
+    to check.
 
     Examples
     --------
@@ -64,9 +65,6 @@ def as_array(data: Any, dtype: Any = None, what: str = "the input") -> np.ndarra
     except (TypeError, ValueError, OverflowError) as exc:
         msg = f"cannot turn {what} into a numeric array: {exc}"
         raise InvalidParameter(msg[:300]) from None
-    if arr.dtype.kind in "OUSV" and dtype is None:
-        msg = f"cannot turn {what} into a numeric array: it holds {arr.dtype} values"
-        raise InvalidParameter(msg)
     return as_native(arr)
 
 

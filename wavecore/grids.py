@@ -1923,7 +1923,7 @@ def _decode_predictive(parsed: _Parsed, level: int, keep: float | None) -> np.nd
     shape = tuple(parsed.shape)
     out = decode_predictive(parsed.core, shape, parsed.dtype, keep)
     if level:
-        stride = 1 << min(level, 62)
+        stride = 1 << level  # at most the lattice's depth (decode_grid checks)
         spatial: tuple[slice, ...] = (slice(None, None, stride), slice(None, None, stride))
         if parsed.layout == LAYOUT_VOLUME:
             spatial = (slice(None), *spatial)

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from . import _kernels, filters
-from .arguments import as_native
+from .arguments import as_array
 from .errors import InvalidCoefficients, InvalidParameter
 from .filters import (
     FilterBank,
@@ -162,11 +162,7 @@ def work_dtype(dtype: np.dtype[Any]) -> np.dtype[Any]:
 
 def as_float_array(data: Any) -> np.ndarray:
     """``data`` as an array of its working dtype (no copy when it already is one)."""
-    try:
-        arr = as_native(np.asarray(data))  # big-endian input (an uploaded .npy) included
-    except (TypeError, ValueError) as exc:
-        msg = f"cannot turn the input into a numeric array: {exc}"
-        raise InvalidParameter(msg) from None
+    arr = as_array(data)  # big-endian input (an uploaded .npy) included
     return arr.astype(work_dtype(arr.dtype), copy=False)
 
 
