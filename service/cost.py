@@ -24,6 +24,7 @@ from typing import Any
 
 import wavecore
 from wavecore.codec.choice import AUTO, AUTO_CANDIDATES
+from wavecore.codec.plan import level_arg
 
 from .errors import Problem
 from .settings import Settings
@@ -118,7 +119,8 @@ def padded_lengths(
     """
     if level is None:
         level = _default_level(sizes, DEFAULT_MOST_LEVELS[kind])
-    level = min(level, 30)  # deeper is refused by the codec (422) before any work
+    elif level > 30:
+        level_arg(level)  # the codec's own 422, naming the level sent, before any work
     fitted = [
         min(wavecore.valid_length(n, level, b, wavelet), 2 * n + 64)
         for n, b in zip(sizes, boundaries, strict=True)

@@ -381,3 +381,13 @@ async def test_transfer_level_is_bounded_by_the_source(client: httpx.AsyncClient
     deepest = int(problem["detail"].rsplit(" ", 1)[-1])
     r = await client.post("/v1/curves/transfer", json={**body, "level": deepest})
     assert r.status_code == 200 and r.json()["shape"] == [40, 2]
+
+
+@pytest.mark.parametrize("level", [31, 1000])
+async def test_a_surface_level_past_30_is_named_as_sent(
+    client: httpx.AsyncClient, level: int
+) -> None:
+    body = {"grid": [[0.0] * 8] * 8, "level": level}
+    r = await client.post("/v1/surfaces/encode", json=body)
+    problem = _check_problem(r, 422, "invalid-parameter")
+    assert f"level {level} is more than 30" in problem["detail"]  # not the clamped 30

@@ -106,6 +106,7 @@ async def test_geotiff_nodata_cells_decode_as_nan(client: httpx.AsyncClient) -> 
         (npy(np.zeros((4, 4))), {"rmse": "1", "psnr": "30"}, 422, "at most one"),
         (npy(np.zeros((4, 4))), {"wavelet": "nope"}, 422, "nope"),
         (npy(np.zeros((4, 4)))[:-8], {}, 415, "truncated"),
+        (npy(np.zeros((64, 64))), {"level": "1000"}, 422, "level 1000 is more than 30"),
         (b"II*\x00garbage", {}, 415, "TIFF"),
     ],
 )
