@@ -108,6 +108,12 @@ class Metrics:
             "Admitted /v1/ requests (working or waiting for a thread).",
             registry=self.registry,
         )
+        self.answer_bytes = Gauge(
+            "wavecore_answer_bytes_held",
+            "Bytes of answers over 1 MiB held while their clients read them "
+            "(at most WAVECORE_ANSWER_MEMORY_BYTES, or one answer).",
+            registry=self.registry,
+        )
 
 
 def route_label(scope: Scope) -> str:

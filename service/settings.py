@@ -76,6 +76,13 @@ class Settings(BaseSettings):
         "1 MiB (the request keeps its slot meanwhile; the whole answer within the request "
         "timeout) before its connection is closed.",
     )
+    answer_memory_bytes: int = Field(
+        default=512 * 1024 * 1024,
+        ge=0,
+        description="Bytes of answers of more than 1 MiB that the server holds at once while "
+        "their clients read them; an answer that would pass it while others are held gets a "
+        "503 instead (one answer alone is always sent).  0: no limit.",
+    )
     header_timeout: float = Field(
         default=10.0,
         gt=0,

@@ -9,6 +9,17 @@ Admission.  With its body in, the request takes one of ``concurrency + queue_siz
 gets an immediate 503 with ``Retry-After``.  The slot is held until the response is sent and
 the request's jobs have ended.
 
+Fairness.  Clients (by address: :func:`client_key`) share the workers and the slots.  Jobs
+waiting for a worker are dispatched round-robin between clients, not first come first served,
+so one client's backlog does not delay another's job by more than one job per client ahead of
+it.  When every slot is taken, a request from a client holding fewer slots than the client
+holding most takes the slot of that client's newest job still waiting for a worker, which gets
+the 503 instead: one client alone may use every slot, and many share them evenly.
+
+Answers.  An answer of more than 1 MiB goes out in 1 MiB pieces while the request keeps its
+slot; answers held so at once are bounded by ``answer_memory_bytes`` (past it: 503), and a
+client that stops reading is cut after ``send_timeout``.
+
 Work.  Jobs run in a pool of ``concurrency`` worker processes (:mod:`pebble`).  A job past the
 request's deadline (``request_timeout`` from admission) is cancelled: its worker is killed
 within about 0.1 s (SIGTERM, then SIGKILL), so its CPU and memory are freed, and the pool
@@ -37,6 +48,7 @@ import contextlib
 import ctypes
 import gc
 import io
+import ipaddress
 import logging
 import multiprocessing
 import os
@@ -45,6 +57,7 @@ import resource
 import tempfile
 import threading
 import time
+from collections import Counter, deque
 from collections.abc import Callable
 from concurrent.futures import CancelledError, Future
 from concurrent.futures import TimeoutError as FutureTimeout
@@ -278,12 +291,123 @@ _POOLS = _SharedPools()
 atexit.register(_POOLS.stop_all)
 
 
+def client_key(scope: Scope) -> str:
+    """Who sent a request, for sharing the work fairly: its client's address.
+
+    An IPv6 client is its /64 network, which one host is usually given whole.  Behind a proxy
+    the address is the proxy's unless uvicorn is told to trust its ``X-Forwarded-For``
+    (``FORWARDED_ALLOW_IPS``; docs/deploy.md).
+    """
+    client = scope.get("client")
+    host = str(client[0]) if client else ""
+    try:
+        address = ipaddress.ip_address(host)
+    except ValueError:
+        return host
+    if isinstance(address, ipaddress.IPv6Address):
+        if address.ipv4_mapped is not None:
+            return str(address.ipv4_mapped)
+        return str(ipaddress.ip_network(f"{address}/64", strict=False))
+    return str(address)
+
+
+class _Preempted(Exception):
+    """A waiting job gave its slot to a client holding fewer."""
+
+
+class FairDispatcher:
+    """Turns on the ``workers`` worker processes, shared out between clients.
+
+    A job takes a turn (:meth:`acquire`) before it is sent to the pool and gives it back
+    (:meth:`release`) when it has ended.  Waiting jobs are queued per client; a freed turn goes
+    to the client with the fewest jobs running, and among those to the one served least
+    recently.  Only called on the event loop.
+    """
+
+    def __init__(self, workers: int) -> None:
+        self.free = workers
+        self.running: Counter[str] = Counter()  # turns held, by client
+        self._waiting: dict[str, deque[asyncio.Future[None]]] = {}
+        self._served: dict[str, int] = {}  # when each client last got a turn (a count)
+        self._turns = 0
+
+    async def acquire(self, client: str) -> None:
+        """Wait for a turn; :class:`_Preempted` if the job's slot was given to another."""
+        if self.free > 0 and not self._waiting:
+            self.free -= 1
+            self._grant(client)
+            return
+        turn: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._waiting.setdefault(client, deque()).append(turn)
+        try:
+            await turn
+        except asyncio.CancelledError:
+            if turn.done() and not turn.cancelled() and turn.exception() is None:
+                self.release(client)  # granted as the job was cancelled: pass the turn on
+            else:
+                self._forget(client, turn)
+            raise
+
+    def release(self, client: str) -> None:
+        """Give back ``client``'s turn, to the next in line."""
+        self.running[client] -= 1
+        if self.running[client] <= 0:
+            del self.running[client]
+        self._tidy(client)
+        while self._waiting:
+            chosen = min(
+                self._waiting,
+                key=lambda waiting: (self.running[waiting], self._served.get(waiting, 0)),
+            )
+            queue = self._waiting[chosen]
+            turn = queue.popleft()
+            if not queue:
+                del self._waiting[chosen]
+            if not turn.done():
+                self._grant(chosen)
+                turn.set_result(None)
+                return
+        self.free += 1
+
+    def preempt(self, client: str) -> bool:
+        """Refuse ``client``'s newest waiting job (:class:`_Preempted`); False if it has none."""
+        queue = self._waiting.get(client)
+        while queue:
+            turn = queue.pop()
+            if not queue:
+                del self._waiting[client]
+                self._tidy(client)
+            if not turn.done():
+                turn.set_exception(_Preempted())
+                return True
+        return False
+
+    def _grant(self, client: str) -> None:
+        self._turns += 1
+        self._served[client] = self._turns
+        self.running[client] += 1
+
+    def _forget(self, client: str, turn: asyncio.Future[None]) -> None:
+        queue = self._waiting.get(client)
+        if queue is not None and turn in queue:
+            queue.remove(turn)
+            if not queue:
+                del self._waiting[client]
+                self._tidy(client)
+
+    def _tidy(self, client: str) -> None:
+        # A client with nothing running or waiting is forgotten: back later, it goes first.
+        if client not in self.running and client not in self._waiting:
+            self._served.pop(client, None)
+
+
 class Slot:
     """One admitted request; released when its response and its jobs are all done."""
 
-    def __init__(self, pool: WorkPool) -> None:
+    def __init__(self, pool: WorkPool, client: str = "") -> None:
         self._pool = pool
         self._holders = 1
+        self.client = client
         self.started = time.monotonic()
 
     def hold(self) -> None:
@@ -293,6 +417,9 @@ class Slot:
         self._holders -= 1
         if self._holders == 0:
             self._pool.in_use -= 1
+            self._pool.held[self.client] -= 1
+            if self._pool.held[self.client] <= 0:
+                del self._pool.held[self.client]
 
 
 class WorkPool:
@@ -302,6 +429,9 @@ class WorkPool:
         self.settings = settings
         self.capacity = settings.capacity
         self.in_use = 0
+        self.held: Counter[str] = Counter()  # slots held, by client
+        self.dispatch = FairDispatcher(settings.concurrency)
+        self.answers = AnswerMemory(settings.answer_memory_bytes)
         self.rejected = 0
         self.intake_bytes = 0
         self.intake_budget = settings.capacity * settings.max_upload_bytes
@@ -327,20 +457,47 @@ class WorkPool:
             jobs = [pool.submit(_worker_pid, None, 0.1) for _ in range(self.settings.concurrency)]
             seen.update(job.result() for job in jobs)
 
-    def admit(self) -> Slot | None:
-        """A slot, or ``None`` when every slot is taken (only called on the event loop)."""
-        if self.in_use >= self.capacity:
+    def admit(self, client: str = "") -> Slot | None:
+        """A slot for ``client``, or ``None`` when every slot is taken by clients holding no
+        more than it would (only called on the event loop).
+
+        When the slots are full, the client holding most that has a job waiting for a worker
+        gives up its newest such job (a 503 for it), if it holds more slots than ``client``
+        would with this one.  Until that job's request has answered, the slots are over-full
+        by one.
+        """
+        if self.in_use >= self.capacity and not self._make_room(client):
             self.rejected += 1
             return None
         self.in_use += 1
-        return Slot(self)
+        self.held[client] += 1
+        return Slot(self, client)
+
+    def _make_room(self, client: str) -> bool:
+        mine = self.held[client] + 1
+        for holder, count in self.held.most_common():
+            if count <= mine:
+                return False
+            if self.dispatch.preempt(holder):
+                return True
+        return False
 
     async def run(self, slot: Slot, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         """Run ``fn`` in a worker; a 503 ``timeout`` problem past the request's deadline."""
         loop = asyncio.get_running_loop()
         args = tuple(_sendable(arg) for arg in args)
-        remaining = slot.started + self.settings.request_timeout - time.monotonic()
+        deadline = slot.started + self.settings.request_timeout
+        try:
+            async with asyncio.timeout(max(0.0, deadline - time.monotonic())):
+                await self.dispatch.acquire(slot.client)  # this client's turn on a worker
+        except TimeoutError:
+            raise self._timeout() from None
+        except _Preempted:
+            self.rejected += 1
+            raise self._preempted() from None
+        remaining = deadline - time.monotonic()
         if remaining <= 0:
+            self.dispatch.release(slot.client)
             raise self._timeout()
         slot.hold()
         try:
@@ -348,11 +505,16 @@ class WorkPool:
             job: Future[T] = self.processes.submit(_run_job, remaining + 1, fn, args, kwargs)
         except RuntimeError:  # the pool was stopped (shutdown) or broke
             slot.release()
+            self.dispatch.release(slot.client)
             raise self._worker_lost("the work pool is not running") from None
+
+        def finished() -> None:
+            slot.release()
+            self.dispatch.release(slot.client)
 
         def done(_: Future[T]) -> None:
             with contextlib.suppress(RuntimeError):  # the loop may be closed at shutdown
-                loop.call_soon_threadsafe(slot.release)
+                loop.call_soon_threadsafe(finished)
 
         job.add_done_callback(done)
         try:
@@ -394,6 +556,14 @@ class WorkPool:
         )
         return Problem("timeout", msg, headers={"Retry-After": str(self.settings.retry_after)})
 
+    def _preempted(self) -> Problem:
+        msg = (
+            f"all {self.capacity} request slots are taken, and this client holds more of "
+            "them than another client that asked for one: its newest request waiting for a "
+            "worker gave its slot up; retry shortly"
+        )
+        return Problem("overloaded", msg, headers={"Retry-After": str(self.settings.retry_after)})
+
     def _worker_lost(self, detail: str) -> Problem:
         headers = {"Retry-After": str(self.settings.retry_after)}
         return Problem("worker-lost", detail, headers=headers)
@@ -424,8 +594,10 @@ async def run_work(request: Request, fn: Callable[..., T], *args: Any, **kwargs:
     pool: WorkPool = request.app.state.pool
     slot: Slot | None = request.scope.get("state", {}).get("work_slot")
     if slot is None:  # a route outside /v1/ (not admitted by the middleware)
-        slot = Slot(pool)
+        client = client_key(request.scope)
+        slot = Slot(pool, client)
         pool.in_use += 1
+        pool.held[client] += 1
         try:
             return await pool.run(slot, fn, *args, **kwargs)
         finally:
@@ -437,7 +609,36 @@ class ClientNotReading(Exception):
     """A client stopped reading its answer (its connection is closed)."""
 
 
-def _paced(send: Send, stall: float, whole: float) -> Send:
+class AnswerMemory:
+    """The bytes of large answers the server holds while their clients read them.
+
+    Answers held at once are otherwise bounded only by the slots: ``(concurrency + queue) ×``
+    the largest answer (66 × 67 MB for 66 clients that ask for a 67 MB array and read
+    slowly).  Past ``limit`` (0: none) a new large answer is refused, unless none is held:
+    one answer alone always goes out.
+    """
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self.held = 0
+
+    def take(self, size: int) -> bool:
+        if self.limit and self.held and self.held + size > self.limit:
+            return False
+        self.held += size
+        return True
+
+    def give_back(self, size: int) -> None:
+        self.held -= size
+
+
+class _AnswersFull(Exception):
+    def __init__(self, size: int, memory: AnswerMemory) -> None:
+        super().__init__(size)
+        self.size, self.held, self.limit = size, memory.held, memory.limit
+
+
+def _paced(send: Send, stall: float, whole: float, memory: AnswerMemory | None = None) -> Send:
     """``send`` that hands a large body over in pieces of ``SPOOL_BYTES``.
 
     uvicorn buffers whatever one ``send`` gives it and waits for the client only before the
@@ -446,20 +647,39 @@ def _paced(send: Send, stall: float, whole: float) -> Send:
     67 MB answer held 2.2 GB of the server).  In pieces, the request keeps its slot until its
     client has taken the body.  A client that takes no piece for ``stall`` seconds, or not the
     whole body within ``whole``, gets :class:`ClientNotReading`, and uvicorn closes the
-    connection."""
+    connection.
+
+    The response's start is held back until its body comes, so that a large body that does not
+    fit in ``memory`` can still be answered with a 503 instead (:class:`_AnswersFull`)."""
+    start: Message | None = None
 
     async def paced(message: Message) -> None:
+        nonlocal start
+        if message["type"] == "http.response.start":
+            start = message
+            return
         body = message.get("body", b"")
         if message["type"] != "http.response.body" or len(body) <= SPOOL_BYTES:
+            if start is not None:
+                await send(start)
+                start = None
             await send(message)
             return
+        reserved = 0
+        if start is not None:
+            if memory is not None:
+                if not memory.take(len(body)):
+                    raise _AnswersFull(len(body), memory)
+                reserved = len(body)
+            await send(start)
+            start = None
         more = message.get("more_body", False)
         view = memoryview(body)
         try:
             async with asyncio.timeout(whole):
-                for start in range(0, len(view), SPOOL_BYTES):
-                    piece = bytes(view[start : start + SPOOL_BYTES])
-                    last = start + SPOOL_BYTES >= len(view)
+                for begin in range(0, len(view), SPOOL_BYTES):
+                    piece = bytes(view[begin : begin + SPOOL_BYTES])
+                    last = begin + SPOOL_BYTES >= len(view)
                     async with asyncio.timeout(stall):
                         await send(
                             {
@@ -474,6 +694,9 @@ def _paced(send: Send, stall: float, whole: float) -> Send:
                 f"{stall:g} s, or not all in {whole:g} s)"
             )
             raise ClientNotReading(msg) from None
+        finally:
+            if memory is not None:
+                memory.give_back(reserved)
 
     return paced
 
@@ -521,7 +744,7 @@ class AdmissionMiddleware:
                     headers = {"Retry-After": str(settings.retry_after)}
                     await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
                     return
-                slot = self.pool.admit()
+                slot = self.pool.admit(client_key(scope))
                 if slot is None:
                     detail = (
                         f"all {self.pool.capacity} request slots are taken "
@@ -543,9 +766,21 @@ class AdmissionMiddleware:
                         return {"type": "http.request", "body": chunk, "more_body": not replayed}
                     return await receive()  # after the body: only the disconnect is left
 
+                paced = _paced(
+                    send, settings.send_timeout, settings.request_timeout, self.pool.answers
+                )
                 try:
-                    paced = _paced(send, settings.send_timeout, settings.request_timeout)
                     await self.app(scope, replay, paced)
+                except _AnswersFull as full:
+                    detail = (
+                        f"the server holds {full.held} bytes of answers that clients are still "
+                        f"reading, and this {full.size}-byte answer would pass its limit of "
+                        f"{full.limit} (WAVECORE_ANSWER_MEMORY_BYTES); retry shortly"
+                    )
+                    headers = {"Retry-After": str(settings.retry_after)}
+                    await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
+                except ClientNotReading as gone:
+                    log.warning("%s: %s; its connection is closed", scope["path"], gone)
                 finally:
                     slot.release()
             finally:

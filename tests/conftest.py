@@ -112,7 +112,7 @@ def live_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
 @pytest.fixture(scope="session")
 def guarded_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
     """A server with a small connection cap (40), 3 s deadlines for headers and for reading an
-    answer, and 256 descriptors
+    answer, 100 MB for answers held, and 256 descriptors
     (tests/service/test_connection_guards.py); its URL and its log."""
     pytest.importorskip("service.app", reason="the service extra is not installed")
     log = tmp_path_factory.mktemp("guarded-server") / "uvicorn.log"
@@ -120,6 +120,7 @@ def guarded_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[s
         "WAVECORE_MAX_CONNECTIONS": "40",
         "WAVECORE_HEADER_TIMEOUT": "3",
         "WAVECORE_SEND_TIMEOUT": "3",
+        "WAVECORE_ANSWER_MEMORY_BYTES": "100000000",  # one 67 MB answer, not two
     }
     try:
         proc, url = start_server(log, env=env, descriptors=256)
@@ -138,6 +139,22 @@ def small_limit_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str
     log = tmp_path_factory.mktemp("small-limit-server") / "uvicorn.log"
     try:
         proc, url = start_server(log, env={"WAVECORE_MAX_UPLOAD_BYTES": "100000"})
+    except RuntimeError as exc:
+        pytest.fail(str(exc))
+    try:
+        yield url
+    finally:
+        stop_server(proc)
+
+
+@pytest.fixture(scope="session")
+def one_worker_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A real server with one worker and five queue places (tests/service/test_fairness.py)."""
+    pytest.importorskip("service.app", reason="the service extra is not installed")
+    log = tmp_path_factory.mktemp("one-worker-server") / "uvicorn.log"
+    env = {"WAVECORE_CONCURRENCY": "1", "WAVECORE_QUEUE_SIZE": "5"}
+    try:
+        proc, url = start_server(log, env=env)
     except RuntimeError as exc:
         pytest.fail(str(exc))
     try:

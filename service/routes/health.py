@@ -27,7 +27,8 @@ async def healthz() -> Health:
 )
 async def metrics(request: Request) -> Response:
     """Requests by route, method and status; durations; body bytes in and out; problems by
-    kind; requests in flight."""
+    kind; requests in flight; bytes of answers held while clients read them."""
     state = request.app.state
     state.metrics.in_flight.set(state.pool.in_use)
+    state.metrics.answer_bytes.set(state.pool.answers.held)
     return Response(generate_latest(state.metrics.registry), media_type=CONTENT_TYPE_LATEST)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import socket
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import httpx
@@ -153,3 +154,55 @@ def test_a_client_that_does_not_read_its_answer_is_cut_and_frees_its_slot(
         assert "did not read its" in log.read_text()  # ClientNotReading: the answer was cut
     finally:
         sock.close()
+
+
+def _answer_bytes_held(url: str) -> float:
+    metrics = httpx.get(url + "/metrics", timeout=5).text
+    line = next(x for x in metrics.splitlines() if x.startswith("wavecore_answer_bytes_held "))
+    return float(line.split()[1])
+
+
+def _wait_for(condition: Callable[[], bool], seconds: float) -> None:
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert time.monotonic() < deadline, f"not within {seconds} s"
+        time.sleep(0.1)
+
+
+def test_answers_held_for_slow_readers_are_bounded(guarded_server: tuple[str, Path]) -> None:
+    """Answers held while clients read them stay within WAVECORE_ANSWER_MEMORY_BYTES (100 MB
+    here): with one 67 MB answer unread, a second gets a 503 naming the setting, and once the
+    first is cut at its send deadline the second is served."""
+    url, _ = guarded_server
+    bundle, size = _big_answer_request(url)
+    _wait_for(lambda: _answer_bytes_held(url) == 0, 20)  # any earlier test's answer cut
+    host, port = url.removeprefix("http://").split(":")
+    sock = socket.create_connection((host, int(port)), timeout=30)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    head = (
+        "POST /v1/bundles/reconstruct?format=npy HTTP/1.1\r\nHost: x\r\n"
+        "Content-Type: application/vnd.wavecore.bundle\r\n"
+        f"Content-Length: {len(bundle)}\r\n\r\n"
+    )
+    sock.sendall(head.encode() + bundle)
+
+    def second() -> httpx.Response:
+        return httpx.post(
+            url + "/v1/bundles/reconstruct",
+            params={"format": "npy"},
+            content=bundle,
+            headers={"content-type": "application/vnd.wavecore.bundle"},
+            timeout=60,
+        )
+
+    try:
+        _wait_for(lambda: _answer_bytes_held(url) >= size, 30)
+        refused = second()
+        assert refused.status_code == 503, refused.status_code
+        assert "WAVECORE_ANSWER_MEMORY_BYTES" in refused.json()["detail"]
+        assert refused.headers["retry-after"]
+    finally:
+        sock.close()
+    _wait_for(lambda: _answer_bytes_held(url) == 0, 20)
+    served = second()
+    assert served.status_code == 200 and len(served.content) > size
