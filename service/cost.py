@@ -200,9 +200,11 @@ def check_transfer(n: int, dims: int, closed: bool, level: int | None, settings:
         deepest = 0
         while deepest < 30 and fits(deepest + 1):
             deepest += 1
+        # a transfer needs one level at least (the library refuses level 0)
+        offer = f"give a level from 1 to {deepest}" if deepest else "no level fits it"
         msg = (
             f"level {level} is too deep for a source of {n} points: it would re-sample it past "
-            f"{bound} points; give a level from 0 to {deepest}"
+            f"{bound} points; {offer}"
         )
         errors = [{"loc": ["body", "level"], "msg": msg, "type": "less_than_equal"}]
         raise Problem("invalid-parameter", msg, errors=errors)

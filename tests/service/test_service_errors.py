@@ -377,6 +377,7 @@ async def test_transfer_level_is_bounded_by_the_source(client: httpx.AsyncClient
     r = await client.post("/v1/curves/transfer", json=body)
     problem = _check_problem(r, 422, "invalid-parameter")
     assert "level 30" in problem["detail"] and problem["errors"][0]["loc"] == ["body", "level"]
+    assert "from 1 to" in problem["detail"]  # a transfer needs a level: 0 is refused
     # the deepest level the message offers is accepted
     deepest = int(problem["detail"].rsplit(" ", 1)[-1])
     r = await client.post("/v1/curves/transfer", json={**body, "level": deepest})
