@@ -206,6 +206,17 @@ def test_formats_convert_into_each_other() -> None:
         wavecore.decode_curve_file(bundle, "kml")
 
 
+def test_a_decoded_set_is_written_as_its_bundle_decodes() -> None:
+    """``curve_set_file`` writes a set already decoded (the service decodes once)."""
+    bundle = wavecore.encode_curve_file(json.dumps(FEATURES), "geojson", tolerance=0.05)
+    curveset = wavecore.decode_curves(bundle)
+    assert wio.curve_set_file(curveset) == wavecore.decode_curve_file(bundle)  # its own: geojson
+    for fmt in wio.FORMATS:
+        assert wio.curve_set_file(curveset, fmt) == wavecore.decode_curve_file(bundle, fmt)
+    with pytest.raises(wavecore.InvalidParameter, match="format"):
+        wio.curve_set_file(curveset, "kml")
+
+
 def test_suffixes() -> None:
     assert wavecore.curve_file_format("a/b.GeoJSON") == "geojson"
     assert wavecore.curve_file_format("x.svg") == "svg"

@@ -15,6 +15,7 @@ from fastapi.responses import JSONResponse, Response
 from starlette.datastructures import UploadFile
 
 import wavecore
+from wavecore.io import curve_set_file
 
 from .. import cost
 from ..deps import (
@@ -129,7 +130,7 @@ def _reconstruct_curves(
     own = (curveset.metadata or {}).get("format", "json")
     fmt = _choose_format(requested, "curves", accept, own if own in CURVE_FILE_FORMATS else "json")
     headers = {"X-Wavecore-Kind": "curves", "X-Wavecore-Curves": str(info["count"])}
-    return wavecore.decode_curve_file(bundle, fmt), CURVE_FILE_FORMATS[fmt], headers
+    return curve_set_file(curveset, fmt), CURVE_FILE_FORMATS[fmt], headers
 
 
 def _check_declared_size(info: dict[str, Any], settings: Settings) -> None:

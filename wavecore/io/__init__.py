@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from ..curvesets import decode_curves, encode_curves
+from ..curvesets import CurveSet, decode_curves, encode_curves
 from ..errors import BundleError, InvalidParameter
 from .common import CurveData
 from .curvejson import read_curve_json, write_curve_json
@@ -28,6 +28,7 @@ __all__ = [
     "FORMATS",
     "MEDIA_TYPES",
     "CurveData",
+    "curve_set_file",
     "decode_file",
     "encode_file",
     "format_from_suffix",
@@ -132,7 +133,31 @@ def encode_file(
 
 def decode_file(bundle: bytes, fmt: str | None = None) -> bytes:
     """Decode a curve-set bundle into a file: ``fmt``, or the format it was read from."""
-    curveset = decode_curves(bundle)
+    return curve_set_file(decode_curves(bundle), fmt)
+
+
+def curve_set_file(curveset: CurveSet, fmt: str | None = None) -> bytes:
+    """A decoded curve set (:func:`~wavecore.decode_curves`) written as a file.
+
+    Parameters
+    ----------
+    curveset : CurveSet
+        What ``decode_curves`` gave.
+    fmt : {"geojson", "svg", "json"}, optional
+        The file format; by default the one the set was read from (its ``metadata``).
+
+    Returns
+    -------
+    bytes
+        The file.
+
+    Raises
+    ------
+    wavecore.errors.InvalidParameter
+        ``fmt`` is not a format.
+    wavecore.errors.BundleError
+        The set's metadata does not describe a file of that format.
+    """
     metadata = curveset.metadata or {}
     if fmt is None:
         fmt = metadata.get("format", "json")
