@@ -115,7 +115,11 @@ class BodyTooLarge(StarletteHTTPException):
     """Raised from inside the body stream, so FastAPI's form parser passes it on untouched."""
 
     def __init__(self, limit: int) -> None:
-        super().__init__(413, f"the request body is larger than the limit of {limit} bytes")
+        super().__init__(
+            413,
+            f"the request body is larger than the limit of {limit} bytes",
+            headers={"Connection": "close"},  # the rest of the body is not read
+        )
 
 
 def problem_response(problem: Problem, request: Request | None = None) -> JSONResponse:

@@ -51,7 +51,11 @@ class BodyLimitMiddleware:
                         f"the request body is {declared} bytes; the limit is {self.limit} "
                         "bytes (WAVECORE_MAX_UPLOAD_BYTES)"
                     )
-                    await send_problem(scope, send, Problem("body-too-large", detail))
+                    # closed after the answer: the rest of the body is not read for nothing
+                    closing = {"Connection": "close"}
+                    await send_problem(
+                        scope, send, Problem("body-too-large", detail, headers=closing)
+                    )
                     return
         received = 0
 

@@ -733,7 +733,10 @@ class AdmissionMiddleware:
                     return
                 except BodyTooLarge as exc:
                     detail = f"{exc.detail} (WAVECORE_MAX_UPLOAD_BYTES)"
-                    await send_problem(scope, send, Problem("body-too-large", detail))
+                    closing = {"Connection": "close"}  # the rest of the body is not read
+                    await send_problem(
+                        scope, send, Problem("body-too-large", detail, headers=closing)
+                    )
                     return
                 except _ClientGone:
                     log.info("the client left before sending its whole body: %s", scope["path"])

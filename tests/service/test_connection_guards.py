@@ -206,3 +206,48 @@ def test_answers_held_for_slow_readers_are_bounded(guarded_server: tuple[str, Pa
     _wait_for(lambda: _answer_bytes_held(url) == 0, 20)
     served = second()
     assert served.status_code == 200 and len(served.content) > size
+
+
+def test_a_body_past_the_limit_gets_a_413_and_its_connection_closed(live_server: str) -> None:
+    """A chunked body past WAVECORE_MAX_UPLOAD_BYTES (20 MiB) gets its 413 and the connection is
+    closed, instead of the server reading on what the client keeps sending (until the header
+    deadline, 10 s and tens of megabytes later)."""
+    host, port = live_server.removeprefix("http://").split(":")
+    refused_before = _count_413(live_server)
+    sock = socket.create_connection((host, int(port)), timeout=5)
+    sock.sendall(
+        b"POST /v1/curves/encode HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+        b"Transfer-Encoding: chunked\r\n\r\n"
+    )
+    chunk = b"%x\r\n" % 65536 + b"1" * 65536 + b"\r\n"
+    answer = b""
+    began = time.monotonic()
+    sock.settimeout(0.005)
+    try:
+        while time.monotonic() - began < 8.0:
+            sock.sendall(chunk)
+            try:
+                data = sock.recv(65536)
+            except TimeoutError:
+                continue
+            if not data:
+                break
+            answer += data
+    except OSError:  # reset or broken pipe: closed while we were still sending
+        pass
+    finally:
+        sock.close()
+    closed_after = time.monotonic() - began
+    # The answer may be lost to the reset that closing mid-body brings; the server counts it.
+    assert not answer or answer.startswith(b"HTTP/1.1 413"), answer[:100]
+    assert _count_413(live_server) == refused_before + 1
+    assert closed_after < 4.0, closed_after
+
+
+def _count_413(url: str) -> float:
+    metrics = httpx.get(url + "/metrics", timeout=5).text
+    return sum(
+        float(line.split()[-1])
+        for line in metrics.splitlines()
+        if line.startswith("wavecore_http_requests_total{") and 'status="413"' in line
+    )
