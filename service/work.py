@@ -9,7 +9,9 @@ Admission.  With its body in, the request takes one of ``concurrency + queue_siz
 gets an immediate 503 with ``Retry-After``.  The slot is held until the response is sent and
 the request's jobs have ended.
 
-Fairness.  Clients (by address: :func:`client_key`) share the workers and the slots.  Jobs
+Fairness.  Clients (by address: :func:`client_key`) share the intake, the workers and the
+slots.  With the intake budget full, a body from a client sending less than another takes the
+room of that client's newest bodies still arriving (503 for them).  Jobs
 waiting for a worker are dispatched round-robin between clients, not first come first served,
 so one client's backlog does not delay another's job by more than one job per client ahead of
 it.  When every slot is taken, a request from a client holding fewer slots than the client
@@ -47,6 +49,7 @@ import atexit
 import contextlib
 import ctypes
 import gc
+import heapq
 import io
 import ipaddress
 import logging
@@ -435,6 +438,7 @@ class WorkPool:
         self.rejected = 0
         self.intake_bytes = 0
         self.intake_budget = settings.capacity * settings.max_upload_bytes
+        self.reading: list[BodyRead] = []  # bodies still arriving, oldest first
         self._held = False
 
     @property
@@ -472,6 +476,38 @@ class WorkPool:
         self.in_use += 1
         self.held[client] += 1
         return Slot(self, client)
+
+    def make_intake_room(self, client: str, need: int) -> bool:
+        """Make room in the intake budget for ``need`` more bytes of ``client``'s body, by
+        refusing the newest bodies still arriving of clients that would still be sending more
+        than ``client``.  False, refusing none, if that would not be enough (only called on
+        the event loop)."""
+        sending: Counter[str] = Counter()
+        bodies: dict[str, list[BodyRead]] = {}  # by client, oldest first
+        for reading in self.reading:
+            sending[reading.client] += reading.size
+            if reading.size and not reading.evicted.done():
+                bodies.setdefault(reading.client, []).append(reading)
+        mine = sending[client] + need
+        short = self.intake_bytes + need - self.intake_budget
+        biggest = [(-sending[other], other) for other in bodies if other != client]
+        heapq.heapify(biggest)
+        victims: list[BodyRead] = []
+        while short > 0:
+            if not biggest or -biggest[0][0] <= mine:
+                return False
+            _, other = heapq.heappop(biggest)
+            victim = bodies[other].pop()  # that client's newest
+            victims.append(victim)
+            sending[other] -= victim.size
+            short -= victim.size
+            if bodies[other]:
+                heapq.heappush(biggest, (-sending[other], other))
+        for victim in victims:
+            victim.evicted.set_result(None)
+            self.intake_bytes -= victim.size
+            victim.size = 0
+        return True
 
     def _make_room(self, client: str) -> bool:
         mine = self.held[client] + 1
@@ -705,6 +741,20 @@ class _ClientGone(Exception):
     pass
 
 
+class BodyRead:
+    """A request body still arriving: its client, its bytes so far, and a future set when it
+    must give its room in the intake budget to another client's body."""
+
+    def __init__(self, client: str) -> None:
+        self.client = client
+        self.size = 0
+        self.evicted: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+
+class _Evicted(Exception):
+    pass
+
+
 class AdmissionMiddleware:
     """Read a ``/v1/`` request's body within the deadline, then admit it into a slot."""
 
@@ -722,7 +772,7 @@ class AdmissionMiddleware:
             try:
                 try:
                     async with asyncio.timeout(settings.body_timeout):
-                        size = await self._read_body(receive, body)
+                        size = await self._read_body(receive, body, client_key(scope))
                 except TimeoutError:
                     detail = (
                         "the request body did not arrive in full within "
@@ -742,9 +792,15 @@ class AdmissionMiddleware:
                     log.info("the client left before sending its whole body: %s", scope["path"])
                     scope.setdefault("state", {})["client_left"] = True  # metrics: 499, not 500
                     return
-                except _IntakeFull:
+                except (_IntakeFull, _Evicted) as full:
                     detail = "too many request bodies are arriving at once; retry shortly"
-                    headers = {"Retry-After": str(settings.retry_after)}
+                    if isinstance(full, _Evicted):
+                        detail = (
+                            "this client was sending more request bodies at once than another "
+                            "that needed room; retry shortly"
+                        )
+                    # closed after the answer: the rest of the body is not read
+                    headers = {"Retry-After": str(settings.retry_after), "Connection": "close"}
                     await send_problem(scope, send, Problem("overloaded", detail, headers=headers))
                     return
                 slot = self.pool.admit(client_key(scope))
@@ -789,26 +845,48 @@ class AdmissionMiddleware:
             finally:
                 self.pool.intake_bytes -= size
 
-    async def _read_body(self, receive: Receive, body: IO[bytes]) -> int:
-        """Read the whole body into ``body``; its size, reserved of the intake budget."""
-        size = 0
+    async def _read_body(self, receive: Receive, body: IO[bytes], client: str) -> int:
+        """Read the whole body into ``body``; its size, reserved of the intake budget.
+
+        With the budget full, a body takes room from the newest bodies of clients sending
+        more (:meth:`WorkPool.make_intake_room`); such a body ends with :class:`_Evicted`."""
+        pool = self.pool
+        reading = BodyRead(client)
+        pool.reading.append(reading)
         try:
             while True:
-                message = await receive()
+                message = await _receive_unless(receive, reading.evicted)
                 if message["type"] == "http.disconnect":
                     raise _ClientGone
                 chunk = message.get("body", b"")
                 if chunk:
-                    if self.pool.intake_bytes + len(chunk) > self.pool.intake_budget:
+                    if pool.intake_bytes + len(chunk) > pool.intake_budget and not (
+                        pool.make_intake_room(client, len(chunk))
+                    ):
                         raise _IntakeFull
-                    self.pool.intake_bytes += len(chunk)
-                    size += len(chunk)
+                    pool.intake_bytes += len(chunk)
+                    reading.size += len(chunk)
                     body.write(chunk)
                 if not message.get("more_body", False):
-                    return size
+                    return reading.size
         except BaseException:
-            self.pool.intake_bytes -= size
+            pool.intake_bytes -= reading.size  # (nothing, if evicted: given back then)
             raise
+        finally:
+            pool.reading.remove(reading)
+
+
+async def _receive_unless(receive: Receive, evicted: asyncio.Future[None]) -> Message:
+    """The next message, or :class:`_Evicted` once ``evicted`` is set."""
+    receiving = asyncio.ensure_future(receive())
+    try:
+        await asyncio.wait((receiving, evicted), return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        if not receiving.done():
+            receiving.cancel()
+    if evicted.done():
+        raise _Evicted
+    return receiving.result()
 
 
 class _IntakeFull(Exception):

@@ -310,6 +310,28 @@ async def test_bodies_arriving_at_once_are_bounded_in_bytes() -> None:
     assert app.state.pool.intake_bytes == 0
 
 
+async def test_a_client_sending_less_takes_room_from_the_biggest_sender() -> None:
+    """With the intake full of one client's bodies, another client's body takes the room of
+    the first one's newest: one address cannot shut everyone out by sending slowly."""
+    import httpx
+
+    app = create_app(Settings(concurrency=1, queue_size=0, max_upload_bytes=100))
+    first = asyncio.create_task(_call_stalling(app, "/v1/curves/encode", b"x" * 70, 100))
+    await asyncio.sleep(0.1)
+    assert app.state.pool.intake_bytes == 70
+    body = b'{"points": [[0, 0], [1, 1], [2, 0], [3, 1]]}'
+    assert 30 < len(body) < 70
+    transport = httpx.ASGITransport(app=app, client=("127.0.0.2", 123))
+    async with httpx.AsyncClient(transport=transport, base_url="http://testserver") as client:
+        r = await client.post(
+            "/v1/curves/encode", content=body, headers={"content-type": "application/json"}
+        )
+    assert r.status_code == 200, r.text
+    status, answer = await asyncio.wait_for(first, 5)
+    assert status == 503 and b"another that needed room" in answer
+    assert app.state.pool.intake_bytes == 0 and not app.state.pool.reading
+
+
 async def test_a_body_over_the_spool_size_arrives_whole() -> None:
     """Bodies over 1 MiB wait on disk and are replayed in pieces: the route sees all of it."""
     import httpx
