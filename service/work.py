@@ -702,16 +702,16 @@ def _paced(send: Send, stall: float, whole: float, memory: AnswerMemory | None =
             await send(message)
             return
         reserved = 0
-        if start is not None:
-            if memory is not None:
-                if not memory.take(len(body)):
-                    raise _AnswersFull(len(body), memory)
-                reserved = len(body)
-            await send(start)
-            start = None
+        if start is not None and memory is not None:
+            if not memory.take(len(body)):
+                raise _AnswersFull(len(body), memory)
+            reserved = len(body)
         more = message.get("more_body", False)
         view = memoryview(body)
         try:
+            if start is not None:
+                await send(start)
+                start = None
             async with asyncio.timeout(whole):
                 for begin in range(0, len(view), SPOOL_BYTES):
                     piece = bytes(view[begin : begin + SPOOL_BYTES])

@@ -382,3 +382,24 @@ def test_a_bad_setting_is_one_line_naming_the_variable(
     assert "\n" not in message and message.startswith(f"{variable}={value!r}: ")
     with pytest.raises(SettingsError):
         create_app()
+
+
+async def test_an_answer_whose_send_fails_gives_its_memory_back() -> None:
+    """A large answer reserves its bytes of ``answer_memory_bytes`` before its start goes out;
+    a send that fails there (a connection torn down) must not keep them for ever, or every
+    large answer after would get a 503."""
+    from service.work import SPOOL_BYTES, AnswerMemory, _paced
+
+    class Torn(Exception):
+        pass
+
+    async def send(message: dict[str, Any]) -> None:
+        raise Torn
+
+    memory = AnswerMemory(10 * SPOOL_BYTES)
+    paced = _paced(send, 1.0, 5.0, memory)
+    await paced({"type": "http.response.start", "status": 200, "headers": []})
+    with pytest.raises(Torn):
+        await paced({"type": "http.response.body", "body": bytes(3 * SPOOL_BYTES)})
+    assert memory.held == 0
+    assert memory.take(10 * SPOOL_BYTES) and memory.take(SPOOL_BYTES) is False
