@@ -94,36 +94,17 @@ def stop_server(proc: subprocess.Popen[bytes]) -> None:
         proc.wait()
 
 
-@pytest.fixture(scope="session")
-def live_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    """Base URL (``http://127.0.0.1:<port>``) of a real uvicorn process with default settings."""
+def _served(
+    tmp_path_factory: pytest.TempPathFactory,
+    name: str,
+    env: dict[str, str] | None = None,
+    descriptors: int | None = None,
+) -> Iterator[tuple[str, Path]]:
+    """A real server for a session fixture: its URL and its log, stopped afterwards."""
     pytest.importorskip("service.app", reason="the service extra is not installed")
-    log = tmp_path_factory.mktemp("live-server") / "uvicorn.log"
+    log = tmp_path_factory.mktemp(name) / "uvicorn.log"
     try:
-        proc, url = start_server(log)
-    except RuntimeError as exc:
-        pytest.fail(str(exc))
-    try:
-        yield url
-    finally:
-        stop_server(proc)
-
-
-@pytest.fixture(scope="session")
-def guarded_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
-    """A server with a small connection cap (40), 3 s deadlines for headers and for reading an
-    answer, 100 MB for answers held, and 256 descriptors
-    (tests/service/test_connection_guards.py); its URL and its log."""
-    pytest.importorskip("service.app", reason="the service extra is not installed")
-    log = tmp_path_factory.mktemp("guarded-server") / "uvicorn.log"
-    env = {
-        "WAVECORE_MAX_CONNECTIONS": "40",
-        "WAVECORE_HEADER_TIMEOUT": "3",
-        "WAVECORE_SEND_TIMEOUT": "3",
-        "WAVECORE_ANSWER_MEMORY_BYTES": "100000000",  # one 67 MB answer, not two
-    }
-    try:
-        proc, url = start_server(log, env=env, descriptors=256)
+        proc, url = start_server(log, env=env, descriptors=descriptors)
     except RuntimeError as exc:
         pytest.fail(str(exc))
     try:
@@ -133,31 +114,37 @@ def guarded_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[s
 
 
 @pytest.fixture(scope="session")
+def live_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """Base URL (``http://127.0.0.1:<port>``) of a real uvicorn process with default settings."""
+    for url, _ in _served(tmp_path_factory, "live-server"):
+        yield url
+
+
+@pytest.fixture(scope="session")
+def guarded_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
+    """A server with a small connection cap (40), 3 s deadlines for headers and for reading an
+    answer, 100 MB for answers held, and 256 descriptors
+    (tests/service/test_connection_guards.py); its URL and its log."""
+    env = {
+        "WAVECORE_MAX_CONNECTIONS": "40",
+        "WAVECORE_HEADER_TIMEOUT": "3",
+        "WAVECORE_SEND_TIMEOUT": "3",
+        "WAVECORE_ANSWER_MEMORY_BYTES": "100000000",  # one 67 MB answer, not two
+    }
+    yield from _served(tmp_path_factory, "guarded-server", env, descriptors=256)
+
+
+@pytest.fixture(scope="session")
 def small_limit_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """A second real server that accepts at most 100 kB per request (for 413 messages)."""
-    pytest.importorskip("service.app", reason="the service extra is not installed")
-    log = tmp_path_factory.mktemp("small-limit-server") / "uvicorn.log"
-    try:
-        proc, url = start_server(log, env={"WAVECORE_MAX_UPLOAD_BYTES": "100000"})
-    except RuntimeError as exc:
-        pytest.fail(str(exc))
-    try:
+    env = {"WAVECORE_MAX_UPLOAD_BYTES": "100000"}
+    for url, _ in _served(tmp_path_factory, "small-limit-server", env):
         yield url
-    finally:
-        stop_server(proc)
 
 
 @pytest.fixture(scope="session")
 def one_worker_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """A real server with one worker and five queue places (tests/service/test_fairness.py)."""
-    pytest.importorskip("service.app", reason="the service extra is not installed")
-    log = tmp_path_factory.mktemp("one-worker-server") / "uvicorn.log"
     env = {"WAVECORE_CONCURRENCY": "1", "WAVECORE_QUEUE_SIZE": "5"}
-    try:
-        proc, url = start_server(log, env=env)
-    except RuntimeError as exc:
-        pytest.fail(str(exc))
-    try:
+    for url, _ in _served(tmp_path_factory, "one-worker-server", env):
         yield url
-    finally:
-        stop_server(proc)

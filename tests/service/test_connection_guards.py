@@ -118,6 +118,20 @@ def _big_answer_request(url: str) -> tuple[bytes, int]:
     return bundle, 2048 * 2048 * 4 * 4
 
 
+def _ask_without_reading(url: str, bundle: bytes) -> socket.socket:
+    """A socket that asks for ``bundle``'s npy answer and reads none of it (a small buffer)."""
+    host, port = url.removeprefix("http://").split(":")
+    sock = socket.create_connection((host, int(port)), timeout=30)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    head = (
+        "POST /v1/bundles/reconstruct?format=npy HTTP/1.1\r\nHost: x\r\n"
+        "Content-Type: application/vnd.wavecore.bundle\r\n"
+        f"Content-Length: {len(bundle)}\r\n\r\n"
+    )
+    sock.sendall(head.encode() + bundle)
+    return sock
+
+
 def test_a_large_answer_arrives_whole_in_pieces(guarded_server: tuple[str, Path]) -> None:
     url, _ = guarded_server
     bundle, size = _big_answer_request(url)
@@ -138,15 +152,7 @@ def test_a_client_that_does_not_read_its_answer_is_cut_and_frees_its_slot(
     read is cut after the send deadline (35 such clients held 2.2 GB of the server for good)."""
     url, log = guarded_server
     bundle, _ = _big_answer_request(url)
-    host, port = url.removeprefix("http://").split(":")
-    sock = socket.create_connection((host, int(port)), timeout=30)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    head = (
-        "POST /v1/bundles/reconstruct?format=npy HTTP/1.1\r\nHost: x\r\n"
-        "Content-Type: application/vnd.wavecore.bundle\r\n"
-        f"Content-Length: {len(bundle)}\r\n\r\n"
-    )
-    sock.sendall(head.encode() + bundle)
+    sock = _ask_without_reading(url, bundle)
     try:
         time.sleep(DEADLINE + 6.0)  # decode, then the send deadline
         metrics = httpx.get(url + "/metrics", timeout=5).text
@@ -176,15 +182,7 @@ def test_answers_held_for_slow_readers_are_bounded(guarded_server: tuple[str, Pa
     url, _ = guarded_server
     bundle, size = _big_answer_request(url)
     _wait_for(lambda: _answer_bytes_held(url) == 0, 20)  # any earlier test's answer cut
-    host, port = url.removeprefix("http://").split(":")
-    sock = socket.create_connection((host, int(port)), timeout=30)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    head = (
-        "POST /v1/bundles/reconstruct?format=npy HTTP/1.1\r\nHost: x\r\n"
-        "Content-Type: application/vnd.wavecore.bundle\r\n"
-        f"Content-Length: {len(bundle)}\r\n\r\n"
-    )
-    sock.sendall(head.encode() + bundle)
+    sock = _ask_without_reading(url, bundle)
 
     def second() -> httpx.Response:
         return httpx.post(
