@@ -109,6 +109,7 @@ async def test_preempting_refuses_the_newest_waiting_job() -> None:
     assert not dispatcher.preempt("a")  # nothing of a's left waiting
     assert not dispatcher.preempt("b")
     await _settle()
+    assert older.done() and isinstance(older.exception(), _Preempted)
     dispatcher.release("a")
     assert dispatcher.free == 1
 
