@@ -80,8 +80,9 @@ class Settings(BaseSettings):
         default=512 * 1024 * 1024,
         ge=0,
         description="Bytes of answers of more than 1 MiB that the server holds at once while "
-        "their clients read them; an answer that would pass it while others are held gets a "
-        "503 instead (one answer alone is always sent).  0: no limit.",
+        "their clients read them; an answer that would pass it cuts the newest answers of a "
+        "client that would still hold more, else gets a 503 (one answer alone is always "
+        "sent).  0: no limit.",
     )
     header_timeout: float = Field(
         default=10.0,

@@ -19,8 +19,9 @@ holding most takes the slot of that client's newest job still waiting for a work
 the 503 instead: one client alone may use every slot, and many share them evenly.
 
 Answers.  An answer of more than 1 MiB goes out in 1 MiB pieces while the request keeps its
-slot; answers held so at once are bounded by ``answer_memory_bytes`` (past it: 503), and a
-client that stops reading is cut after ``send_timeout``.
+slot; answers held so at once are bounded by ``answer_memory_bytes`` (past it, the newest
+answers of a client holding more are cut, else a 503), and a client that stops reading is cut
+after ``send_timeout``.
 
 Work.  Jobs run in a pool of ``concurrency`` worker processes (:mod:`pebble`).  A job past the
 request's deadline (``request_timeout`` from admission) is cancelled: its worker is killed
@@ -645,27 +646,73 @@ class ClientNotReading(Exception):
     """A client stopped reading its answer (its connection is closed)."""
 
 
+class HeldAnswer:
+    """A large answer being sent: its client, its size, and a future set when it must give its
+    room to another client's answer."""
+
+    def __init__(self, client: str, size: int) -> None:
+        self.client = client
+        self.size = size
+        self.cut: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+
 class AnswerMemory:
     """The bytes of large answers the server holds while their clients read them.
 
     Answers held at once are otherwise bounded only by the slots: ``(concurrency + queue) ×``
     the largest answer (66 × 67 MB for 66 clients that ask for a 67 MB array and read
-    slowly).  Past ``limit`` (0: none) a new large answer is refused, unless none is held:
-    one answer alone always goes out.
+    slowly).  Past ``limit`` (0: none) a new large answer takes the room of the newest answers
+    of clients that would still hold more than its own client, which are cut; failing that it
+    is refused, unless none is held: one answer alone always goes out.  Only used on the
+    event loop.
     """
 
     def __init__(self, limit: int) -> None:
         self.limit = limit
         self.held = 0
+        self.answers: list[HeldAnswer] = []  # oldest first
 
-    def take(self, size: int) -> bool:
-        if self.limit and self.held and self.held + size > self.limit:
-            return False
+    def take(self, size: int, client: str = "") -> HeldAnswer | None:
+        """Room for an answer of ``size`` bytes to ``client``, or None."""
+        over = self.limit and self.held and self.held + size > self.limit
+        if over and not self._make_room(size, client):
+            return None
+        answer = HeldAnswer(client, size)
+        self.answers.append(answer)
         self.held += size
-        return True
+        return answer
 
-    def give_back(self, size: int) -> None:
-        self.held -= size
+    def give_back(self, answer: HeldAnswer) -> None:
+        if answer in self.answers:  # (not if it was cut: given back then)
+            self.answers.remove(answer)
+            self.held -= answer.size
+
+    def _make_room(self, size: int, client: str) -> bool:
+        holding: Counter[str] = Counter()
+        for answer in self.answers:
+            holding[answer.client] += answer.size
+        mine = holding[client] + size
+        by_client: dict[str, list[HeldAnswer]] = {}
+        for answer in self.answers:
+            if answer.client != client:
+                by_client.setdefault(answer.client, []).append(answer)
+        biggest = [(-holding[other], other) for other in by_client]
+        heapq.heapify(biggest)
+        held, victims = self.held, []
+        while held and held + size > self.limit:
+            if not biggest or -biggest[0][0] <= mine:
+                return False
+            _, other = heapq.heappop(biggest)
+            victim = by_client[other].pop()  # that client's newest
+            victims.append(victim)
+            holding[other] -= victim.size
+            held -= victim.size
+            if by_client[other]:
+                heapq.heappush(biggest, (-holding[other], other))
+        for victim in victims:
+            self.give_back(victim)
+            victim.cut.set_result(None)
+        return True
 
 
 class _AnswersFull(Exception):
@@ -674,7 +721,33 @@ class _AnswersFull(Exception):
         self.size, self.held, self.limit = size, memory.held, memory.limit
 
 
-def _paced(send: Send, stall: float, whole: float, memory: AnswerMemory | None = None) -> Send:
+async def _send_unless_cut(send: Send, message: Message, answer: HeldAnswer | None) -> None:
+    """``send(message)``, or :class:`ClientNotReading` once ``answer`` is cut for another's."""
+    if answer is None:
+        await send(message)
+        return
+    sending = asyncio.ensure_future(send(message))
+    try:
+        await asyncio.wait((sending, answer.cut), return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        if not sending.done():
+            sending.cancel()
+    if answer.cut.done():
+        msg = (
+            f"the client's {answer.size}-byte answer was cut to make room for another "
+            "client's: it held more answer memory (WAVECORE_ANSWER_MEMORY_BYTES) than that one"
+        )
+        raise ClientNotReading(msg)
+    sending.result()
+
+
+def _paced(
+    send: Send,
+    stall: float,
+    whole: float,
+    memory: AnswerMemory | None = None,
+    client: str = "",
+) -> Send:
     """``send`` that hands a large body over in pieces of ``SPOOL_BYTES``.
 
     uvicorn buffers whatever one ``send`` gives it and waits for the client only before the
@@ -686,7 +759,9 @@ def _paced(send: Send, stall: float, whole: float, memory: AnswerMemory | None =
     connection.
 
     The response's start is held back until its body comes, so that a large body that does not
-    fit in ``memory`` can still be answered with a 503 instead (:class:`_AnswersFull`)."""
+    fit in ``memory`` can still be answered with a 503 instead (:class:`_AnswersFull`).  An
+    answer cut to make room for another client's (:class:`AnswerMemory`) ends with
+    :class:`ClientNotReading` too."""
     start: Message | None = None
 
     async def paced(message: Message) -> None:
@@ -701,11 +776,11 @@ def _paced(send: Send, stall: float, whole: float, memory: AnswerMemory | None =
                 start = None
             await send(message)
             return
-        reserved = 0
+        answer = None
         if start is not None and memory is not None:
-            if not memory.take(len(body)):
+            answer = memory.take(len(body), client)
+            if answer is None:
                 raise _AnswersFull(len(body), memory)
-            reserved = len(body)
         more = message.get("more_body", False)
         view = memoryview(body)
         try:
@@ -717,12 +792,14 @@ def _paced(send: Send, stall: float, whole: float, memory: AnswerMemory | None =
                     piece = bytes(view[begin : begin + SPOOL_BYTES])
                     last = begin + SPOOL_BYTES >= len(view)
                     async with asyncio.timeout(stall):
-                        await send(
+                        await _send_unless_cut(
+                            send,
                             {
                                 "type": "http.response.body",
                                 "body": piece,
                                 "more_body": more or not last,
-                            }
+                            },
+                            answer,
                         )
         except TimeoutError:
             msg = (
@@ -731,8 +808,8 @@ def _paced(send: Send, stall: float, whole: float, memory: AnswerMemory | None =
             )
             raise ClientNotReading(msg) from None
         finally:
-            if memory is not None:
-                memory.give_back(reserved)
+            if memory is not None and answer is not None:
+                memory.give_back(answer)
 
     return paced
 
@@ -826,7 +903,11 @@ class AdmissionMiddleware:
                     return await receive()  # after the body: only the disconnect is left
 
                 paced = _paced(
-                    send, settings.send_timeout, settings.request_timeout, self.pool.answers
+                    send,
+                    settings.send_timeout,
+                    settings.request_timeout,
+                    self.pool.answers,
+                    client_key(scope),
                 )
                 try:
                     await self.app(scope, replay, paced)

@@ -402,4 +402,50 @@ async def test_an_answer_whose_send_fails_gives_its_memory_back() -> None:
     with pytest.raises(Torn):
         await paced({"type": "http.response.body", "body": bytes(3 * SPOOL_BYTES)})
     assert memory.held == 0
-    assert memory.take(10 * SPOOL_BYTES) and memory.take(SPOOL_BYTES) is False
+    assert memory.take(10 * SPOOL_BYTES) is not None and memory.take(SPOOL_BYTES) is None
+
+
+async def test_an_answer_takes_the_room_of_the_biggest_holders_newest() -> None:
+    """Past ``answer_memory_bytes``, a client's large answer cuts the newest answers of a client
+    that would still hold more (its reader gets ClientNotReading), else it is refused."""
+    from service.work import SPOOL_BYTES, AnswerMemory, ClientNotReading, _paced
+
+    start = {"type": "http.response.start", "status": 200, "headers": []}
+
+    def body(pieces: int) -> dict[str, Any]:
+        return {"type": "http.response.body", "body": bytes(pieces * SPOOL_BYTES)}
+
+    async def never_read(message: dict[str, Any]) -> None:
+        if message["type"] == "http.response.body":
+            await asyncio.Event().wait()
+
+    memory = AnswerMemory(5 * SPOOL_BYTES)
+    held_by_a = []
+    for pieces in (3, 2):  # a holds the whole limit in two answers that nobody reads
+        paced = _paced(never_read, 30.0, 60.0, memory, "a")
+        await paced(start)
+        held_by_a.append(asyncio.create_task(paced(body(pieces))))
+        await _settle_loop()
+    assert memory.held == 5 * SPOOL_BYTES
+    sent: list[dict[str, Any]] = []
+
+    async def read(message: dict[str, Any]) -> None:
+        sent.append(message)
+
+    paced_b = _paced(read, 30.0, 60.0, memory, "b")
+    await paced_b(start)
+    await asyncio.wait_for(paced_b(body(2)), 5)
+    assert sum(len(m.get("body", b"")) for m in sent) == 2 * SPOOL_BYTES  # b's answer, whole
+    with pytest.raises(ClientNotReading, match="make room"):
+        await asyncio.wait_for(held_by_a[1], 5)  # a's newest was cut
+    assert not held_by_a[0].done()
+    # b holding nothing more now, a's 3 pieces are no more than b would hold with 3: refused
+    assert memory.take(3 * SPOOL_BYTES, "b") is None
+    held_by_a[0].cancel()
+    await asyncio.gather(held_by_a[0], return_exceptions=True)
+    assert memory.held == 0 and not memory.answers
+
+
+async def _settle_loop() -> None:
+    for _ in range(5):
+        await asyncio.sleep(0)
