@@ -62,11 +62,11 @@ import tempfile
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from concurrent.futures import CancelledError, Future
 from concurrent.futures import TimeoutError as FutureTimeout
 from concurrent.futures.process import BrokenProcessPool
-from typing import IO, Any, TypeVar
+from typing import IO, Any, Protocol, TypeVar
 
 import numpy as np
 from pebble import ProcessExpired, ProcessPool
@@ -483,27 +483,10 @@ class WorkPool:
         refusing the newest bodies still arriving of clients that would still be sending more
         than ``client``.  False, refusing none, if that would not be enough (only called on
         the event loop)."""
-        sending: Counter[str] = Counter()
-        bodies: dict[str, list[BodyRead]] = {}  # by client, oldest first
-        for reading in self.reading:
-            sending[reading.client] += reading.size
-            if reading.size and not reading.evicted.done():
-                bodies.setdefault(reading.client, []).append(reading)
-        mine = sending[client] + need
         short = self.intake_bytes + need - self.intake_budget
-        biggest = [(-sending[other], other) for other in bodies if other != client]
-        heapq.heapify(biggest)
-        victims: list[BodyRead] = []
-        while short > 0:
-            if not biggest or -biggest[0][0] <= mine:
-                return False
-            _, other = heapq.heappop(biggest)
-            victim = bodies[other].pop()  # that client's newest
-            victims.append(victim)
-            sending[other] -= victim.size
-            short -= victim.size
-            if bodies[other]:
-                heapq.heappush(biggest, (-sending[other], other))
+        victims = _newest_of_biggest(self.reading, client, need, short)
+        if victims is None:
+            return False
         for victim in victims:
             victim.evicted.set_result(None)
             self.intake_bytes -= victim.size
@@ -688,31 +671,50 @@ class AnswerMemory:
             self.held -= answer.size
 
     def _make_room(self, size: int, client: str) -> bool:
-        holding: Counter[str] = Counter()
-        for answer in self.answers:
-            holding[answer.client] += answer.size
-        mine = holding[client] + size
-        by_client: dict[str, list[HeldAnswer]] = {}
-        for answer in self.answers:
-            if answer.client != client:
-                by_client.setdefault(answer.client, []).append(answer)
-        biggest = [(-holding[other], other) for other in by_client]
-        heapq.heapify(biggest)
-        held, victims = self.held, []
-        while held and held + size > self.limit:
-            if not biggest or -biggest[0][0] <= mine:
-                return False
-            _, other = heapq.heappop(biggest)
-            victim = by_client[other].pop()  # that client's newest
-            victims.append(victim)
-            holding[other] -= victim.size
-            held -= victim.size
-            if by_client[other]:
-                heapq.heappush(biggest, (-holding[other], other))
+        # Freeing every answer held is enough too: one answer alone always goes.
+        short = min(self.held + size - self.limit, self.held)
+        victims = _newest_of_biggest(self.answers, client, size, short)
+        if victims is None:
+            return False
         for victim in victims:
             self.give_back(victim)
             victim.cut.set_result(None)
         return True
+
+
+class _Held(Protocol):
+    client: str
+    size: int
+
+
+H = TypeVar("H", bound=_Held)
+
+
+def _newest_of_biggest(held: list[H], client: str, need: int, short: int) -> list[H] | None:
+    """What to take from other clients so that ``client`` gets ``short`` bytes of room for
+    ``need`` more: the newest of ``held`` (oldest first) of whichever client holds most, as long
+    as it would still hold more than ``client`` with ``need``; None if that is not enough."""
+    holding: Counter[str] = Counter()
+    by_client: dict[str, list[H]] = {}  # others' items, oldest first
+    for item in held:
+        holding[item.client] += item.size
+        if item.size and item.client != client:
+            by_client.setdefault(item.client, []).append(item)
+    mine = holding[client] + need
+    biggest = [(-holding[other], other) for other in by_client]
+    heapq.heapify(biggest)
+    victims: list[H] = []
+    while short > 0:
+        if not biggest or -biggest[0][0] <= mine:
+            return None
+        _, other = heapq.heappop(biggest)
+        victim = by_client[other].pop()  # that client's newest
+        victims.append(victim)
+        holding[other] -= victim.size
+        short -= victim.size
+        if by_client[other]:
+            heapq.heappush(biggest, (-holding[other], other))
+    return victims
 
 
 class _AnswersFull(Exception):
@@ -721,24 +723,36 @@ class _AnswersFull(Exception):
         self.size, self.held, self.limit = size, memory.held, memory.limit
 
 
+class _Stopped(Exception):
+    pass
+
+
+async def _unless(work: Awaitable[T], stop: asyncio.Future[None]) -> T:
+    """``await work``, or :class:`_Stopped` (``work`` cancelled) once ``stop`` is set."""
+    task = asyncio.ensure_future(work)
+    try:
+        await asyncio.wait((task, stop), return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        if not task.done():
+            task.cancel()
+    if stop.done():
+        raise _Stopped
+    return task.result()
+
+
 async def _send_unless_cut(send: Send, message: Message, answer: HeldAnswer | None) -> None:
     """``send(message)``, or :class:`ClientNotReading` once ``answer`` is cut for another's."""
     if answer is None:
         await send(message)
         return
-    sending = asyncio.ensure_future(send(message))
     try:
-        await asyncio.wait((sending, answer.cut), return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        if not sending.done():
-            sending.cancel()
-    if answer.cut.done():
+        await _unless(send(message), answer.cut)
+    except _Stopped:
         msg = (
             f"the client's {answer.size}-byte answer was cut to make room for another "
             "client's: it held more answer memory (WAVECORE_ANSWER_MEMORY_BYTES) than that one"
         )
-        raise ClientNotReading(msg)
-    sending.result()
+        raise ClientNotReading(msg) from None
 
 
 def _paced(
@@ -959,15 +973,10 @@ class AdmissionMiddleware:
 
 async def _receive_unless(receive: Receive, evicted: asyncio.Future[None]) -> Message:
     """The next message, or :class:`_Evicted` once ``evicted`` is set."""
-    receiving = asyncio.ensure_future(receive())
     try:
-        await asyncio.wait((receiving, evicted), return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        if not receiving.done():
-            receiving.cancel()
-    if evicted.done():
-        raise _Evicted
-    return receiving.result()
+        return await _unless(receive(), evicted)
+    except _Stopped:
+        raise _Evicted from None
 
 
 class _IntakeFull(Exception):
