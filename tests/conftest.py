@@ -44,11 +44,16 @@ def free_port() -> int:
 def start_server(
     log: Path,
     env: dict[str, str] | None = None,
-    timeout: float = 60.0,
+    timeout: float = 300.0,
     descriptors: int | None = None,
 ) -> tuple[subprocess.Popen[bytes], str]:
     """Start the service as ``wavecore serve`` runs it (uvicorn with the service's connection
-    guards, ``service.protocol``; no warm-up) and wait for ``/healthz``."""
+    guards, ``service.protocol``; no warm-up) and wait for ``/healthz``.
+
+    ``/healthz`` answers once every worker is warm, and the first server of a run on a clean
+    clone warms them by compiling numba's kernels (a minute or two on a loaded machine; CI
+    once took more than 60 s): ``timeout`` is the pool's own bound, ``service.work.WARM_TIMEOUT``.
+    """
     import httpx
 
     port = free_port()
