@@ -164,6 +164,15 @@ def test_transfer_returns_the_source_length() -> None:
     assert new.shape == (100, 2)
 
 
+def test_transfer_to_one_coarse_point_names_the_levels_that_fit() -> None:
+    # 16 closed points at level 4 leave one coarse point, which has no direction to follow
+    with pytest.raises(InvalidParameter, match=r"level 4 .* 1 point.* from 1 to 3"):
+        wavecore.transfer_details(_blob(16), _blob(30), level=4, closed=True)
+    with pytest.raises(InvalidParameter, match=r"give level 1$"):
+        wavecore.transfer_details(_blob(5), _blob(30), level=3, closed=True)
+    assert wavecore.transfer_details(_blob(16), _blob(30), level=3, closed=True).shape == (16, 2)
+
+
 def test_bad_curves() -> None:
     with pytest.raises(InvalidParameter, match="at least 2 points"):
         wavecore.decompose_curve([[1.0, 2.0]])

@@ -448,6 +448,23 @@ def transfer_details(
     if closed and len(base_points) > 2 and np.array_equal(base_points[0], base_points[-1]):
         base_points = base_points[:-1]
     coarse_length = len(dec.coeffs[0])
+    if coarse_length < 2:
+        # one coarse point has no direction: no base can stand in for it
+        deepest = dec.level - 1
+        while (
+            deepest > 0
+            and len(decompose_curve(src_points, deepest, closed=closed, wavelet=wavelet).coeffs[0])
+            < 2
+        ):
+            deepest -= 1
+        offer = {0: "no level fits it", 1: "give level 1"}.get(
+            deepest, f"give a level from 1 to {deepest}"
+        )
+        msg = (
+            f"level {dec.level} leaves source a coarse curve of {coarse_length} point, which no "
+            f"base can stand in for; {offer}"
+        )
+        raise InvalidParameter(msg)
     new = (
         base_points
         if len(base_points) == coarse_length

@@ -384,6 +384,19 @@ async def test_transfer_level_is_bounded_by_the_source(client: httpx.AsyncClient
     assert r.status_code == 200 and r.json()["shape"] == [40, 2]
 
 
+async def test_a_closed_transfer_to_one_coarse_point_offers_the_levels_that_fit(
+    client: httpx.AsyncClient,
+) -> None:
+    t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    source = np.stack([np.cos(t), np.sin(t)], axis=1).tolist()
+    body = {"source": source, "base": [[0, 0], [1, 0], [1, 1]], "closed": True, "level": 4}
+    r = await client.post("/v1/curves/transfer", json=body)
+    problem = _check_problem(r, 422, "invalid-parameter")
+    assert "1 point" in problem["detail"] and problem["detail"].endswith("from 1 to 3")
+    r = await client.post("/v1/curves/transfer", json={**body, "level": 3})
+    assert r.status_code == 200 and r.json()["shape"] == [16, 2]
+
+
 @pytest.mark.parametrize("level", [31, 1000])
 async def test_a_surface_level_past_30_is_named_as_sent(
     client: httpx.AsyncClient, level: int
