@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import binascii
 import itertools
+import math
 import struct
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -145,6 +147,29 @@ def test_vertex_falls_back_to_the_wavelet_form_where_it_cannot() -> None:
     bundle = wavecore.encode_curves(huge, closed=False, tolerance=1e-3, method="vertex")
     assert _version(bundle) == curvesets.VERSION
     assert _both_ways(huge[0], wavecore.decode(bundle)[0], False) <= 1e-3
+
+
+@pytest.mark.parametrize("scale", [2.0**700, 1e300])
+def test_huge_coordinates_are_coded_as_at_unit_scale(scale: float) -> None:
+    # squared distances overflow past 1e154: such sets were stored raw, with warnings
+    curves = [_walk(400, 5), _ring(100)]
+    flags = [False, True]
+    exact = math.ldexp(1.0, -math.frexp(scale)[1])  # a power of two: measures exactly
+    for method in ("vertex", "wavelet"):
+        unit = wavecore.encode_curves(curves, closed=flags, tolerance=0.05, method=method)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            big = wavecore.encode_curves(
+                [c * scale for c in curves], closed=flags, tolerance=0.05 * scale, method=method
+            )
+            decoded = wavecore.decode(big)
+        assert _version(big) == _version(unit)
+        # the wavelet form codes the same integers; the vertex form, without parabolas
+        assert len(big) == len(unit) if method == "wavelet" else len(big) < 1.5 * len(unit)
+        assert len(big) < 0.2 * 16 * 500  # the raw values' bytes
+        for curve, out, closed in zip(curves, decoded, flags, strict=True):
+            gap = _both_ways(curve * scale * exact, out * exact, closed)
+            assert gap <= 0.05 * scale * exact
 
 
 def test_bad_method_is_named() -> None:

@@ -843,15 +843,44 @@ def encode_curves(
         msg = f"method must be one of {METHODS}, not {method!r}"[:300]
         raise InvalidParameter(msg)
     meta = meta_bytes if metadata is not None else None
+    scale = _working_scale(arrays, dtype)
     vertex = None
     if method != "wavelet":
-        vertex = _encode_vertex(arrays, flags, tolerance, dtype, meta)
+        vertex = _encode_vertex(arrays, flags, tolerance, dtype, meta, scale)
         if method == "vertex" and vertex is not None:
             return vertex
-    wavelet_form = _encode_wavelet(arrays, flags, name, tolerance, cap, level_given, dtype, meta)
+    wavelet_form = _encode_wavelet(
+        arrays, flags, name, tolerance, cap, level_given, dtype, meta, scale
+    )
     if vertex is not None and len(vertex) < len(wavelet_form):
         return vertex
     return wavelet_form
+
+
+def _working_scale(arrays: list[np.ndarray], dtype: np.dtype[Any]) -> float:
+    """A power of two that brings the largest coordinate under 1, or 1 (below
+    ``_SCALED_ABOVE``, and for every dtype but ``float64``, whose values square without
+    overflow).
+
+    The searches measure squared distances, which overflow past about ``1e154``: coded at
+    that scale a set fell back to its raw values.  Scaling by a power of two is exact, so
+    coding the scaled values with the scaled tolerance gives the same integers, and the
+    header keeps the true tolerance, from which the decoder's steps come out scaled back.
+    """
+    if dtype != np.float64:
+        return 1.0
+    largest = max((float(np.max(np.abs(a), initial=0.0)) for a in arrays), default=0.0)
+    if not largest > _SCALED_ABOVE:
+        return 1.0
+    return math.ldexp(1.0, -math.frexp(largest)[1])
+
+
+#: Plane sets with coordinates up to this (about 3e150) may have parabolic spans: a chord's
+#: squared length stays finite where the decoder computes it, from the unscaled values.
+_BULGED_BELOW = 2.0**500
+#: Coordinates past this (about 3e144) are coded at a power-of-two scale
+#: (:func:`_working_scale`); below it every sum of squares the searches form is finite.
+_SCALED_ABOVE = 2.0**480
 
 
 def _encode_wavelet(
@@ -863,14 +892,15 @@ def _encode_wavelet(
     level_given: bool,
     dtype: np.dtype[Any],
     meta_bytes: bytes | None,
+    scale: float = 1.0,
 ) -> bytes:
-    """The wavelet form (format version 1)."""
+    """The wavelet form (format version 1), coded on the values times ``scale``."""
     rounding_byte = round(DEFAULT_ROUNDING * 256)
-    coder = _CurveCoder(name, tolerance, rounding_byte / 256, cap, dtype)
+    coder = _CurveCoder(name, tolerance * scale, rounding_byte / 256, cap, dtype)
     coded: list[_Coded] = []
     repeated: list[bool] = []
     for arr, is_closed in zip(arrays, flags, strict=True):
-        points = arr.astype(np.float64)
+        points = arr.astype(np.float64) * scale
         repeat = bool(is_closed and len(points) > 2 and np.array_equal(points[0], points[-1]))
         if repeat:
             points = points[:-1]
@@ -917,7 +947,7 @@ def _encode_wavelet(
         out += chunk
     for c in coded:
         if c.raw is not None:
-            out += c.raw.astype(dtype.newbyteorder("<")).tobytes()
+            out += (c.raw / scale).astype(dtype.newbyteorder("<")).tobytes()
     if meta_bytes is not None:
         out += encode_varint(len(meta_bytes)) + meta_bytes
     out += struct.pack("<I", zlib.crc32(out))
@@ -1227,8 +1257,10 @@ def _encode_vertex(
     tolerance: float,
     dtype: np.dtype[Any],
     meta_bytes: bytes | None,
+    scale: float = 1.0,
 ) -> bytes | None:
-    """The vertex form (format version 2), or None where it cannot keep the bound.
+    """The vertex form (format version 2), or None where it cannot keep the bound; coded on
+    the values times ``scale``.
 
     Each curve is simplified (greedy farthest reach, distances to the decoded lattice segments), its
     kept points rounded to the lattice, and the set range-coded (:mod:`wavecore.curvecoder`).
@@ -1239,10 +1271,11 @@ def _encode_vertex(
         return None
     d = arrays[0].shape[1]
     tolerance, tolerance_bytes = _pack_tolerance(tolerance)
+    tolerance *= scale
     repeated = []
     parts = []
     for arr, is_closed in zip(arrays, flags, strict=True):
-        points = arr.astype(np.float64)
+        points = arr.astype(np.float64) * scale
         repeat = bool(is_closed and len(points) > 2 and np.array_equal(points[0], points[-1]))
         repeated.append(repeat)
         parts.append(points[:-1] if repeat else points)
@@ -1347,19 +1380,25 @@ def _encode_vertex(
             if order < 0 or len(coded) < len(stream):
                 stream, order = coded, candidate
         if d == 2:  # parabolas between the vertices too; every choice coded as version 4
-            bulged = _bulged_stream(
-                plain_points,
-                plain_lattice,
-                plain_decoded,
-                chosen_keep,
-                chosen_lattice,
-                offsets,
-                closed,
-                again,
-                closed_mode,
-                step,
-                tolerance,
-                dtype,
+            # (not past _BULGED_BELOW: decoding a parabola squares its chord's length, which
+            # must not overflow in the unscaled values)
+            bulged = (
+                None
+                if largest / scale >= _BULGED_BELOW
+                else _bulged_stream(
+                    plain_points,
+                    plain_lattice,
+                    plain_decoded,
+                    chosen_keep,
+                    chosen_lattice,
+                    offsets,
+                    closed,
+                    again,
+                    closed_mode,
+                    step,
+                    tolerance,
+                    dtype,
+                )
             )
             bulged_counts = counts
             if bulged is not None:
