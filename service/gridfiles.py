@@ -12,8 +12,11 @@ from __future__ import annotations
 
 import io
 import math
+from typing import Any
 
 import numpy as np
+
+from .imaging import tiff_chunk_limit
 
 __all__ = [
     "GridFileError",
@@ -130,6 +133,28 @@ def _read_npy(data: bytes, name: str, max_elements: int) -> np.ndarray:
     return flat.reshape(shape, order="F" if fortran else "C")
 
 
+def _check_chunks(series: Any, name: str) -> None:
+    """Refuse tiles or strips that decode to far more than their pages (a reader decodes a
+    whole tile before it crops it: one zstd tile of 16384 × 16384 float64 zeros is 66 kB
+    and 2 GiB), from the tags, before a sample is decoded."""
+    seen = set()
+    for page in series.pages:
+        key = getattr(page, "keyframe", page)  # the frames of a stack share a keyframe's layout
+        if key is None or id(key) in seen:
+            continue
+        seen.add(id(key))
+        itemsize = np.dtype(key.dtype).itemsize
+        chunk = math.prod(key.chunks) * itemsize
+        limit = tiff_chunk_limit(math.prod(key.shape) * itemsize)
+        if chunk > limit:
+            msg = (
+                f"{name} stores its {' × '.join(map(str, key.shape))} samples in tiles or strips "
+                f"of {' × '.join(map(str, key.chunks))}, {chunk} bytes each once decoded; at most "
+                f"{limit} are accepted"
+            )
+            raise GridFileError("too-costly", msg)
+
+
 def _read_tiff(data: bytes, name: str, max_elements: int) -> np.ndarray:
     import tifffile
 
@@ -138,7 +163,8 @@ def _read_tiff(data: bytes, name: str, max_elements: int) -> np.ndarray:
             series = tif.series[0]
             shape, dtype = tuple(series.shape), np.dtype(series.dtype)
             _check(shape, dtype, name, max_elements)
-            arr = series.asarray()
+            _check_chunks(series, name)
+            arr = series.asarray(maxworkers=1)  # one decoded tile at a time
             page = tif.pages.first
             nodata = page.tags.get(GDAL_NODATA_TAG)
             nodata_text = None if nodata is None else str(nodata.value).strip("\x00 ")

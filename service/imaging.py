@@ -61,6 +61,8 @@ def read_image(data: bytes, *, max_pixels: int) -> np.ndarray:
                     f"{max_pixels} pixels (WAVECORE_MAX_PIXELS)"
                 )
                 raise Problem("image-too-large", msg)
+            if image.format == "TIFF":
+                _check_tiff_chunk(image)
             deeper = _bits_beyond_the_mode(image, data)  # from the header, before decoding
             if deeper:
                 return _read_deep(image, data, deeper)
@@ -82,6 +84,39 @@ def read_image(data: bytes, *, max_pixels: int) -> np.ndarray:
         # SyntaxError and ValueError from plugins): any of them means "not a readable image".
         msg = f"not a complete image that Pillow can read ({type(exc).__name__}: {exc})"
         raise Problem("unsupported-media-type", msg[:500]) from None
+
+
+#: The most bytes one decoded TIFF tile or strip may take beyond the picture's own: a reader
+#: decodes a whole tile before it crops it, and a 16 × 16 picture stored as one zstd tile of
+#: 16384 × 16384 is 25 kB that decodes to 805 MB.
+TIFF_CHUNK_BYTES = 16 << 20
+
+
+def tiff_chunk_limit(picture_bytes: int) -> int:
+    """The most bytes a decoded tile or strip of a TIFF picture of ``picture_bytes`` may take."""
+    return max(picture_bytes, TIFF_CHUNK_BYTES)
+
+
+def _check_tiff_chunk(image: Image.Image) -> None:
+    """Refuse a TIFF whose tiles (or strips) decode to far more than its picture, from its
+    tags, before a sample is decoded."""
+    tags = getattr(image, "tag_v2", {})  # Pillow's TIFF plugin has it; typing does not
+    width, height = image.size
+    bits = tags.get(258, (8,))  # BitsPerSample, one value per sample
+    sample_bytes = -(-(max(bits) if isinstance(bits, tuple) else int(bits)) // 8)
+    samples = int(tags.get(277, 1))  # SamplesPerPixel
+    if 322 in tags and 323 in tags:  # TileWidth, TileLength
+        across, down = int(tags[322]), int(tags[323])
+    else:  # strips: RowsPerStrip rows (a larger value means the whole picture)
+        across, down = width, min(int(tags.get(278, height)), height)
+    chunk = across * down * samples * sample_bytes
+    limit = tiff_chunk_limit(width * height * samples * sample_bytes)
+    if chunk > limit:
+        msg = (
+            f"this {width} × {height} TIFF is stored in tiles or strips of {across} × {down} "
+            f"pixels, {chunk} bytes each once decoded; at most {limit} are accepted"
+        )
+        raise Problem("image-too-large", msg)
 
 
 def _bits_beyond_the_mode(image: Image.Image, data: bytes) -> int:

@@ -108,6 +108,13 @@ async def test_geotiff_nodata_cells_decode_as_nan(client: httpx.AsyncClient) -> 
         (npy(np.zeros((4, 4)))[:-8], {}, 415, "truncated"),
         (npy(np.zeros((64, 64))), {"level": "1000"}, 422, "level 1000 is more than 30"),
         (b"II*\x00garbage", {}, 415, "TIFF"),
+        # 16 × 16 heights in one zstd tile of 8192 × 8192: 17 kB that would decode to 512 MiB
+        (
+            tiff(np.zeros((16, 16)), tile=(8192, 8192), compression="zstd"),
+            {},
+            413,
+            "tiles or strips of 8192 × 8192",
+        ),
     ],
 )
 async def test_bad_grids_are_problems(

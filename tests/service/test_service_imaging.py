@@ -108,6 +108,21 @@ def test_a_tiff_tifffile_cannot_decode_is_refused_clearly() -> None:
     assert caught.value.status == 415
 
 
+@pytest.mark.parametrize("array", [RGB16, test_image((24, 20)), test_image((24, 20, 3))])
+def test_a_tiff_whose_tiles_decode_to_far_more_is_refused_before_decoding(
+    array: np.ndarray,
+) -> None:
+    # a 24 × 20 picture in one zstd tile of 8192 × 8192: kilobytes that decode to 64-384 MiB
+    bomb = tiff(array, tile=(8192, 8192), compression="zstd")
+    assert len(bomb) < 300_000
+    with pytest.raises(Problem, match=r"tiles or strips of 8192 × 8192") as caught:
+        read_image(bomb, max_pixels=10_000)
+    assert caught.value.status == 413
+    # ordinary tiles, larger than the picture, and one strip of the whole picture still read
+    for options in ({"tile": (256, 256), "compression": "zstd"}, {"rowsperstrip": 24}):
+        assert np.array_equal(read_image(tiff(array, **options), max_pixels=10_000), array)
+
+
 def test_eight_bit_files_are_unchanged() -> None:
     image = test_image((20, 24, 3))
     assert np.array_equal(read_image(image_file(image, "TIFF"), max_pixels=10_000), image)
