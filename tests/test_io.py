@@ -356,6 +356,19 @@ def test_geojson_nested_too_deeply_is_named(document: str) -> None:
         wio.read_curves(document, "geojson")
 
 
+@pytest.mark.parametrize(
+    ("document", "fmt"),
+    [
+        ('{"type": "LineString", "coordinates": [[1' + "0" * 5000 + ", 0], [0, 1]]}", "geojson"),
+        ('{"points": [[1' + "0" * 5000 + ", 0], [0, 1]]}", "json"),
+    ],
+)
+def test_an_integer_python_will_not_convert_is_named(document: str, fmt: str) -> None:
+    # valid JSON, but past Python's 4,300 digits: a ValueError that is not a JSONDecodeError
+    with pytest.raises(wavecore.InvalidParameter, match="cannot be read: Exceeds the limit"):
+        wio.read_curves(document, fmt)
+
+
 def test_metadata_too_deep_to_decode_is_refused() -> None:
     document = (
         '{"type": "Feature", "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 1]]},'

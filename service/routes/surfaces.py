@@ -93,7 +93,7 @@ def _closed_field(text: str) -> Any:
     if text.startswith("["):
         try:
             return json.loads(text)
-        except ValueError:
+        except (ValueError, RecursionError):  # the model's validation names the field
             return text
     return [part.strip() for part in text.split(",")]
 

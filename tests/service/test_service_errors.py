@@ -94,6 +94,8 @@ CASES: list[tuple[str, str, Any, int, str]] = [
     ("surface-npy-nan", "/v1/surfaces/encode", surface_npy(_npy(np.full((8, 8), np.nan))), 422, "invalid-parameter"),
     ("surface-npy-1d", "/v1/surfaces/encode", surface_npy(_npy(np.zeros(30))), 422, "invalid-parameter"),
     ("surface-closed-bad", "/v1/surfaces/encode", surface_npy(_npy(np.zeros((8, 8))), closed="yes,no,maybe"), 422, "validation-error"),
+    ("surface-closed-nested", "/v1/surfaces/encode", surface_npy(_npy(np.zeros((8, 8))), closed="[" * 5000), 422, "validation-error"),
+    ("geojson-long-integer", "/v1/curves/encode", {"content": b'{"type": "LineString", "coordinates": [[1' + b"0" * 5000 + b', 0], [0, 1]]}', "headers": {"content-type": "application/geo+json"}}, 422, "invalid-parameter"),
     ("surface-text-plain", "/v1/surfaces/encode", {"content": b"1 2 3", "headers": {"content-type": "text/plain"}}, 415, "unsupported-media-type"),
     # bundles
     ("corrupt-bundle", "/v1/bundles/reconstruct", {"content": _flipped(IMAGE_BUNDLE, len(IMAGE_BUNDLE) // 2)}, 400, "invalid-bundle"),

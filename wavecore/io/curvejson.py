@@ -30,6 +30,9 @@ def read_curve_json(data: bytes | str) -> CurveData:
     except json.JSONDecodeError as exc:
         msg = f"curve JSON is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
         raise InvalidParameter(msg) from None
+    except ValueError as exc:  # valid JSON Python refuses: an integer of over 4,300 digits
+        msg = f"curve JSON cannot be read: {str(exc).split(';')[0]}"[:300]
+        raise InvalidParameter(msg) from None
     except RecursionError:
         msg = "curve JSON is nested too deeply"
         raise InvalidParameter(msg) from None

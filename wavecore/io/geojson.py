@@ -105,6 +105,9 @@ def _read_geojson(data: bytes | str) -> CurveData:
     except json.JSONDecodeError as exc:
         msg = f"GeoJSON is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
         raise InvalidParameter(msg) from None
+    except ValueError as exc:  # valid JSON Python refuses: an integer of over 4,300 digits
+        msg = f"GeoJSON cannot be read: {str(exc).split(';')[0]}"[:300]
+        raise InvalidParameter(msg) from None
     if not isinstance(doc, dict) or "type" not in doc:
         msg = "GeoJSON must be an object with a 'type'"
         raise InvalidParameter(msg)
