@@ -129,6 +129,18 @@ def test_huge_values_under_a_psnr_target_meet_it(
     assert -20 * np.log10(relative) >= target["psnr"] - 1e-6
 
 
+def test_a_range_past_the_largest_float_keeps_a_finite_default_bound() -> None:
+    # max - min of ±1.8e308 overflowed: the default bound was inf, and cells decoded as NaN
+    biggest = np.finfo(np.float64).max
+    data = np.where(np.random.default_rng(3).random((32, 32)) > 0.5, biggest, -biggest)
+    bundle = wavecore.encode_grid(data)
+    bound = wavecore.inspect(bundle)["max_error"]
+    assert bound == pytest.approx(1e-3 * biggest * 2)
+    out = wavecore.decode(bundle)
+    assert np.isfinite(out).all()
+    assert np.max(np.abs(out / 2 - data / 2)) <= bound / 2
+
+
 def test_zero_bound_on_floats_is_exact() -> None:
     data = terrain((16, 21), seed=5)
     out = wavecore.decode(wavecore.encode_grid(data, max_error=0))

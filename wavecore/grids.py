@@ -820,13 +820,16 @@ def encode_layout(
     missing = np.isnan(values) if has_mask else np.broadcast_to(np.False_, arr.shape)
     if has_mask:
         finite = values[~missing]
-        data_range = float(finite.max() - finite.min()) if finite.size else 0.0
+        top, bottom = (float(finite.max()), float(finite.min())) if finite.size else (0.0, 0.0)
     else:  # no copy of the values for their range
-        data_range = float(values.max() - low)
+        top, bottom = float(values.max()), float(low)
+    # halved, so that a range of more than the largest float (±1.8e308) stays finite
+    half_range = top / 2 - bottom / 2
     if not (bound is not None or rmse_target or psnr_target or bpp_target or lossless):
-        bound = DEFAULT_RELATIVE_MAX_ERROR * data_range
+        bound = 2 * DEFAULT_RELATIVE_MAX_ERROR * half_range
     if psnr_target is not None:
-        rmse_target = (data_range if data_range > 0 else 1.0) * 10.0 ** (-psnr_target / 20.0)
+        scale = 10.0 ** (-psnr_target / 20.0)
+        rmse_target = 2 * (half_range * scale) if half_range > 0 else scale
     if rmse_target is not None and dtype.kind == "f" and bound is None:
         finite_values = values[~missing] if has_mask else values
         largest = float(np.max(np.abs(finite_values))) if finite_values.size else 0.0
