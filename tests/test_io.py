@@ -285,6 +285,20 @@ def test_the_scan_bounds_what_reading_gives(document: str) -> None:
     assert work.microseconds >= 100 * (1 + work.curves)  # an element, a path or shape each
 
 
+def test_the_scan_prices_moves_and_the_closes_quadratic_look_back() -> None:
+    def path(d: str) -> int:
+        return int(wio.svg.scan_svg(f'{_SVG}<path d="{d}"/></svg>').microseconds)
+
+    # bare moves draw nothing, but svgelements builds a segment for each (30-52 µs)
+    assert path("M0 0" * 2000) - path("M0 0") >= 2000 * 30
+    # each close looks back over its subpath for its move: twice the closes, four times the work
+    few, many = path("M0 0" + "Z" * 4000), path("M0 0" + "Z" * 8000)
+    assert many > 3.5 * few > 3.5 * 4000 * 4000 / 2 * 0.09  # 0.09 µs a segment passed
+    # closes that each follow their own move look back over one segment
+    squares = path("M0 0 l1 0 l0 1Z" * 2000)
+    assert squares < 2 * path("M0 0 l1 0 l0 1Z" * 1000) + 1
+
+
 def test_a_use_bomb_is_refused_before_it_is_parsed() -> None:
     document = _use_bomb(7)  # 2 KB that draw 10**7 paths
     assert len(document) < 3000

@@ -348,6 +348,12 @@ ROWS: list[Row] = [
     Row("svg-inherited-font", "/v1/curves/encode", svg('<g font="' + "1" * 3000 + ' x;x">' + "<text>a</text>" * 200 + '<path d="M0 0 L1 1"/></g>'), (200,), None, 60.0),
     Row("svg-style-without-braces", "/v1/curves/encode", svg("<style>" + "a" * 160_000 + '</style><path d="M0 0 L1 1"/>'), (200,), None, 60.0),
     Row("svg-style-20000-properties", "/v1/curves/encode", lambda: svg("<style>*{" + ";".join(f"a{i}:1" for i in range(20_000)) + "}</style>" + "<g/>" * 2000 + '<path d="M0 0 L1 1"/>'), (200,), None, 60.0),
+    # moves and closes were free in the scan: 100 kB of Z took the 120 s timeout (each close
+    # looks back over its subpath), 6.4 MB of bare moves 52 s and 1.9 GB, and a 4.7 kB path
+    # of 3 000 Z drawn by 100 <use>, 48 s
+    Row("svg-closes-100kb", "/v1/curves/encode", svg('<path d="M0 0' + "Z" * 100_000 + '"/>'), (413,), "too-costly", 3.0),
+    Row("svg-moves-6mb", "/v1/curves/encode", lambda: svg('<path d="' + "M0 0" * 1_600_000 + '"/>'), (413,), "too-costly", 6.0),
+    Row("svg-closes-drawn-by-use", "/v1/curves/encode", svg('<defs><path id="p" d="M0 0' + "Z" * 3000 + '"/></defs>' + '<use xlink:href="#p"/>' * 100), (413,), "too-costly", 3.0),
     Row("svg-use-cycle", "/v1/curves/encode", lambda: svg('<g id="a"><use xlink:href="#b"/></g><g id="b"><use xlink:href="#a"/></g>'), (422,), "invalid-parameter"),
     Row("svg-arc-radius-1e300", "/v1/curves/encode", svg('<path d="M0 0 a1e300 1e300 0 1 1 1e300 1e-300"/>'), (422,), "invalid-parameter"),
     Row("svg-circle-subnormal", "/v1/curves/encode", svg('<circle r="1e-320" cx="0" cy="0"/>'), (200,), None, 60.0),
