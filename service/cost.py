@@ -47,6 +47,10 @@ CURVE_SET_CURVE_SAMPLES = 16384
 #: a 258-byte bundle of 1,048,576 one-point curves took 1.3 s to decode and 12 s and 1.5 GB to
 #: write as SVG (some 12 µs and 1.4 kB a curve; 5 s as JSON, 7 s as GeoJSON).
 CURVE_DECODE_CURVE_SAMPLES = 64
+#: And each byte of its metadata's JSON: parsed, then written out again, a byte of ``{},``
+#: takes some 32 bytes (a 29 kB bundle with 31 MB of empty objects took 1.0 GB to
+#: reconstruct), about half a sample of the codec's working memory.
+CURVE_METADATA_SAMPLES_PER_BYTE = 1
 
 #: Working values per coordinate of a detail transfer: the local frames (``d × d`` per point)
 #: and the three reconstructions per level hold about 4 times what a codec pass holds

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -115,6 +117,18 @@ def test_huge_values_and_tiny_tolerance_are_still_bounded() -> None:
     # a bound far below the values' resolution: stored exactly rather than missed
     assert np.array_equal(out[0], huge)
     assert _both_ways(tiny, out[1], False) <= 1e-12
+
+
+@pytest.mark.parametrize("method", ["vertex", "wavelet"])
+def test_inspect_gives_the_metadata_length_without_parsing_it(method: str) -> None:
+    meta = {"name": "ü", "values": list(range(1000))}
+    raw = [np.array([[1.5, 2.5]])]  # one point: stored exactly, ahead of the metadata
+    bundle = wavecore.encode_curves([_walk(60, 5), *raw], metadata=meta, method=method)
+    info = wavecore.inspect(bundle)
+    text = json.dumps(meta, separators=(",", ":"), allow_nan=False).encode()
+    assert info["metadata"] is True and info["metadata_bytes"] == len(text)
+    plain = wavecore.inspect(wavecore.encode_curves([_walk(60, 5)], method=method))
+    assert plain["metadata"] is False and plain["metadata_bytes"] == 0
 
 
 def test_hundred_curves_cost_little_more_than_their_payloads() -> None:

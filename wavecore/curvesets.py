@@ -805,7 +805,8 @@ def encode_curves(
         if arrays and all(a.shape[1] == arrays[0].shape[1] for a in arrays):
             stacked = np.concatenate([a.astype(np.float64) for a in arrays])
             extent = np.ptp(stacked, axis=0)
-            diagonal = float(np.linalg.norm(extent))
+            with np.errstate(over="ignore", under="ignore"):  # measured again below
+                diagonal = float(np.linalg.norm(extent))
             top = float(np.max(extent))
             if top > 0 and not 1e-150 < diagonal < 1e150:  # the squares under- or overflowed
                 diagonal = top * float(np.linalg.norm(extent / top))
@@ -1666,8 +1667,10 @@ def _copied_stream(
     return stream, written
 
 
-def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
-    """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows."""
+def _decode_vertex(data: bytes, parse_metadata: bool = True) -> tuple[CurveSet, dict[str, Any]]:
+    """Decode a vertex-form bundle (CRC already checked): the set and what inspect shows
+    (with ``parse_metadata`` false, the metadata is inflated but not parsed: its JSON may
+    take far more memory as Python objects than as text)."""
     reader = _Reader(data[: -check_size(data)])
     version, start = _preamble(data)
     reader.take(start, "preamble")
@@ -1725,13 +1728,17 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
     step = tolerance * VERTEX_STEPS[step_index]
     count = packed_count - 1 if packed_count else reader.varint("count", MAX_CURVES)
     metadata = None
+    metadata_bytes = 0
     if metadata_given:
         size = reader.varint("metadata length", len(data))
-        try:
-            metadata = _inflated_metadata(reader.take(size, "metadata"))
-        except (zlib.error, ValueError) as exc:
-            msg = f"curve set metadata is not deflated JSON: {exc}"
-            raise BundleError(msg) from exc
+        deflated = reader.take(size, "metadata")
+        if parse_metadata:
+            try:
+                metadata = _inflated_metadata(deflated)
+            except (zlib.error, ValueError) as exc:
+                msg = f"curve set metadata is not deflated JSON: {exc}"
+                raise BundleError(msg) from exc
+        metadata_bytes = _metadata_length(deflated)
     stream = reader.data[reader.at :]
     limit = min(MAX_POINTS, VERTEX_PER_BYTE * (len(stream) + 16))
     if count > limit:
@@ -1799,6 +1806,8 @@ def _decode_vertex(data: bytes) -> tuple[CurveSet, dict[str, Any]]:
         "dtype": dtype,
         "d": d,
         "stream": len(stream),
+        "has_metadata": bool(metadata_given),
+        "metadata_bytes": metadata_bytes,
         "step": step,
         "repeated": [bool(r) for r in repeated.tolist()],
         "closed_mode": closed_mode,
@@ -1849,6 +1858,11 @@ class _Record:
 def _inflated_metadata(deflated: bytes) -> Any:
     """A set's metadata: at most ``MAX_METADATA_BYTES`` of JSON is inflated."""
     return json.loads(inflate(deflated, MAX_METADATA_BYTES, "curve set metadata"))
+
+
+def _metadata_length(deflated: bytes) -> int:
+    """The bytes of JSON a set's metadata inflates to (checked as decoding checks it)."""
+    return len(inflate(deflated, MAX_METADATA_BYTES, "curve set metadata"))
 
 
 def _checked(data: Any) -> bytes:
@@ -2095,7 +2109,9 @@ def inspect_curves(bundle: Any) -> dict[str, Any]:
 
     ``kind`` is ``"curves"``; ``count`` curves with their ``points``, ``dims`` and ``closed``
     flags; ``tolerance`` (also as ``max_error``: the guaranteed bound); ``total_bytes`` and
-    ``payload_bytes`` (the entropy-coded coefficients; the rest is header and records).
+    ``payload_bytes`` (the entropy-coded coefficients; the rest is header and records);
+    ``metadata`` (whether the set has any) and ``metadata_bytes`` (its JSON's length, inflated
+    but not parsed: as Python objects it may take some 30 times that).
     A vertex-coded set (format version 2) keeps its records in the coded stream: it is
     decoded to describe it (``payload_bytes`` is then the stream, records included).
 
@@ -2111,9 +2127,16 @@ def _inspect_curves(bundle: Any) -> dict[str, Any]:
     data = _checked(bundle)
     if _is_vertex_form(data):
         return _inspect_vertex(data)
-    info, records, chunks, _ = _parse(data)
+    info, records, chunks, reader = _parse(data)
     total = len(bytes(bundle))
     payload = sum(len(c) for c in chunks)
+    metadata_bytes = 0
+    if info["has_metadata"]:
+        for record in records:  # the raw values come before the metadata
+            if record.mode == _MODE_RAW:
+                reader.take(record.count * record.d * info["dtype"].itemsize, "raw curve")
+        size = reader.varint("metadata length", len(reader.data))
+        metadata_bytes = _metadata_length(reader.take(size, "metadata"))
     return {
         "kind": "curves",
         "version": f"{VERSION}",
@@ -2137,11 +2160,12 @@ def _inspect_curves(bundle: Any) -> dict[str, Any]:
         "payload_bytes": payload,
         "method": "wavelet",
         "metadata": info["has_metadata"],
+        "metadata_bytes": metadata_bytes,
     }
 
 
 def _inspect_vertex(data: bytes) -> dict[str, Any]:
-    curve_set, info = _decode_vertex(data)
+    curve_set, info = _decode_vertex(data, parse_metadata=False)
     points = [len(c) for c in curve_set.curves]
     total = len(data)
     return {
@@ -2167,5 +2191,6 @@ def _inspect_vertex(data: bytes) -> dict[str, Any]:
         "total_points": sum(points),
         "total_bytes": total,
         "payload_bytes": info["stream"],
-        "metadata": curve_set.metadata is not None,
+        "metadata": info["has_metadata"],
+        "metadata_bytes": info["metadata_bytes"],
     }

@@ -125,7 +125,12 @@ def _reconstruct_curves(
         cost.CURVE_FACTOR * n * (d + 1) for n, d in zip(info["points"], info["dims"], strict=True)
     )
     samples += cost.CURVE_DECODE_CURVE_SAMPLES * int(info["count"])
-    cost.check(samples, f"a bundle of {info['count']} curves", settings)
+    metadata = int(info.get("metadata_bytes", 0))
+    samples += cost.CURVE_METADATA_SAMPLES_PER_BYTE * metadata
+    what = f"a bundle of {info['count']} curves" + (
+        f" with {metadata} bytes of metadata" if metadata else ""
+    )
+    cost.check(samples, what, settings)
     curveset = wavecore.decode_curves(bundle)
     own = (curveset.metadata or {}).get("format", "json")
     fmt = _choose_format(requested, "curves", accept, own if own in CURVE_FILE_FORMATS else "json")

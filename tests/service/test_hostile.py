@@ -408,6 +408,9 @@ ROWS: list[Row] = [
     Row("bundle-empty", "/v1/bundles/reconstruct", bundle_body(b""), (400,), "invalid-bundle"),
     Row("curve-set-with-keep", "/v1/bundles/reconstruct", lambda: bundle_body(CURVE_SET, keep=0.5), (422,), "invalid-parameter"),
     Row("curve-set-with-level", "/v1/bundles/reconstruct", lambda: bundle_body(CURVE_SET, level=1), (422,), "invalid-parameter"),
+    # 29 kB whose 31 MB of metadata JSON (`{},` over and over) took 1.0 GB to parse and write
+    # out; its bytes are counted now
+    Row("bundle-31mb-of-metadata", "/v1/bundles/reconstruct", lambda: bundle_body(wavecore.encode_curves([CURVE], metadata={"x": [0] * 15_000_000})), (413,), "too-costly", 5.0),
     Row("bundle-a-million-curves", "/v1/bundles/reconstruct", lambda: bundle_body(vertex_bomb(4096 * 256, 240), format="svg"), (413,), "too-costly", 5.0),
     Row("bundle-8m-curves", "/v1/bundles/inspect", lambda: bundle_body(vertex_bomb(4096 * 2016, 2000)), (400,), "invalid-bundle"),
     # ---- the HTTP layer
