@@ -141,6 +141,14 @@ def test_a_range_past_the_largest_float_keeps_a_finite_default_bound() -> None:
     assert np.max(np.abs(out / 2 - data / 2)) <= bound / 2
 
 
+@pytest.mark.parametrize("wavelet", [None, "cdf97"])
+def test_a_grid_of_subnormals_is_coded_exactly(wavelet: str | None) -> None:
+    # scaled up by 2**1073, the core's step overflowed math.ldexp (an OverflowError)
+    data = np.full((32, 32), 5e-324)
+    out = wavecore.decode(wavecore.encode_grid(data, wavelet=wavelet))
+    assert np.array_equal(out, data)
+
+
 def test_zero_bound_on_floats_is_exact() -> None:
     data = terrain((16, 21), seed=5)
     out = wavecore.decode(wavecore.encode_grid(data, max_error=0))

@@ -188,6 +188,10 @@ def test_bad_bytes_are_a_bundle_error() -> None:
     for bad in (b"", b"nonsense", good[:-7], good[:30], b"WZC1" + b"\xff" * 40):
         with pytest.raises(BundleError):
             decode_chunk(bad)
+    # not a buffer at all: numpy's TypeError ("array of references") came out bare
+    for thing in (None, [None], {"a": 1}, object()):
+        with pytest.raises(BundleError, match="bytes or a buffer"):
+            decode_chunk(thing)
 
 
 # --------------------------------------------------------------------------------------------

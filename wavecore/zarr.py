@@ -308,7 +308,11 @@ def decode_chunk(data: Any) -> np.ndarray:
     BundleError
         For bytes that are not a wavecore chunk, or a truncated or corrupt one.
     """
-    buf = _bytes(data)
+    try:
+        buf = _bytes(data)
+    except (TypeError, ValueError) as exc:  # objects, or an array of references
+        msg = f"a wavecore chunk is bytes or a buffer, not {type(data).__name__}: {exc}"
+        raise BundleError(msg[:300]) from exc
     try:
         return _decode_chunk(buf)
     except BundleError:
