@@ -1811,6 +1811,40 @@ def check_bulged(points, offsets, closed, keep, out, sizes, rows):
 
 
 @njit(cache=True, nogil=True)
+def nearest_corner_starts(lattice, offsets, corner):
+    """Each curve's start (a row offset within it): the first of its ``corner`` rows whose
+    lattice point is the fewest coded bits (per coordinate ``2 × bit length + sign``) from
+    the previous curve's first point after its own start; 0 where it has no corner."""
+    count = len(offsets) - 1
+    d = lattice.shape[1]
+    starts = np.zeros(count, dtype=np.int64)
+    previous = np.zeros(d, dtype=np.int64)
+    for c in range(count):
+        first, stop = offsets[c], offsets[c + 1]
+        if stop == first:
+            continue
+        best = -1
+        best_bits = 0
+        for r in range(first, stop):
+            if not corner[r]:
+                continue
+            bits = 0
+            for k in range(d):
+                gap = abs(lattice[r, k] - previous[k])
+                length = 0
+                while gap >> length:
+                    length += 1
+                bits += 2 * length + (1 if gap != 0 else 0)
+            if best < 0 or bits < best_bits:
+                best, best_bits = r, bits
+        if best >= 0:
+            starts[c] = best - first
+        for k in range(d):
+            previous[k] = lattice[first + starts[c], k]
+    return starts
+
+
+@njit(cache=True, nogil=True)
 def optimal_bulged_set(
     points, decoded, offsets, closed, tolerance, window, unit, strict, greedy, bulges
 ):

@@ -1075,29 +1075,39 @@ def _cheapest_starts(
     previous curve's first vertex, from which the coder codes a curve's first vertex.
 
     The polygon and its vertices stay the same: only which of them comes first changes.
+    Corners are found for all curves at once; the choice, which depends on the previous
+    curve's, runs in :func:`curvecoder.nearest_corner_starts`.
     """
-    rows = np.arange(len(lattice))
-    previous = np.zeros(lattice.shape[1], dtype=np.int64)
-    for c in range(len(offsets) - 1):
-        first, stop = int(offsets[c]), int(offsets[c + 1])
-        if stop == first:
-            continue
-        kept = np.flatnonzero(keep[first:stop])
-        if closed[c] and stop - first > 2 and len(kept) > 2:
-            vertices = lattice[first + kept].astype(np.float64)
-            before = vertices - np.roll(vertices, 1, axis=0)
-            after = np.roll(vertices, -1, axis=0) - vertices
-            norms = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
-            turn = np.einsum("ij,ij->i", before, after) / np.maximum(norms, 1e-300)
-            # corners only: after a corner the next steps are unpredictable anyway, while a
-            # start inside a smooth run would cost the predictor its first two steps there
-            corners = np.flatnonzero(turn < _CORNER_COSINE)
-            if len(corners):
-                gaps = np.abs(lattice[first + kept[corners]] - previous)
-                bits = np.sum(2 * np.ceil(np.log2(gaps + 1)) + (gaps != 0), axis=1)
-                start = int(kept[corners[int(np.argmin(bits))]])
-                rows[first:stop] = np.roll(rows[first:stop], -start)
-        previous = lattice[rows[first]]
+    count = len(offsets) - 1
+    sizes = np.diff(offsets)
+    kept_rows = np.flatnonzero(keep)
+    curve_of = np.searchsorted(offsets, kept_rows, side="right") - 1
+    kept_count = np.bincount(curve_of, minlength=count)
+    eligible = (np.asarray(closed) != 0) & (sizes > 2) & (kept_count > 2)
+    rows_in = kept_rows[eligible[curve_of]]
+    curves_in = curve_of[eligible[curve_of]]
+    corner = np.zeros(len(lattice), dtype=np.bool_)
+    if len(rows_in):
+        # each kept vertex's neighbours around its own curve's kept vertices
+        group = np.searchsorted(curves_in, curves_in, side="left")
+        size = kept_count[curves_in]
+        at = np.arange(len(rows_in)) - group
+        vertices = lattice[rows_in].astype(np.float64)
+        before = vertices - vertices[group + (at - 1) % size]
+        after = vertices[group + (at + 1) % size] - vertices
+        norms = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
+        turn = np.einsum("ij,ij->i", before, after) / np.maximum(norms, 1e-300)
+        # corners only: after a corner the next steps are unpredictable anyway, while a
+        # start inside a smooth run would cost the predictor its first two steps there
+        corner[rows_in[turn < _CORNER_COSINE]] = True
+    starts = curvecoder.nearest_corner_starts(
+        np.ascontiguousarray(lattice, dtype=np.int64), np.asarray(offsets, np.int64), corner
+    )
+    curve_of_row = np.repeat(np.arange(count), sizes)
+    within = np.arange(len(lattice)) - offsets[curve_of_row]
+    rows: np.ndarray = offsets[curve_of_row] + (within + starts[curve_of_row]) % np.maximum(
+        sizes[curve_of_row], 1
+    )
     return rows
 
 
