@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -283,6 +284,20 @@ def test_the_scan_bounds_what_reading_gives(document: str) -> None:
     assert work.points <= sum(len(c) for c in read.curves)
     assert work.curves <= len(read.curves)
     assert work.microseconds >= 100 * (1 + work.curves)  # an element, a path or shape each
+
+
+def test_nested_use_past_what_a_set_holds_is_refused_without_max_points() -> None:
+    # each group draws the one before twice: 2.7 kB that the parser would expand for ever
+    groups = "".join(
+        f'<g id="p{i + 1}"><use xlink:href="#p{i}"/><use xlink:href="#p{i}"/></g>'
+        for i in range(40)
+    )
+    document = _SVG + '<path id="p0" d="M0 0 L1 1 L2 0"/>' + groups + "</svg>"
+    assert len(document) < 3000
+    start = time.perf_counter()
+    with pytest.raises(wavecore.InvalidParameter, match="more than 134217728"):
+        wio.read_curves(document, "svg")
+    assert time.perf_counter() - start < 5
 
 
 def test_the_scan_prices_moves_and_the_closes_quadratic_look_back() -> None:

@@ -26,6 +26,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from ..curvesets import MAX_POINTS
 from ..errors import InvalidParameter
 from .common import CurveData, as_text
 
@@ -519,7 +520,9 @@ def read_svg(
         quarter) of it.  Default: ``1e-3`` × the drawing's diagonal.
     max_points : int, optional
         Refuse (``InvalidParameter``) once the samples pass this many points, or before
-        parsing when :func:`scan_svg` finds that they will.
+        parsing when :func:`scan_svg` finds that they will.  Default: the most a curve set
+        holds (``curvesets.MAX_POINTS``, 2**27): a 2.7 kB document of nested ``<use>`` draws
+        2**40 shapes, which the parser would expand for ever.
 
     Raises
     ------
@@ -528,12 +531,13 @@ def read_svg(
     """
     se = _parser()
     clean = _sanitized(_parsed(as_text(data, "SVG")))
-    if max_points is not None:
-        # before the parser expands every <use>: a few kilobytes may draw millions of shapes
-        fewest = _scan(clean, None).points
-        if fewest > max_points:
-            msg = f"SVG draws {fewest} points or more, more than {max_points}"
-            raise InvalidParameter(msg)
+    if max_points is None:
+        max_points = MAX_POINTS
+    # before the parser expands every <use>: a few kilobytes may draw millions of shapes
+    fewest = _scan(clean, None).points
+    if fewest > max_points:
+        msg = f"SVG draws {fewest} points or more, more than {max_points}"
+        raise InvalidParameter(msg)
     try:
         svg = se.SVG.parse(io.StringIO(ElementTree.tostring(clean, encoding="unicode")))
         shapes = [e for e in svg.elements() if isinstance(e, se.Shape)]
@@ -577,7 +581,7 @@ def read_svg(
                     msg = f"SVG element {name} has a segment that cannot be sampled: {exc}"
                     raise InvalidParameter(msg[:300]) from None
                 total += len(pieces[-1])
-                if max_points is not None and total > max_points:
+                if total > max_points:
                     msg = (
                         f"SVG sampled to tolerance {tolerance:g} gives more than {max_points} "
                         "points; give a larger tolerance or a smaller drawing"
