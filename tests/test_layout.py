@@ -111,3 +111,16 @@ def test_malformed_lists_are_refused(bad: Any) -> None:
         as_levels(bad)
     with pytest.raises(InvalidCoefficients, match="non-empty list"):
         as_keyed(bad)
+
+
+def test_bands_that_do_not_fit_are_named_not_left_to_numpy() -> None:
+    import wavecore
+
+    coeffs = wavedec2(np.random.default_rng(0).standard_normal((66, 130)), level=2)
+    short = [coeffs[0], (coeffs[1][0][:-1], coeffs[1][1], coeffs[1][2]), *coeffs[2:]]
+    for bad in (short, [None, *coeffs[1:]], [np.float64(1), (np.float64(1),) * 3]):
+        with pytest.raises(InvalidCoefficients, match="do not tile a picture"):
+            wavecore.subband_mosaic(bad)
+    # the levels swapped: a tuple of three bands where the coarse band belongs
+    with pytest.raises(InvalidCoefficients, match="cA must be an array"):
+        wavecore.remove_smallest([coeffs[1], coeffs[0], *coeffs[2:]], 0.5)

@@ -288,7 +288,12 @@ def subband_mosaic(coeffs: Sequence[Any]) -> np.ndarray:
             msg = "each level's details must be a tuple (cH, cV, cD)"
             raise InvalidCoefficients(msg)
         ch, cv, cd = (_view_detail(as_array(b, np.float64, "a detail band")) for b in bands)
-        top = np.concatenate([picture, cv], axis=1)
-        bottom = np.concatenate([ch, cd], axis=1)
-        picture = np.concatenate([top, bottom], axis=0)
+        try:
+            top = np.concatenate([picture, cv], axis=1)
+            bottom = np.concatenate([ch, cd], axis=1)
+            picture = np.concatenate([top, bottom], axis=0)
+        except ValueError:  # numpy's words for bands that do not tile (or have no axes)
+            shapes = ", ".join(str(b.shape) for b in (picture, ch, cv, cd))
+            msg = f"the bands do not tile a picture (coarse, cH, cV, cD: {shapes})"
+            raise InvalidCoefficients(msg) from None
     return picture

@@ -177,7 +177,11 @@ def as_keyed(coeffs: Any) -> tuple[str, np.ndarray, list[dict[str, np.ndarray]]]
     if isinstance(coeffs, np.ndarray | dict) or not isinstance(coeffs, Sequence) or not coeffs:
         msg = "coeffs must be a non-empty list as wavedec, wavedec2 or wavedecn returns it"
         raise InvalidCoefficients(msg)
-    coarse = np.asarray(as_native(np.asarray(coeffs[0])))
+    try:
+        coarse = np.asarray(as_native(np.asarray(coeffs[0])))
+    except ValueError:  # a tuple of bands of several shapes where cA belongs
+        msg = f"cA must be an array, not a {type(coeffs[0]).__name__} of bands"
+        raise InvalidCoefficients(msg) from None
     if coarse.ndim == 0:
         msg = "cA must have at least one dimension"
         raise InvalidCoefficients(msg)
