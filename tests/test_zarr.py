@@ -188,6 +188,11 @@ def test_bad_bytes_are_a_bundle_error() -> None:
     for bad in (b"", b"nonsense", good[:-7], good[:30], b"WZC1" + b"\xff" * 40):
         with pytest.raises(BundleError):
             decode_chunk(bad)
+    # settings that are not a mapping, and an ``out`` of another size, are named too
+    with pytest.raises(InvalidParameter, match="must be a mapping"):
+        encode_chunk(np.zeros((4, 4)), None)  # type: ignore[arg-type]
+    with pytest.raises(InvalidParameter, match="out holds 56 bytes"):
+        WavecoreCodec(max_error=0.1).decode(good, out=np.empty(7))
     # not a buffer at all: numpy's TypeError ("array of references") came out bare
     for thing in (None, [None], {"a": 1}, object()):
         with pytest.raises(BundleError, match="bytes or a buffer"):

@@ -135,6 +135,9 @@ class CodecConfig:
     def from_mapping(cls, config: Mapping[str, Any]) -> CodecConfig:
         """Check a configuration (the codec's JSON keys) and fill in the defaults."""
         known = {"wavelet", "level", "max_error", "psnr", "bpp", "lossless"}
+        if not isinstance(config, Mapping):
+            msg = f"the codec's settings must be a mapping such as {{'max_error': 0.01}}, not {config!r}"
+            raise InvalidParameter(msg[:300])
         unknown = sorted(set(config) - known - {"id"})
         if unknown:
             msg = f"unknown wavecore codec setting(s) {unknown}; accepted: {sorted(known)}"
@@ -683,6 +686,12 @@ class WavecoreCodec(_NumcodecsCodec):
         if out is None:
             return arr
         target = np.asarray(out)
+        if target.nbytes != arr.nbytes:
+            msg = (
+                f"out holds {target.nbytes} bytes; the chunk decodes to {arr.size} values of "
+                f"{arr.dtype} ({arr.nbytes} bytes)"
+            )
+            raise InvalidParameter(msg)
         target.reshape(-1).view(arr.dtype)[:] = arr.reshape(-1)
         return target
 
