@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -217,3 +220,23 @@ def test_padding_a_conversion_equals_padding_the_converted_array(
     assert got_pads == pads
     assert padded.dtype == np.float64
     assert np.array_equal(padded, expected)
+
+
+def test_a_curve_too_long_for_memory_is_an_invalid_parameter() -> None:
+    # 3e8 points pass the values' limit; under a 2 GiB address space numpy's MemoryError
+    # came out bare
+    script = (
+        "import resource; resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))\n"
+        "import numpy as np, wavecore\n"
+        "points = np.random.default_rng(0).standard_normal((66, 2))\n"
+        "try:\n"
+        "    wavecore.resample_curve(points, 3 * 10**8)\n"
+        "except wavecore.InvalidParameter as exc:\n"
+        "    print('refused:', exc)\n"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
+    )
+    assert "refused: a curve of 300000000 points of 2 coordinates does not fit" in run.stdout, (
+        run.stdout + run.stderr
+    )

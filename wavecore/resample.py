@@ -451,11 +451,15 @@ def resample_curve(
     if total == 0.0:
         out = np.repeat(arr[:1], n, axis=0)
         return out[:, 0] if flat else out
-    targets = total * np.arange(n) / n if closed else np.linspace(0.0, total, n)
     # Repeated points give zero-length segments; np.interp needs increasing nodes.
     keep = np.concatenate([[True], np.diff(s) > 0])
     s, nodes = s[keep], nodes[keep]
-    out = np.stack([np.interp(targets, s, nodes[:, j]) for j in range(nodes.shape[1])], axis=1)
+    try:
+        targets = total * np.arange(n) / n if closed else np.linspace(0.0, total, n)
+        out = np.stack([np.interp(targets, s, nodes[:, j]) for j in range(nodes.shape[1])], axis=1)
+    except MemoryError:  # under the values' limit, over this machine's memory
+        msg = f"a curve of {n} points of {arr.shape[1]} coordinates does not fit in memory"
+        raise InvalidParameter(msg) from None
     out = out.astype(arr.dtype, copy=False)
     out[0] = arr[0]
     if not closed:
