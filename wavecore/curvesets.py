@@ -734,7 +734,8 @@ def encode_curves(
         Each curve ``(n_i, d_i)`` (or ``(n_i,)`` for ``d = 1``), any ``n_i >= 1`` and
         ``d_i >= 1``; the dimension may differ between curves.  Finite values, in one of the
         dtypes ``float64``, ``float32``, ``float16``, ``int8`` … ``uint32``; the decoded
-        curves come back in the common dtype (``numpy.result_type`` of the inputs).
+        curves come back in the common dtype (``numpy.result_type`` of the inputs; ``bool``
+        is taken as ``uint8``, and comes back so, as 0 and 1).
     closed : bool or sequence of bool, keyword-only
         Closed (periodic) or open curves: one flag for all, or one per curve.  A closed curve
         may repeat its first point at the end; it comes back the same way.
