@@ -73,7 +73,7 @@ import json
 import math
 import struct
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from decimal import Decimal
 from functools import lru_cache
@@ -1580,6 +1580,23 @@ def _fraction_pairs(k: np.ndarray, fraction: np.ndarray) -> list[int]:
     return pairs
 
 
+def _copy_tries(
+    target: np.ndarray, again_as: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Where a copy's first vertex may go, in the order tried: as the previous copy
+    (``again_as``), then ``target`` rounded to fractions of a step, the fewest bits per
+    coordinate in all first (a copy along a baseline needs none across it).  Made one at a
+    time: most copies fit at the first."""
+    if again_as is not None:
+        yield again_as
+    most = curvecoder.COPY_SHIFTS
+    for bits in range(2 * most + 1):
+        for kx in range(max(0, bits - most), min(most, bits) + 1):
+            k = np.array([kx, bits - kx], dtype=np.int64)
+            total = np.rint(target * (1 << k)).astype(np.int64)
+            yield total >> k, k, total & ((1 << k) - 1)
+
+
 def _copied_stream(
     parts: list[np.ndarray],
     closed: np.ndarray,
@@ -1627,18 +1644,10 @@ def _copied_stream(
             # where the first vertex goes (a copied source's decoded points are off its lattice
             # vertices by its own fraction)
             target = shapes[i][0] + phases[i] + shift[0] / step
-            tries = []
+            again_as = None
             if last is not None and last[0] == j - 1 - i:  # as the previous copy: 1 bit
-                tries.append((shapes[i][0] + last[1], last[2], last[3]))
-            # the fractions' bits per coordinate, fewest in all first (a copy along a
-            # baseline needs none across it)
-            most = curvecoder.COPY_SHIFTS
-            for bits in range(2 * most + 1):
-                for kx in range(max(0, bits - most), min(most, bits) + 1):
-                    k = np.array([kx, bits - kx], dtype=np.int64)
-                    total = np.rint(target * (1 << k)).astype(np.int64)
-                    tries.append((total >> k, k, total & ((1 << k) - 1)))
-            for first, k, fraction in tries:
+                again_as = (shapes[i][0] + last[1], last[2], last[3])
+            for first, k, fraction in _copy_tries(target, again_as):
                 moved = (shape + first).astype(np.float64) + fraction / (1 << k)
                 decoded = _copy_values(moved, kept_bulges, bool(closed[j]), step, dtype)
                 work = 2 * len(points) * len(decoded)
