@@ -172,6 +172,18 @@ def test_huge_coordinates_are_coded_as_at_unit_scale(scale: float) -> None:
             assert gap <= 0.05 * scale * exact
 
 
+def test_a_curve_stored_exactly_beside_huge_ones_keeps_every_bit() -> None:
+    # a one-point curve is stored exactly; scaled down with its set by 2**-997 and back, 1e-10
+    # would pass through the subnormals and lose bits
+    huge = _walk(50, 1) * 1e300
+    tiny = np.array([[1e-10, 3.3e-11]])
+    for tolerance in (1e-12, None):
+        bundle = wavecore.encode_curves(
+            [huge, tiny], closed=False, tolerance=tolerance, method="wavelet"
+        )
+        assert np.array_equal(wavecore.decode(bundle)[1], tiny)
+
+
 def test_bad_method_is_named() -> None:
     with pytest.raises(wavecore.InvalidParameter, match="method"):
         wavecore.encode_curves([_ring(10)], method="fractal")

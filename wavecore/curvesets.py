@@ -901,13 +901,15 @@ def _encode_wavelet(
     coder = _CurveCoder(name, tolerance * scale, rounding_byte / 256, cap, dtype)
     coded: list[_Coded] = []
     repeated: list[bool] = []
+    unscaled: list[np.ndarray] = []  # a curve stored exactly is written from these
     for arr, is_closed in zip(arrays, flags, strict=True):
-        points = arr.astype(np.float64) * scale
+        points = arr.astype(np.float64)
         repeat = bool(is_closed and len(points) > 2 and np.array_equal(points[0], points[-1]))
         if repeat:
             points = points[:-1]
         repeated.append(repeat)
-        coded.append(coder.code(points, is_closed)[0])
+        unscaled.append(points)
+        coded.append(coder.code(points * scale, is_closed)[0])
     dims = [a.shape[1] for a in arrays]
     mixed = len(set(dims)) > 1
     closed_mode = 2 if len(set(flags)) > 1 else (1 if flags and flags[0] else 0)
@@ -947,9 +949,9 @@ def _encode_wavelet(
         out += encode_varint(len(chunk))
     for chunk in chunks:
         out += chunk
-    for c in coded:
-        if c.raw is not None:
-            out += (c.raw / scale).astype(dtype.newbyteorder("<")).tobytes()
+    for c, points in zip(coded, unscaled, strict=True):
+        if c.raw is not None:  # (scaled down, a tiny value would have lost bits)
+            out += _finish(points, dtype).astype(dtype.newbyteorder("<")).tobytes()
     if meta_bytes is not None:
         out += encode_varint(len(meta_bytes)) + meta_bytes
     out += struct.pack("<I", zlib.crc32(out))

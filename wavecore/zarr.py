@@ -136,7 +136,8 @@ class CodecConfig:
         """Check a configuration (the codec's JSON keys) and fill in the defaults."""
         known = {"wavelet", "level", "max_error", "psnr", "bpp", "lossless"}
         if not isinstance(config, Mapping):
-            msg = f"the codec's settings must be a mapping such as {{'max_error': 0.01}}, not {config!r}"
+            example = "{'max_error': 0.01}"
+            msg = f"the codec's settings must be a mapping such as {example}, not {config!r}"
             raise InvalidParameter(msg[:300])
         unknown = sorted(set(config) - known - {"id"})
         if unknown:
