@@ -54,6 +54,10 @@ def test_encode_surface_default_is_still_bspline2_and_unchanged() -> None:
 def test_encode_surface_refuses_an_unknown_wavelet() -> None:
     with pytest.raises(InvalidParameter, match="unknown wavelet 'db99'"):
         wavecore.encode_surface(HEIGHTS, wavelet="db99")
+    # a long name is cut in the message, which a service answers with
+    with pytest.raises(InvalidParameter, match=r"… \(5002 characters\)") as caught:
+        wavecore.encode_surface(HEIGHTS, wavelet="x" * 5000)
+    assert len(str(caught.value)) < 400
 
 
 # --- boundary= beside closed= -----------------------------------------------------------------

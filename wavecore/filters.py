@@ -415,7 +415,10 @@ def get_wavelet(wavelet: str | FilterBank) -> FilterBank:
         return _REGISTRY[wavelet]
     except (KeyError, TypeError):
         accepted = ", ".join(repr(n) for n in wavelet_names())
-        msg = f"unknown wavelet {wavelet!r}; accepted wavelets are {accepted}"
+        given = repr(wavelet)
+        if len(given) > 80:  # a client's 5 kB name is not echoed back whole
+            given = given[:60] + f"… ({len(given)} characters)"
+        msg = f"unknown wavelet {given}; accepted wavelets are {accepted}"
         raise InvalidParameter(msg) from None
 
 
