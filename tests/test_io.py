@@ -385,13 +385,6 @@ def test_geojson_nested_too_deeply_is_named(document: str) -> None:
         wio.read_curves(document, "geojson")
 
 
-@pytest.mark.parametrize("position", ["[0]", "[0, 1, 2, 3]"])
-def test_geojson_positions_of_other_than_2_or_3_numbers_are_named(position: str) -> None:
-    document = '{"type": "LineString", "coordinates": [' + f"{position}, {position}" + "]}"
-    with pytest.raises(wavecore.InvalidParameter, match="GeoJSON allows 2 or 3"):
-        wio.read_curves(document, "geojson")
-
-
 @pytest.mark.parametrize(
     ("document", "fmt"),
     [
