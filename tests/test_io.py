@@ -385,6 +385,13 @@ def test_geojson_nested_too_deeply_is_named(document: str) -> None:
         wio.read_curves(document, "geojson")
 
 
+def test_geojson_written_from_1d_curves_reads_back() -> None:
+    # RFC 7946 asks for two numbers a position, but a 1-D set writes one: it must read back
+    bundle = wavecore.encode_curves([np.arange(10.0)], closed=False, tolerance=1e-9)
+    again = wio.read_curves(wavecore.decode_curve_file(bundle, "geojson"), "geojson")
+    assert np.array_equal(again.curves[0], wavecore.decode(bundle)[0].reshape(-1, 1))
+
+
 @pytest.mark.parametrize(
     ("document", "fmt"),
     [

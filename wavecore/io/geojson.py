@@ -29,7 +29,7 @@ class _Reader:
 
     def line(self, coords: Any, where: str, ring: bool) -> int:
         arr = finite_array(coords, where, min_points=4 if ring else 2)
-        if arr.shape[1] > 3:
+        if arr.shape[1] > 3:  # (one is taken too: GeoJSON written from 1-D curves reads back)
             msg = f"{where}: positions have {arr.shape[1]} numbers; GeoJSON allows 2 or 3"
             raise InvalidParameter(msg)
         self.curves.append(arr)
