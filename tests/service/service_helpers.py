@@ -61,3 +61,25 @@ def bomb_png(width: int = 10_000, height: int = 10_000) -> bytes:
         + chunk(b"IDAT", b"".join(parts))
         + chunk(b"IEND", b"")
     )
+
+
+def tiled_tiff_declaring(array: np.ndarray, side: int) -> bytes:
+    """A TIFF of ``array`` in one 16 × 16 tile whose tags declare ``side`` × ``side`` tiles.
+
+    A bomb of that shape is a few kilobytes once compressed (one zstd tile of 16384² zeros:
+    66 kB for 2 GiB), but writing it needs the codec and the memory; the readers' check uses
+    the tags alone, so these are what is patched.
+    """
+    import struct
+
+    import tifffile
+
+    out = io.BytesIO()
+    photometric = "minisblack" if array.ndim == 2 else "rgb"
+    tifffile.imwrite(out, array, tile=(16, 16), photometric=photometric)
+    data = bytearray(out.getvalue())
+    for tag in (322, 323):  # TileWidth, TileLength: one LONG (tifffile's choice)
+        entry = data.find(struct.pack("<HHI", tag, 4, 1))
+        assert entry > 0, tag
+        data[entry + 8 : entry + 12] = struct.pack("<I", side)
+    return bytes(data)

@@ -9,6 +9,7 @@ import httpx
 import numpy as np
 import pytest
 import tifffile
+from service_helpers import tiled_tiff_declaring
 
 import wavecore
 
@@ -108,9 +109,10 @@ async def test_geotiff_nodata_cells_decode_as_nan(client: httpx.AsyncClient) -> 
         (npy(np.zeros((4, 4)))[:-8], {}, 415, "truncated"),
         (npy(np.zeros((64, 64))), {"level": "1000"}, 422, "level 1000 is more than 30"),
         (b"II*\x00garbage", {}, 415, "TIFF"),
-        # 16 × 16 heights in one zstd tile of 8192 × 8192: 17 kB that would decode to 512 MiB
+        # 16 × 16 heights in tiles of 8192 × 8192: 512 MiB each once decoded (one zstd tile of
+        # 16384 × 16384 zeros is 66 kB, and took 2.2 GB)
         (
-            tiff(np.zeros((16, 16)), tile=(8192, 8192), compression="zstd"),
+            tiled_tiff_declaring(np.zeros((16, 16)), 8192),
             {},
             413,
             "tiles or strips of 8192 × 8192",
