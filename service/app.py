@@ -27,7 +27,7 @@ import wavecore
 
 from . import errors
 from .imaging import set_pixel_limit
-from .middleware import BodyLimitMiddleware, Metrics, MetricsMiddleware
+from .middleware import BodyLimitMiddleware, Metrics, MetricsMiddleware, SecurityHeadersMiddleware
 from .routes import bundles, curves, docs, grids, health, images, pages, surfaces
 from .settings import Settings
 from .work import AdmissionMiddleware, WorkPool
@@ -92,4 +92,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(AdmissionMiddleware, pool=pool)
     app.add_middleware(BodyLimitMiddleware, limit=settings.max_upload_bytes)
     app.add_middleware(MetricsMiddleware, metrics=app.state.metrics)
+    app.add_middleware(SecurityHeadersMiddleware)  # outermost: on every answer, refusals too
     return app

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import time
 
 import numpy as np
@@ -383,6 +384,51 @@ def test_a_subnormal_drawing_is_kept_exactly() -> None:
 def test_geojson_nested_too_deeply_is_named(document: str) -> None:
     with pytest.raises(wavecore.InvalidParameter, match="nested too deeply"):
         wio.read_curves(document, "geojson")
+
+
+_SQUARE = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]
+
+
+def _svg_bundle(elements: list[dict[str, object]], **sizes: object) -> bytes:
+    meta = {"format": "svg", "width": 100, "height": 100, **sizes, "elements": elements}
+    return wavecore.encode_curves([_SQUARE], closed=True, metadata=meta)
+
+
+def test_svg_written_from_hostile_metadata_is_plain_well_formed_svg() -> None:
+    from xml.etree import ElementTree
+
+    attributes = {
+        'x="1"/><script>alert(1)</script><path fill': "none",  # a name: dropped
+        "onload": "alert(1)",  # not an attribute the reader keeps: dropped
+        "id": 'a\x01"><script>b',  # a control character (dropped) and markup (quoted)
+        "fill": "red",
+    }
+    for sizes in ({}, {"width": "1e309", "height": "nan"}):
+        text = wavecore.decode_curve_file(
+            _svg_bundle([{"curves": [0], "attributes": attributes}], **sizes), "svg"
+        )
+        root = ElementTree.fromstring(text)  # well-formed
+        elements = list(root.iter())
+        assert [e.tag.split("}")[-1] for e in elements] == ["svg", "path"]
+        path = elements[1]
+        assert sorted(path.attrib) == ["d", "fill", "id"] and path.get("id") == 'a"><script>b'
+        assert all(math.isfinite(float(v)) for v in root.get("viewBox", "").split())
+
+
+@pytest.mark.parametrize("fmt", ["svg", "geojson"])
+def test_metadata_naming_a_curve_twice_is_refused(fmt: str) -> None:
+    # 600 bytes naming one 1000-point curve 10 000 times wrote 106 MB of SVG
+    if fmt == "svg":
+        meta = {"format": "svg", "elements": [{"curves": [0], "attributes": {}}] * 3}
+    else:
+        line = {"type": "LineString", "coordinates": 0}
+        meta = {
+            "format": "geojson",
+            "document": {"type": "GeometryCollection", "geometries": [line] * 3},
+        }
+    bundle = wavecore.encode_curves([_SQUARE], closed=False, metadata=meta)
+    with pytest.raises(wavecore.BundleError, match="curve 0 twice"):
+        wavecore.decode_curve_file(bundle, fmt)
 
 
 def test_geojson_written_from_1d_curves_reads_back() -> None:

@@ -210,3 +210,24 @@ async def test_a_file_of_many_curves_costs_its_search(make_client) -> None:  # t
         )
         assert r.status_code == 200, r.text
         assert r.headers["X-Wavecore-Curves"] == "6"
+
+
+async def test_svg_from_a_hostile_bundle_runs_nothing(client: httpx.AsyncClient) -> None:
+    # the metadata named an attribute '"/><script>…': a page posting the bundle to the API as
+    # a form got an SVG that ran the script at the service's origin
+    import wavecore
+
+    name = 'x="1"/><script>alert(document.domain)</script><path fill'
+    meta = {"format": "svg", "width": 100, "height": 100}
+    meta["elements"] = [{"curves": [0], "attributes": {name: "none", "fill": "red"}}]
+    square = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]
+    bundle = wavecore.encode_curves([square], metadata=meta)
+    r = await client.post("/v1/bundles/reconstruct", params={"format": "svg"}, content=bundle)
+    assert r.status_code == 200 and r.headers["content-type"].startswith(SVG_TYPE)
+    assert "<script" not in r.text and 'fill="red"' in r.text
+    # and whatever an answer holds, a browser shown it runs nothing and sniffs no other type
+    assert r.headers["content-security-policy"] == "default-src 'none'; sandbox"
+    assert r.headers["x-content-type-options"] == "nosniff"
+    page = await client.get("/")
+    assert "script-src 'self'" in page.headers["content-security-policy"]
+    assert page.headers["x-content-type-options"] == "nosniff"

@@ -133,23 +133,28 @@ def _positions(points: np.ndarray, closed: bool) -> list[list[float]]:
     return out
 
 
-def _fill(node: Any, depth: int, data: CurveData) -> Any:
+def _fill(node: Any, depth: int, data: CurveData, used: set[int]) -> Any:
     if depth == 1:
         if not isinstance(node, int) or not 0 <= node < len(data.curves):
             msg = f"GeoJSON structure refers to curve {node!r}, not in the bundle"
+            raise InvalidParameter(msg[:200])
+        if node in used:  # the reader names each curve once: a bundle naming one again
+            msg = f"GeoJSON structure refers to curve {node} twice"  # would repeat its points
             raise InvalidParameter(msg)
+        used.add(node)
         return _positions(data.curves[node], data.closed[node])
-    return [_fill(child, depth - 1, data) for child in node]
+    return [_fill(child, depth - 1, data, used) for child in node]
 
 
-def _fill_geometry(geometry: Any, data: CurveData) -> Any:
+def _fill_geometry(geometry: Any, data: CurveData, used: set[int]) -> Any:
     if geometry is None:
         return None
     out = dict(geometry)
     if geometry.get("type") == "GeometryCollection":
-        out["geometries"] = [_fill_geometry(g, data) for g in geometry["geometries"]]
+        out["geometries"] = [_fill_geometry(g, data, used) for g in geometry["geometries"]]
     else:
-        out["coordinates"] = _fill(geometry["coordinates"], _LINE_TYPES[geometry["type"]], data)
+        depth = _LINE_TYPES[geometry["type"]]
+        out["coordinates"] = _fill(geometry["coordinates"], depth, data, used)
     return out
 
 
@@ -171,15 +176,17 @@ def write_geojson(data: CurveData) -> bytes:
     """GeoJSON text: the original document's structure when there is one, else a
     FeatureCollection of LineStrings (open curves) and Polygons (closed ones)."""
     document = data.metadata.get("document") if data.metadata.get("format") == "geojson" else None
+    used: set[int] = set()
     if document is None:
         out = _generic_document(data)
     elif document.get("type") == "FeatureCollection":
         out = dict(document)
         out["features"] = [
-            {**f, "geometry": _fill_geometry(f.get("geometry"), data)} for f in document["features"]
+            {**f, "geometry": _fill_geometry(f.get("geometry"), data, used)}
+            for f in document["features"]
         ]
     elif document.get("type") == "Feature":
-        out = {**document, "geometry": _fill_geometry(document.get("geometry"), data)}
+        out = {**document, "geometry": _fill_geometry(document.get("geometry"), data, used)}
     else:
-        out = _fill_geometry(document, data)
+        out = _fill_geometry(document, data, used)
     return json.dumps(out, separators=(",", ":"), allow_nan=False).encode()

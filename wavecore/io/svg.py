@@ -620,6 +620,21 @@ def _path_data(points: np.ndarray, closed: bool) -> str:
     return "M" + " L".join(coords) + (" Z" if closed else "")
 
 
+#: The attributes written on a path: the paint the reader keeps, and ``id``.
+_WRITTEN_ATTRIBUTES = frozenset((*_PAINT, "id"))
+#: Characters XML 1.0 does not allow (C0 controls but tab and newlines, surrogates, U+FFFE/F).
+_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+
+
+def _length(value: Any) -> float | None:
+    """A width or height from a set's metadata: a positive finite number, else None."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return None
+    return number if math.isfinite(number) and number > 0 else None
+
+
 def write_svg(data: CurveData) -> bytes:
     """An SVG document: one ``<path>`` per original element (or per curve)."""
     meta = data.metadata if data.metadata.get("format") == "svg" else {}
@@ -627,8 +642,8 @@ def write_svg(data: CurveData) -> bytes:
         {"curves": [i], "attributes": {"fill": "none", "stroke": "black"}}
         for i in range(len(data.curves))
     ]
-    if meta.get("width") and meta.get("height"):
-        width, height = float(meta["width"]), float(meta["height"])
+    width, height = _length(meta.get("width")), _length(meta.get("height"))
+    if width and height:
         box = f"0 0 {width:.6g} {height:.6g}"
     else:  # curves from elsewhere: a view of their bounding box
         xy = [np.asarray(c, dtype=np.float64)[:, :2] for c in data.curves]
@@ -642,10 +657,20 @@ def write_svg(data: CurveData) -> bytes:
         '<svg xmlns="http://www.w3.org/2000/svg" '
         f'width="{width:.6g}" height="{height:.6g}" viewBox="{box}">'
     ]
+    used: set[int] = set()
     for element in elements:
+        for i in element["curves"]:
+            if i in used:  # the reader names each curve once: a bundle naming one again
+                msg = f"SVG elements refer to curve {i!r} twice"  # would repeat its points
+                raise InvalidParameter(msg[:200])
+            used.add(i)
         d = " ".join(_path_data(data.curves[i], data.closed[i]) for i in element["curves"])
+        # only the attributes the reader keeps, whose names are known: a bundle's metadata
+        # could name one '"/><script>…' (its values are quoted; names cannot be)
         attributes = "".join(
-            f" {name}={quoteattr(str(value))}" for name, value in element["attributes"].items()
+            f" {name}={quoteattr(_XML_INVALID.sub('', str(value)))}"
+            for name, value in element["attributes"].items()
+            if name in _WRITTEN_ATTRIBUTES
         )
         lines.append(f'<path d="{d}"{attributes}/>')
     lines.append("</svg>")
