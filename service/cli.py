@@ -46,7 +46,7 @@ import re
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -193,12 +193,24 @@ def expand(arg: str, suffixes: set[str]) -> tuple[list[Path], bool]:
     return [path], False
 
 
+#: The outputs of the current run and the inputs they come from (reset by :func:`run_many`):
+#: ``a.png`` and ``a.jpg`` would both write ``a.wcb``, the second over the first.
+_CLAIMED: dict[Path, Path] = {}
+
+
 def output_for(source: Path, out: Path, many: bool, suffix: str) -> Path:
-    if many or out.is_dir():
-        out.mkdir(parents=True, exist_ok=True)
-        return out / (source.stem + suffix)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return out
+    """Where ``source``'s result goes; never onto an input or another result of the run."""
+    target = out / (source.stem + suffix) if many or out.is_dir() else out
+    where = target.resolve()
+    if where == source.resolve():
+        msg = f"{target} is the input itself; name another output"
+        raise CLIError(msg)
+    if _CLAIMED.get(where, source) != source:
+        msg = f"{target} is also the output of {_CLAIMED[where]}; rename one of them"
+        raise CLIError(msg)
+    _CLAIMED[where] = source
+    target.parent.mkdir(parents=True, exist_ok=True)
+    return target
 
 
 class Progress:
@@ -230,6 +242,7 @@ class Progress:
 def print_table(rows: Sequence[Row], columns: Sequence[str], stream: TextIO) -> None:
     """A plain aligned table; a failed row shows its error instead of figures."""
     header = ["file", *columns]
+    rows = [replace(r, name=_printable(r.name)) for r in rows]  # file names as printed
     body = [[r.name, *(r.values.get(c, "") for c in columns)] for r in rows if r.error is None]
     widths = [max(len(row[i]) for row in [header, *body]) for i in range(len(header))]
     widths[0] = max(widths[0], *(len(r.name) for r in rows))
@@ -260,21 +273,44 @@ def run_many(
 ) -> int:
     progress = Progress(len(files), sys.stderr, enabled=many and not quiet)
     rows: list[Row] = []
+    _CLAIMED.clear()
     for i, path in enumerate(files, 1):
         try:
             rows.append(work(path))
-        except (CLIError, wavecore.WavecoreError, OSError, ValueError) as exc:
+        except _FILE_ERRORS as exc:
             if not many:
                 raise
             rows.append(Row(path.name, error=f"error: {_message(exc)}"))
-        progress.update(i, path.name)
+        progress.update(i, _printable(path.name))
     if many or not quiet:
         print_table(rows, columns, sys.stdout)
     return 0 if all(r.error is None for r in rows) else 1
 
 
+#: What reading one bad file may raise: a message, then the next file (never a traceback):
+#: ``EOFError`` from an empty ``.npy``, ``RecursionError`` from JSON nested too deeply.
+_FILE_ERRORS = (
+    CLIError,
+    wavecore.WavecoreError,
+    OSError,
+    ValueError,
+    EOFError,
+    RecursionError,
+)
+
+
 def _message(exc: BaseException) -> str:
-    return str(exc)
+    if isinstance(exc, RecursionError):
+        return "the file is nested too deeply to read"
+    if isinstance(exc, EOFError):
+        return f"the file ends too soon ({exc})"
+    return _printable(str(exc))
+
+
+def _printable(text: str) -> str:
+    """``text`` with control characters shown escaped: a file named ``\x1b]0;…`` must not
+    retitle or clear the terminal it is printed to."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def _size(n: float) -> str:
@@ -296,7 +332,10 @@ def _load_input(path: Path, kind: str | None) -> tuple[str, np.ndarray, bool]:
     if suffix == ".json":
         data = json.loads(path.read_text(encoding="utf-8"))
         kind = kind or ("surface" if isinstance(data, dict) and "grid" in data else "curve")
-        closed = bool(data.get("closed", False)) if isinstance(data, dict) else False
+        closed = data.get("closed", False) if isinstance(data, dict) else False
+        if not isinstance(closed, bool):  # bool("false") is True
+            msg = f"{path}: 'closed' must be true or false, not {closed!r}"[:300]
+            raise CLIError(msg)
         key = "grid" if kind == "surface" else "points"
         values = data.get(key) if isinstance(data, dict) else data
         try:
@@ -836,9 +875,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status (0 ok, 1 failed, 2 usage)."""
     args = build_parser().parse_args(argv)
+    _CLAIMED.clear()  # (a process may run several commands: tests do)
     try:
         status: int = args.run(args)
-    except (CLIError, wavecore.WavecoreError, OSError, ValueError) as exc:
+    except _FILE_ERRORS as exc:
         print(f"wavecore: error: {_message(exc)}", file=sys.stderr)
         return 1
     return status

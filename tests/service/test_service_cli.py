@@ -143,6 +143,44 @@ def test_errors_are_messages_not_tracebacks(
         main(["encode", "a", "b", "--keep", "0.5", "--quality", "30"])
 
 
+def test_nothing_is_written_over_an_input_or_an_earlier_output(
+    tmp_path: Path, images: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # `encode img.png img.png` replaced the picture with its bundle
+    picture = images / "img0.png"
+    before = picture.read_bytes()
+    assert main(["encode", str(picture), str(picture)]) == 1
+    assert "is the input itself" in capsys.readouterr().err
+    assert picture.read_bytes() == before
+    # a.png and a.jpg in one folder both made out/a.wcb, the second over the first
+    folder = tmp_path / "same-stem"
+    folder.mkdir()
+    (folder / "a.png").write_bytes(image_file(test_image((20, 24), seed=1)))
+    (folder / "a.jpg").write_bytes(image_file(test_image((20, 24), seed=2), "JPEG"))
+    assert main(["encode", str(folder), str(tmp_path / "out")]) == 1
+    assert "is also the output of" in capsys.readouterr().out
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["a.wcb"]
+
+
+def test_bad_files_in_a_batch_are_rows_not_tracebacks(
+    tmp_path: Path, images: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (images / "empty.npy").write_bytes(b"")  # EOFError from numpy
+    (images / "x\x1b]0;title\x07.png").write_bytes(image_file(test_image((20, 24))))
+    assert main(["encode", str(images), str(tmp_path / "out"), "--quiet"]) == 1
+    out = capsys.readouterr().out
+    assert "empty.npy" in out and "ends too soon" in out and "4 of 5 done" in out
+    assert "\x1b" not in out and "x\\x1b]0;title\\x07.png" in out  # shown escaped
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 200_000 + "]" * 200_000)
+    assert main(["encode", str(deep), str(tmp_path / "deep.wcb")]) == 1
+    assert "nested too deeply" in capsys.readouterr().err
+    closed = tmp_path / "closed.json"
+    closed.write_text('{"points": [[0, 0], [1, 0], [1, 1], [0, 1]], "closed": "false"}')
+    assert main(["encode", str(closed), str(tmp_path / "closed.wcb")]) == 1
+    assert "'closed' must be true or false" in capsys.readouterr().err
+
+
 def test_console_script_runs(tmp_path: Path, images: Path) -> None:
     script = shutil.which("wavecore", path=str(Path(sys.executable).parent))
     command = [script] if script else [sys.executable, "-m", "service.cli"]
