@@ -16,8 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from .imaging import tiff_chunk_limit
-
 __all__ = [
     "GridFileError",
     "check_npy_length",
@@ -131,6 +129,18 @@ def _read_npy(data: bytes, name: str, max_elements: int) -> np.ndarray:
     check_npy_length(data, offset, shape, dtype, name)
     flat = np.frombuffer(data, dtype=dtype, offset=offset)
     return flat.reshape(shape, order="F" if fortran else "C")
+
+
+#: The most bytes one decoded TIFF tile or strip may take beyond the picture's own: a reader
+#: decodes a whole tile before it crops it, and a 16 × 16 picture stored as one zstd tile of
+#: 16384 × 16384 is 25 kB that decodes to 805 MB.  (Here, not in imaging.py, which needs
+#: Pillow: the CLI reads grids with tifffile alone.)
+TIFF_CHUNK_BYTES = 16 << 20
+
+
+def tiff_chunk_limit(picture_bytes: int) -> int:
+    """The most bytes a decoded tile or strip of a TIFF picture of ``picture_bytes`` may take."""
+    return max(picture_bytes, TIFF_CHUNK_BYTES)
 
 
 def _check_chunks(series: Any, name: str) -> None:

@@ -26,6 +26,7 @@ import tifffile
 from PIL import Image
 
 from .errors import Problem
+from .gridfiles import tiff_chunk_limit
 
 #: Output formats for images and the media type of each.
 IMAGE_FORMATS = {"png": "image/png", "webp": "image/webp", "tiff": "image/tiff"}
@@ -84,17 +85,6 @@ def read_image(data: bytes, *, max_pixels: int) -> np.ndarray:
         # SyntaxError and ValueError from plugins): any of them means "not a readable image".
         msg = f"not a complete image that Pillow can read ({type(exc).__name__}: {exc})"
         raise Problem("unsupported-media-type", msg[:500]) from None
-
-
-#: The most bytes one decoded TIFF tile or strip may take beyond the picture's own: a reader
-#: decodes a whole tile before it crops it, and a 16 × 16 picture stored as one zstd tile of
-#: 16384 × 16384 is 25 kB that decodes to 805 MB.
-TIFF_CHUNK_BYTES = 16 << 20
-
-
-def tiff_chunk_limit(picture_bytes: int) -> int:
-    """The most bytes a decoded tile or strip of a TIFF picture of ``picture_bytes`` may take."""
-    return max(picture_bytes, TIFF_CHUNK_BYTES)
 
 
 def _check_tiff_chunk(image: Image.Image) -> None:
