@@ -1753,14 +1753,14 @@ def _decode_vertex(data: bytes, parse_metadata: bool = True) -> tuple[CurveSet, 
     metadata_bytes = 0
     if metadata_given:
         size = reader.varint("metadata length", len(data))
-        deflated = reader.take(size, "metadata")
+        text = _metadata_text(reader.take(size, "metadata"))
+        metadata_bytes = len(text)
         if parse_metadata:
             try:
-                metadata = _inflated_metadata(deflated)
-            except (zlib.error, ValueError) as exc:
+                metadata = json.loads(text)
+            except ValueError as exc:
                 msg = f"curve set metadata is not deflated JSON: {exc}"
                 raise BundleError(msg) from exc
-        metadata_bytes = _metadata_length(deflated)
     stream = reader.data[reader.at :]
     limit = min(MAX_POINTS, VERTEX_PER_BYTE * (len(stream) + 16))
     if count > limit:
@@ -1877,14 +1877,14 @@ class _Record:
     closed: bool
 
 
+def _metadata_text(deflated: bytes) -> bytes:
+    """A set's metadata JSON: at most ``MAX_METADATA_BYTES`` of it is inflated."""
+    return inflate(deflated, MAX_METADATA_BYTES, "curve set metadata")
+
+
 def _inflated_metadata(deflated: bytes) -> Any:
-    """A set's metadata: at most ``MAX_METADATA_BYTES`` of JSON is inflated."""
-    return json.loads(inflate(deflated, MAX_METADATA_BYTES, "curve set metadata"))
-
-
-def _metadata_length(deflated: bytes) -> int:
-    """The bytes of JSON a set's metadata inflates to (checked as decoding checks it)."""
-    return len(inflate(deflated, MAX_METADATA_BYTES, "curve set metadata"))
+    """A set's metadata, parsed."""
+    return json.loads(_metadata_text(deflated))
 
 
 def _checked(data: Any) -> bytes:
@@ -2158,7 +2158,7 @@ def _inspect_curves(bundle: Any) -> dict[str, Any]:
             if record.mode == _MODE_RAW:
                 reader.take(record.count * record.d * info["dtype"].itemsize, "raw curve")
         size = reader.varint("metadata length", len(reader.data))
-        metadata_bytes = _metadata_length(reader.take(size, "metadata"))
+        metadata_bytes = len(_metadata_text(reader.take(size, "metadata")))
     return {
         "kind": "curves",
         "version": f"{VERSION}",

@@ -6,8 +6,6 @@ fastest lossy coding, and the bundle measured on what the decoder returns.  What
 
 from __future__ import annotations
 
-import math
-import sys
 from typing import Any
 
 import numpy as np
@@ -33,14 +31,10 @@ from .samples import decompose, finish, measure_errors, peak_of, reconstruct, sc
 
 def coded_units(rmse: float, scale: int) -> float:
     """A distance (an RMSE, a step) in the original's units → the coded units of a plan
-    scaled by ``2**scale`` (at most the largest float: a step that coarse on subnormal data,
-    scaled up by ``2**1073``, quantizes everything to zero either way)."""
-    if not scale:
-        return rmse
-    try:
-        return math.ldexp(rmse, -scale)
-    except OverflowError:
-        return sys.float_info.max
+    scaled by ``2**scale`` (capped at the largest float, as :func:`samples.unscaled` caps the
+    other way: a step that coarse on subnormal data, scaled up by ``2**1073``, quantizes
+    everything to zero either way)."""
+    return unscaled(rmse, -scale) if scale else rmse
 
 
 def encode_surface_at_step(
