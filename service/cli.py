@@ -193,7 +193,7 @@ def expand(arg: str, suffixes: set[str]) -> tuple[list[Path], bool]:
     return [path], False
 
 
-#: The outputs of the current run and the inputs they come from (reset by :func:`run_many`):
+#: The outputs of the current run and the inputs they come from (reset by :func:`main`):
 #: ``a.png`` and ``a.jpg`` would both write ``a.wcb``, the second over the first.
 _CLAIMED: dict[Path, Path] = {}
 
@@ -273,7 +273,6 @@ def run_many(
 ) -> int:
     progress = Progress(len(files), sys.stderr, enabled=many and not quiet)
     rows: list[Row] = []
-    _CLAIMED.clear()
     for i, path in enumerate(files, 1):
         try:
             rows.append(work(path))
