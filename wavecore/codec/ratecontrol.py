@@ -746,6 +746,10 @@ def _log_histograms(bands: list[np.ndarray], scales: list[float]) -> list[tuple[
     return list(zip(totals, tops, strict=True))
 
 
+#: A guided search whose guide moves the step by less than this (in log) is stalled.
+_GUIDE_STALLED = 1e-3
+
+
 class _Search:
     """Finds the step whose measured value is as large as allowed (``value <= bound``).
 
@@ -821,11 +825,19 @@ class _Search:
             return None if step in (s0, s1) else step
         assert self.last is not None
         s, v = self.last
+        aim = self.aim
         if self.guide is not None:
             step = min(max(self.guide(s, v), self.low), self.high)
-            if step != s:
-                return step  # else the guide is stuck: extrapolate as without it
-        exponent = (math.log(self.aim) - math.log(v)) / self.slope
+            crawls = step > 0 and s > 0 and 0 < abs(math.log(step / s)) <= _GUIDE_STALLED
+            if step != s and not crawls:
+                return step
+            # The guide is stuck or crawls.  Extrapolate as without it, and from beyond the
+            # bound to inside it: an aim beyond the bound (where a trim was to take over, and
+            # could not: a picture coded nearly exactly, whose size hardly moves with the step)
+            # crept up on it a few hundredths of a per cent a coding, 28 codings.
+            if v > self.bound > 0:
+                aim = min(aim, math.sqrt(self.bound * max(self.enough, 1e-300)))
+        exponent = (math.log(aim) - math.log(v)) / self.slope
         step = s * math.exp(min(max(exponent, -math.log(16)), math.log(16)))
         step = min(max(step, self.low), self.high)
         return None if step == s else step
