@@ -39,6 +39,7 @@ import numpy as np
 import wavecore
 from wavecore import BundleError, InvalidParameter, binheader
 from wavecore.bundle import COMPACT_MAGIC, MAGIC, chunk_groups, deflate_header, read_bundle
+from wavecore.codec import replication
 
 GOLDEN = Path(__file__).parent / "golden"
 
@@ -77,6 +78,8 @@ def bundles() -> dict[str, bytes]:
 
 
 def split(data: bytes) -> tuple[dict[str, Any], list[bytes]]:
+    if replication.is_replicated(data):  # 7.0: the header and chunks of the source's bundle
+        data = replication.unwrap(data)[1]
     parsed = read_bundle(data)
     return json.loads(json.dumps(parsed.header)), [bytes(c or b"") for c in parsed.chunks]
 

@@ -298,6 +298,7 @@ def test_the_block_count_rule_is_the_block_coders() -> None:
     from wavecore.codec.plan import plan_from_header
 
     image = np.zeros((300, 270, 3), np.uint8)
+    image[0, 0] = 1  # not a picture enlarged by pixel replication, which is coded smaller
     for bundle in (
         wavecore.encode_curve(_curve(40_000, 3, 0.01), level=4),
         wavecore.encode_curve(_curve(9, 1)[:, 0]),

@@ -27,9 +27,9 @@ def test_the_golden_set_is_complete() -> None:
     assert any(entry["lossless"] for entry in MANIFEST.values())
     # Every format version a reader must still read has bundles here (2.0: the binary header;
     # 3.1: images with derived weights; 5.0: the curve layout; 6.0: curves with block checks
-    # in chunks of several blocks).
+    # in chunks of several blocks; 7.0: pictures enlarged by pixel replication).
     versions = {entry["version"] for entry in MANIFEST.values()}
-    assert versions >= {"1.0", "1.1", "1.2", "2.0", "3.0", "3.1", "4.0", "5.0", "6.0"}
+    assert versions >= {"1.0", "1.1", "1.2", "2.0", "3.0", "3.1", "4.0", "5.0", "6.0", "7.0"}
     assert sorted(p.stem for p in GOLDEN.glob("*.wvb")) == sorted(MANIFEST)
     # Every context coder version that decoders must still read has bundles here.
     coders = {entry["cparams"].get("version") for entry in MANIFEST.values()}

@@ -84,6 +84,7 @@ def test_max_effort_takes_one_haar_level_of_a_pixel_repeated_picture() -> None:
     """Haar details of a 2x nearest-neighbour enlargement are all zero: one level pays."""
     small = _texture((40, 36), 5)
     big = np.kron(small, np.ones((2, 2), dtype=np.uint8))
+    big[0, 1] ^= 1  # one pixel off: not an exact enlargement, which is coded as its source
     bundle = wavecore.encode_image(big, lossless=True, effort="max")
     assert wavecore.inspect(bundle)["header"]["lifting"] == ["haar"]
     assert np.array_equal(wavecore.decode(bundle), big)

@@ -2,9 +2,12 @@
 
 This docstring summarises format versions 6.0 and 5.0 (written for curves) and 3.1 (written
 for images and surfaces), and 4.0, 3.0, 2.0 and 1.x, which are still read;
-``docs/bundle-format.md`` is the specification.  Like NumPy's ``.npy`` format, a bundle is a
-fixed preamble, a bounded self-describing header, then the payload.  All integers are
-little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless final zero byte).
+``docs/bundle-format.md`` is the specification.  (7.0, a picture enlarged by pixel
+replication, is a 7-byte wrapper around one of these, which :func:`wavecore.decode` and
+:func:`wavecore.inspect` unwrap: :mod:`wavecore.codec.replication`.)  Like NumPy's ``.npy``
+format, a bundle is a fixed preamble, a bounded self-describing header, then the payload.
+All integers are little-endian; a *varint* is unsigned LEB128 (at most 10 bytes, no needless
+final zero byte).
 
 Layout (6.0)
 ------------

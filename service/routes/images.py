@@ -70,6 +70,8 @@ def encode_job(
         "X-Wavecore-Dtype": str(image.dtype),
         # The wavelet coded with: wavelet="auto" names its choice here.
         "X-Wavecore-Wavelet": str(info["wavelet"]),
+        # 2, 4, …: a picture enlarged by pixel replication, coded as its source (1: any other).
+        "X-Wavecore-Replicated": str(info.get("replicated", 1)),
     }
     return bundle, headers
 

@@ -220,6 +220,16 @@ def inputs() -> dict[str, tuple[str, np.ndarray, dict[str, Any]]]:
             grey.astype(np.uint8),
             {"quality": 40.0, "nudge_weight": True},
         ),
+        # Format 7.0 (a picture enlarged by pixel replication: its source's bundle behind a
+        # 7-byte wrapper naming the factor): the 2× enlargement of a random picture, lossy and
+        # lossless, and a colour picture enlarged 4× at a set rate.
+        "v7_0_image_grey_u8_replicated": ("image", repeated, {"quality": 40.0}),
+        "v7_0_image_grey_u8_replicated_lossless": ("image", repeated, {"lossless": True}),
+        "v7_0_image_rgb_u8_replicated_bpp": (
+            "image",
+            np.kron(rgb.clip(0, 255).astype(np.uint8)[:16, :24], np.ones((4, 4, 1), np.uint8)),
+            {"bpp": 0.4},
+        ),
         # Format 1.2 (the JSON header with ``scale``), written by the 1.x writer that
         # ``write_bundle(..., version=(1, 1))`` keeps: no earlier golden bundle had it.
         "surface_scaled_v1_2": (

@@ -218,7 +218,9 @@ async def test_metrics_count_requests_bytes_and_errors(client: httpx.AsyncClient
     assert float(line.split()[-1]) >= len(b"not a bundle")
 
 
-async def test_auto_names_haar_for_a_pixel_replicated_picture(client: httpx.AsyncClient) -> None:
+async def test_auto_codes_a_pixel_replicated_picture_at_its_source_size(
+    client: httpx.AsyncClient,
+) -> None:
     image = test_image((40, 48, 3)).repeat(2, axis=0).repeat(2, axis=1)
     r = await client.post(
         "/v1/images/encode",
@@ -226,6 +228,8 @@ async def test_auto_names_haar_for_a_pixel_replicated_picture(client: httpx.Asyn
         data={"quality": "38"},
     )
     assert r.status_code == 200, r.text
-    assert r.headers["x-wavecore-wavelet"] == "haar"
-    assert wavecore.inspect(r.content)["wavelet"] == "haar"
+    assert r.headers["x-wavecore-wavelet"] == "cdf97"  # chosen on the 40 × 48 source
+    assert r.headers["x-wavecore-replicated"] == "2"
+    assert wavecore.inspect(r.content)["replicated"] == 2
+    assert wavecore.decode(r.content).shape == image.shape
     assert psnr(wavecore.decode(r.content), image) >= 38

@@ -41,6 +41,8 @@ The package, one module per concern:
   ``tolerance``;
 * :mod:`.encode`: the front ends ``encode_image``/``encode_curve``/``encode_surface``;
 * :mod:`.reversible`: the lossless pipeline (reversible colour, integer lifting, its coders);
+* :mod:`.replication`: pictures enlarged by pixel replication, coded as their source inside
+  a 7-byte wrapper (format 7.0), and enlarged again when decoded;
 * :mod:`.fixedstep`: a surface coded at one given step, what the grid containers build on;
 * :mod:`.decode`: ``decode`` (the pipeline backwards, through the registry) and ``inspect``;
 * :mod:`.chunks`: the coded chunks read for decoding, whole or block by block, checked, only

@@ -6,7 +6,9 @@ default), and the colour transform of a lossy colour picture.
 CDF 9/7 wins the measured rate–distortion on photographs by 13–90 % (BD-rate against Haar on
 scikit-image's pictures).  Haar wins by 45–70 % where most 2 × 2 blocks of pixels are flat:
 pictures enlarged by pixel replication (scikit-image's ``moon`` is a 256² picture at 512²),
-binary and two-tone graphics (``horse``, ``binary_blobs``, ``checkerboard``).  Its finest
+binary and two-tone graphics (``horse``, ``binary_blobs``, ``checkerboard``).  An *exact*
+enlargement is now coded as its source (:mod:`wavecore.codec.replication`), and this choice
+is then made on the source; it still serves the graphics and near-enlargements.  Its finest
 details there are exactly zero, while CDF 9/7's long filters spread every edge over several
 coefficients.  Between those, at a flat share of 0.17–0.42 (``page``, ``logo``, ``retina``),
 CDF 9/7 wins or ties, so the threshold sits in the gap.

@@ -20,6 +20,7 @@ from ..multilevel import default_level
 from ..regions import band_masks, windowed_inverse
 from ..restoration import APRON, apply_restoration
 from ..threshold import check_share
+from . import replication
 from .chunks import (
     band_entries,
     block_coder,
@@ -80,7 +81,9 @@ def decode(
         cropped to the original's extent (about ``ceil(n / 2**k)`` samples per side), decoded
         from the first ``L - k + 1`` chunks only, so a truncated bundle still gives it.
         Note that this counts levels *dropped*, where ``encode_*(level=L)`` counts levels
-        made; ``drop_levels`` says so in its name.
+        made; ``drop_levels`` says so in its name.  A picture enlarged ``f = 2**s`` times by
+        pixel replication (``inspect(bundle)["replicated"]``) gives its decoded source
+        enlarged ``2**(s - k)`` times for ``k < s``, then the source's own levels.
     drop_levels : int, optional
         The same as ``level``, under a name that says what it does: leave out the
         ``drop_levels`` finest levels of detail.  Give one of the two (both only when equal).
@@ -169,6 +172,10 @@ def decode(
             msg = f"drop_levels={drop_levels} and level={level} disagree; give one of them"
             raise InvalidParameter(msg)
         level = drop_levels
+    if replication.is_replicated(bundle):  # a picture enlarged by pixel replication
+        return replication.decode_replicated(
+            bundle, decode, inspect, keep=keep, level=int(level), region=region, damaged=damaged
+        )
     parsed, plan = _open(bundle)
     if (
         plan.transform.lossless
@@ -375,13 +382,17 @@ def inspect(bundle: Any) -> dict[str, Any]:
         (one entry per chunk, coarse to fine: its resolution ``level``, its subband
         ``shapes``, its ``bytes`` and whether it is ``present``), ``restored`` (whether a
         full-resolution decode applies a restoration filter: :mod:`wavecore.restoration`),
-        and ``header`` (the raw header).
+        and ``header`` (the raw header).  Images also give ``replicated``: ``f`` for a
+        picture enlarged ``f × f`` by pixel replication and coded as its source (format 7.0,
+        whose ``source_version`` is the inner bundle's, and whose ``header`` is the
+        source's), 1 for any other.
 
     Examples
     --------
     >>> import numpy as np
     >>> from wavecore import encode_image
-    >>> info = inspect(encode_image(np.zeros((16, 16), np.uint8), lossless=True, level=2))
+    >>> picture = np.arange(256, dtype=np.uint8).reshape(16, 16)
+    >>> info = inspect(encode_image(picture, lossless=True, level=2))
     >>> info["levels"], [c["level"] for c in info["chunks"]], info["lossless"]
     (2, [2, 1, 0], True)
     """
@@ -389,6 +400,8 @@ def inspect(bundle: Any) -> dict[str, Any]:
         return curvesets.inspect_curves(bundle)
     if grids.is_grid_bundle(bundle):
         return grids.inspect_grid(bundle)
+    if replication.is_replicated(bundle):
+        return replication.inspect_replicated(bundle, inspect)
     parsed, plan = _open(bundle)
     header = parsed.header
     try:
@@ -437,4 +450,5 @@ def inspect(bundle: Any) -> dict[str, Any]:
     }
     if plan.kind == "image":
         info["bpp"] = 8.0 * total / (plan.shape[0] * plan.shape[1])
+        info["replicated"] = 1
     return info

@@ -13,7 +13,7 @@ import numpy as np
 from .. import _heap
 from ..arguments import closed_flags
 from ..bundle import read_bundle, with_header
-from ..errors import BundleError, InvalidParameter
+from ..errors import BitrateTooLow, BundleError, InvalidParameter
 from ..filters import get_wavelet
 from ..threshold import check_share
 from .choice import AUTO, choose_colour, choose_image_wavelet
@@ -36,6 +36,9 @@ from .plan import (
     positive,
 )
 from .ratecontrol import encode_lossy
+from .replication import OVERHEAD as REPLICATION_OVERHEAD
+from .replication import replication_factor
+from .replication import wrap as wrap_replicated
 from .reversible import encode_lossless_image
 from .samples import (
     fitted_samples,
@@ -107,9 +110,9 @@ def encode_image(
     wavelet : str
         The wavelet for lossy coding.  ``"auto"`` (the default) chooses per picture:
         ``"cdf97"``, the one that wins the measured rate–distortion on photographs
-        (docs/benchmarks.md), unless most 2 × 2 blocks of pixels are flat (pictures enlarged
-        by pixel replication, binary and two-tone graphics), where ``"haar"`` takes 45–70 %
-        fewer bytes (:mod:`wavecore.codec.choice`).  Or name one: ``"cdf97"``,
+        (docs/benchmarks.md), unless most 2 × 2 blocks of pixels are flat (binary and
+        two-tone graphics, pictures nearly enlarged by pixel replication), where ``"haar"``
+        takes 45–70 % fewer bytes (:mod:`wavecore.codec.choice`).  Or name one: ``"cdf97"``,
         ``"bspline2"`` (the paper's, smooth, with interpolated ends), ``"haar"`` or an alias
         (see :func:`wavecore.wavelet_names`).  The bundle records the wavelet used, so any
         bundle decodes alike.
@@ -146,6 +149,14 @@ def encode_image(
 
     With none of ``keep``/``quality``/``bpp`` the image is coded to ``quality=40`` dB.
 
+    A picture enlarged by pixel replication (each pixel of a source at least 8 pixels a side
+    repeated ``f × f`` times, ``f`` a power of two: pixel art, scikit-image's ``moon``) is
+    coded as its source, with these arguments, and decodes to the enlarged picture again
+    (:mod:`wavecore.codec.replication`, bundle format 7.0): the PSNR is the source's, a
+    ``bpp`` target keeps its bytes (``f²`` times the rate for the source), ``keep`` counts
+    the source's details, and ``level`` counts the replication's levels first.
+    ``inspect(bundle)["replicated"]`` gives ``f``.
+
     Returns
     -------
     bytes
@@ -175,14 +186,54 @@ def encode_image(
     if effort != "default" and not lossless:
         msg = f"effort={effort!r} applies only with lossless=True; lossy encodes take 'default'"
         raise InvalidParameter(msg)
-    if lossless:
-        if keep is not None or quality is not None or bpp is not None:
-            msg = "lossless=True cannot be combined with keep, quality or bpp"
-            raise InvalidParameter(msg)
-        return encode_lossless_image(arr, level, effort)
+    if lossless and (keep is not None or quality is not None or bpp is not None):
+        msg = "lossless=True cannot be combined with keep, quality or bpp"
+        raise InvalidParameter(msg)
     keep = None if keep is None else check_share(keep, "keep", "details to keep")
     quality = None if quality is None else positive(quality, "quality", "a PSNR in dB")
     bpp = None if bpp is None else positive(bpp, "bpp", "bits per pixel")
+    factor = replication_factor(arr)
+    if factor == 1:
+        return _encode_picture(arr, wavelet, level, keep, quality, bpp, lossless, effort)
+    # a picture enlarged by pixel replication: its source coded in the same bytes
+    log2_factor = factor.bit_length() - 1
+    source = np.ascontiguousarray(arr[::factor, ::factor])
+    source_bpp = None
+    if bpp is not None:
+        budget_bits = bpp * arr.shape[0] * arr.shape[1] - 8 * REPLICATION_OVERHEAD
+        if budget_bits <= 0:  # not even the wrapper fits: the plain picture's refusal says so
+            return _encode_picture(arr, wavelet, level, keep, quality, bpp, lossless, effort)
+        source_bpp = budget_bits / (source.shape[0] * source.shape[1])
+    source_level = None if level is None else max(0, level - log2_factor)
+    try:
+        inner = _encode_picture(
+            source, wavelet, source_level, keep, quality, source_bpp, lossless, effort
+        )
+    except BitrateTooLow as exc:
+        smallest = exc.smallest_bytes + REPLICATION_OVERHEAD
+        msg = (
+            f"bpp {bpp} is below what this image can be coded in: its smallest bundle needs "
+            f"{smallest} bytes = {8 * smallest / (arr.shape[0] * arr.shape[1]):.4f} bpp "
+            f"(header included)"
+        )
+        raise BitrateTooLow(msg, smallest) from None
+    return wrap_replicated(inner, log2_factor)
+
+
+def _encode_picture(
+    arr: np.ndarray,
+    wavelet: str,
+    level: int | None,
+    keep: float | None,
+    quality: float | None,
+    bpp: float | None,
+    lossless: bool,
+    effort: str,
+) -> bytes:
+    """:func:`encode_image` of a picture that is not enlarged by pixel replication, its
+    arguments checked."""
+    if lossless:
+        return encode_lossless_image(arr, level, effort)
     dtype = dtype_name(arr, "image")
     arr, scale = scaled(arr)
     colour = choose_colour(arr) if arr.ndim == 3 and arr.shape[2] >= 3 else "none"
