@@ -269,24 +269,26 @@ INTRO = """Written by `benchmarks/rate_distortion.py` (scikit-image's pictures, 
 
 ![PSNR against bits per pixel](figures/rd_curves.png)
 
-The coder (`wavecore/quantize.py`, `wavecore/blockcoder.py`): a dead-zone quantizer whose step in
-each subband is the global step divided by the RMS norm of that subband's synthesis basis
+The coder (`wavecore/quantize.py`, `wavecore/blockcoder.py`): a dead-zone quantizer whose step
+in each subband is the global step divided by the RMS norm of that subband's synthesis basis
 functions; a closed loop that keeps the dead zone's zeros and re-fits the kept coefficients to
 the image by least squares (a few conjugate-gradient steps with the exact adjoint of the
 synthesis; images up to 2**20 coefficients), which is what the non-orthogonal `bspline2` needs
 (about +1 dB); reconstruction offsets fitted from each band's own histogram (no side
 information); RDOQ's dead zone that depends on the neighbourhood and the parent band
-(`wavecore/rdoq.py`, where the closed loop does not run); for colour, YCbCr or the picture's
-own colour matrix (`wavecore.codec.choice`); and the context coder (version 7,
-`wavecore/blockcoder.py`): independent 128 × 128 code-blocks, each coded by an LZMA-style
-binary range coder with adaptive probabilities, after a flag per 8 × 8 tile that says whether
-the tile holds anything; its contexts are the causal neighbours in the same band (for the
-horizontal and vertical details also along the band's orientation, each block choosing by
-the bits it has cost), the other orientations of the same level, the parent band one level
-coarser and the first (luma) channel at the same place.  Rate control scales the first-order
-estimate by what the real coder measured and codes for real once or twice; it accepts
-97.5–100 % of the budget.  Our rates include the whole bundle: the binary header (format 2.0)
-is under 100 bytes, about 1 % of the budget at 0.25 bpp on a 512 × 512 picture."""
+(`wavecore/rdoq.py`, where the closed loop does not run); for colour, YCbCr or the picture's own
+colour matrix (`wavecore.codec.choice`); and the context coder (version 8,
+`wavecore/blockcoder.py`): independent 128 × 128 code-blocks, each coded by an LZMA-style binary
+range coder with adaptive probabilities that start from values trained per level, after a flag
+per 8 × 8 tile that says whether the tile holds anything; its contexts are the causal neighbours
+in the same band (for the horizontal and vertical details also along the band's orientation,
+each block choosing by the bits it has cost), the other orientations of the same level, the
+parent band one level coarser and the first (luma) channel at the same place. Rate control
+scales the first-order estimate by what the real coder measured and codes for real once or
+twice; it accepts 97.5–100 % of the budget. Our rates include the whole bundle: the binary
+header (format 2.0) is under 100 bytes, about 1 % of the budget at 0.25 bpp on a 512 × 512
+picture. `moon` is a 256² picture enlarged to 512² by pixel replication, which every wavelet now
+codes as its source at 4× the rate (`wavecore.codec.replication`, format 7.0, since 2026-12-08)."""
 
 
 def write_section(body: str) -> None:
@@ -449,7 +451,7 @@ def rdoq_bd_rates(
 
 PEER_START, PEER_END = "<!-- rd-peers:start -->", "<!-- rd-peers:end -->"
 PEER_PLOT = ROOT / "docs" / "figures" / "rd_peers.png"
-#: ``auto``: the default, cdf97 unless most 2 × 2 blocks are flat (then Haar: moon).
+#: ``auto``: the default, cdf97 unless most 2 × 2 blocks are flat (then Haar).
 PEER_WAVELETS = ("auto", "cdf97", "bspline2")
 
 
@@ -676,8 +678,11 @@ def run_peers(names: tuple[str, ...], side: int | None, write: bool) -> None:
             "A peer whose best setting stays below 2 bpp on a picture (smooth ones: moon, "
             "brick) leaves the top rates empty; BD-rate then covers the PSNR range both curves "
             "reach.  `auto` is `encode_image`'s default: `cdf97`, unless most 2 × 2 blocks of "
-            "pixels are flat, then `haar` (`wavecore.codec.choice`); of these pictures only "
-            "moon, a 256² picture enlarged to 512² by pixel replication, takes Haar.  "
+            "pixels are flat, then `haar` (`wavecore.codec.choice`); none of these pictures "
+            "takes Haar.  moon is a 256² picture enlarged to 512² by pixel replication: "
+            "`encode_image` codes such a picture as its source, whatever the wavelet "
+            "(`wavecore.codec.replication`, format 7.0), so every wavelet's moon is its 256² "
+            "source at 4× the rate.  "
             f"One run of {seconds:.0f} s on a shared 2-core machine, load average "
             f"{' '.join(load_before)} before and {' '.join(load_after)} after.",
             "",
