@@ -140,6 +140,15 @@ def test_regions_equal_the_whole_decode(level: int) -> None:
         decode(bundle, level=level, region=(slice(height, None),))
 
 
+def test_a_level_too_deep_for_the_source_codes_the_whole_picture() -> None:
+    picture = _kron(_smooth(32, 32), 2)  # 64²: 7 levels, where the 32² source takes 5
+    bundle = encode_image(picture, quality=40, level=7)
+    assert not is_replicated(bundle) and inspect(bundle)["levels"] == 7
+    assert is_replicated(encode_image(picture, quality=40, level=6))
+    with pytest.raises(InvalidParameter, match="level 8 is too deep for length 64"):
+        encode_image(picture, quality=40, level=8)  # the whole picture's own refusal
+
+
 def test_float_and_big_endian_pictures() -> None:
     source = _smooth(24, 32).astype(">f8") / 255.0
     bundle = encode_image(_kron(source, 2), quality=45)

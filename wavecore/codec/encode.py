@@ -154,8 +154,8 @@ def encode_image(
     coded as its source, with these arguments, and decodes to the enlarged picture again
     (:mod:`wavecore.codec.replication`, bundle format 7.0): the PSNR is the source's, a
     ``bpp`` target keeps its bytes (``f²`` times the rate for the source), ``keep`` counts
-    the source's details, and ``level`` counts the replication's levels first.
-    ``inspect(bundle)["replicated"]`` gives ``f``.
+    the source's details, and ``level`` counts the replication's levels first (one too deep
+    for the source codes the whole picture).  ``inspect(bundle)["replicated"]`` gives ``f``.
 
     Returns
     -------
@@ -217,6 +217,11 @@ def encode_image(
             f"(header included)"
         )
         raise BitrateTooLow(msg, smallest) from None
+    except InvalidParameter:
+        if source_level is None or source_level == 0:
+            raise
+        # a level too deep for the source, which the whole picture may take: code it whole
+        return _encode_picture(arr, wavelet, level, keep, quality, bpp, lossless, effort)
     return wrap_replicated(inner, log2_factor)
 
 
