@@ -143,8 +143,8 @@ def encode_image(
         :mod:`wavecore.losslesscoder` (JPEG XL's weighted predictor, three mixed models per
         bit), smaller than JPEG XL e7 on grey and WebP lossless on colour; a region decodes the
         stripes of rows it touches, a coarser level lifts the decoded picture, and damage loses
-        a whole level.  ``"fast"``: the block context coder, 3–7 % bigger in 0.6–0.7× the
-        encode + decode wall time (0.55–0.57× the CPU), with regions, coarser levels and
+        a whole level.  ``"fast"``: the block context coder, 3–7 % bigger in 0.6–0.85× the
+        encode + decode wall time (0.55–0.75× the CPU), with regions, coarser levels and
         damage by code-blocks.  Either decodes with :func:`decode`.
 
     With none of ``keep``/``quality``/``bpp`` the image is coded to ``quality=40`` dB.
