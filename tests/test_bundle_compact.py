@@ -96,8 +96,8 @@ def test_the_preamble_is_four_bytes_and_never_the_old_magic() -> None:
     bundle = BUNDLES["compact curve"]
     assert bundle[:4] == COMPACT_MAGIC + bytes(COMPACT_VERSION) == b"\x89W\x04\x00"
     assert MAGIC[:2] == COMPACT_MAGIC and MAGIC[2] == ord("V")  # never read as a major
-    with pytest.raises(BundleError, match=r"unsupported bundle format version 7\.0"):
-        read_bundle(COMPACT_MAGIC + bytes([7, 0]) + bundle[4:])
+    with pytest.raises(BundleError, match=r"unsupported bundle format version 8\.0"):
+        read_bundle(COMPACT_MAGIC + bytes([8, 0]) + bundle[4:])  # (7.0 is the replication's)
     with pytest.raises(BundleError, match=r"unsupported bundle format version 4\.0"):
         read_bundle(MAGIC + bytes([4, 0]) + bundle[4:])  # 4.x never has the long magic
     with pytest.raises(BundleError, match="truncated while reading the preamble"):

@@ -245,6 +245,9 @@ CURVE_VERSION = (6, 0)
 CURVE_OVERHEAD_LIMIT = 48
 #: The major versions this module reads.
 READ_MAJORS = (1, 2, 3, 4, 5, 6)
+#: The major version of a picture enlarged by pixel replication (format 7.0): a wrapper around
+#: a bundle of one of :data:`READ_MAJORS`, which :mod:`wavecore.codec.replication` reads.
+REPLICATED_MAJOR = 7
 #: The majors that start with :data:`COMPACT_MAGIC` (a 4-byte preamble).
 _SHORT_MAJORS = (COMPACT_VERSION[0], CURVE_VERSION_5[0], CURVE_VERSION[0])
 #: 4.0's preamble: these two bytes, then the major and the minor version (one byte each).  The
@@ -1124,6 +1127,13 @@ def read_bundle(data: Any) -> Bundle:
         raise BundleError(msg)
     if len(start) == 3 and start[:2] == COMPACT_MAGIC and start[2] != MAGIC[2]:
         major, minor = reader.take(4, "the preamble")[2:]
+        if major == REPLICATED_MAJOR:  # wavecore.codec.replication's wrapper, said plainly
+            msg = (
+                f"not a bundle of this reader: a picture enlarged by pixel replication (format "
+                f"{major}.{minor}) around its source's bundle; decode it with wavecore.decode, "
+                "or unwrap it with wavecore.codec.replication.unwrap"
+            )
+            raise BundleError(msg)
         if major not in _SHORT_MAJORS:
             msg = (
                 f"unsupported bundle format version {major}.{minor}: this wavecore reads major "

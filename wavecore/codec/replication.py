@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from ..bundle import COMPACT_MAGIC, MAX_ELEMENTS
+from ..bundle import COMPACT_MAGIC, MAX_ELEMENTS, REPLICATED_MAJOR
 from ..errors import BundleError, InvalidParameter
 from ..regions import check_region
 
@@ -54,7 +54,7 @@ __all__ = [
 ]
 
 #: The preamble's major and minor version.
-REPLICATED_VERSION = (7, 0)
+REPLICATED_VERSION = (REPLICATED_MAJOR, 0)
 _PREAMBLE = COMPACT_MAGIC + bytes(REPLICATED_VERSION)
 _CRC = struct.Struct("<H")
 #: The bytes a replicated picture adds to its source's bundle.
