@@ -714,6 +714,12 @@ def _print_info(info: dict[str, Any]) -> None:
     print(f"PSNR {'exact' if psnr is None else f'{psnr:.2f} dB'}, max error {info['max_error']}")
     bpp = f", {info['bpp']:.3f} bpp" if "bpp" in info else ""
     print(f"{info['total_bytes']} bytes ({info['header_bytes']} header){bpp}")
+    factor = info.get("replicated", 1)
+    if factor > 1:
+        print(
+            f"an enlargement by pixel replication: its source coded (format "
+            f"{info['source_version']}), each pixel repeated {factor} × {factor}"
+        )
     for chunk in info["chunks"]:
         shapes = " ".join("×".join(map(str, s)) for s in chunk["shapes"])
         size = chunk["bytes"] if chunk["present"] else "missing"

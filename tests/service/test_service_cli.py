@@ -52,6 +52,20 @@ def test_encode_decode_one_image(
     assert json.loads(capsys.readouterr().out)["kind"] == "image"
 
 
+def test_inspect_names_an_enlargement(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    picture = test_image((20, 26, 3)).repeat(4, axis=0).repeat(4, axis=1)
+    Image.fromarray(picture).save(tmp_path / "pixel.png")
+    bundle = tmp_path / "pixel.wcb"
+    assert main(["encode", str(tmp_path / "pixel.png"), str(bundle), "--quality", "40"]) == 0
+    capsys.readouterr()
+    assert main(["inspect", str(bundle)]) == 0
+    text = capsys.readouterr().out
+    assert "image 80×104×3 uint8, format 7.0" in text
+    assert "each pixel repeated 4 × 4" in text
+    assert main(["decode", str(bundle), str(tmp_path / "out.png")]) == 0
+    assert np.asarray(Image.open(tmp_path / "out.png")).shape == picture.shape
+
+
 def test_lossless_is_exact(tmp_path: Path, images: Path) -> None:
     bundle = tmp_path / "exact.wcb"
     assert main(["encode", str(images / "img1.png"), str(bundle), "--lossless"]) == 0
