@@ -10,6 +10,7 @@ import pytest
 
 from wavecore import decode, encode_image, inspect
 from wavecore.bundle import MAX_ELEMENTS
+from wavecore.codec import replication
 from wavecore.codec.replication import (
     MIN_SOURCE_SIDE,
     OVERHEAD,
@@ -197,6 +198,20 @@ def test_damaged_or_hostile_wrappers_are_bundle_errors() -> None:
     assert decode(head + crc + source).shape == (32, 32)
     with pytest.raises(BundleError):
         decode(head + crc + source[:-3])  # the source's bundle cut short
+
+
+def test_memory_running_out_is_a_bundle_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    bundle = encode_image(_kron(_smooth(16, 16), 4), quality=40)
+
+    def no_memory(*args: object, **kwargs: object) -> np.ndarray:
+        raise MemoryError
+
+    monkeypatch.setattr(replication, "enlarged", no_memory)
+    for level in (0, 1):
+        with pytest.raises(BundleError, match="not enough memory to enlarge"):
+            decode(bundle, level=level)
+    with pytest.raises(BundleError, match="not enough memory to enlarge"):
+        decode(bundle, region=(slice(0, 8), slice(0, 8)))
 
 
 def test_the_bundle_reader_names_the_wrapper() -> None:

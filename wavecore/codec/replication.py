@@ -215,7 +215,7 @@ def decode_replicated(
     factor = 1 << (log2_factor - level)
     height, width = info["shape"][:2]
     if region is None:
-        return enlarged(decode(inner, keep=keep, damaged=damaged), factor)
+        return _enlarged_or_refused(decode(inner, keep=keep, damaged=damaged), factor)
     slices = check_region(region, (height * factor, width * factor), 2)
     # the source's pixels that the region touches, enlarged, then the region's samples of them
     wanted, inner_slices = [], []
@@ -226,7 +226,16 @@ def decode_replicated(
         offset = first_source * factor
         wanted.append(slice(s.start - offset, last + 1 - offset, s.step))
     part = decode(inner, keep=keep, region=tuple(inner_slices), damaged=damaged)
-    return np.ascontiguousarray(enlarged(part, factor)[tuple(wanted)])
+    return np.ascontiguousarray(_enlarged_or_refused(part, factor)[tuple(wanted)])
+
+
+def _enlarged_or_refused(source: np.ndarray, factor: int) -> np.ndarray:
+    """:func:`enlarged`, or a ``BundleError`` where memory runs out (as any decode says)."""
+    try:
+        return enlarged(source, factor)
+    except MemoryError as exc:
+        msg = f"not enough memory to enlarge a decoded {source.shape} picture {factor} times"
+        raise BundleError(msg) from exc
 
 
 def inspect_replicated(
