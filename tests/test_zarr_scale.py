@@ -18,7 +18,12 @@ from zarr_fields import smooth_field  # noqa: E402
 
 from service.cli import main  # noqa: E402
 from wavecore.errors import InvalidParameter  # noqa: E402
-from wavecore.scale import read_region, synthetic_rgb, write_pyramid  # noqa: E402
+from wavecore.scale import (  # noqa: E402
+    open_image_source,
+    read_region,
+    synthetic_rgb,
+    write_pyramid,
+)
 
 
 @pytest.fixture(scope="module")
@@ -110,6 +115,26 @@ def test_cli_big_tiff_to_pyramid_and_window(tmp_path: Path, capsys: pytest.Captu
     window = np.load(out)
     assert window.shape == (45, 80, 3)
     assert np.array_equal(window, read_region(store, level=1)[5:50, 20:100])
+
+
+def test_a_tiff_whose_tiles_decode_far_larger_is_refused_from_its_tags(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    # 37 kB of file whose one zlib tile decodes to 36 MB, in every task under it; the check
+    # reads the tags, before a task is built
+    bomb = tmp_path / "bomb.tif"
+    tifffile.imwrite(bomb, np.zeros((64, 64), np.uint8), tile=(6016, 6016), compression="zlib")
+    assert bomb.stat().st_size < 100_000
+    with pytest.raises(InvalidParameter, match=r"tiles or strips of 6016 × 6016, 36192256 bytes"):
+        open_image_source(bomb, tile=64)
+    assert main(["encode", str(bomb), str(tmp_path / "b.zarr"), "--tile", "64"]) == 1
+    assert "save it tiled" in capsys.readouterr().err
+    # strips of a few rows, and one strip of a small picture, still read
+    image = np.asarray(synthetic_rgb(96, tile=64, seed=3))
+    for name, options in (("strips", {"rowsperstrip": 8}), ("one", {})):
+        path = tmp_path / f"{name}.tif"
+        tifffile.imwrite(path, image, photometric="rgb", **options)
+        assert np.array_equal(np.asarray(open_image_source(path, tile=64)), image)
 
 
 def test_cli_tile_folder_with_max_error(tmp_path: Path) -> None:

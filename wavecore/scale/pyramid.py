@@ -45,6 +45,11 @@ TILE_NAME = re.compile(r"_r(\d+)_c(\d+)$")
 # The smallest side that one analysis step of the open boundary takes; smaller tiles (the last
 # row or column of a level) are halved by averaging pairs.
 SMALLEST_SIDE = 8
+#: A TIFF's tile or strip, decoded, may take at most this many bytes, or four times a task's
+#: window if that is more: each task decodes every TIFF tile or strip under its window whole.
+#: (One zstd tile of 16384² zeros is 66 kB of file and 256 MiB decoded, in every task; one strip
+#: of a whole big picture would be decoded whole by every task, a cost quadratic in its size.)
+TIFF_CHUNK_BYTES = 16 * 2**20
 
 
 @dataclass(frozen=True)
@@ -287,8 +292,19 @@ def open_image_source(path: str | Path, *, tile: int = DEFAULT_TILE) -> Any:
         with tifffile.TiffFile(path) as tif:
             series = tif.series[0]
             axes, shape, dtype = series.axes, tuple(series.shape), np.dtype(series.dtype)
+            chunks = _largest_tiff_chunk(series)
         if not (axes in ("YX", "YXS") and (len(shape) == 2 or 1 <= shape[2] <= 4)):
             msg = f"{path} holds a TIFF of axes {axes}; expected YX or YXS (grey or RGB)"
+            raise InvalidParameter(msg)
+        window = tile * tile * (shape[2] if len(shape) == 3 else 1) * dtype.itemsize
+        limit = max(TIFF_CHUNK_BYTES, 4 * window)
+        if chunks[0] > limit:
+            msg = (
+                f"{path} stores its pixels in tiles or strips of {' × '.join(map(str, chunks[1]))}"
+                f", {chunks[0]} bytes each once decoded, and each task of {tile} × {tile} pixels "
+                f"decodes those under it whole; at most {limit} bytes are accepted: save it "
+                "tiled (tifffile.imwrite(..., tile=(256, 256)))"
+            )
             raise InvalidParameter(msg)
         # Each task opens the file itself and reads its window through tifffile's Zarr view
         # (only the TIFF tiles or strips under it): the tasks carry a path, not an open file,
@@ -308,6 +324,21 @@ def open_image_source(path: str | Path, *, tile: int = DEFAULT_TILE) -> Any:
         return da.from_array(data, chunks=(tile, tile, *data.shape[2:]))
     msg = f"{path}: a big image is a .tif/.tiff, a .npy or a folder of tiles, not {suffix!r}"
     raise InvalidParameter(msg)
+
+
+def _largest_tiff_chunk(series: Any) -> tuple[int, tuple[int, ...]]:
+    """The bytes of the largest decoded tile or strip of a TIFF series' pages, and its shape,
+    from the tags alone."""
+    largest: tuple[int, tuple[int, ...]] = (0, ())
+    seen = set()
+    for page in series.pages:
+        key = getattr(page, "keyframe", page)  # the frames of a stack share a keyframe's layout
+        if key is None or id(key) in seen:
+            continue
+        seen.add(id(key))
+        size = math.prod(key.chunks) * np.dtype(key.dtype).itemsize
+        largest = max(largest, (size, tuple(key.chunks)))
+    return largest
 
 
 def _tiff_window(
