@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from wavecore.tiffchunks import tiff_layouts
+
 __all__ = [
     "GridFileError",
     "check_npy_length",
@@ -147,20 +149,13 @@ def _check_chunks(series: Any, name: str) -> None:
     """Refuse tiles or strips that decode to far more than their pages (a reader decodes a
     whole tile before it crops it: one zstd tile of 16384 × 16384 float64 zeros is 66 kB
     and 2 GiB), from the tags, before a sample is decoded."""
-    seen = set()
-    for page in series.pages:
-        key = getattr(page, "keyframe", page)  # the frames of a stack share a keyframe's layout
-        if key is None or id(key) in seen:
-            continue
-        seen.add(id(key))
-        itemsize = np.dtype(key.dtype).itemsize
-        chunk = math.prod(key.chunks) * itemsize
-        limit = tiff_chunk_limit(math.prod(key.shape) * itemsize)
-        if chunk > limit:
+    for layout in tiff_layouts(series):
+        limit = tiff_chunk_limit(layout.page_bytes)
+        if layout.chunk_bytes > limit:
             msg = (
-                f"{name} stores its {' × '.join(map(str, key.shape))} samples in tiles or strips "
-                f"of {' × '.join(map(str, key.chunks))}, {chunk} bytes each once decoded; at most "
-                f"{limit} are accepted"
+                f"{name} stores its {' × '.join(map(str, layout.shape))} samples in tiles or "
+                f"strips of {' × '.join(map(str, layout.chunks))}, {layout.chunk_bytes} bytes "
+                f"each once decoded; at most {limit} are accepted"
             )
             raise GridFileError("too-costly", msg)
 

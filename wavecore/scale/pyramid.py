@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import InvalidParameter
 from ..images import decompose_image
+from ..tiffchunks import tiff_layouts
 
 try:
     import dask
@@ -292,16 +293,18 @@ def open_image_source(path: str | Path, *, tile: int = DEFAULT_TILE) -> Any:
         with tifffile.TiffFile(path) as tif:
             series = tif.series[0]
             axes, shape, dtype = series.axes, tuple(series.shape), np.dtype(series.dtype)
-            chunks = _largest_tiff_chunk(series)
+            layouts = list(tiff_layouts(series))
         if not (axes in ("YX", "YXS") and (len(shape) == 2 or 1 <= shape[2] <= 4)):
             msg = f"{path} holds a TIFF of axes {axes}; expected YX or YXS (grey or RGB)"
             raise InvalidParameter(msg)
         window = tile * tile * (shape[2] if len(shape) == 3 else 1) * dtype.itemsize
         limit = max(TIFF_CHUNK_BYTES, 4 * window)
-        if chunks[0] > limit:
+        largest = max(layouts, key=lambda layout: layout.chunk_bytes, default=None)
+        if largest is not None and largest.chunk_bytes > limit:
             msg = (
-                f"{path} stores its pixels in tiles or strips of {' × '.join(map(str, chunks[1]))}"
-                f", {chunks[0]} bytes each once decoded, and each task of {tile} × {tile} pixels "
+                f"{path} stores its pixels in tiles or strips of "
+                f"{' × '.join(map(str, largest.chunks))}, {largest.chunk_bytes} bytes each once "
+                f"decoded, and each task of {tile} × {tile} pixels "
                 f"decodes those under it whole; at most {limit} bytes are accepted: save it "
                 "tiled (tifffile.imwrite(..., tile=(256, 256)))"
             )
@@ -324,21 +327,6 @@ def open_image_source(path: str | Path, *, tile: int = DEFAULT_TILE) -> Any:
         return da.from_array(data, chunks=(tile, tile, *data.shape[2:]))
     msg = f"{path}: a big image is a .tif/.tiff, a .npy or a folder of tiles, not {suffix!r}"
     raise InvalidParameter(msg)
-
-
-def _largest_tiff_chunk(series: Any) -> tuple[int, tuple[int, ...]]:
-    """The bytes of the largest decoded tile or strip of a TIFF series' pages, and its shape,
-    from the tags alone."""
-    largest: tuple[int, tuple[int, ...]] = (0, ())
-    seen = set()
-    for page in series.pages:
-        key = getattr(page, "keyframe", page)  # the frames of a stack share a keyframe's layout
-        if key is None or id(key) in seen:
-            continue
-        seen.add(id(key))
-        size = math.prod(key.chunks) * np.dtype(key.dtype).itemsize
-        largest = max(largest, (size, tuple(key.chunks)))
-    return largest
 
 
 def _tiff_window(
